@@ -1,0 +1,36 @@
+# Stage 1 (Sec. III.A): design disturbances and design trajectories.
+
+
+rule design_disturbances:
+    """K point-symmetric LCD design disturbances of N(0, I_q) (or a random baseline), shared by scenarios."""
+    output:
+        "results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc",
+    log:
+        "results/shared/logs/design_disturbances/q{q}_K{K}_{method}_seed{seed}.log",
+    benchmark:
+        "results/shared/benchmarks/design_disturbances/q{q}_K{K}_{method}_seed{seed}.tsv"
+    params:
+        design=config["design"],
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    script:
+        "../scripts/design_disturbances.py"
+
+
+rule design_trajectories:
+    """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1))."""
+    input:
+        scenario_disturbances,
+    output:
+        "results/{scenario}/design_trajectories/trajectories.nc",
+    log:
+        "results/{scenario}/logs/design_trajectories.log",
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/design_trajectories.py"

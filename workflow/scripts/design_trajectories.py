@@ -1,0 +1,12 @@
+"""Rule design_trajectories: design states and observations of one scenario."""
+
+from ssmobs import io, log
+from ssmobs.config import disturbance_dim
+from ssmobs.trajectories import make_trajectories, write_trajectories
+
+logger = log.setup(snakemake.log[0])
+sc = snakemake.params.scenario
+matrix, attrs = io.read_disturbances(snakemake.input[0], q=disturbance_dim(sc), K=sc["K"])
+traj = make_trajectories(sc, matrix, provenance=attrs)
+logger.info("scenario %s: %d trajectories of length %d", sc["name"], traj.K, traj.T)
+write_trajectories(snakemake.output[0], traj)

@@ -1,0 +1,10 @@
+"""Rule figure_design_points: Figure 2 of the paper."""
+
+from ssmobs import io, log
+from ssmobs.figures import figure_design_points
+
+logger = log.setup(snakemake.log[0])
+f2 = snakemake.params.figure
+matrix, _ = io.read_disturbances(snakemake.input[0], q=2, K=f2["K"])
+figure_design_points(matrix, f2["a"], f2["x0"], [snakemake.output.pdf, snakemake.output.png])
+logger.info("wrote %s and %s", snakemake.output.pdf, snakemake.output.png)

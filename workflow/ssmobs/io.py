@@ -1,0 +1,164 @@
+"""All readers and writers of ssmobs: atomic writes, validated reads.
+
+Every file is written to a temporary name in the target folder and renamed into place,
+so a killed job never leaves a file that looks complete (style guide, Sec. 4).  Readers
+check what they load and raise :class:`CorruptFileError` naming the file when it is bad.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+
+class CorruptFileError(RuntimeError):
+    """An intermediate file exists but cannot be used (truncated, wrong content)."""
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; rename it to ``path`` on success."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp",
+                               dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot write {type(obj).__name__} to JSON")
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write JSON atomically (sorted keys, so reruns give identical bytes)."""
+    write_text(path, json.dumps(obj, indent=1, sort_keys=True, default=_json_default,
+                                allow_nan=True) + "\n")
+
+
+def read_json(path: str | os.PathLike, required: Sequence[str] = ()) -> Any:
+    """Read JSON; CorruptFileError naming the file if it does not parse or lacks keys."""
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise CorruptFileError(f"{path}: not valid JSON ({err})") from err
+    missing = [k for k in required if not isinstance(obj, dict) or k not in obj]
+    if missing:
+        raise CorruptFileError(f"{path}: missing keys {missing}")
+    return obj
+
+
+def write_netcdf(path: str | os.PathLike, dataset: "xarray.Dataset") -> None:  # noqa: F821
+    """Write an xarray Dataset atomically with the pinned h5netcdf engine."""
+    with atomic_path(path, suffix=".nc") as tmp:
+        dataset.to_netcdf(tmp, engine="h5netcdf")
+
+
+def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> "xarray.Dataset":  # noqa: F821
+    """Load a NetCDF file fully into memory; CorruptFileError naming the file if unreadable."""
+    import xarray as xr
+
+    path = Path(path)
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            ds = ds.load()
+    except Exception as err:  # h5py raises several types for damaged files
+        raise CorruptFileError(f"{path}: not a readable NetCDF file ({err})") from err
+    missing = [v for v in required_vars if v not in ds.variables]
+    if missing:
+        raise CorruptFileError(f"{path}: missing variables {missing}")
+    return ds
+
+
+def write_parquet(path: str | os.PathLike, frame: "pandas.DataFrame") -> None:  # noqa: F821
+    with atomic_path(path, suffix=".parquet") as tmp:
+        frame.to_parquet(tmp, index=False)
+
+
+def read_parquet(path: str | os.PathLike, required_columns: Sequence[str] = ()) -> "pandas.DataFrame":  # noqa: F821
+    import pandas as pd
+
+    path = Path(path)
+    try:
+        frame = pd.read_parquet(path)
+    except Exception as err:
+        raise CorruptFileError(f"{path}: not a readable Parquet file ({err})") from err
+    missing = [c for c in required_columns if c not in frame.columns]
+    if missing:
+        raise CorruptFileError(f"{path}: missing columns {missing}")
+    return frame
+
+
+def array_checksum(*arrays: np.ndarray) -> str:
+    """SHA-256 of the arrays' bytes (dtype and shape included): stored beside cached arrays."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------- design disturbances
+def write_disturbances(path: str | os.PathLike, result: Any) -> None:
+    """Store a :class:`~ssmobs.design_disturbances.DesignResult` as the paper's (q x K) matrix."""
+    import xarray as xr
+
+    matrix = np.asarray(result.matrix, dtype=float)
+    ds = xr.Dataset(
+        {"disturbance": (("component", "k"), matrix)},
+        coords={"component": np.arange(matrix.shape[0]), "k": np.arange(matrix.shape[1])},
+        attrs={
+            "method": result.method, "q": int(result.q), "K": int(result.K),
+            "seed": int(result.seed),
+            "b_max": float(result.b_max) if result.b_max is not None else float("nan"),
+            "distance_raw": float(result.distance_raw), "distance": float(result.distance),
+            "iterations": int(result.iterations),
+            "covariance_correction": result.covariance_correction,
+            "checksum": array_checksum(matrix),
+            "description": "design disturbance vectors (columns), state disturbances first "
+                           "(Hanebeck & Czado, Sec. III.A)",
+        },
+    )
+    write_netcdf(path, ds)
+
+
+def read_disturbances(path: str | os.PathLike, q: int | None = None,
+                      K: int | None = None) -> tuple[np.ndarray, dict]:
+    """Load a disturbance matrix (q x K) and its attributes; CorruptFileError if damaged."""
+    ds = read_netcdf(path, required_vars=["disturbance"])
+    matrix = np.asarray(ds["disturbance"].values, dtype=float)
+    attrs = dict(ds.attrs)
+    if attrs.get("checksum") != array_checksum(matrix):
+        raise CorruptFileError(f"{path}: checksum mismatch (file damaged or edited)")
+    if (q is not None and matrix.shape[0] != q) or (K is not None and matrix.shape[1] != K):
+        raise CorruptFileError(f"{path}: expected a {q} x {K} matrix, found {matrix.shape}")
+    return matrix, attrs

@@ -1,0 +1,59 @@
+"""Logging set-up shared by every workflow script, and a progress reporter."""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from pathlib import Path
+
+LOGGER_NAME = "ssmobs"
+
+
+def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logger:
+    """Log to ``logfile`` (if given) and to stderr; uncaught exceptions land in the log."""
+    root = logging.getLogger()
+    root.setLevel(level)
+    for h in list(root.handlers):
+        root.removeHandler(h)
+    fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S")
+    stream = logging.StreamHandler(sys.stderr)
+    stream.setFormatter(fmt)
+    root.addHandler(stream)
+    if logfile:
+        Path(logfile).parent.mkdir(parents=True, exist_ok=True)
+        fh = logging.FileHandler(logfile, mode="w")
+        fh.setFormatter(fmt)
+        root.addHandler(fh)
+    for noisy in ("matplotlib", "h5py", "asyncio", "httpstan", "aiohttp", "PIL"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+
+    def _hook(exc_type, exc, tb):
+        logging.getLogger(LOGGER_NAME).error("uncaught exception", exc_info=(exc_type, exc, tb))
+        sys.__excepthook__(exc_type, exc, tb)
+
+    sys.excepthook = _hook
+    return logging.getLogger(LOGGER_NAME)
+
+
+class Progress:
+    """Logs 'label: done/total, about N s left' at most every ``every`` seconds."""
+
+    def __init__(self, label: str, total: int, logger: logging.Logger | None = None,
+                 every: float = 10.0) -> None:
+        self.label, self.total, self.every = label, total, every
+        self.logger = logger or logging.getLogger(LOGGER_NAME)
+        self.start = time.monotonic()
+        self.last = -float("inf")
+        self.done = 0
+
+    def update(self, n: int = 1, force: bool = False) -> None:
+        self.done += n
+        now = time.monotonic()
+        if force or self.done >= self.total or now - self.last >= self.every:
+            self.last = now
+            elapsed = now - self.start
+            rate = self.done / elapsed if elapsed > 0 else float("inf")
+            left = (self.total - self.done) / rate if rate > 0 else float("nan")
+            self.logger.info("%s: %d/%d done, %.0f s elapsed, about %.0f s left",
+                             self.label, self.done, self.total, elapsed, left)

@@ -1,0 +1,290 @@
+"""The model contract shared by every state space model of Section IV.
+
+A model of the form (1) of the paper,
+
+    Z_t = g(Omega, X_t, eps_t),   X_t = h(Omega, X_{t-1}, eta_t),   t = 1..T,
+
+is given by its dimensions (d observations, p states), its parameter names Omega, a
+simulator (Eq. (1), used in Sec. III.A to turn design disturbances into design
+trajectories) and the two per-time-step terms of the log posterior (2):
+
+    -2 pi(Theta | z) = sum_t obs_term(Omega, x_t; z_t) + sum_t trans_term(Omega, x_{t-1}, x_t)
+                       - 2 log p(Omega) + const,
+
+with Theta = (Omega, x_0, x_1, ..., x_T).  The priors p_0(x_0) is flat (Sec. IV) and the
+priors on Omega are uniform on intervals (Eq. (3), Eq. (14)), so inside the prior support
+they only add a constant; their support enters as bounds.
+
+The per-step terms are written once, symbolically (SymPy), and differentiated
+symbolically; :mod:`ssmobs.models.log_posterior` assembles the value, the gradient and the
+Hessian in Theta for a whole batch of trajectories from them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+
+#: prior variants for a parameter Omega_i (Sec. II.A Example 1 and Sec. IV.E):
+#: ``restricted``: U(0, 1) if the true value is positive, U(-1, 0) if negative (Eq. (3));
+#: ``unrestricted``: U(-1, 1);
+#: ``half_line``: flat on (0, inf) if the true value is positive, (-inf, 0) if negative (Eq. (14)).
+PRIOR_VARIANTS: tuple[str, ...] = ("restricted", "unrestricted", "half_line")
+
+
+@dataclass(frozen=True)
+class PriorBounds:
+    """Support of the (flat) prior on Omega: ``lower < Omega < upper`` component-wise."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    variants: tuple[str, ...]
+
+    def contains(self, omega: np.ndarray) -> np.ndarray:
+        """True where ``omega`` (shape (..., m)) lies strictly inside the support."""
+        omega = np.asarray(omega, dtype=float)
+        return np.all((omega > self.lower) & (omega < self.upper), axis=-1)
+
+
+class StateSpaceModel:
+    """Base class of a model of Section IV; a subclass is one paper model.
+
+    Subclasses set the class attributes and implement :meth:`obs_term`,
+    :meth:`trans_term` and :meth:`simulate`; optional :meth:`support_constraints`.
+    """
+
+    slug: ClassVar[str]
+    title: ClassVar[str]
+    obs_dim: ClassVar[int]
+    state_dim: ClassVar[int]
+    param_names: ClassVar[tuple[str, ...]]
+    #: prior variant used by the paper for each parameter
+    default_prior: ClassVar[Mapping[str, str]]
+    #: prior variants that make sense for each parameter
+    allowed_priors: ClassVar[Mapping[str, tuple[str, ...]]]
+    #: parameters that enter as sqrt(1 - w^2) and so need |w| < 1
+    unit_interval_params: ClassVar[tuple[str, ...]] = ()
+    #: parameters that must be strictly positive whatever the prior (e.g. sqrt(a))
+    positive_params: ClassVar[tuple[str, ...]] = ()
+
+    # ----------------------------------------------------------------- symbolic terms
+    def obs_term(self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol],
+                 z: Sequence[sp.Symbol]) -> sp.Expr:
+        """-2 log f_z(z_t | x_t, Omega), up to an additive constant."""
+        raise NotImplementedError
+
+    def trans_term(self, omega: Sequence[sp.Symbol], x_prev: Sequence[sp.Symbol],
+                   x: Sequence[sp.Symbol]) -> sp.Expr:
+        """-2 log p_x(x_t | x_{t-1}, Omega), up to an additive constant."""
+        raise NotImplementedError
+
+    def support_constraints(self, omega: Sequence[sp.Symbol]) -> list[sp.Expr]:
+        """Expressions c(Omega) that must be > 0 besides the prior box (e.g. 1 - a^2 - b^2)."""
+        return []
+
+    # ----------------------------------------------------------------- simulation
+    def simulate(self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray,
+                 eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """States and observations for disturbances (Eq. (1); Sec. III.A).
+
+        Parameters
+        ----------
+        omega : (m,) true parameters.
+        x0 : (p,) true initial state.
+        eta : (K, T, p) state disturbances.
+        eps : (K, T, d) observation disturbances.
+
+        Returns
+        -------
+        x : (K, T, p) states x_1..x_T;  z : (K, T, d) observations z_1..z_T.
+        """
+        raise NotImplementedError
+
+    # ----------------------------------------------------------------- derived facts
+    @property
+    def n_params(self) -> int:
+        return len(self.param_names)
+
+    @property
+    def disturbance_dim_per_step(self) -> int:
+        """d + p: entries of the design disturbance vector per time step."""
+        return self.obs_dim + self.state_dim
+
+    def n_theta(self, T: int) -> int:
+        """|Theta| = |Omega| + p (T + 1)."""
+        return self.n_params + self.state_dim * (T + 1)
+
+    def theta_names(self, T: int) -> list[str]:
+        """Names of the components of Theta = (Omega, x_0, x_1..x_T), in order."""
+        names = list(self.param_names)
+        for t in range(T + 1):
+            if self.state_dim == 1:
+                names.append(f"x{t}")
+            else:
+                names.extend(f"x{t}_{i + 1}" for i in range(self.state_dim))
+        return names
+
+    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float],
+                     prior: str | Mapping[str, str] | None = None) -> PriorBounds:
+        """Bounds of the flat prior on Omega for the given variants (Eq. (3), Eq. (14)).
+
+        ``prior`` is one variant for all parameters, a mapping parameter -> variant
+        (missing parameters take :attr:`default_prior`), or None for the paper's choice.
+        Raises ValueError naming the parameter and value when a variant is unknown,
+        not allowed for the model, or undefined for the true value (sign 0).
+        """
+        omega = self._omega_vector(omega_true)
+        variants = self.resolve_prior(prior)
+        lower = np.empty(self.n_params)
+        upper = np.empty(self.n_params)
+        for i, (name, variant) in enumerate(zip(self.param_names, variants)):
+            value = omega[i]
+            if variant == "unrestricted":
+                lower[i], upper[i] = -1.0, 1.0
+                continue
+            if value == 0:
+                raise ValueError(
+                    f"prior '{variant}' for parameter '{name}' of model '{self.slug}' takes its "
+                    f"sign from the true value, which is 0; use a non-zero true value or "
+                    f"prior 'unrestricted'")
+            if variant == "restricted":
+                lower[i], upper[i] = (0.0, 1.0) if value > 0 else (-1.0, 0.0)
+            else:  # half_line
+                lower[i], upper[i] = (0.0, math.inf) if value > 0 else (-math.inf, 0.0)
+        return PriorBounds(lower=lower, upper=upper, variants=tuple(variants))
+
+    def resolve_prior(self, prior: str | Mapping[str, str] | None) -> list[str]:
+        """Prior variant per parameter, validated against :attr:`allowed_priors`."""
+        if prior is None:
+            chosen = dict(self.default_prior)
+        elif isinstance(prior, str):
+            chosen = {name: prior for name in self.param_names}
+        else:
+            unknown = sorted(set(prior) - set(self.param_names))
+            if unknown:
+                raise ValueError(
+                    f"prior names parameter(s) {unknown} that model '{self.slug}' does not "
+                    f"have; its parameters are {list(self.param_names)}")
+            chosen = {**self.default_prior, **prior}
+        out = []
+        for name in self.param_names:
+            variant = chosen[name]
+            if variant not in PRIOR_VARIANTS:
+                raise ValueError(
+                    f"unknown prior variant '{variant}' for parameter '{name}'; "
+                    f"allowed: {list(PRIOR_VARIANTS)}")
+            if variant not in self.allowed_priors[name]:
+                raise ValueError(
+                    f"prior variant '{variant}' is not allowed for parameter '{name}' of model "
+                    f"'{self.slug}'; allowed: {list(self.allowed_priors[name])}")
+            out.append(variant)
+        return out
+
+    def check_true_values(self, omega_true: Mapping[str, float] | Sequence[float],
+                          x0_true: Sequence[float] | float,
+                          prior: str | Mapping[str, str] | None = None) -> list[str]:
+        """Problems with true values (empty list when valid): each names key, value and range."""
+        problems: list[str] = []
+        try:
+            omega = self._omega_vector(omega_true)
+        except ValueError as err:
+            return [str(err)]
+        x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
+        if x0.shape != (self.state_dim,):
+            problems.append(f"x0 must have {self.state_dim} component(s) for model "
+                            f"'{self.slug}', got {x0.tolist()}")
+        if not np.all(np.isfinite(omega)) or not np.all(np.isfinite(x0)):
+            problems.append("true values must be finite numbers")
+            return problems
+        for i, name in enumerate(self.param_names):
+            if name in self.unit_interval_params and not abs(omega[i]) < 1:
+                problems.append(f"true value {name}={omega[i]} must satisfy |{name}| < 1 "
+                                f"in model '{self.slug}'")
+            if name in self.positive_params and not omega[i] > 0:
+                problems.append(f"true value {name}={omega[i]} must be > 0 in model "
+                                f"'{self.slug}'")
+        syms = sp.symbols(" ".join(f"w{i}" for i in range(self.n_params)), seq=True)
+        for expr in self.support_constraints(list(syms)):
+            val = float(expr.subs(dict(zip(syms, omega))))
+            if not val > 0:
+                problems.append(
+                    f"true values {dict(zip(self.param_names, omega.tolist()))} violate the "
+                    f"model constraint {sp.sstr(expr.subs(dict(zip(syms, sp.symbols(self.param_names)))))} > 0 "
+                    f"(value {val:g})")
+        if problems:
+            return problems
+        try:
+            bounds = self.prior_bounds(omega, prior)
+        except ValueError as err:
+            return [str(err)]
+        for i, name in enumerate(self.param_names):
+            if not bounds.lower[i] < omega[i] < bounds.upper[i]:
+                problems.append(
+                    f"true value {name}={omega[i]} lies outside the support "
+                    f"({bounds.lower[i]}, {bounds.upper[i]}) of its prior '{bounds.variants[i]}'")
+        return problems
+
+    def _omega_vector(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+        if isinstance(omega, Mapping):
+            missing = [n for n in self.param_names if n not in omega]
+            extra = sorted(set(omega) - set(self.param_names))
+            if missing or extra:
+                raise ValueError(
+                    f"model '{self.slug}' needs true values for exactly {list(self.param_names)}; "
+                    f"missing {missing}, unknown {extra}")
+            return np.array([float(omega[n]) for n in self.param_names])
+        arr = np.asarray(omega, dtype=float).reshape(-1)
+        if arr.shape != (self.n_params,):
+            raise ValueError(f"model '{self.slug}' has {self.n_params} parameters "
+                             f"{list(self.param_names)}, got {arr.tolist()}")
+        return arr
+
+    # ----------------------------------------------------------------- disturbances
+    def split_disturbances(self, matrix: np.ndarray, T: int) -> tuple[np.ndarray, np.ndarray]:
+        """Split the paper's (d+p)T x K disturbance matrix (Sec. III.A).
+
+        Rows are the state disturbances eta_1..eta_T first (p per step, time-major),
+        then the observation disturbances eps_1..eps_T (d per step).  Returns
+        ``eta`` (K, T, p) and ``eps`` (K, T, d).
+        """
+        p, d = self.state_dim, self.obs_dim
+        matrix = np.asarray(matrix, dtype=float)
+        if matrix.ndim != 2 or matrix.shape[0] != (p + d) * T:
+            raise ValueError(f"disturbance matrix for model '{self.slug}' with T={T} must have "
+                             f"(d+p)T = {(p + d) * T} rows, got shape {matrix.shape}")
+        K = matrix.shape[1]
+        eta = matrix[: p * T].T.reshape(K, T, p)
+        eps = matrix[p * T:].T.reshape(K, T, d)
+        return eta, eps
+
+    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float],
+                            x0: Sequence[float] | float, matrix: np.ndarray,
+                            T: int) -> tuple[np.ndarray, np.ndarray]:
+        """Design states and observations x~(k), z~(k) for every column k (Sec. III.A)."""
+        eta, eps = self.split_disturbances(matrix, T)
+        omega_v = self._omega_vector(omega)
+        x0_v = np.atleast_1d(np.asarray(x0, dtype=float))
+        return self.simulate(omega_v, x0_v, eta, eps)
+
+    # ----------------------------------------------------------------- Stan contract
+    def stan_data(self, z: np.ndarray, bounds: PriorBounds) -> dict:
+        """Data dict for ``stan/<slug>.stan`` (same for PyStan and cmdstanpy).
+
+        ``z`` is one observation trajectory of shape (T, d).  Bounds of the prior are passed
+        per parameter as ``<name>_lower`` / ``<name>_upper``; infinite bounds are passed as
+        +-inf (Stan treats infinite bounds as no bound).
+        """
+        z = np.asarray(z, dtype=float)
+        data: dict = {"T": int(z.shape[0])}
+        data["z"] = z[:, 0].tolist() if self.obs_dim == 1 else z.tolist()
+        for i, name in enumerate(self.param_names):
+            data[f"{name}_lower"] = float(bounds.lower[i])
+            data[f"{name}_upper"] = float(bounds.upper[i])
+        return data
+
+    def __repr__(self) -> str:  # pragma: no cover - cosmetic
+        return f"<model {self.slug}: {self.title}>"

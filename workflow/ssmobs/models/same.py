@@ -1,0 +1,42 @@
+"""Model (Same, d=p=1): same dynamics for observations and states (Sec. IV, model 1; Eq. (5)).
+
+    Z_t = a X_t + sqrt(1 - a^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import sympy as sp
+
+from .base import StateSpaceModel
+
+
+class Same(StateSpaceModel):
+    slug = "same"
+    title = "(Same, d=p=1)"
+    obs_dim = 1
+    state_dim = 1
+    param_names = ("a",)
+    default_prior = {"a": "restricted"}
+    allowed_priors = {"a": ("restricted", "unrestricted")}
+    unit_interval_params = ("a",)
+
+    def obs_term(self, omega, x, z):
+        (a,), (xt,), (zt,) = omega, x, z
+        return (zt - a * xt) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+
+    def trans_term(self, omega, x_prev, x):
+        (a,), (xp,), (xt,) = omega, x_prev, x
+        return (xt - a * xp) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+
+    def simulate(self, omega, x0, eta, eps):
+        a = omega[0]
+        s = np.sqrt(1 - a**2)
+        K, T, _ = eta.shape
+        x = np.empty((K, T, 1))
+        prev = np.full(K, x0[0])
+        for t in range(T):
+            prev = a * prev + s * eta[:, t, 0]
+            x[:, t, 0] = prev
+        z = a * x + s * eps
+        return x, z

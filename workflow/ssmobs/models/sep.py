@@ -1,0 +1,41 @@
+"""Model (Sep, d=p=1): separate dynamics for observations and states (Sec. IV, model 2).
+
+    Z_t = b X_t + sqrt(1 - b^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import sympy as sp
+
+from .base import StateSpaceModel
+
+
+class Sep(StateSpaceModel):
+    slug = "sep"
+    title = "(Sep, d=p=1)"
+    obs_dim = 1
+    state_dim = 1
+    param_names = ("a", "b")
+    default_prior = {"a": "restricted", "b": "restricted"}
+    allowed_priors = {"a": ("restricted", "unrestricted"), "b": ("restricted", "unrestricted")}
+    unit_interval_params = ("a", "b")
+
+    def obs_term(self, omega, x, z):
+        (_, b), (xt,), (zt,) = omega, x, z
+        return (zt - b * xt) ** 2 / (1 - b**2) + sp.log(1 - b**2)
+
+    def trans_term(self, omega, x_prev, x):
+        (a, _), (xp,), (xt,) = omega, x_prev, x
+        return (xt - a * xp) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+
+    def simulate(self, omega, x0, eta, eps):
+        a, b = omega
+        K, T, _ = eta.shape
+        x = np.empty((K, T, 1))
+        prev = np.full(K, x0[0])
+        for t in range(T):
+            prev = a * prev + np.sqrt(1 - a**2) * eta[:, t, 0]
+            x[:, t, 0] = prev
+        z = b * x + np.sqrt(1 - b**2) * eps
+        return x, z

@@ -1,0 +1,44 @@
+"""Model (Sep, d=2, p=1): bivariate observations driven by one state (Sec. IV, model 3).
+
+    Z_{t,1} = a X_t + sqrt(1 - a^2) eps_{t,1},   Z_{t,2} = b X_t + sqrt(1 - b^2) eps_{t,2},
+    X_t = c X_{t-1} + sqrt(1 - c^2) eta_t.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import sympy as sp
+
+from .base import StateSpaceModel
+
+
+class SepD2P1(StateSpaceModel):
+    slug = "sep_d2_p1"
+    title = "(Sep, d=2, p=1)"
+    obs_dim = 2
+    state_dim = 1
+    param_names = ("a", "b", "c")
+    default_prior = {"a": "restricted", "b": "restricted", "c": "restricted"}
+    allowed_priors = {n: ("restricted", "unrestricted") for n in ("a", "b", "c")}
+    unit_interval_params = ("a", "b", "c")
+
+    def obs_term(self, omega, x, z):
+        (a, b, _), (xt,), (z1, z2) = omega, x, z
+        return ((z1 - a * xt) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+                + (z2 - b * xt) ** 2 / (1 - b**2) + sp.log(1 - b**2))
+
+    def trans_term(self, omega, x_prev, x):
+        (_, _, c), (xp,), (xt,) = omega, x_prev, x
+        return (xt - c * xp) ** 2 / (1 - c**2) + sp.log(1 - c**2)
+
+    def simulate(self, omega, x0, eta, eps):
+        a, b, c = omega
+        K, T, _ = eta.shape
+        x = np.empty((K, T, 1))
+        prev = np.full(K, x0[0])
+        for t in range(T):
+            prev = c * prev + np.sqrt(1 - c**2) * eta[:, t, 0]
+            x[:, t, 0] = prev
+        z = np.concatenate([a * x + np.sqrt(1 - a**2) * eps[:, :, :1],
+                            b * x + np.sqrt(1 - b**2) * eps[:, :, 1:]], axis=2)
+        return x, z

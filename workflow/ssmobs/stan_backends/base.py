@@ -1,0 +1,67 @@
+"""The interface every Stan backend implements (PyStan 3 embedded, cmdstanpy with CmdStan).
+
+Both backends compile the same ``stan/<model>.stan`` program, take the same data dict
+(:meth:`ssmobs.models.base.StateSpaceModel.stan_data`) and return the same :class:`Draws`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Protocol
+
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """NUTS settings; defaults are the paper's (Sec. IV): 4 chains, 10 000 iterations, 4 000 warmup."""
+
+    chains: int = 4
+    iter_warmup: int = 4000
+    iter_sampling: int = 6000
+    adapt_delta: float = 0.8
+    max_treedepth: int = 10
+    #: parallel chain processes used by one sampling call (PyStan pool size / cmdstanpy parallel_chains)
+    workers: int = 1
+
+
+@dataclass
+class Draws:
+    """Post-warmup draws of one run, chain-major.
+
+    ``params`` maps a Stan parameter name to an array of shape (chain, draw, *param_shape);
+    ``sample_stats`` maps the sampler columns ``divergent__``, ``treedepth__``, ``energy__``,
+    ``accept_stat__``, ``stepsize__``, ``n_leapfrog__``, ``lp__`` to arrays (chain, draw).
+    ``timings`` holds seconds spent in the backend call (``sample``) and, where the backend
+    can tell, in its own transfer/parsing (``transfer``).
+    """
+
+    params: dict[str, np.ndarray]
+    sample_stats: dict[str, np.ndarray]
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_chains(self) -> int:
+        return next(iter(self.sample_stats.values())).shape[0]
+
+    @property
+    def n_draws(self) -> int:
+        return next(iter(self.sample_stats.values())).shape[1]
+
+
+class SamplingError(RuntimeError):
+    """A run that could not produce draws (initialisation failure, numerical exception)."""
+
+
+class StanBackend(Protocol):
+    """What the Stan stage needs from a backend."""
+
+    name: str
+
+    def compile(self, stan_file: str) -> dict[str, Any]:
+        """Compile (or find compiled) program; return a JSON-able marker (backend, program hash, paths)."""
+
+    def sample(self, stan_file: str, data: Mapping[str, Any], seed: int,
+               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+        """Run NUTS; raise SamplingError with the reason when no draws can be had."""
