@@ -15,6 +15,8 @@ rule design_disturbances:
     resources:
         mem_mb=4000,
         runtime=30,
+    conda:
+        "../../envs/ssmobs.yaml"
     script:
         "../scripts/design_disturbances.py"
 
@@ -32,5 +34,7 @@ rule design_trajectories:
     resources:
         mem_mb=2000,
         runtime=10,
+    conda:
+        "../../envs/ssmobs.yaml"
     script:
         "../scripts/design_trajectories.py"

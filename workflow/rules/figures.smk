@@ -12,5 +12,7 @@ rule figure_design_points:
         "results/shared/logs/figure_design_points.log",
     params:
         figure=config["figure2"],
+    conda:
+        "../../envs/ssmobs.yaml"
     script:
         "../scripts/figure_design_points.py"

@@ -70,6 +70,8 @@ class StateSpaceModel:
     unit_interval_params: ClassVar[tuple[str, ...]] = ()
     #: parameters that must be strictly positive whatever the prior (e.g. sqrt(a))
     positive_params: ClassVar[tuple[str, ...]] = ()
+    #: readable form of each expression of :meth:`support_constraints`, for messages
+    constraint_text: ClassVar[tuple[str, ...]] = ()
 
     # ----------------------------------------------------------------- symbolic terms
     def obs_term(self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol],
@@ -208,13 +210,14 @@ class StateSpaceModel:
                 problems.append(f"true value {name}={omega[i]} must be > 0 in model "
                                 f"'{self.slug}'")
         syms = sp.symbols(" ".join(f"w{i}" for i in range(self.n_params)), seq=True)
-        for expr in self.support_constraints(list(syms)):
+        for i, expr in enumerate(self.support_constraints(list(syms))):
             val = float(expr.subs(dict(zip(syms, omega))))
             if not val > 0:
+                text = (self.constraint_text[i] if i < len(self.constraint_text) else
+                        sp.sstr(expr.subs(dict(zip(syms, sp.symbols(self.param_names))))) + " > 0")
                 problems.append(
                     f"true values {dict(zip(self.param_names, omega.tolist()))} violate the "
-                    f"model constraint {sp.sstr(expr.subs(dict(zip(syms, sp.symbols(self.param_names)))))} > 0 "
-                    f"(value {val:g})")
+                    f"constraint {text} of model '{self.slug}'")
         if problems:
             return problems
         try:

@@ -221,3 +221,137 @@ def log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
     """pi(Theta | z) of Eq. (2) up to an additive constant (-inf outside the support)."""
     (v,) = neg2_log_posterior(model, theta, z, bounds, order=0)
     return -0.5 * v
+
+
+# --------------------------------------------------------------------------- structured Hessian
+@dataclass(frozen=True)
+class BlockHessian:
+    """Hessian of -2 pi in its natural block structure (Sec. III.B), batched over k.
+
+    With Theta = (Omega, x_0, ..., x_T) the Hessian is an "arrow" matrix: a dense m x m
+    block for Omega, m dense columns coupling Omega with every state, and a
+    block-tridiagonal state part (each step term couples only x_{t-1} and x_t).
+
+    Attributes
+    ----------
+    omega : (K, m, m) d^2 / dOmega dOmega^T.
+    cross : (K, T+1, p, m) d^2 / dx_t dOmega^T for t = 0..T.
+    diag : (K, T+1, p, p) d^2 / dx_t dx_t^T.
+    lower : (K, T, p, p) d^2 / dx_t dx_{t-1}^T for t = 1..T (entry t-1).
+    """
+
+    omega: np.ndarray
+    cross: np.ndarray
+    diag: np.ndarray
+    lower: np.ndarray
+
+    def to_dense(self) -> np.ndarray:
+        """(K, n, n) dense Hessian (for checks and the final eigen-decomposition)."""
+        K, N, p, m = self.cross.shape
+        n = m + N * p
+        H = np.zeros((K, n, n))
+        H[:, :m, :m] = self.omega
+        cross = self.cross.reshape(K, N * p, m)
+        H[:, m:, :m] = cross
+        H[:, :m, m:] = np.swapaxes(cross, 1, 2)
+        for t in range(N):
+            s = m + t * p
+            H[:, s:s + p, s:s + p] = self.diag[:, t]
+            if t >= 1:
+                H[:, s:s + p, s - p:s] = self.lower[:, t - 1]
+                H[:, s - p:s, s:s + p] = np.swapaxes(self.lower[:, t - 1], 1, 2)
+        return H
+
+
+def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray, BlockHessian]:
+    """Value, gradient and block-structured Hessian of -2 pi (smooth formula, no bounds).
+
+    Same per-step symbolic derivatives as :func:`neg2_log_posterior`, but the Hessian is
+    returned as a :class:`BlockHessian` (O(K T (m + p)^2) memory instead of O(K n^2)), which
+    is what the batched Newton solver of :mod:`ssmobs.joint_map` factorizes.
+
+    Parameters: ``theta`` (K, n), ``z`` (K, T, d).  Returns value (K,), grad (K, n), blocks.
+    """
+    theta = np.asarray(theta, dtype=float)
+    z = np.asarray(z, dtype=float)
+    K, T, d = z.shape
+    m, p = model.n_params, model.state_dim
+    n = model.n_theta(T)
+    if theta.shape != (K, n):
+        raise ValueError(f"theta must have shape ({K}, {n}) for T={T}, got {theta.shape}")
+    cm = compile_model(model)
+    omega, states = split_theta(theta, model, T)
+    om_cols = [omega[:, i:i + 1] for i in range(m)]
+    shape = (K, T)
+    obs = _evaluate(cm.obs, om_cols + [states[:, 1:, i] for i in range(p)]
+                    + [z[:, :, i] for i in range(d)], shape)
+    tr = _evaluate(cm.trans, om_cols + [states[:, :-1, i] for i in range(p)]
+                   + [states[:, 1:, i] for i in range(p)], shape)
+    Lo, Lt = cm.obs.n_local, cm.trans.n_local
+    value = obs[0].sum(axis=1) + tr[0].sum(axis=1)
+
+    go = np.stack(obs[1:1 + Lo], axis=2)          # (K, T, m + p)
+    gt = np.stack(tr[1:1 + Lt], axis=2)           # (K, T, m + 2p)
+    grad_states = np.zeros((K, T + 1, p))
+    grad_states[:, 1:] += go[:, :, m:] + gt[:, :, m + p:]
+    grad_states[:, :-1] += gt[:, :, m:m + p]
+    grad = np.concatenate([go[:, :, :m].sum(axis=1) + gt[:, :, :m].sum(axis=1),
+                           grad_states.reshape(K, -1)], axis=1)
+
+    ho = _full_from_triu(obs[1 + Lo:], cm.obs)    # (K, T, m+p, m+p)
+    ht = _full_from_triu(tr[1 + Lt:], cm.trans)   # (K, T, m+2p, m+2p)
+    h_omega = ho[:, :, :m, :m].sum(axis=1) + ht[:, :, :m, :m].sum(axis=1)
+    cross = np.zeros((K, T + 1, p, m))
+    cross[:, 1:] += ho[:, :, m:, :m] + ht[:, :, m + p:, :m]
+    cross[:, :-1] += ht[:, :, m:m + p, :m]
+    diag = np.zeros((K, T + 1, p, p))
+    diag[:, 1:] += ho[:, :, m:, m:] + ht[:, :, m + p:, m + p:]
+    diag[:, :-1] += ht[:, :, m:m + p, m:m + p]
+    lower = np.ascontiguousarray(ht[:, :, m + p:, m:m + p])
+    return value, grad, BlockHessian(omega=h_omega, cross=cross, diag=diag, lower=lower)
+
+
+# --------------------------------------------------------------------------- constraints
+@lru_cache(maxsize=None)
+def _compile_constraints(model: StateSpaceModel) -> Callable | None:
+    """Lambdified [c_j, dc_j/dw_i, d2c_j/dw_i dw_l] of the model constraints (cached)."""
+    m = model.n_params
+    w = list(sp.symbols(f"w0:{m}", real=True))
+    cons = model.support_constraints(w)
+    if not cons:
+        return None
+    out = []
+    for c in cons:
+        out.append(c)
+        out.extend(sp.diff(c, v) for v in w)
+        out.extend(sp.diff(c, v, u) for v in w for u in w)
+    return sp.lambdify(w, out, modules="numpy", cse=True)
+
+
+def constraint_derivatives(model: StateSpaceModel, omega: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Model constraints c(Omega) > 0 with symbolic first and second derivatives.
+
+    Returns values (K, n_c), gradients (K, n_c, m) and Hessians (K, n_c, m, m); n_c = 0
+    when the model has no constraint besides the prior box.
+    """
+    omega = np.asarray(omega, dtype=float)
+    K, m = omega.shape
+    func = _compile_constraints(model)
+    if func is None:
+        return np.zeros((K, 0)), np.zeros((K, 0, m)), np.zeros((K, 0, m, m))
+    with np.errstate(all="ignore"):
+        raw = func(*[omega[:, i] for i in range(m)])
+    raw = [np.broadcast_to(np.asarray(v, dtype=float), (K,)) for v in raw]
+    per = 1 + m + m * m
+    nc = len(raw) // per
+    vals = np.empty((K, nc))
+    grads = np.empty((K, nc, m))
+    hess = np.empty((K, nc, m, m))
+    for j in range(nc):
+        chunk = raw[j * per:(j + 1) * per]
+        vals[:, j] = chunk[0]
+        grads[:, j] = np.stack(chunk[1:1 + m], axis=1)
+        hess[:, j] = np.stack(chunk[1 + m:], axis=1).reshape(K, m, m)
+    return vals, grads, hess

@@ -23,6 +23,7 @@ class SepD1P2(StateSpaceModel):
     default_prior = {n: "restricted" for n in ("a", "b", "c", "d")}
     allowed_priors = {n: ("restricted", "unrestricted") for n in ("a", "b", "c", "d")}
     unit_interval_params = ("a", "b", "c", "d")
+    constraint_text = ("a^2 + b^2 < 1",)
 
     def support_constraints(self, omega):
         a, b = omega[0], omega[1]

@@ -1,0 +1,101 @@
+"""Atomic writes, validated reads and design trajectories on disk."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from ssmobs import io
+from ssmobs.design_disturbances import design_disturbances
+from ssmobs.models import get_model
+from ssmobs.trajectories import make_trajectories, read_trajectories, write_trajectories
+
+pytestmark = pytest.mark.unit
+
+
+def test_atomic_path_leaves_nothing_on_error(tmp_path):
+    target = tmp_path / "out.json"
+    with pytest.raises(RuntimeError):
+        with io.atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("killed")
+    assert not target.exists()
+    assert os.listdir(tmp_path) == []
+
+
+def test_json_round_trip_and_corruption(tmp_path):
+    path = tmp_path / "r.json"
+    io.write_json(path, {"a": np.float64(1.5), "b": np.arange(3)})
+    assert io.read_json(path, required=["a", "b"]) == {"a": 1.5, "b": [0, 1, 2]}
+    path.write_text(path.read_text()[:7])
+    with pytest.raises(io.CorruptFileError, match="r.json"):
+        io.read_json(path)
+
+
+def test_disturbances_round_trip_and_checksum(tmp_path):
+    res = design_disturbances(4, 9, "design", 3)
+    path = tmp_path / "d.nc"
+    io.write_disturbances(path, res)
+    matrix, attrs = io.read_disturbances(path, q=4, K=9)
+    np.testing.assert_array_equal(matrix, res.matrix)
+    assert attrs["method"] == "design" and attrs["seed"] == 3
+    with pytest.raises(io.CorruptFileError, match="expected a 5 x 9"):
+        io.read_disturbances(path, q=5, K=9)
+    raw = bytearray(path.read_bytes())
+    path.write_bytes(bytes(raw[: len(raw) // 2]))
+    with pytest.raises(io.CorruptFileError, match="d.nc"):
+        io.read_disturbances(path)
+
+
+SCENARIO = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 3, "K": 4,
+            "method": "design", "seed": 1}
+
+
+def test_trajectories_follow_the_model_equations(tmp_path):
+    rng = np.random.default_rng(0)
+    matrix = rng.standard_normal((6, 4))
+    traj = make_trajectories(SCENARIO, matrix)
+    a, s = 0.9, np.sqrt(1 - 0.81)
+    eta, eps = matrix[:3].T, matrix[3:].T
+    x1 = a * 8 + s * eta[:, 0]
+    np.testing.assert_allclose(traj.x[:, 0, 0], x1)
+    np.testing.assert_allclose(traj.x[:, 1, 0], a * x1 + s * eta[:, 1])
+    np.testing.assert_allclose(traj.z[:, :, 0], a * traj.x[:, :, 0] + s * eps)
+    path = tmp_path / "t.nc"
+    write_trajectories(path, traj)
+    back = read_trajectories(path)
+    np.testing.assert_array_equal(back.x, traj.x)
+    np.testing.assert_array_equal(back.z, traj.z)
+    assert back.model.slug == "same" and back.T == 3 and back.K == 4
+
+
+def test_damaged_trajectories_detected(tmp_path):
+    traj = make_trajectories(SCENARIO, np.ones((6, 4)))
+    path = tmp_path / "t.nc"
+    write_trajectories(path, traj)
+    import xarray as xr
+
+    with xr.open_dataset(path, engine="h5netcdf") as opened:
+        ds = opened.load()
+    ds["z"][0, 0, 0] = 99.0
+    ds.to_netcdf(path, engine="h5netcdf")
+    with pytest.raises(io.CorruptFileError, match="checksum"):
+        read_trajectories(path)
+
+
+@pytest.mark.parametrize("slug,omega,x0", [
+    ("sep_d2_p1", {"a": 0.9, "b": 0.8, "c": 0.7}, 8.0),
+    ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.8}, [8.0, 7.0]),
+])
+def test_disturbance_layout_state_first(slug, omega, x0):
+    """Rows: eta_1..eta_T (p each) first, then eps_1..eps_T (d each), Sec. III.A."""
+    model = get_model(slug)
+    T, K = 3, 2
+    q = (model.obs_dim + model.state_dim) * T
+    matrix = np.arange(q * K, dtype=float).reshape(q, K)
+    eta, eps = model.split_disturbances(matrix, T)
+    assert eta.shape == (K, T, model.state_dim) and eps.shape == (K, T, model.obs_dim)
+    np.testing.assert_array_equal(eta[1, 0], matrix[: model.state_dim, 1])
+    np.testing.assert_array_equal(eps[0, 0], matrix[model.state_dim * T: model.state_dim * T + model.obs_dim, 0])
