@@ -16,7 +16,11 @@ from snakemake.utils import min_version
 min_version("9.0")
 
 
-configfile: "config/config.yaml"
+# config/config.yaml is the default; a profile given with --configfile replaces it whole
+# (Snakemake would otherwise deep-merge the two and leak default settings into it).
+if not workflow.overwrite_configfiles:
+
+    configfile: "config/config.yaml"
 
 
 include: "workflow/rules/common.smk"

@@ -15,7 +15,7 @@ from conftest import REPO
 
 pytestmark = pytest.mark.workflow
 
-COPY = ["Snakefile", "workflow", "config", "stan"]
+COPY = ["Snakefile", "workflow", "config", "stan", "envs"]
 
 
 def make_workdir(dest: Path) -> Path:

@@ -11,7 +11,7 @@ A run passes when, over its post-warmup draws,
 * all draws are finite,
 
 and tree-depth saturation (draws with ``treedepth__ >= max_treedepth``) is reported as a
-warning, or fails the run when ``treedepth_fail`` is set.  Default thresholds are the
+warning, or fails the run when ``treedepth_fails`` is set.  Default thresholds are the
 decision summary of ``shared/docs/stan-arviz-snakemake-facts.md`` (Sec. 1).
 
 Two implementations give the same numbers (tested to 1e-10):
@@ -64,7 +64,7 @@ class ConvergenceSettings:
     ess_bulk_min, ess_tail_min : a run fails if any total bulk-/tail-ESS is < this
         (100 x 4 chains = 400).
     ebfmi_min : a run fails if any chain's E-BFMI is < this (0.3).
-    treedepth_fail : if True, draws that hit the sampler's max tree depth fail the run;
+    treedepth_fails : if True, draws that hit the sampler's max tree depth fail the run;
         by default they only add a warning (an efficiency, not a validity, problem).
     implementation : ``"vectorized"`` or ``"arviz"`` (same numbers; see module doc).
     """
@@ -74,7 +74,7 @@ class ConvergenceSettings:
     ess_bulk_min: float = 400.0
     ess_tail_min: float = 400.0
     ebfmi_min: float = 0.3
-    treedepth_fail: bool = False
+    treedepth_fails: bool = False
     implementation: str = "vectorized"
 
     def __post_init__(self) -> None:
@@ -133,25 +133,39 @@ def _rank_average(m: np.ndarray) -> np.ndarray:
     """Ranks 1..n of each row (ties get their average rank, as scipy's 'average')."""
     n = m.shape[1]
     order = np.argsort(m, axis=1)
-    srt = np.take_along_axis(m, order, axis=1)
     ranks = np.empty(m.shape, dtype=float)
     np.put_along_axis(ranks, order, np.broadcast_to(np.arange(1.0, n + 1.0), m.shape), axis=1)
-    tied = np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1))
-    for r in tied:  # rare for continuous draws (stuck chains, the median tie of folding)
-        s = srt[r]
-        new = np.r_[True, s[1:] != s[:-1]]
-        starts = np.flatnonzero(new)
-        ends = np.r_[starts[1:], n]
-        avg = (starts + ends + 1) / 2.0  # mean of ranks starts+1 .. ends
-        ranks[r, order[r]] = np.repeat(avg, ends - starts)
+    srt = np.take_along_axis(m, order, axis=1)
+    for r in np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1)):
+        ranks[r] = _average_ranks_1d(srt[r], order[r])
     return ranks
 
 
+def _average_ranks_1d(srt: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """Average ranks of one row given its sorted values and sort order."""
+    n = srt.size
+    starts = np.flatnonzero(np.r_[True, srt[1:] != srt[:-1]])
+    ends = np.r_[starts[1:], n]
+    out = np.empty(n)
+    out[order] = np.repeat((starts + ends + 1) / 2.0, ends - starts)  # mean of starts+1..ends
+    return out
+
+
 def _z_scale_rows(m: np.ndarray) -> np.ndarray:
-    """Rank-normalise every row: Phi^-1((rank - 3/8) / (n + 1/4)) (ArviZ ``_z_scale``)."""
+    """Rank-normalise every row: Phi^-1((rank - 3/8) / (n + 1/4)) (ArviZ ``_z_scale``).
+
+    Rows without ties are a permutation of the ranks 1..n, so their z-values come from one
+    table of n normal quantiles; only rows with ties need their own ``ndtri``.
+    """
     n = m.shape[1]
-    ranks = _rank_average(m)
-    return special.ndtri((ranks - 0.375) / (n - 0.75 + 1.0))
+    order = np.argsort(m, axis=1)
+    table = special.ndtri((np.arange(1.0, n + 1.0) - 0.375) / (n + 0.25))
+    z = np.empty(m.shape, dtype=float)
+    np.put_along_axis(z, order, np.broadcast_to(table, m.shape), axis=1)
+    srt = np.take_along_axis(m, order, axis=1)
+    for r in np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1)):
+        z[r] = special.ndtri((_average_ranks_1d(srt[r], order[r]) - 0.375) / (n + 0.25))
+    return z
 
 
 def _split(a: np.ndarray) -> np.ndarray:
@@ -386,7 +400,7 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
     if hits:
         text = (f"treedepth: {hits} of {depth.size} draws ({100.0 * hits / depth.size:.2f} %) "
                 f"hit max_treedepth {max_treedepth}")
-        if settings.treedepth_fail:
+        if settings.treedepth_fails:
             failed.append("treedepth")
             messages.append(text)
         else:

@@ -25,11 +25,14 @@ back to ``scipy.special.exp1``.
 
 from __future__ import annotations
 
+import ctypes
 import math
+import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 from scipy import optimize, special
@@ -241,7 +244,7 @@ def _e1(c: np.ndarray, zero_diag: bool = False) -> np.ndarray:
 
 def _psi_sum(c: np.ndarray, e: np.ndarray) -> float:
     """sum of psi(T) / (4 B^2) = sum [c E1(c) + 1 - exp(-c)] over a block (doc 2.4)."""
-    return float(np.vdot(c, e)) - float(np.sum(np.expm1(-c)))
+    return float(np.einsum("i,i->", c.reshape(-1), e.reshape(-1))) - float(np.sum(np.expm1(-c)))
 
 
 def _blocks(n: int, size: int) -> list[tuple[int, int]]:
@@ -425,6 +428,75 @@ def symmetric_distance_and_gradient(
 # --------------------------------------------------------------------------------------------
 
 
+_BLAS_THREAD_SYMBOLS = (
+    ("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
+    ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"),
+    ("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
+    ("openblas_get_num_threads", "openblas_set_num_threads"),
+)
+
+
+@lru_cache(maxsize=1)
+def _openblas_thread_controls() -> tuple[tuple[Callable[[], int], Callable[[int], None]], ...]:
+    """(get, set) thread-count functions of the OpenBLAS libraries loaded in this process.
+
+    Found via /proc/self/maps (Linux); empty elsewhere or if nothing is found.
+    """
+    try:
+        with open("/proc/self/maps") as fh:
+            paths = sorted(
+                {
+                    line.split()[-1]
+                    for line in fh
+                    if "openblas" in line.lower() and line.split()[-1].startswith("/")
+                }
+            )
+    except OSError:
+        return ()
+    controls = []
+    mode = getattr(os, "RTLD_NOLOAD", 0) | getattr(os, "RTLD_NOW", 2)
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path, mode=mode)
+        except OSError:
+            continue
+        for get_name, set_name in _BLAS_THREAD_SYMBOLS:
+            get_fn = getattr(lib, get_name, None)
+            set_fn = getattr(lib, set_name, None)
+            if get_fn is not None and set_fn is not None:
+                get_fn.restype = ctypes.c_int
+                get_fn.argtypes = []
+                set_fn.restype = None
+                set_fn.argtypes = [ctypes.c_int]
+                controls.append((get_fn, set_fn))
+                break
+    return tuple(controls)
+
+
+@contextmanager
+def _blas_threads(n: int | None) -> Iterator[None]:
+    """Temporarily set the OpenBLAS thread count (no-op for None or if OpenBLAS is not found).
+
+    The pairwise work is dominated by single-threaded NumPy element-wise loops; multi-threaded
+    BLAS gains little on an idle machine and slows the small GEMMs down by 10-25x when the cores
+    are shared with other processes (OpenBLAS threads spin), so the optimisation runs with 1.
+    """
+    saved = []
+    if n is not None:
+        for get_fn, set_fn in _openblas_thread_controls():
+            try:
+                old = int(get_fn())
+                set_fn(int(n))
+                saved.append((set_fn, old))
+            except Exception:  # pragma: no cover - defensive, foreign library
+                continue
+    try:
+        yield
+    finally:
+        for set_fn, old in reversed(saved):
+            set_fn(old)
+
+
 def _check_positive_int(name: str, value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"{name} must be a positive integer (>= 1); got {value!r}")
@@ -441,11 +513,17 @@ def _symmetric_points(half: np.ndarray, K: int) -> np.ndarray:
     return np.concatenate(parts, axis=0)
 
 
+def _inv_sqrt(lam: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    w = (vec / np.sqrt(lam)) @ vec.T
+    return 0.5 * (w + w.T)
+
+
 def _covariance_correct(half: np.ndarray, K: int) -> tuple[np.ndarray, str]:
     """Covariance correction of a symmetric set (doc Section 5), applied to the half-set.
 
     C = X^T X / K = 2 S^T S / K (divisor K, origin included).  If N >= q (K >= 2q) the set is
-    whitened with the symmetric W = C^{-1/2}; otherwise (C rank-deficient) it is scaled so that
+    whitened with the symmetric W = C^{-1/2} (plus one refinement pass with the residual
+    C' ~ I, so that the sample covariance is I to ~1e-15 even for ill-conditioned C); otherwise (C rank-deficient) it is scaled so that
     trace(C) = q.  A numerically singular C with K >= 2q also falls back to trace scaling.
     """
     n_half, q = half.shape
@@ -456,9 +534,11 @@ def _covariance_correct(half: np.ndarray, K: int) -> tuple[np.ndarray, str]:
     if n_half >= q:
         lam, vec = np.linalg.eigh(c)
         if lam[0] > 1e-12 * lam[-1] and lam[0] > 0.0:
-            wmat = (vec / np.sqrt(lam)) @ vec.T
-            wmat = 0.5 * (wmat + wmat.T)
-            return half @ wmat, "whitened"
+            out = half @ _inv_sqrt(lam, vec)
+            # one refinement step: removes the O(eps * cond(C)) round-off of the first pass
+            c2 = (2.0 / K) * (out.T @ out)
+            lam2, vec2 = np.linalg.eigh(0.5 * (c2 + c2.T))
+            return out @ _inv_sqrt(lam2, vec2), "whitened"
     tr = float(np.trace(c))
     if tr <= 0.0:
         return half.copy(), "none"
@@ -545,6 +625,7 @@ def design_disturbances(
     rel_tol: float = REL_TOL,
     grad_tol: float = GRAD_TOL,
     max_iter: int = MAX_ITER,
+    blas_threads: int | None = 1,
 ) -> DesignResult:
     """Generate K design disturbance vectors approximating N(0, I_q) (paper Sec. III.A).
 
@@ -575,6 +656,10 @@ def design_disturbances(
         change of one iteration is <= ``rel_tol`` (toolbox rule, default 1e-6), when
         ``K * ||grad||_inf <= grad_tol`` (default 1e-7, i.e. the toolbox's absolute 1e-8 at
         K = 10, but not loosening as K grows), or after ``max_iter`` iterations.
+    blas_threads : int or None, optional
+        OpenBLAS thread count used while generating (default 1, restored afterwards; None leaves
+        it alone).  Multi-threaded BLAS gains little here and is 10-25x slower when the cores are
+        shared with other processes.
 
     Returns
     -------
@@ -611,6 +696,28 @@ def design_disturbances(
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
     seed = int(seed)
     bm = b_max_rule(q) if b_max is None else _check_b_max(b_max)
+    if not (float(rel_tol) >= 0.0 and float(grad_tol) >= 0.0):
+        raise ValueError(f"rel_tol and grad_tol must be >= 0; got {rel_tol!r}, {grad_tol!r}")
+    max_iter = _check_positive_int("max_iter", max_iter)
+    if blas_threads is not None:
+        blas_threads = _check_positive_int("blas_threads", blas_threads)
+    with _blas_threads(blas_threads):
+        return _generate(q, K, method, seed, bm, progress, correct_covariance, rel_tol, grad_tol,
+                         max_iter)
+
+
+def _generate(
+    q: int,
+    K: int,
+    method: str,
+    seed: int,
+    bm: float,
+    progress: Callable[[str], None] | None,
+    correct_covariance: bool,
+    rel_tol: float,
+    grad_tol: float,
+    max_iter: int,
+) -> DesignResult:
     rng = np.random.default_rng(seed)
     n_half = K // 2
 
@@ -633,9 +740,6 @@ def design_disturbances(
     half = rng.standard_normal((n_half, q))
     iterations = 0
     if method == "design" and n_half > 0:
-        if not (rel_tol >= 0.0 and grad_tol >= 0.0):
-            raise ValueError(f"rel_tol and grad_tol must be >= 0; got {rel_tol!r}, {grad_tol!r}")
-        max_iter = _check_positive_int("max_iter", max_iter)
         half, d_raw, iterations = _optimise_half(
             half, K, bm, rel_tol=rel_tol, grad_tol=grad_tol, max_iter=max_iter, progress=progress
         )

@@ -106,6 +106,29 @@ class StateSpaceModel:
         """
         raise NotImplementedError
 
+    def initial_states(self, omega: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Start values of x_1..x_T for the joint-MAP optimisation (Sec. III.B).
+
+        The paper starts the k-th optimisation at (Omega_true, x0_true, z~(k)): the
+        observations themselves serve as the start of the states.  That needs d == p;
+        models with d != p override this method and document their choice.
+
+        Parameters
+        ----------
+        omega : (m,) parameter values of the start (Omega_true); unused here.
+        z : (K, T, d) observation trajectories.
+
+        Returns
+        -------
+        (K, T, p) start values of the states.
+        """
+        z = np.asarray(z, dtype=float)
+        if self.obs_dim != self.state_dim:
+            raise NotImplementedError(
+                f"model '{self.slug}' has d={self.obs_dim} != p={self.state_dim} and must "
+                f"override initial_states")
+        return z.copy()
+
     # ----------------------------------------------------------------- derived facts
     @property
     def n_params(self) -> int:

@@ -31,6 +31,17 @@ class SepD2P1(StateSpaceModel):
         (_, _, c), (xp,), (xt,) = omega, x_prev, x
         return (xt - c * xp) ** 2 / (1 - c**2) + sp.log(1 - c**2)
 
+    def initial_states(self, omega, z):
+        """Start of x_1..x_T for the joint MAP (Sec. III.B) when d = 2 > p = 1.
+
+        The paper's start "x_t = z_t" needs d == p; here each state starts at the mean of
+        its two observations, x_t = (z_{t,1} + z_{t,2}) / 2.  Like the paper's start it uses
+        only the data (no inversion of the observation equation with Omega), and for
+        a = b it is exactly the paper's rule applied to either observation's expectation.
+        """
+        z = np.asarray(z, dtype=float)
+        return z.mean(axis=2, keepdims=True)
+
     def simulate(self, omega, x0, eta, eps):
         a, b, c = omega
         K, T, _ = eta.shape

@@ -1,0 +1,756 @@
+"""Joint MAP estimates per design trajectory and their numerical checks (Sec. III.B).
+
+For every design observation trajectory z~(k) we minimise -2 pi(Theta | z~(k)) over
+Theta = (Omega, x_0, x_1..x_T) with a primal log-barrier method ([26, Sec. 19.6]):
+
+    P_mu(Theta) = -2 pi(Theta | z) - mu * sum_i log s_i(Omega),
+
+where the slacks s_i > 0 are the finite prior bounds (Omega_j - lower_j, upper_j - Omega_j)
+and the model constraints c(Omega) > 0 (e.g. 1 - a^2 - b^2 for (Sep, d=1, p=2)).  For each
+mu the barrier problem is solved by Newton's method with the analytic Hessian and an
+Armijo backtracking line search whose first trial step is cut to a fraction of the
+distance to the box boundary and which rejects any trial point with a non-positive slack,
+so every iterate stays strictly feasible.  mu is divided by ``mu_factor`` each time the
+barrier gradient falls below ``max(inner_tol_factor * mu, newton_tol)`` until ``mu_min``.
+
+All trajectories are optimised together: every Newton iteration evaluates the per-step
+symbolic derivatives for the whole batch and solves the K Newton systems at once.  The
+Hessian is an "arrow" matrix (block-tridiagonal in the states plus m dense rows/columns
+for Omega), so each system is solved in O(T (p^3 + p^2 m + m^2) + m^3) by a block
+Cholesky of the state part and an m x m Schur complement, vectorised over k with a loop
+over t.  Where the Hessian is not positive definite a multiple of the identity is added
+(modified Newton, [26, Sec. 3.4]).
+
+Numerical checks at the result Theta_hat (Sec. III.B), giving one status per k, checked in
+this order:
+
+``failed``
+    value, gradient, Hessian or Theta_hat not finite (reason in ``reason``).
+``boundary``
+    the optimum lies on the boundary of the prior's support: a slack below
+    ``boundary_tol``, or a barrier multiplier mu / s_i above ``grad_tol`` (the barrier is
+    what holds the point), or the iterates ran off to infinity (``|Theta|_inf`` above
+    ``divergence_limit``; the supremum is approached at the edge of an unbounded support).
+``not-positive-definite``
+    smallest eigenvalue of the Hessian of -2 pi not above ``pd_tol``.
+``gradient``
+    largest absolute gradient component of -2 pi not below ``grad_tol`` (1e-5 in the paper).
+``ridge``
+    eigenvalue ratio lambda_min / lambda_max below ``eig_ratio_min`` (r_0 = 1e-5) and a new
+    optimisation started at Theta_hat + h v_min (v_min the unit eigenvector of the smallest
+    eigenvalue, h = ``ridge_shift``) ends more than ``ridge_move_tol`` away (sup norm) or
+    fails.  If it returns to Theta_hat the trajectory is ``ok``.
+``ok``
+    all checks passed: k belongs to K^max.
+
+Local variances (Sec. II.B): LVar_j = -H_pi^{-1}(Theta_hat)_jj = 2 (H_{-2 pi}^{-1})_jj,
+computed from the eigen-decomposition wherever the Hessian is positive definite (NaN
+otherwise).
+
+Start (Sec. III.B): (Omega_true, x0_true, model.initial_states(Omega_true, z~(k))), i.e. the
+observations themselves when d == p as in the paper (see the models for d != p).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Protocol, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .models.base import PriorBounds, StateSpaceModel
+from .models.log_posterior import (
+    _compile_constraints,
+    constraint_derivatives,
+    neg2_log_posterior,
+    neg2_log_posterior_blocks,
+)
+
+#: the six statuses, in the order in which the checks assign them
+STATUSES: tuple[str, ...] = ("ok", "not-positive-definite", "gradient", "ridge", "boundary",
+                             "failed")
+
+
+# =========================================================================== settings
+@dataclass(frozen=True)
+class JointMapSettings:
+    """Thresholds and tuning of the joint-MAP optimiser and its checks (Sec. III.B).
+
+    Every number the checks use is a field, so the workflow config can set it.
+    """
+
+    #: gradient check: max |d(-2 pi)/dTheta_j| must be below this (paper: 1e-5)
+    grad_tol: float = 1e-5
+    #: eigenvalue check: lambda_min / lambda_max must be above this (paper: r_0 = 1e-5)
+    eig_ratio_min: float = 1e-5
+    #: Hessian check: lambda_min must be above this
+    pd_tol: float = 0.0
+    #: Newton iterations per trajectory (all barrier stages together)
+    max_newton_iter: int = 200
+    #: stop when max |grad P_mu| <= newton_tol at mu = mu_min (absolute, units of -2 pi)
+    newton_tol: float = 1e-9
+    #: inner stopping rule for mu > mu_min: max |grad P_mu| <= inner_tol_factor * mu
+    inner_tol_factor: float = 1.0
+    #: initial barrier parameter mu_0
+    mu0: float = 1.0
+    #: mu <- mu * mu_factor after each barrier stage
+    mu_factor: float = 0.1
+    #: final barrier parameter ("near zero")
+    mu_min: float = 1e-10
+    #: a step goes at most this fraction of the way to a prior bound
+    fraction_to_boundary: float = 0.995
+    #: Armijo sufficient-decrease constant
+    armijo_c1: float = 1e-4
+    #: step halvings before the line search gives up
+    max_backtracks: int = 50
+    #: first diagonal shift (relative to 1 + max |H_jj|) when the Hessian is not PD
+    damping_init: float = 1e-8
+    #: shift multiplications by 10 before falling back to steepest descent
+    max_damping_tries: int = 25
+    #: length of the shift along the smallest-eigenvalue eigenvector for the ridge check
+    ridge_shift: float = 0.1
+    #: the ridge re-optimisation "moved" if it ends farther than this (sup norm) from Theta_hat
+    ridge_move_tol: float = 1e-4
+    #: a slack s_i(Omega_hat) below this means the optimum is on the boundary
+    boundary_tol: float = 1e-6
+    #: |Theta|_inf above this means the iterates run off to infinity (boundary at infinity)
+    divergence_limit: float = 1e6
+    #: trajectories per vectorised batch (0: chosen from |Theta| to bound memory)
+    chunk_size: int = 0
+
+    def __post_init__(self) -> None:
+        positive = ("grad_tol", "eig_ratio_min", "newton_tol", "inner_tol_factor", "mu0",
+                    "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol",
+                    "boundary_tol", "divergence_limit")
+        for name in positive:
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"joint-MAP setting {name}={value!r} must be a positive number")
+        for name in ("max_newton_iter", "max_backtracks", "max_damping_tries"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be >= 1")
+        if not 0 < self.mu_factor < 1:
+            raise ValueError(f"joint-MAP setting mu_factor={self.mu_factor!r} must be in (0, 1)")
+        if not 0 < self.fraction_to_boundary < 1:
+            raise ValueError(f"joint-MAP setting fraction_to_boundary={self.fraction_to_boundary!r}"
+                             " must be in (0, 1)")
+        if self.mu_min > self.mu0:
+            raise ValueError(f"joint-MAP setting mu_min={self.mu_min!r} must not exceed "
+                             f"mu0={self.mu0!r}")
+        if self.pd_tol < 0:
+            raise ValueError(f"joint-MAP setting pd_tol={self.pd_tol!r} must be >= 0")
+        if self.chunk_size < 0:
+            raise ValueError(f"joint-MAP setting chunk_size={self.chunk_size!r} must be >= 0")
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any] | None) -> "JointMapSettings":
+        """Settings from a config block; unknown keys raise ValueError naming them."""
+        values = dict(values or {})
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown joint-MAP setting(s) {unknown}; known: {sorted(known)}")
+        return cls(**values)
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+# =========================================================================== result
+@dataclass
+class JointMapResult:
+    """Per-trajectory joint-MAP results (index k = column of the design matrix, from 0).
+
+    Attributes
+    ----------
+    theta_hat : (K, n) Theta_hat = (Omega, x_0, x_1..x_T).
+    neg2_log_post : (K,) -2 pi(Theta_hat | z~(k)) (up to the model's additive constant).
+    local_variance : (K, n) LVar_j = 2 (H_{-2 pi}^{-1})_jj (NaN where H is not PD).
+    eig_ratio : (K,) lambda_min / lambda_max of H_{-2 pi}(Theta_hat).
+    grad_max : (K,) max_j |d(-2 pi)/dTheta_j| at Theta_hat.
+    iterations : (K,) Newton iterations (the ridge re-optimisation not included).
+    status : (K,) one of :data:`STATUSES`.
+    reason : (K,) short explanation ("" for ok).
+    theta_names : names of the components of Theta.
+    """
+
+    theta_hat: np.ndarray
+    neg2_log_post: np.ndarray
+    local_variance: np.ndarray
+    eig_ratio: np.ndarray
+    grad_max: np.ndarray
+    iterations: np.ndarray
+    status: np.ndarray
+    reason: np.ndarray
+    theta_names: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(K,) True for k in K^max."""
+        return self.status == "ok"
+
+    def to_frame(self, model: StateSpaceModel, T: int) -> pd.DataFrame:
+        """One row per k: k, status, reason, neg2_log_post, eig_ratio, grad_max, iterations,
+        and for every component c of Omega and x_0 its estimate ``c`` and ``lvar_c``."""
+        names = model.theta_names(T)
+        head = model.n_params + model.state_dim
+        frame = pd.DataFrame({
+            "k": np.arange(self.theta_hat.shape[0], dtype=np.int64),
+            "status": pd.Series(self.status, dtype=object).astype(str),
+            "reason": pd.Series(self.reason, dtype=object).astype(str),
+            "neg2_log_post": self.neg2_log_post.astype(float),
+            "eig_ratio": self.eig_ratio.astype(float),
+            "grad_max": self.grad_max.astype(float),
+            "iterations": self.iterations.astype(np.int64),
+        })
+        for j, name in enumerate(names[:head]):
+            frame[name] = self.theta_hat[:, j]
+        for j, name in enumerate(names[:head]):
+            frame[f"lvar_{name}"] = self.local_variance[:, j]
+        return frame
+
+
+class _ProgressLike(Protocol):
+    def update(self, n: int = 1) -> None: ...
+
+
+# =========================================================================== small dense algebra
+def _chol_inv(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse Cholesky factor of a batch of small SPD matrices.
+
+    S : (..., q, q).  Returns (Linv, ok) with Linv lower triangular, Linv S Linv^T = I where
+    ok; where S is not positive definite (or not finite) ok is False and Linv is finite junk.
+    """
+    q = S.shape[-1]
+    if q == 1:
+        d = S[..., 0, 0]
+        ok = np.isfinite(d) & (d > 0)
+        with np.errstate(all="ignore"):
+            inv = 1.0 / np.sqrt(np.where(ok, d, 1.0))
+        return inv[..., None, None], ok
+    L = np.zeros_like(S)
+    ok = np.all(np.isfinite(S), axis=(-2, -1))
+    for j in range(q):
+        s = S[..., j, j] - np.sum(L[..., j, :j] ** 2, axis=-1)
+        good = s > 0
+        ok &= good
+        L[..., j, j] = np.sqrt(np.where(good, s, 1.0))
+        for i in range(j + 1, q):
+            L[..., i, j] = (S[..., i, j] - np.sum(L[..., i, :j] * L[..., j, :j], axis=-1)) / L[..., j, j]
+    Linv = np.zeros_like(S)
+    for i in range(q):
+        Linv[..., i, i] = 1.0 / L[..., i, i]
+        for j in range(i):
+            Linv[..., i, j] = -np.sum(L[..., i, j:i] * Linv[..., j:i, j], axis=-1) / L[..., i, i]
+    return Linv, ok
+
+
+class _StateFactor:
+    """Block Cholesky D = L L^T of a batch of block-tridiagonal SPD matrices.
+
+    ``diag`` (K, N, p, p) and ``lower`` (K, N-1, p, p) (block (t, t-1)).  Stores L_t^{-1}
+    and M_t = D_{t,t-1} L_{t-1}^{-T}, time-major for fast per-step access.
+    """
+
+    def __init__(self, diag: np.ndarray, lower: np.ndarray) -> None:
+        K, N, p, _ = diag.shape
+        self.p, self.N = p, N
+        dg = np.moveaxis(diag, 1, 0)
+        lo = np.moveaxis(lower, 1, 0)
+        self.ok = np.ones(K, dtype=bool)
+        if p == 1:
+            # scalar recursion: l_t = 1/sqrt(pivot_t), m_t = D_{t,t-1} l_{t-1}
+            dg = dg[..., 0, 0]
+            lo = lo[..., 0, 0]
+            linv = np.empty((N, K))
+            mm = np.empty((max(N - 1, 0), K))
+            piv = dg[0]
+            with np.errstate(all="ignore"):
+                for t in range(N):
+                    if t > 0:
+                        mm[t - 1] = lo[t - 1] * linv[t - 1]
+                        piv = dg[t] - mm[t - 1] ** 2
+                    good = piv > 0
+                    self.ok &= good
+                    linv[t] = 1.0 / np.sqrt(np.where(good, piv, 1.0))
+            self.ok &= np.all(np.isfinite(linv), axis=0) & np.all(np.isfinite(mm), axis=0)
+            self.linv, self.m = linv, mm
+            return
+        linv = np.empty((N, K, p, p))
+        mm = np.empty((max(N - 1, 0), K, p, p))
+        with np.errstate(all="ignore"):
+            for t in range(N):
+                S = dg[t]
+                if t > 0:
+                    mm[t - 1] = lo[t - 1] @ np.swapaxes(linv[t - 1], -1, -2)
+                    S = S - mm[t - 1] @ np.swapaxes(mm[t - 1], -1, -2)
+                linv[t], good = _chol_inv(S)
+                self.ok &= good
+        self.linv, self.m = linv, mm
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """D^{-1} rhs for rhs (K, N, p, r); returns (K, N, p, r)."""
+        N = self.N
+        R = np.moveaxis(rhs, 1, 0)
+        u = np.empty_like(R)
+        with np.errstate(all="ignore"):
+            if self.p == 1:
+                l, mm = self.linv[:, :, None], self.m[:, :, None]
+                R = R[:, :, 0, :]
+                u = np.empty_like(R)
+                u[0] = l[0] * R[0]
+                for t in range(1, N):
+                    u[t] = l[t] * (R[t] - mm[t - 1] * u[t - 1])
+                v = np.empty_like(u)
+                v[N - 1] = l[N - 1] * u[N - 1]
+                for t in range(N - 2, -1, -1):
+                    v[t] = l[t] * (u[t] - mm[t] * v[t + 1])
+                return np.moveaxis(v, 0, 1)[:, :, None, :]
+            Li, mm = self.linv, self.m
+            u[0] = Li[0] @ R[0]
+            for t in range(1, N):
+                u[t] = Li[t] @ (R[t] - mm[t - 1] @ u[t - 1])
+            v = np.empty_like(u)
+            v[N - 1] = np.swapaxes(Li[N - 1], -1, -2) @ u[N - 1]
+            for t in range(N - 2, -1, -1):
+                v[t] = np.swapaxes(Li[t], -1, -2) @ (u[t] - np.swapaxes(mm[t], -1, -2) @ v[t + 1])
+        return np.moveaxis(v, 0, 1)
+
+
+def _arrow_newton_step(A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray,
+                       g: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve (H + tau I) d = -g for a batch of arrow matrices H = [[A, C^T], [C, D]].
+
+    A (K, m, m); C (K, N, p, m) couples state t with Omega; D block-tridiagonal with
+    diagonal blocks Dd (K, N, p, p) and sub-diagonal blocks Dl (K, N-1, p, p); tau (K,).
+    Eliminates the states (block Cholesky of D) and solves the m x m Schur complement.
+    Returns d (K, n) and ok (K,): True where H + tau I is positive definite.
+    """
+    K, N, p, m = C.shape
+    eye_p = np.eye(p)
+    fac = _StateFactor(Dd + tau[:, None, None, None] * eye_p, Dl)
+    gx = g[:, m:].reshape(K, N, p)
+    Y = fac.solve(np.concatenate([C, gx[..., None]], axis=-1))
+    YC, yg = Y[..., :m], Y[..., m]
+    with np.errstate(all="ignore"):
+        S = A + tau[:, None, None] * np.eye(m) - np.einsum("ktpi,ktpj->kij", C, YC)
+        r = -g[:, :m] + np.einsum("ktpi,ktp->ki", C, yg)
+        LSi, okS = _chol_inv(S)
+        dw = np.einsum("kji,kj->ki", LSi, np.einsum("kij,kj->ki", LSi, r))
+        dx = -yg - np.einsum("ktpi,ki->ktp", YC, dw)
+    d = np.concatenate([dw, dx.reshape(K, -1)], axis=1)
+    ok = fac.ok & okS & np.all(np.isfinite(d), axis=1)
+    return d, ok
+
+
+def _damped_newton_direction(A, C, Dd, Dl, g, settings: JointMapSettings
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """Newton direction with a diagonal shift where the Hessian is not PD.
+
+    Returns d (K, n) and the shift used (K,); where no shift up to
+    damping_init * 10^(tries-1) * scale works, d is the scaled steepest-descent direction.
+    """
+    K = g.shape[0]
+    tau = np.zeros(K)
+    d, ok = _arrow_newton_step(A, C, Dd, Dl, g, tau)
+    if ok.all():
+        return d, tau
+    scale = 1.0 + np.maximum(np.abs(np.diagonal(A, axis1=1, axis2=2)).max(axis=1),
+                             np.abs(np.diagonal(Dd, axis1=2, axis2=3)).max(axis=(1, 2)))
+    bad = np.flatnonzero(~ok)
+    t_bad = settings.damping_init * scale[bad]
+    for _ in range(settings.max_damping_tries):
+        db, okb = _arrow_newton_step(A[bad], C[bad], Dd[bad], Dl[bad], g[bad], t_bad)
+        d[bad[okb]] = db[okb]
+        tau[bad[okb]] = t_bad[okb]
+        bad, t_bad = bad[~okb], t_bad[~okb] * 10.0
+        if bad.size == 0:
+            return d, tau
+    d[bad] = -g[bad] / scale[bad, None]
+    tau[bad] = np.inf
+    return d, tau
+
+
+# =========================================================================== barrier
+class _Barrier:
+    """Log barrier -sum log s_i(Omega) for the finite prior bounds and model constraints."""
+
+    def __init__(self, model: StateSpaceModel, bounds: PriorBounds) -> None:
+        self.model = model
+        self.m = model.n_params
+        self.lower = np.asarray(bounds.lower, dtype=float)
+        self.upper = np.asarray(bounds.upper, dtype=float)
+        self.lo_idx = np.flatnonzero(np.isfinite(self.lower))
+        self.up_idx = np.flatnonzero(np.isfinite(self.upper))
+        self.has_cons = _compile_constraints(model) is not None
+
+    def slacks(self, omega: np.ndarray) -> np.ndarray:
+        """(K, n_s) slacks (box lower, box upper, model constraints); all > 0 inside."""
+        parts = [omega[:, self.lo_idx] - self.lower[self.lo_idx],
+                 self.upper[self.up_idx] - omega[:, self.up_idx]]
+        if self.has_cons:
+            parts.append(constraint_derivatives(self.model, omega)[0])
+        return np.concatenate(parts, axis=1)
+
+    def value(self, omega: np.ndarray) -> np.ndarray:
+        """(K,) -sum log s_i, +inf where a slack is not positive."""
+        s = self.slacks(omega)
+        with np.errstate(all="ignore"):
+            phi = -np.sum(np.log(np.where(s > 0, s, 1.0)), axis=1)
+        return np.where(np.all(s > 0, axis=1), phi, np.inf)
+
+    def derivatives(self, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """value (K,), gradient (K, m) and Hessian (K, m, m) of -sum log s_i."""
+        K, m = omega.shape
+        grad = np.zeros((K, m))
+        hess = np.zeros((K, m, m))
+        phi = np.zeros(K)
+        with np.errstate(all="ignore"):
+            s_lo = omega[:, self.lo_idx] - self.lower[self.lo_idx]
+            s_up = self.upper[self.up_idx] - omega[:, self.up_idx]
+            phi -= np.log(s_lo).sum(axis=1) + np.log(s_up).sum(axis=1)
+            grad[:, self.lo_idx] -= 1.0 / s_lo
+            grad[:, self.up_idx] += 1.0 / s_up
+            diag = np.zeros((K, m))
+            diag[:, self.lo_idx] += 1.0 / s_lo**2
+            diag[:, self.up_idx] += 1.0 / s_up**2
+            hess += diag[:, :, None] * np.eye(m)
+            if self.has_cons:
+                c, dc, d2c = constraint_derivatives(self.model, omega)
+                phi -= np.log(c).sum(axis=1)
+                grad -= np.einsum("kj,kji->ki", 1.0 / c, dc)
+                hess += (np.einsum("kj,kji,kjl->kil", 1.0 / c**2, dc, dc)
+                         - np.einsum("kj,kjil->kil", 1.0 / c, d2c))
+        return phi, grad, hess
+
+    def max_step(self, omega: np.ndarray, d_omega: np.ndarray, tau: float) -> np.ndarray:
+        """(K,) largest alpha <= 1 keeping a fraction (1 - tau) of every box slack."""
+        alpha = np.ones(omega.shape[0])
+        with np.errstate(all="ignore"):
+            for idx, s, rate in ((self.lo_idx, omega[:, self.lo_idx] - self.lower[self.lo_idx],
+                                  -d_omega[:, self.lo_idx]),
+                                 (self.up_idx, self.upper[self.up_idx] - omega[:, self.up_idx],
+                                  d_omega[:, self.up_idx])):
+                if idx.size:
+                    lim = np.where(rate > 0, tau * s / rate, np.inf)
+                    alpha = np.minimum(alpha, lim.min(axis=1))
+        return alpha
+
+
+# =========================================================================== optimiser
+def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier: _Barrier,
+              settings: JointMapSettings, mu_start: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Batched primal barrier-Newton minimisation of -2 pi from ``theta0``.
+
+    Returns theta (K, n), iterations (K,), final mu (K,) and the stop reason (K,) str:
+    converged, max-iter, line-search, non-finite, diverged.
+    """
+    K, n = theta0.shape
+    m = model.n_params
+    theta = theta0.astype(float).copy()
+    mu = np.full(K, float(mu_start))
+    iters = np.zeros(K, dtype=np.int64)
+    reason = np.full(K, "max-iter", dtype=object)
+    active = np.ones(K, dtype=bool)
+    eps = np.finfo(float).eps
+
+    def grad_p(g, bg, mu_a):
+        gp = g.copy()
+        gp[:, :m] += mu_a[:, None] * bg
+        return gp
+
+    for _ in range(settings.max_newton_iter):
+        act = np.flatnonzero(active)
+        if act.size == 0:
+            break
+        th, zz, mu_a = theta[act], z[act], mu[act]
+        f, g, blk = neg2_log_posterior_blocks(model, th, zz)
+        phi, bg, bh = barrier.derivatives(th[:, :m])
+        finite = (np.isfinite(f) & np.isfinite(phi) & np.all(np.isfinite(g), axis=1)
+                  & np.all(np.isfinite(bg), axis=1))
+        gp = grad_p(g, bg, mu_a)
+        gnorm = np.abs(gp).max(axis=1)
+        # finish barrier stages whose inner problem is solved, possibly several at once
+        while True:
+            tol = np.maximum(settings.inner_tol_factor * mu_a, settings.newton_tol)
+            lower_mu = finite & (gnorm <= tol) & (mu_a > settings.mu_min)
+            if not lower_mu.any():
+                break
+            mu_a = np.where(lower_mu, np.maximum(mu_a * settings.mu_factor, settings.mu_min), mu_a)
+            gp = grad_p(g, bg, mu_a)
+            gnorm = np.abs(gp).max(axis=1)
+        mu[act] = mu_a
+        done = finite & (gnorm <= settings.newton_tol) & (mu_a <= settings.mu_min)
+        reason[act[~finite]] = "non-finite"
+        reason[act[done]] = "converged"
+        active[act[~finite | done]] = False
+        go = finite & ~done
+        if not go.any():
+            continue
+        sel = np.flatnonzero(go)
+        idx = act[sel]
+        th, zz, mu_s, gps = th[sel], zz[sel], mu_a[sel], gp[sel]
+        P0 = f[sel] + mu_s * phi[sel]
+        A = blk.omega[sel] + mu_s[:, None, None] * bh[sel]
+        d, _ = _damped_newton_direction(A, blk.cross[sel], blk.diag[sel], blk.lower[sel], gps,
+                                        settings)
+        slope = np.einsum("kj,kj->k", gps, d)
+        uphill = ~(slope < 0)
+        if uphill.any():  # safeguard: never search along an ascent direction
+            d[uphill] = -gps[uphill]
+            slope[uphill] = -np.einsum("kj,kj->k", gps[uphill], gps[uphill])
+        # a full step smaller than rounding at mu_min: nothing left to gain
+        tiny = ((np.abs(d).max(axis=1) <= 4 * eps * (1.0 + np.abs(th).max(axis=1)))
+                & (mu_s <= settings.mu_min))
+        if tiny.any():
+            reason[idx[tiny]] = "converged"
+            active[idx[tiny]] = False
+        alpha = barrier.max_step(th[:, :m], d[:, :m], settings.fraction_to_boundary)
+        accepted = np.zeros(sel.size, dtype=bool)
+        pending = ~tiny
+        for _ls in range(settings.max_backtracks):
+            pi = np.flatnonzero(pending)
+            if pi.size == 0:
+                break
+            trial = th[pi] + alpha[pi, None] * d[pi]
+            (ft,) = neg2_log_posterior(model, trial, zz[pi], None, order=0)
+            Pt = ft + mu_s[pi] * barrier.value(trial[:, :m])
+            ok = np.isfinite(Pt) & (Pt <= P0[pi] + settings.armijo_c1 * alpha[pi] * slope[pi]
+                                    + 16 * eps * np.abs(P0[pi]))
+            good = pi[ok]
+            theta[idx[good]] = trial[ok]
+            accepted[good] = True
+            pending[good] = False
+            alpha[pi[~ok]] *= 0.5
+        stuck = pending  # never accepted
+        reason[idx[stuck]] = "line-search"
+        active[idx[stuck]] = False
+        iters[idx[accepted]] += 1
+        big = np.abs(theta[idx]).max(axis=1) > settings.divergence_limit
+        reason[idx[big]] = "diverged"
+        active[idx[big]] = False
+    return theta, iters, mu, reason
+
+
+def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
+    size = settings.chunk_size or int(np.clip(1e7 / (n * n), 64, 2048))
+    return [slice(s, min(s + size, K)) for s in range(0, K, size)]
+
+
+def _eigen(H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eigen-decomposition of finite symmetric matrices; NaN rows where not finite."""
+    K, n, _ = H.shape
+    lam = np.full((K, n), np.nan)
+    vec = np.full((K, n, n), np.nan)
+    fin = np.all(np.isfinite(H), axis=(1, 2))
+    if fin.any():
+        lam[fin], vec[fin] = np.linalg.eigh(H[fin])
+    return lam, vec, fin
+
+
+def _classify_chunk(model, z, theta, mu, stop, barrier, settings
+                    ) -> dict[str, np.ndarray]:
+    """Checks of Sec. III.B for one chunk (ridge re-optimisation included)."""
+    K, n = theta.shape
+    m = model.n_params
+    with np.errstate(all="ignore"):
+        f, g, blk = neg2_log_posterior_blocks(model, theta, z)
+        H = blk.to_dense()
+    lam, vec, fin_h = _eigen(H)
+    finite = (np.isfinite(f) & np.all(np.isfinite(g), axis=1) & fin_h
+              & np.all(np.isfinite(theta), axis=1))
+    lam_min, lam_max = lam[:, 0], lam[:, -1]
+    with np.errstate(all="ignore"):
+        ratio = lam_min / lam_max
+        grad_max = np.abs(g).max(axis=1)
+        s = barrier.slacks(theta[:, :m])
+        s_min = s.min(axis=1) if s.shape[1] else np.full(K, np.inf)
+        mult = mu / s_min
+    pd_ = lam_min > settings.pd_tol
+    with np.errstate(all="ignore"):
+        lvar = 2.0 * np.einsum("kji,ki->kj", vec ** 2, 1.0 / lam)
+    lvar[~(pd_ & finite)] = np.nan
+
+    status = np.full(K, "ok", dtype=object)
+    reason = np.full(K, "", dtype=object)
+    undecided = np.ones(K, dtype=bool)
+
+    def assign(mask, st, why):
+        nonlocal undecided
+        hit = mask & undecided
+        status[hit] = st
+        for k in np.flatnonzero(hit):
+            reason[k] = why(k) if callable(why) else why
+        undecided &= ~hit
+
+    assign(~finite, "failed", lambda k: f"non-finite value/gradient/Hessian at the result "
+                                        f"(optimiser stop: {stop[k]})")
+    assign(stop == "diverged", "boundary",
+           f"iterates ran off to infinity (|Theta|_inf > {settings.divergence_limit:g})")
+    assign(s_min < settings.boundary_tol, "boundary",
+           lambda k: f"optimum on the boundary of the prior support (min slack {s_min[k]:.3g})")
+    assign(mult > settings.grad_tol, "boundary",
+           lambda k: f"barrier holds the optimum (mu/slack = {mult[k]:.3g})")
+    assign(~pd_, "not-positive-definite",
+           lambda k: f"smallest Hessian eigenvalue {lam_min[k]:.3g} <= {settings.pd_tol:g}")
+    assign(~(grad_max < settings.grad_tol), "gradient",
+           lambda k: f"max |gradient| {grad_max[k]:.3g} >= {settings.grad_tol:g} "
+                     f"(optimiser stop: {stop[k]})")
+
+    cand = np.flatnonzero(undecided & (ratio < settings.eig_ratio_min))
+    if cand.size:
+        moved, dist = _ridge_check(model, z[cand], theta[cand], vec[cand, :, 0], barrier,
+                                   settings)
+        for j, k in enumerate(cand):
+            if moved[j]:
+                status[k] = "ridge"
+                reason[k] = (f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g} and the "
+                             f"optimum moved by {dist[j]:.3g} after a shift along the ridge")
+            else:
+                reason[k] = (f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g} but the "
+                             f"optimum did not move (moved {dist[j]:.3g})")
+    return dict(neg2_log_post=f, local_variance=lvar, eig_ratio=ratio, grad_max=grad_max,
+                status=status, reason=reason)
+
+
+def _ridge_check(model, z, theta, v, barrier, settings) -> tuple[np.ndarray, np.ndarray]:
+    """Re-optimise from Theta_hat + h v (or - h v if that leaves the support); moved?"""
+    m = model.n_params
+    start = theta.copy()
+    placed = np.zeros(theta.shape[0], dtype=bool)
+    h = settings.ridge_shift
+    for _ in range(30):
+        for sign in (1.0, -1.0):
+            trial = theta + sign * h * v
+            inside = ~placed & np.isfinite(barrier.value(trial[:, :m]))
+            start[inside] = trial[inside]
+            placed |= inside
+        if placed.all():
+            break
+        h *= 0.5
+    new, _, _, stop = _optimize(model, z, start, barrier, settings, settings.mu_min)
+    with np.errstate(all="ignore"):
+        dist = np.abs(new - theta).max(axis=1)
+    moved = ~(dist <= settings.ridge_move_tol) | (stop == "non-finite") | (stop == "diverged")
+    return moved, dist
+
+
+# =========================================================================== public API
+def initial_theta(model: StateSpaceModel, z: np.ndarray, omega_true: np.ndarray,
+                  x0_true: np.ndarray) -> np.ndarray:
+    """Start of Sec. III.B: (Omega_true, x0_true, initial_states(Omega_true, z)) for every k."""
+    K, T, _ = z.shape
+    x = np.asarray(model.initial_states(omega_true, z), dtype=float)
+    if x.shape != (K, T, model.state_dim):
+        raise ValueError(f"initial_states of model '{model.slug}' returned shape {x.shape}, "
+                         f"expected {(K, T, model.state_dim)}")
+    return np.concatenate([np.broadcast_to(omega_true, (K, model.n_params)),
+                           np.broadcast_to(x0_true, (K, model.state_dim)),
+                           x.reshape(K, -1)], axis=1)
+
+
+def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
+              omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
+              x0_true: Sequence[float] | float | np.ndarray,
+              settings: JointMapSettings | None = None,
+              progress: _ProgressLike | None = None) -> JointMapResult:
+    """Joint MAP estimate and numerical checks for every design trajectory (Sec. III.B).
+
+    Parameters
+    ----------
+    model : the state space model.
+    z : (K, T, d) design observation trajectories z~(k).
+    bounds : support of the flat prior on Omega (from ``model.prior_bounds``).
+    omega_true, x0_true : true values; they are the start of every optimisation.
+    settings : thresholds and tuning (:class:`JointMapSettings`; defaults = paper values).
+    progress : optional object with ``update(n)`` (e.g. :class:`ssmobs.log.Progress`),
+        called after each batch with the number of trajectories finished.
+
+    Returns
+    -------
+    JointMapResult with per-k arrays; ``status == "ok"`` marks K^max.  A numerical failure
+    of one trajectory never raises: it is recorded as ``failed`` with a reason.
+    """
+    settings = settings or JointMapSettings()
+    z = np.asarray(z, dtype=float)
+    if z.ndim != 3 or z.shape[2] != model.obs_dim:
+        raise ValueError(f"z must have shape (K, T, {model.obs_dim}) for model '{model.slug}', "
+                         f"got {z.shape}")
+    K, T, _ = z.shape
+    omega = model._omega_vector(omega_true)
+    x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
+    if x0.shape != (model.state_dim,):
+        raise ValueError(f"x0_true must have {model.state_dim} component(s), got {x0.tolist()}")
+    barrier = _Barrier(model, bounds)
+    if not np.isfinite(barrier.value(omega[None, :]))[0]:
+        raise ValueError(f"start Omega={omega.tolist()} is not strictly inside the prior support "
+                         f"({bounds.lower.tolist()}, {bounds.upper.tolist()}) and the model "
+                         f"constraints")
+    n = model.n_theta(T)
+    out = JointMapResult(
+        theta_hat=np.full((K, n), np.nan), neg2_log_post=np.full(K, np.nan),
+        local_variance=np.full((K, n), np.nan), eig_ratio=np.full(K, np.nan),
+        grad_max=np.full(K, np.nan), iterations=np.zeros(K, dtype=np.int64),
+        status=np.full(K, "failed", dtype=object), reason=np.full(K, "", dtype=object),
+        theta_names=model.theta_names(T))
+    for sl in _chunks(K, n, settings):
+        zc = z[sl]
+        theta0 = initial_theta(model, zc, omega, x0)
+        theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings, settings.mu0)
+        res = _classify_chunk(model, zc, theta, mu, stop, barrier, settings)
+        out.theta_hat[sl] = theta
+        out.iterations[sl] = iters
+        for key, val in res.items():
+            getattr(out, key)[sl] = val
+        if progress is not None:
+            progress.update(sl.stop - sl.start)
+    return out
+
+
+def component_names(model: StateSpaceModel) -> list[str]:
+    """Names of the components of Omega and x_0 (the columns of :meth:`JointMapResult.to_frame`)."""
+    return model.theta_names(0)
+
+
+def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
+                      omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
+                      x0_true: Sequence[float] | float | np.ndarray) -> dict[str, Any]:
+    """Scenario summary of the joint MAP estimator over K^max (Sec. III.B, Table II).
+
+    Keys: ``K``, ``K_max`` (= |K^max|), ``ratio`` (= |K^max| / K), ``components``, the count
+    per status ``n_<status>``, and per component c of Omega and x_0: ``mean_c``, ``var_c``
+    (ddof = 1, as in Table II), ``mse_c`` (mean squared error about the true value, divided
+    by |K^max|), ``bias_c`` and ``mean_lvar_c`` (mean local variance).  Values that are not
+    defined (|K^max| = 0, or 1 for the variance) are NaN.
+    """
+    names = component_names(model)
+    truth = np.concatenate([model._omega_vector(omega_true),
+                            np.atleast_1d(np.asarray(x0_true, dtype=float))])
+    if truth.size != len(names):
+        raise ValueError(f"true values {truth.tolist()} do not match components {names}")
+    missing = [c for c in ["status", *names, *[f"lvar_{c}" for c in names]]
+               if c not in frame.columns]
+    if missing:
+        raise ValueError(f"joint-MAP frame lacks columns {missing}")
+    ok = (frame["status"] == "ok").to_numpy()
+    K = int(len(frame))
+    k_max = int(ok.sum())
+    out: dict[str, Any] = {"K": K, "K_max": k_max,
+                           "ratio": k_max / K if K else float("nan"),
+                           "components": names}
+    counts = frame["status"].value_counts()
+    for st in STATUSES:
+        out[f"n_{st}"] = int(counts.get(st, 0))
+    for c, true in zip(names, truth):
+        est = frame.loc[ok, c].to_numpy(dtype=float)
+        lv = frame.loc[ok, f"lvar_{c}"].to_numpy(dtype=float)
+        mean = float(est.mean()) if k_max else float("nan")
+        out[f"mean_{c}"] = mean
+        out[f"var_{c}"] = float(est.var(ddof=1)) if k_max > 1 else float("nan")
+        out[f"mse_{c}"] = float(np.mean((est - true) ** 2)) if k_max else float("nan")
+        out[f"bias_{c}"] = mean - float(true)
+        out[f"mean_lvar_{c}"] = float(lv.mean()) if k_max else float("nan")
+    return out

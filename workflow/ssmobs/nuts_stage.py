@@ -1,0 +1,450 @@
+"""The NUTS stage of Sec. III.C: per design trajectory k, sample, check, summarise.
+
+:func:`run_trajectories` is the loop one batch job runs: for every k of its batch it
+
+1. skips k if ``records_dir/k{k:05d}.json`` exists and validates (same key: scenario, k,
+   seed, Stan program hash, settings hash, data hash; see :func:`record_key`), else
+2. samples pi(Theta | z~(k)) with the backend, seed ``seeds.int_seed(seed, "nuts",
+   scenario, k)``, random or true initial values,
+3. checks convergence (:func:`ssmobs.convergence.check_convergence`),
+4. computes the marginal MAP and 5 %/95 % quantiles of every Theta component
+   (:func:`ssmobs.marginal_map.marginal_summary`, Eq. (11), (12)),
+5. writes the record atomically, and the draws as NetCDF (ArviZ) for k in ``keep_draws_for``.
+
+Any exception of one trajectory (a :class:`SamplingError`, a KDE on zero-spread or
+non-finite draws, anything else) becomes a record with ``converged: false`` and the
+reason; the loop goes on.  Only the per-trajectory records (and draws where asked) are
+written, so an interrupted batch resumes where it stopped.
+
+Record format (JSON, one file per k; ``RECORD_VERSION``)::
+
+    record_version   int
+    key              {scenario, k, seed, stan_seed, program_hash, settings_hash, data_hash}
+    k, scenario, model, T
+    status           "ok" (draws were checked) | "error" (an exception before that)
+    converged        bool: all convergence checks passed and the marginal summary exists
+    failed_checks    list of names: convergence.CHECKS, "kde", "sampling_error", "exception"
+    reason           None when converged, else one line per failed check / the exception
+    diagnostics      worst values (max_rhat, min_ess_bulk, min_ess_tail, n_divergent,
+                     n_treedepth_hits, min_ebfmi, ebfmi per chain, ...; see
+                     check_convergence), or None when sampling failed
+    theta_names      model.theta_names(T)
+    map, q5, q95     lists in theta_names order (marginal MAP, Eq. (11); quantiles, Eq. (12)),
+                     or None when they could not be computed
+    init             "random" | "true"
+    backend          backend name
+    timings          seconds: sample_call (wall time of backend.sample), backend (the
+                     backend's own breakdown, e.g. transfer), prepare, diagnostics, marginal,
+                     keep_draws, overhead (all of ours except writing this file)
+
+Timings are the only field that differs between reruns; :func:`records_to_frame` leaves
+them out, so tables built from records are byte-identical across reruns.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from . import io, seeds
+from .convergence import ConvergenceSettings, check_convergence, to_inference_data
+from .log import Progress
+from .marginal_map import GRID_PER_BW, KDEError, marginal_summary
+from .stan_backends.base import Draws, SamplerSettings, SamplingError
+
+LOG = logging.getLogger("ssmobs.nuts")
+
+RECORD_VERSION = 1
+INIT_MODES = ("random", "true")
+#: keys every record has (checked when a record is read back)
+RECORD_KEYS = ("record_version", "key", "k", "status", "converged", "failed_checks", "reason",
+               "diagnostics", "theta_names", "map", "q5", "q95")
+#: diagnostics columns copied into the per-k table
+DIAGNOSTIC_COLUMNS = ("max_rhat", "min_ess_bulk", "min_ess_tail", "n_divergent",
+                      "n_treedepth_hits", "min_ebfmi")
+#: the KDE/quantile method, part of the settings hash (change it when the estimator changes)
+ESTIMATOR = {"kde": "gaussian, silverman bw, linear binning + fft", "grid_per_bw": GRID_PER_BW,
+             "quantile": "type 7", "mode": "argmax + parabolic refinement"}
+
+
+# --------------------------------------------------------------------------- keys
+def _sha(obj: Any) -> str:
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot hash {type(obj).__name__}")
+
+
+def program_hash(stan_file: str | Path) -> str:
+    """SHA-256 (16 hex digits) of the Stan program's text."""
+    return hashlib.sha256(Path(stan_file).read_bytes()).hexdigest()[:16]
+
+
+def _as_list(v: Any) -> list[float]:
+    if isinstance(v, dict):
+        return [float(x) for x in v.values()]
+    return [float(x) for x in np.atleast_1d(np.asarray(v, dtype=float)).ravel()]
+
+
+def settings_hash(model: Any, T: int, sampler: SamplerSettings,
+                  convergence: ConvergenceSettings, init: str, bounds: Any,
+                  omega_true: Any, x0_true: Any) -> str:
+    """Hash of everything besides (scenario, k, seed, program, data) that determines a record.
+
+    ``sampler.workers`` is left out: it changes how chains are scheduled, not the draws.
+    """
+    sampler_d = {k: v for k, v in asdict(sampler).items() if k != "workers"}
+    payload = {
+        "record_version": RECORD_VERSION, "model": model.slug, "T": int(T),
+        "sampler": sampler_d, "convergence": asdict(convergence), "init": init,
+        "bounds": {"lower": np.asarray(bounds.lower, float).tolist(),
+                   "upper": np.asarray(bounds.upper, float).tolist()},
+        "omega_true": _omega_vector(model, omega_true), "x0_true": _as_list(x0_true),
+        "estimator": ESTIMATOR,
+    }
+    return _sha(payload)
+
+
+def _omega_vector(model: Any, omega_true: Any) -> list[float]:
+    if isinstance(omega_true, dict):
+        return [float(omega_true[n]) for n in model.param_names]
+    return _as_list(omega_true)
+
+
+def record_key(scenario: str, k: int, seed: int, prog_hash: str, set_hash: str,
+               z_k: np.ndarray, x_k: np.ndarray) -> dict[str, Any]:
+    """The key a stored record must match to be reused."""
+    return {"scenario": scenario, "k": int(k), "seed": int(seed),
+            "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
+            "program_hash": prog_hash, "settings_hash": set_hash,
+            "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16]}
+
+
+def record_path(records_dir: str | Path, k: int) -> Path:
+    return Path(records_dir) / f"k{int(k):05d}.json"
+
+
+def draws_path(draws_dir: str | Path, k: int) -> Path:
+    return Path(draws_dir) / f"k{int(k):05d}.nc"
+
+
+def load_record(path: str | Path, key: dict[str, Any] | None = None,
+                n_theta: int | None = None) -> dict[str, Any] | None:
+    """The record at ``path`` if it exists, parses, and matches ``key`` (else None)."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        rec = io.read_json(path, required=RECORD_KEYS)
+    except io.CorruptFileError as err:
+        LOG.warning("recomputing: %s", err)
+        return None
+    if rec.get("record_version") != RECORD_VERSION:
+        LOG.info("recomputing %s: record version %s != %s", path, rec.get("record_version"),
+                 RECORD_VERSION)
+        return None
+    if key is not None and rec.get("key") != key:
+        changed = sorted(k for k in set(key) | set(rec["key"] or {})
+                         if (rec["key"] or {}).get(k) != key.get(k))
+        LOG.info("recomputing %s: key changed (%s)", path, ", ".join(changed))
+        return None
+    if n_theta is not None and rec["map"] is not None and not (
+            len(rec["map"]) == len(rec["q5"]) == len(rec["q95"]) == n_theta):
+        LOG.warning("recomputing %s: Theta arrays have the wrong length", path)
+        return None
+    return rec
+
+
+# --------------------------------------------------------------------------- one trajectory
+def _inits(model: Any, omega_true: Any, x0_true: Any, x_k: np.ndarray, chains: int
+           ) -> list[dict[str, Any]]:
+    """Initial values at the true (Omega, x0) and the design states x~(k), one dict per chain."""
+    init: dict[str, Any] = dict(zip(model.param_names, _omega_vector(model, omega_true)))
+    x0 = _as_list(x0_true)
+    x = np.asarray(x_k, dtype=float)
+    if model.state_dim == 1:
+        init["x0"] = x0[0]
+        init["x"] = x.reshape(-1).tolist()
+    else:
+        init["x0"] = x0
+        init["x"] = x.reshape(x.shape[0], model.state_dim).tolist()
+    return [dict(init) for _ in range(chains)]
+
+
+def _finite_or_none(values: np.ndarray) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=float)]
+
+
+def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
+                    x_k: np.ndarray, k: int, key: dict[str, Any], bounds: Any,
+                    omega_true: Any, x0_true: Any, scenario: str, sampler: SamplerSettings,
+                    convergence: ConvergenceSettings, init: str, keep_draws: Path | None
+                    ) -> dict[str, Any]:
+    T = int(np.asarray(z_k).shape[0])
+    names = model.theta_names(T)
+    t0 = time.perf_counter()
+    timings: dict[str, Any] = {"sample_call": 0.0, "backend": {}, "prepare": 0.0,
+                               "diagnostics": 0.0, "marginal": 0.0, "keep_draws": 0.0}
+    rec: dict[str, Any] = {
+        "record_version": RECORD_VERSION, "key": key, "k": int(k), "scenario": scenario,
+        "model": model.slug, "T": T, "status": "ok", "converged": False, "failed_checks": [],
+        "reason": None, "diagnostics": None, "theta_names": names, "map": None, "q5": None,
+        "q95": None, "init": init, "backend": getattr(backend, "name", type(backend).__name__),
+    }
+    reasons: list[str] = []
+    draws: Draws | None = None
+    try:
+        data = model.stan_data(np.asarray(z_k, dtype=float), bounds)
+        inits = (_inits(model, omega_true, x0_true, x_k, sampler.chains)
+                 if init == "true" else None)
+        t1 = time.perf_counter()
+        timings["prepare"] = t1 - t0
+        try:
+            draws = backend.sample(stan_file, data, key["stan_seed"], sampler, inits)
+        finally:
+            timings["sample_call"] = time.perf_counter() - t1
+    except SamplingError as err:
+        rec.update(status="error", failed_checks=["sampling_error"],
+                   reason=f"sampling error: {err}")
+        LOG.warning("k=%d: %s", k, rec["reason"])
+    except Exception as err:  # noqa: BLE001 - one trajectory must never stop the batch
+        rec.update(status="error", failed_checks=["exception"],
+                   reason=f"exception during sampling: {type(err).__name__}: {err}")
+        LOG.warning("k=%d: %s", k, rec["reason"], exc_info=True)
+
+    if draws is not None:
+        timings["backend"] = {kk: float(v) for kk, v in (draws.timings or {}).items()}
+        failed: list[str] = []
+        t2 = time.perf_counter()
+        try:
+            diag = check_convergence(draws, convergence, max_treedepth=sampler.max_treedepth)
+            rec["diagnostics"] = diag
+            failed.extend(diag["failed_checks"])
+            reasons.extend(diag["messages"])
+        except Exception as err:  # noqa: BLE001
+            failed.append("exception")
+            reasons.append(f"convergence diagnostics failed: {type(err).__name__}: {err}")
+            LOG.warning("k=%d: %s", k, reasons[-1], exc_info=True)
+        t3 = time.perf_counter()
+        timings["diagnostics"] = t3 - t2
+        try:
+            summ = marginal_summary(draws, model, T)
+            rec["map"] = _finite_or_none(summ["map"])
+            rec["q5"] = _finite_or_none(summ["q5"])
+            rec["q95"] = _finite_or_none(summ["q95"])
+        except KDEError as err:
+            failed.append("kde")
+            reasons.append(f"kde: {err}")
+        except Exception as err:  # noqa: BLE001
+            failed.append("exception")
+            reasons.append(f"marginal summary failed: {type(err).__name__}: {err}")
+            LOG.warning("k=%d: %s", k, reasons[-1], exc_info=True)
+        t4 = time.perf_counter()
+        timings["marginal"] = t4 - t3
+        if keep_draws is not None:
+            try:
+                _write_draws(keep_draws, draws, rec)
+            except Exception as err:  # noqa: BLE001 - a lost copy of the draws is no failure
+                LOG.warning("k=%d: could not keep draws at %s: %s", k, keep_draws, err)
+            timings["keep_draws"] = time.perf_counter() - t4
+        seen: list[str] = []
+        for c in failed:
+            if c not in seen:
+                seen.append(c)
+        rec["failed_checks"] = seen
+        rec["converged"] = not seen and rec["map"] is not None
+        rec["reason"] = None if rec["converged"] else "; ".join(reasons) or "not converged"
+    total = time.perf_counter() - t0
+    timings["overhead"] = total - timings["sample_call"]
+    rec["timings"] = timings
+    return rec
+
+
+def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
+    idata = to_inference_data(draws)
+    idata.posterior.attrs.update({"scenario": rec["scenario"], "k": rec["k"],
+                                  "stan_seed": rec["key"]["stan_seed"],
+                                  "program_hash": rec["key"]["program_hash"]})
+    with io.atomic_path(path, suffix=".nc") as tmp:
+        idata.to_netcdf(str(tmp), engine="h5netcdf")
+
+
+# --------------------------------------------------------------------------- the loop
+def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndarray,
+                     x_true: np.ndarray, ks: Sequence[int], bounds: Any, omega_true: Any,
+                     x0_true: Any, scenario: str, seed: int,
+                     sampler: SamplerSettings | None = None,
+                     convergence: ConvergenceSettings | None = None, init: str = "random",
+                     records_dir: str | Path = ".", keep_draws_for: Iterable[int] = (),
+                     draws_dir: str | Path | None = None, progress: Progress | None = None,
+                     retry_errors: bool = False) -> list[dict[str, Any]]:
+    """Sample, check and summarise the design trajectories ``ks`` of one scenario.
+
+    Parameters
+    ----------
+    model : a :class:`~ssmobs.models.base.StateSpaceModel`.
+    backend : a :class:`~ssmobs.stan_backends.base.StanBackend` (``compile``/``sample``).
+    stan_file : the model's Stan program (its text hash is part of every record's key).
+    z : (K, T, d) design observations; ``z[k]`` is trajectory k.
+    x_true : (K, T, p) design states (used for the key and, with ``init="true"``, inits).
+    ks : trajectory indices (0-based rows of ``z``) to process, in order.
+    bounds : the prior's :class:`~ssmobs.models.base.PriorBounds`.
+    omega_true, x0_true : true parameters (mapping or sequence) and initial state.
+    scenario, seed : scenario name and seed; Stan's seed is
+        ``seeds.int_seed(seed, "nuts", scenario, k)``.
+    sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
+    init : ``"random"`` (Stan's uniform(-2, 2) on the unconstrained scale, the paper's
+        default) or ``"true"`` (all chains at the true Omega, x0 and design states).
+    records_dir : where ``k{k:05d}.json`` records go.
+    keep_draws_for : k whose draws are written to ``draws_dir/k{k:05d}.nc`` (ArviZ).
+    progress : a :class:`~ssmobs.log.Progress` updated once per k of ``ks`` (skipped ones
+        included); if None, one is made for the trajectories that need sampling.
+    retry_errors : recompute stored records whose status is "error" (e.g. after fixing
+        the cause of an exception); by default every valid record is reused.
+
+    Returns
+    -------
+    The records (dicts, format in the module docstring), in the order of ``ks``.
+    """
+    sampler = sampler or SamplerSettings()
+    convergence = convergence or ConvergenceSettings()
+    if init not in INIT_MODES:
+        raise ValueError(f"init must be one of {INIT_MODES}, got {init!r}")
+    z = np.asarray(z, dtype=float)
+    x_true = np.asarray(x_true, dtype=float)
+    if z.ndim == 2:
+        z = z[:, :, None]
+    if x_true.ndim == 2:
+        x_true = x_true[:, :, None]
+    if z.shape[:2] != x_true.shape[:2]:
+        raise ValueError(f"z {z.shape} and x_true {x_true.shape} disagree in (K, T)")
+    T = z.shape[1]
+    keep = {int(k) for k in keep_draws_for}
+    if keep and draws_dir is None:
+        raise ValueError("keep_draws_for needs draws_dir")
+    stan_file = str(stan_file)
+    prog = program_hash(stan_file)
+    set_hash = settings_hash(model, T, sampler, convergence, init, bounds, omega_true, x0_true)
+    n_theta = len(model.theta_names(T))
+
+    records: dict[int, dict[str, Any]] = {}
+    todo: list[tuple[int, dict[str, Any]]] = []
+    for k in ks:
+        k = int(k)
+        if not 0 <= k < z.shape[0]:
+            raise IndexError(f"trajectory k={k} outside 0..{z.shape[0] - 1}")
+        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k])
+        rec = load_record(record_path(records_dir, k), key, n_theta)
+        if rec is not None and retry_errors and rec["status"] == "error":
+            rec = None
+        if rec is not None and k in keep and not draws_path(draws_dir, k).exists():
+            LOG.info("recomputing k=%d: its draws are to be kept but %s is missing", k,
+                     draws_path(draws_dir, k))
+            rec = None
+        if rec is None:
+            todo.append((k, key))
+        else:
+            records[k] = rec
+    if records:
+        LOG.info("%s: %d of %d trajectories already done, reusing their records", scenario,
+                 len(records), len(ks))
+        if progress is not None:
+            progress.update(len(records))
+    own_progress = progress is None
+    if own_progress:
+        progress = Progress(f"{scenario} NUTS", total=max(len(todo), 1), logger=LOG)
+    if todo:
+        backend.compile(stan_file)
+    for k, key in todo:
+        rec = _one_trajectory(model, backend, stan_file, z[k], x_true[k], k, key, bounds,
+                              omega_true, x0_true, scenario, sampler, convergence, init,
+                              draws_path(draws_dir, k) if k in keep else None)
+        t_w = time.perf_counter()
+        io.write_json(record_path(records_dir, k), rec)
+        LOG.debug("k=%d: converged=%s %s (sample %.2f s, overhead %.3f s, write %.3f s)", k,
+                  rec["converged"], rec["reason"] or "", rec["timings"]["sample_call"],
+                  rec["timings"]["overhead"], time.perf_counter() - t_w)
+        records[k] = rec
+        progress.update()
+    return [records[int(k)] for k in ks]
+
+
+def load_records(records_dir: str | Path, ks: Iterable[int]) -> list[dict[str, Any]]:
+    """Read the records of ``ks`` (CorruptFileError naming the file if one is missing/bad)."""
+    out = []
+    for k in ks:
+        path = record_path(records_dir, k)
+        if not path.exists():
+            raise io.CorruptFileError(f"{path}: missing record of trajectory k={k}")
+        rec = io.read_json(path, required=RECORD_KEYS)
+        out.append(rec)
+    return out
+
+
+# --------------------------------------------------------------------------- table
+def theta_columns(model: Any, T: int) -> list[str]:
+    """Column names of the per-k table for Theta: ``<name>_map``, ``<name>_q5``, ``<name>_q95``."""
+    return [f"{n}_{s}" for n in model.theta_names(T) for s in ("map", "q5", "q95")]
+
+
+def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> "pandas.DataFrame":  # noqa: F821
+    """One row per trajectory k (sorted by k): wide table of status, diagnostics and Theta.
+
+    Columns: ``k`` (int), ``scenario``, ``stan_seed``, ``status``, ``converged`` (bool),
+    ``failed_checks`` (comma-separated names, "" when none), ``reason`` ("" when none),
+    the worst diagnostics :data:`DIAGNOSTIC_COLUMNS` (NaN when sampling failed), then for
+    every component of ``model.theta_names(T)`` (Omega, x0, x1..xT): ``<name>_map``,
+    ``<name>_q5``, ``<name>_q95`` (NaN when not computed).  We chose wide columns (3 |Theta|
+    of them, 306 for T = 100) because every metric reads whole columns and Parquet stores
+    them compactly; timings are left out so the table is identical across reruns.
+    """
+    import pandas as pd
+
+    names = model.theta_names(T)
+    n = len(names)
+    recs = sorted(records, key=lambda r: int(r["k"]))
+    m = len(recs)
+    cols: dict[str, Any] = {
+        "k": np.array([int(r["k"]) for r in recs], dtype=np.int64),
+        "scenario": [str(r.get("scenario", r["key"].get("scenario", ""))) for r in recs],
+        "stan_seed": np.array([int(r["key"].get("stan_seed", -1)) for r in recs], dtype=np.int64),
+        "status": [str(r["status"]) for r in recs],
+        "converged": np.array([bool(r["converged"]) for r in recs], dtype=bool),
+        "failed_checks": [",".join(r["failed_checks"]) for r in recs],
+        "reason": [r["reason"] or "" for r in recs],
+    }
+    for c in DIAGNOSTIC_COLUMNS:
+        vals = []
+        for r in recs:
+            d = r.get("diagnostics") or {}
+            v = d.get(c)
+            vals.append(math.nan if v is None else float(v))
+        cols[c] = np.array(vals, dtype=float)
+    block = {s: np.full((m, n), np.nan) for s in ("map", "q5", "q95")}
+    for i, r in enumerate(recs):
+        if r.get("theta_names") is not None and list(r["theta_names"]) != names:
+            raise ValueError(f"record k={r['k']} has Theta names {r['theta_names'][:4]}..., "
+                             f"expected {names[:4]}... (model {model.slug}, T={T})")
+        for s in ("map", "q5", "q95"):
+            if r[s] is not None:
+                block[s][i] = np.asarray(r[s], dtype=float)
+    for j, name in enumerate(names):
+        for s in ("map", "q5", "q95"):
+            cols[f"{name}_{s}"] = block[s][:, j]
+    return pd.DataFrame(cols)

@@ -1,0 +1,320 @@
+"""PyStan 3 backend (pystan 3.10 + httpstan 4.13, embedded in this process).
+
+Compiling
+    :meth:`PyStanBackend.compile` builds the program once into the *shared* httpstan
+    cache (``$XDG_CACHE_HOME/httpstan/<version>/models/<id>/``, default ``~/.cache``)
+    under an exclusive ``fcntl.flock`` lock, so concurrent jobs never compile the same
+    program into the same directory at once.  No data is needed to compile.
+
+Sampling
+    httpstan keeps every seeded fit as ``models/<id>/fits/<fit>.jsonlines.gz`` (28 MB for
+    T=20, 127 MB for T=100 with the paper's settings) and returns it from there on an
+    identical repeat call.  Each :meth:`PyStanBackend.sample` call therefore runs with a
+    *private* ``XDG_CACHE_HOME`` (a temporary directory) whose
+    ``httpstan/<version>/models/<id>/`` holds symlinks to the shared model's files (never to
+    ``fits/``): the build finds the compiled model at once, the fit lands in the private
+    directory, and the directory is deleted afterwards, also when sampling fails.  httpstan's
+    per-chain Unix socket files go there too (``tempfile.tempdir``), so nothing is left in
+    ``/tmp``.
+
+    The chains run in a process pool of ``settings.workers`` processes made for the call
+    (``httpstan.services_stub.executor`` is replaced and restored; there is no public
+    option, pystan issue #349).  A pool per call also means its workers are forked with the
+    private cache in their environment.
+
+    PyStan's flat draws interleave chains (chain varies fastest); they are reshaped to
+    ``(chain, draw, *shape)``.
+
+The process-wide state touched here (environment, ``tempfile.tempdir``, the executor) makes
+one call at a time per process; a lock enforces that for threads.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import io
+import logging
+import multiprocessing as mp
+import os
+import shutil
+import tempfile
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from importlib.machinery import EXTENSION_SUFFIXES
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+
+from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
+from .base import Draws, SamplerSettings, SamplingError
+
+LOG = logging.getLogger("ssmobs.stan")
+
+#: one sampling call at a time per process (environment and module globals are shared)
+_CALL_LOCK = threading.Lock()
+#: Unix socket paths must stay below ~107 bytes; private tmp dirs longer than this keep
+#: httpstan's socket files in the default temp dir
+_MAX_SOCKET_DIR_LEN = 70
+
+
+def program_sha256(code: str) -> str:
+    return hashlib.sha256(code.encode()).hexdigest()
+
+
+def _has_extension(directory: Path) -> bool:
+    try:
+        return any(p.suffix in EXTENSION_SUFFIXES for p in directory.iterdir())
+    except FileNotFoundError:
+        return False
+
+
+@contextlib.contextmanager
+def _captured(label: str) -> Iterator[io.StringIO]:
+    """Capture stdout and stderr (PyStan's progress and stanc messages) for the log."""
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+            yield buf
+    finally:
+        log_captured(label, buf.getvalue())
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
+def _private_cache(shared_model_dir: Path, model_name: str,
+                   tmp_root: str | None) -> Iterator[Path]:
+    """A temporary XDG_CACHE_HOME whose httpstan model dir links to the shared model."""
+    import httpstan.cache
+
+    tmp = Path(tempfile.mkdtemp(prefix="ssmobs-pystan-", dir=tmp_root))
+    old_env = os.environ.get("XDG_CACHE_HOME")
+    old_tempdir = tempfile.tempdir
+    try:
+        os.environ["XDG_CACHE_HOME"] = str(tmp)
+        private_model_dir = httpstan.cache.model_directory(model_name)
+        private_model_dir.mkdir(parents=True)
+        for item in shared_model_dir.iterdir():
+            if item.is_file():  # model .so, .cpp, stanc.log, stderr.log; never fits/
+                (private_model_dir / item.name).symlink_to(item)
+        if len(str(tmp)) <= _MAX_SOCKET_DIR_LEN:
+            tempfile.tempdir = str(tmp)
+        yield tmp
+    finally:
+        tempfile.tempdir = old_tempdir
+        if old_env is None:
+            os.environ.pop("XDG_CACHE_HOME", None)
+        else:
+            os.environ["XDG_CACHE_HOME"] = old_env
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _chain_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """Replace httpstan's module-global chain pool by one of ``workers`` processes."""
+    import httpstan.services_stub as ss
+
+    old = ss.executor
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"),
+                               initializer=ss.init_worker)
+    ss.executor = pool
+    ok = False
+    try:
+        yield pool
+        ok = True
+    finally:
+        ss.executor = old
+        if not ok:  # chains may still run after an error or interrupt: stop them
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                with contextlib.suppress(Exception):
+                    proc.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _to_chain_draw(arr: np.ndarray, shape: tuple[int, ...], n_draws: int,
+                   n_chains: int) -> np.ndarray:
+    """PyStan's ``fit[name]`` (shape + (draws*chains,), chain fastest) -> (chain, draw, *shape)."""
+    arr = np.asarray(arr).reshape(shape + (n_draws, n_chains))
+    return np.ascontiguousarray(np.moveaxis(arr, (-1, -2), (0, 1)))
+
+
+def fit_to_draws(fit: Any, n_chains: int, n_draws: int) -> Draws:
+    """Convert a ``stan.fit.Fit`` to :class:`Draws` (chain-major arrays)."""
+    params = {}
+    for name, dims in zip(fit.param_names, fit.dims):
+        params[name] = _to_chain_draw(fit[name], tuple(int(d) for d in dims), n_draws, n_chains)
+    stats = {}
+    for name in SAMPLER_COLUMNS:
+        if name in fit.sample_and_sampler_param_names:
+            stats[name] = _to_chain_draw(fit[name], (), n_draws, n_chains)
+    return Draws(params=params, sample_stats=stats)
+
+
+def _failure_reason(err: BaseException, captured: str) -> str:
+    """Message of a failed run: the exception plus Stan's own lines (rejections etc.)."""
+    lines = [ln.strip() for ln in captured.splitlines()
+             if ln.strip() and not ln.strip().startswith(("Sampling:", "Building:"))]
+    tail = " | ".join(dict.fromkeys(lines[-6:]))
+    reason = str(err).strip() or type(err).__name__
+    return f"{reason} [{tail}]" if tail else reason
+
+
+class PyStanBackend:
+    """Stan backend on PyStan 3 (see the module docstring for cache and pool handling).
+
+    Parameters
+    ----------
+    tmp_root : directory for the private per-call caches (default: the system temp dir).
+        A fit with the paper's settings and T=100 takes about 130 MB there while it runs.
+    refresh : Stan's progress-message interval; 0 (default) sends none.
+    """
+
+    name = "pystan"
+
+    def __init__(self, tmp_root: str | os.PathLike | None = None, refresh: int = 0) -> None:
+        self.tmp_root = None if tmp_root is None else str(tmp_root)
+        self.refresh = int(refresh)
+        self._markers: dict[tuple[str, str], dict[str, Any]] = {}
+
+    # ------------------------------------------------------------------ compile
+    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+        """Build the program into the shared httpstan cache (once); return its marker.
+
+        The marker is JSON-able and deterministic for a given program and installation:
+        ``backend``, ``stan_file``, ``program_sha256``, ``model_name`` (httpstan's
+        ``models/<id>``), ``cache_dir`` (the shared model directory), ``pystan_version``,
+        ``httpstan_version``.  Raises RuntimeError with stanc's/the compiler's message when
+        the program does not compile.
+        """
+        import httpstan
+        import httpstan.cache
+        import httpstan.models
+        import stan
+
+        path = Path(stan_file).resolve()
+        code = path.read_text()
+        sha = program_sha256(code)
+        key = (str(path), sha)
+        if key in self._markers:
+            return self._markers[key]
+        model_name = httpstan.models.calculate_model_name(code)
+        model_id = model_name.split("/")[1]
+        cache_dir = httpstan.cache.cache_directory()
+        model_dir = httpstan.cache.model_directory(model_name)
+        if not _has_extension(model_dir):
+            with _file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
+                if not _has_extension(model_dir):  # another process may have built it
+                    LOG.info("compiling %s into %s (about a minute)", path.name, model_dir)
+                    t0 = time.perf_counter()
+                    self._build_program(code, path)
+                    LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+        marker = {
+            "backend": self.name,
+            "stan_file": str(path),
+            "program_sha256": sha,
+            "model_name": model_name,
+            "cache_dir": str(model_dir),
+            "pystan_version": stan.__version__,
+            "httpstan_version": httpstan.__version__,
+        }
+        self._markers[key] = marker
+        return marker
+
+    @staticmethod
+    def _build_program(code: str, path: Path) -> None:
+        """POST the program to an in-process httpstan server (compiles; needs no data)."""
+        import asyncio
+
+        import stan.common
+
+        async def go() -> tuple[int, dict]:
+            async with stan.common.HttpstanClient() as client:
+                resp = await client.post("/models", json={"program_code": code})
+                return resp.status, resp.json()
+
+        with _captured(f"httpstan build {path.name}"), \
+                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+            status, body = asyncio.run(go())
+        if status != 201:
+            raise RuntimeError(f"compiling {path} failed: {body.get('message', body)}")
+        if body.get("stanc_warnings"):
+            LOG.debug("stanc warnings for %s:\n%s", path.name, body["stanc_warnings"])
+
+    # ------------------------------------------------------------------ sample
+    def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
+               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+        """Run NUTS (``hmc_nuts_diag_e_adapt``) and return the post-warmup draws.
+
+        ``seed`` is Stan's random seed (0 <= seed < 2**32; chains get ids 1..chains).
+        ``inits``: one dict per chain (partial dicts allowed; missing parameters start at
+        Stan's random inits, uniform(-2, 2) on the unconstrained scale) or None (random
+        inits, the paper's choice).  ``timings``: ``sample`` is the ``posterior.sample``
+        call, ``build`` the cached build with the data, ``convert`` the reshaping,
+        ``total`` the whole method including the private cache and pool set-up/teardown.
+
+        Raises SamplingError when Stan cannot initialise or fails while sampling,
+        ValueError when the data are rejected (missing keys, empty prior support) or the
+        arguments are invalid.
+        """
+        import stan
+
+        t_start = time.perf_counter()
+        if not 0 <= int(seed) < 2**32:
+            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+        if inits is not None and len(inits) != settings.chains:
+            raise ValueError(f"inits must have one dict per chain ({settings.chains}), "
+                             f"got {len(inits)}")
+        if settings.workers < 1:
+            raise ValueError(f"settings.workers must be >= 1, got {settings.workers}")
+        marker = self.compile(stan_file)
+        code = Path(marker["stan_file"]).read_text()
+        kwargs: dict[str, Any] = dict(
+            num_chains=settings.chains, num_warmup=settings.iter_warmup,
+            num_samples=settings.iter_sampling, delta=settings.adapt_delta,
+            max_depth=settings.max_treedepth, refresh=self.refresh)
+        if inits is not None:
+            kwargs["init"] = [dict(i) for i in inits]
+        label = Path(marker["stan_file"]).name
+        with _CALL_LOCK, \
+                _private_cache(Path(marker["cache_dir"]), marker["model_name"], self.tmp_root), \
+                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+            with _captured(f"pystan build {label}") as buf:
+                t0 = time.perf_counter()
+                try:
+                    posterior = stan.build(code, data=dict(data), random_seed=int(seed))
+                except (RuntimeError, ValueError) as err:
+                    raise ValueError(f"{label}: data rejected: "
+                                     f"{_failure_reason(err, buf.getvalue())}") from err
+                if posterior is None:  # pystan swallows KeyboardInterrupt
+                    raise KeyboardInterrupt
+                t_build = time.perf_counter() - t0
+            with _chain_pool(settings.workers), _captured(f"pystan sample {label}") as buf:
+                t0 = time.perf_counter()
+                try:
+                    fit = posterior.sample(**kwargs)
+                except RuntimeError as err:
+                    raise SamplingError(f"{label} (seed {seed}): "
+                                        f"{_failure_reason(err, buf.getvalue())}") from err
+                if fit is None:
+                    raise KeyboardInterrupt
+                t_sample = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        draws = fit_to_draws(fit, settings.chains, settings.iter_sampling)
+        del fit
+        t_convert = time.perf_counter() - t0
+        draws.timings = {"build": t_build, "sample": t_sample, "convert": t_convert,
+                         "total": time.perf_counter() - t_start}
+        return draws
