@@ -14,11 +14,13 @@ except ConfigError as err:
     raise WorkflowError(str(err)) from None
 
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
+KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 REPO = Path(workflow.basedir)
 
 
 wildcard_constraints:
     scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
+    ksel="|".join(map(re.escape, KSEL)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
@@ -34,6 +36,23 @@ def scenario_disturbances(wildcards):
     return disturbance_path(ssmobs_config.disturbance_dim(sc), sc["K"], sc["method"], sc["seed"])
 
 
+def k_selection_disturbances(wildcards):
+    sc = SCENARIOS[KSEL[wildcards.ksel]["scenario"]]
+    q = ssmobs_config.disturbance_dim(sc)
+    return disturbance_path(q, wildcards.K, wildcards.method, wildcards.seed)
+
+
+def k_selection_points(ks):
+    """Every (method, seed, K_i) summary of one k_selection entry (design uses its first seed)."""
+    out = []
+    for method in ks["methods"]:
+        seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
+        for seed in seeds:
+            out += [f"results/k_selection/{ks['name']}/{method}_seed{seed}/K{K}.json"
+                    for K in ks["K_grid"]]
+    return out
+
+
 def figure2_disturbances(wildcards=None):
     f2 = config["figure2"]
     return disturbance_path(2, f2["K"], "design", f2["seed"])
@@ -41,5 +60,9 @@ def figure2_disturbances(wildcards=None):
 
 def all_targets():
     targets = [f"results/{name}/design_trajectories/trajectories.nc" for name in SCENARIOS]
+    targets += [f"results/{name}/joint_map/summary.json" for name, sc in SCENARIOS.items()
+                if sc["joint_map"]]
+    for ks in KSEL.values():
+        targets += k_selection_points(ks)
     targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]
     return targets

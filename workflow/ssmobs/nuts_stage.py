@@ -160,8 +160,8 @@ def load_record(path: str | Path, key: dict[str, Any] | None = None,
                  RECORD_VERSION)
         return None
     if key is not None and rec.get("key") != key:
-        changed = sorted(k for k in set(key) | set(rec["key"] or {})
-                         if (rec["key"] or {}).get(k) != key.get(k))
+        old = rec["key"] if isinstance(rec.get("key"), dict) else {}
+        changed = sorted(k for k in set(key) | set(old) if old.get(k) != key.get(k))
         LOG.info("recomputing %s: key changed (%s)", path, ", ".join(changed))
         return None
     if n_theta is not None and rec["map"] is not None and not (
@@ -187,7 +187,7 @@ def _inits(model: Any, omega_true: Any, x0_true: Any, x_k: np.ndarray, chains: i
     return [dict(init) for _ in range(chains)]
 
 
-def _finite_or_none(values: np.ndarray) -> list[float]:
+def _floats(values: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=float)]
 
 
@@ -245,9 +245,9 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
         timings["diagnostics"] = t3 - t2
         try:
             summ = marginal_summary(draws, model, T)
-            rec["map"] = _finite_or_none(summ["map"])
-            rec["q5"] = _finite_or_none(summ["q5"])
-            rec["q95"] = _finite_or_none(summ["q95"])
+            rec["map"] = _floats(summ["map"])
+            rec["q5"] = _floats(summ["q5"])
+            rec["q95"] = _floats(summ["q95"])
         except KDEError as err:
             failed.append("kde")
             reasons.append(f"kde: {err}")

@@ -9,18 +9,23 @@ Compiling
 Sampling
     httpstan keeps every seeded fit as ``models/<id>/fits/<fit>.jsonlines.gz`` (28 MB for
     T=20, 127 MB for T=100 with the paper's settings) and returns it from there on an
-    identical repeat call.  Each :meth:`PyStanBackend.sample` call therefore runs with a
-    *private* ``XDG_CACHE_HOME`` (a temporary directory) whose
-    ``httpstan/<version>/models/<id>/`` holds symlinks to the shared model's files (never to
-    ``fits/``): the build finds the compiled model at once, the fit lands in the private
-    directory, and the directory is deleted afterwards, also when sampling fails.  httpstan's
-    per-chain Unix socket files go there too (``tempfile.tempdir``), so nothing is left in
-    ``/tmp``.
+    identical repeat call.  Sampling therefore runs with a *private* ``XDG_CACHE_HOME``
+    (a temporary directory, one per process) whose ``httpstan/<version>/models/<id>/``
+    holds symlinks to the shared model's files (never to ``fits/``): the build finds the
+    compiled model at once and the fit lands in the private directory.  After every call,
+    also a failed one, its ``fits/`` are deleted, so seeded fits never accumulate; the
+    directory itself goes at process exit.  httpstan's per-chain Unix socket files (which
+    it never deletes) are put there too via ``tempfile.tempdir`` and deleted as well.
+
+    Why one private directory per process and not per call: the compiled model is a
+    pybind11 extension; loading the same ``.so`` through a second path initialises it
+    twice and the interpreter aborts at exit ("double free or corruption").  For the same
+    reason, direct PyStan use in a process that samples through this backend must go
+    through :meth:`PyStanBackend.session`.
 
     The chains run in a process pool of ``settings.workers`` processes made for the call
     (``httpstan.services_stub.executor`` is replaced and restored; there is no public
-    option, pystan issue #349).  A pool per call also means its workers are forked with the
-    private cache in their environment.
+    option, pystan issue #349).
 
     PyStan's flat draws interleave chains (chain varies fastest); they are reshaped to
     ``(chain, draw, *shape)``.
@@ -31,6 +36,7 @@ one call at a time per process; a lock enforces that for threads.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import fcntl
 import hashlib
@@ -94,32 +100,94 @@ def _file_lock(path: Path) -> Iterator[None]:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
-@contextlib.contextmanager
-def _private_cache(shared_model_dir: Path, model_name: str,
-                   tmp_root: str | None) -> Iterator[Path]:
-    """A temporary XDG_CACHE_HOME whose httpstan model dir links to the shared model."""
-    import httpstan.cache
+class _PrivateCache:
+    """This process's private XDG_CACHE_HOME for httpstan (see the module docstring).
 
-    tmp = Path(tempfile.mkdtemp(prefix="ssmobs-pystan-", dir=tmp_root))
-    old_env = os.environ.get("XDG_CACHE_HOME")
-    old_tempdir = tempfile.tempdir
-    try:
-        os.environ["XDG_CACHE_HOME"] = str(tmp)
-        private_model_dir = httpstan.cache.model_directory(model_name)
-        private_model_dir.mkdir(parents=True)
-        for item in shared_model_dir.iterdir():
-            if item.is_file():  # model .so, .cpp, stanc.log, stderr.log; never fits/
-                (private_model_dir / item.name).symlink_to(item)
-        if len(str(tmp)) <= _MAX_SOCKET_DIR_LEN:
-            tempfile.tempdir = str(tmp)
-        yield tmp
-    finally:
-        tempfile.tempdir = old_tempdir
-        if old_env is None:
-            os.environ.pop("XDG_CACHE_HOME", None)
-        else:
-            os.environ["XDG_CACHE_HOME"] = old_env
-        shutil.rmtree(tmp, ignore_errors=True)
+    One per process, made at the first use: the compiled model is a pybind11 extension
+    module, and loading the same ``.so`` from a second path (a second private directory)
+    initialises it twice, which aborts the interpreter at exit ("double free or
+    corruption").  So the directory lives as long as the process; every call empties its
+    ``fits/`` and socket files, and the whole directory is removed at exit.  A lock file held
+    for the process lifetime marks the directory as in use; directories whose lock is free
+    (their process died, e.g. killed) are removed when the next one is made.
+    """
+
+    PREFIX = "ssmobs-pystan-"
+
+    def __init__(self, tmp_root: str | None) -> None:
+        self.pid = os.getpid()
+        self._reap_stale(tmp_root)
+        self.root = Path(tempfile.mkdtemp(prefix=self.PREFIX, dir=tmp_root))
+        self._lock_fh = open(self.root / ".owner.lock", "w")
+        fcntl.flock(self._lock_fh.fileno(), fcntl.LOCK_EX)
+        atexit.register(self.remove)
+
+    @classmethod
+    def _reap_stale(cls, tmp_root: str | None) -> None:
+        base = Path(tmp_root or tempfile.gettempdir())
+        for cand in base.glob(cls.PREFIX + "*"):
+            lock = cand / ".owner.lock"
+            if not lock.is_file():
+                continue
+            try:
+                with open(lock, "a") as fh:
+                    fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    shutil.rmtree(cand, ignore_errors=True)
+                    LOG.info("removed stale private httpstan cache %s", cand)
+            except OSError:  # held: its process is alive
+                continue
+
+    @contextlib.contextmanager
+    def active(self, shared_model_dir: Path, model_name: str) -> Iterator[Path]:
+        """Within the block httpstan uses this cache, with the shared model linked in."""
+        import httpstan.cache
+
+        old_env = os.environ.get("XDG_CACHE_HOME")
+        old_tempdir = tempfile.tempdir
+        try:
+            os.environ["XDG_CACHE_HOME"] = str(self.root)
+            model_dir = httpstan.cache.model_directory(model_name)
+            if not model_dir.is_dir():
+                model_dir.mkdir(parents=True)
+                for item in shared_model_dir.iterdir():
+                    if item.is_file():  # model .so, .cpp, stanc.log, stderr.log; not fits/
+                        (model_dir / item.name).symlink_to(item)
+            if len(str(self.root)) <= _MAX_SOCKET_DIR_LEN:
+                tempfile.tempdir = str(self.root)  # httpstan's per-chain socket files
+            yield model_dir
+        finally:
+            tempfile.tempdir = old_tempdir
+            if old_env is None:
+                os.environ.pop("XDG_CACHE_HOME", None)
+            else:
+                os.environ["XDG_CACHE_HOME"] = old_env
+            self.clean()
+
+    def clean(self) -> None:
+        """Delete every fit and socket file (keeps the model links)."""
+        for fits in self.root.glob("httpstan/*/models/*/fits"):
+            shutil.rmtree(fits, ignore_errors=True)
+        for sock in self.root.glob("httpstan_*.sock"):
+            with contextlib.suppress(OSError):
+                sock.unlink()
+
+    def remove(self) -> None:
+        if os.getpid() == self.pid:
+            shutil.rmtree(self.root, ignore_errors=True)
+            with contextlib.suppress(Exception):
+                self._lock_fh.close()
+
+
+_PRIVATE: dict[int, _PrivateCache] = {}
+
+
+def private_cache(tmp_root: str | None = None) -> _PrivateCache:
+    """This process's private httpstan cache (made at the first call; ``tmp_root`` is
+    used only then)."""
+    pid = os.getpid()
+    if pid not in _PRIVATE:
+        _PRIVATE[pid] = _PrivateCache(tmp_root)
+    return _PRIVATE[pid]
 
 
 @contextlib.contextmanager
@@ -253,6 +321,28 @@ class PyStanBackend:
         if body.get("stanc_warnings"):
             LOG.debug("stanc warnings for %s:\n%s", path.name, body["stanc_warnings"])
 
+    # ------------------------------------------------------------------ sessions
+    @contextlib.contextmanager
+    def _session(self, marker: Mapping[str, Any]) -> Iterator[Path]:
+        with _CALL_LOCK, \
+                private_cache(self.tmp_root).active(Path(marker["cache_dir"]),
+                                                    marker["model_name"]) as model_dir, \
+                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+            yield model_dir
+
+    @contextlib.contextmanager
+    def session(self, stan_file: str | os.PathLike) -> Iterator[dict[str, Any]]:
+        """Compile if needed, then make httpstan use this process's private cache.
+
+        Use it around any direct PyStan use in a process that also samples through this
+        backend (``stan.build`` and every method of the returned model, e.g. ``log_prob``):
+        a compiled model must always be loaded from the same path within a process.
+        Yields the compile marker.
+        """
+        marker = self.compile(stan_file)
+        with self._session(marker):
+            yield marker
+
     # ------------------------------------------------------------------ sample
     def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
                settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
@@ -288,9 +378,7 @@ class PyStanBackend:
         if inits is not None:
             kwargs["init"] = [dict(i) for i in inits]
         label = Path(marker["stan_file"]).name
-        with _CALL_LOCK, \
-                _private_cache(Path(marker["cache_dir"]), marker["model_name"], self.tmp_root), \
-                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+        with self._session(marker):
             with _captured(f"pystan build {label}") as buf:
                 t0 = time.perf_counter()
                 try:

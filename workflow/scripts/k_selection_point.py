@@ -1,0 +1,9 @@
+"""Rule k_selection_point: V_{K_i} of the choice of K for one K_i (Sec. IV.A)."""
+
+from ssmobs import log
+from ssmobs.stages import run_k_selection_point
+
+log.setup(snakemake.log[0])
+wc = snakemake.wildcards
+run_k_selection_point(snakemake.input[0], snakemake.params.scenario, int(wc.K), wc.method,
+                      int(wc.seed), snakemake.params.settings, snakemake.output[0])
