@@ -45,9 +45,13 @@ def run_case(q: int, K: int, seed: int) -> dict:
 
     from ssmobs.design_disturbances import design_disturbances
 
+    messages: list[str] = []
     t0 = time.perf_counter()
-    res = design_disturbances(q, K, "design", seed)
+    res = design_disturbances(q, K, "design", seed, progress=messages.append)
     wall = time.perf_counter() - t0
+    final = messages[-1] if messages else ""
+    m_eval = re.search(r"\((\d+) evaluations\)", final)
+    m_stop = re.search(r"stopped: (.*)$", final)
     x = res.points
     cov = x.T @ x / K
     anti = design_disturbances(q, K, "antithetic", seed)
@@ -59,6 +63,8 @@ def run_case(q: int, K: int, seed: int) -> dict:
         "b_max": res.b_max,
         "wall_s": wall,
         "iterations": res.iterations,
+        "evaluations": int(m_eval.group(1)) if m_eval else None,
+        "stopped": m_stop.group(1) if m_stop else "",
         "distance_raw": res.distance_raw,
         "distance": res.distance,
         "correction": res.covariance_correction,
@@ -95,19 +101,31 @@ def machine_info() -> str:
     )
 
 
+def _short_reason(reason: str) -> str:
+    if reason.startswith("relative objective change"):
+        return "rel. change"
+    if "PROJECTED GRADIENT" in reason:
+        return "K max abs(grad)"
+    if "ITERATIONS" in reason:
+        return "max_iter"
+    return reason.lower()[:30] or "-"
+
+
 def markdown_table(rows: list[dict]) -> str:
     head = (
-        "| q | K | B | wall time [s] | target [s] | iterations | D before correction "
+        "| q | K | B | wall time [s] | target [s] | iterations (evaluations) | stopped by "
+        "| D before correction "
         "| D after correction | correction | max abs(C - I) | peak RSS [MiB] "
         "| antithetic D (raw) | antithetic D (whitened) | design / antithetic |\n"
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|\n"
+        "|---:|---:|---:|---:|---:|---|---|---:|---:|---|---:|---:|---:|---:|---:|\n"
     )
     lines = []
     for r in rows:
         target = TARGETS.get((r["q"], r["K"]))
         lines.append(
             f"| {r['q']} | {r['K']} | {r['b_max']:g} | {r['wall_s']:.1f} | "
-            f"{'%.0f' % target if target else '-'} | {r['iterations']} | "
+            f"{'%.0f' % target if target else '-'} | {r['iterations']} ({r['evaluations']}) | "
+            f"{_short_reason(r['stopped'])} | "
             f"{r['distance_raw']:.5e} | {r['distance']:.5e} | {r['correction']} | "
             f"{r['max_abs_cov_minus_I']:.1e} | {r['peak_rss_mib']:.0f} | "
             f"{r['antithetic_raw']:.5e} | {r['antithetic_whitened']:.5e} | "
@@ -116,7 +134,7 @@ def markdown_table(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def section_text(rows: list[dict], command: str, total_s: float) -> str:
+def section_text(rows: list[dict], command: str, total_s: float, load: str) -> str:
     today = _dt.date.today().isoformat()
     return (
         f"{SECTION}\n\n"
@@ -127,6 +145,7 @@ def section_text(rows: list[dict], command: str, total_s: float) -> str:
         f"- Date: {today}\n"
         f"- Machine: {machine_info()}\n"
         f"- Command: `{command}` (total {total_s:.0f} s)\n"
+        f"- System load (1-min load average at start / end): {load}\n"
         f"- Wall time: the design generation only (optimisation + correction + distance "
         f"evaluations), `time.perf_counter`.\n"
         f"- Peak memory: `resource.getrusage(RUSAGE_SELF).ru_maxrss` of a fresh subprocess per "
@@ -171,6 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     grid = QUICK_GRID if args.quick else FULL_GRID
     command = "python benchmarks/bench_design_disturbances.py" + (" --quick" if args.quick else "")
     rows = []
+    load_start = os.getloadavg()[0]
     t_all = time.perf_counter()
     for q, K in grid:
         print(f"running q={q}, K={K} ...", file=sys.stderr, flush=True)
@@ -189,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         rows.append(row)
     total = time.perf_counter() - t_all
-    text = section_text(rows, command, total)
+    load = f"{load_start:.2f} / {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs"
+    text = section_text(rows, command, total, load)
     print(text)
     if not args.no_write:
         write_section(args.output, text)

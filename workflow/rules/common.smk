@@ -25,6 +25,8 @@ wildcard_constraints:
     K=r"\d+",
     seed=r"\d+",
     method="design|random|antithetic",
+    batch=r"\d+",
+    model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
 
 
 def disturbance_path(q, K, method, seed):
@@ -53,6 +55,14 @@ def k_selection_points(ks):
     return out
 
 
+def nuts_batches(wildcards):
+    from ssmobs.stages import batches
+
+    sc = SCENARIOS[wildcards.scenario]
+    n = len(batches(sc["K"], config["stan"]["batch_size"]))
+    return [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(n)]
+
+
 def figure2_disturbances(wildcards=None):
     f2 = config["figure2"]
     return disturbance_path(2, f2["K"], "design", f2["seed"])
@@ -62,6 +72,8 @@ def all_targets():
     targets = [f"results/{name}/design_trajectories/trajectories.nc" for name in SCENARIOS]
     targets += [f"results/{name}/joint_map/summary.json" for name, sc in SCENARIOS.items()
                 if sc["joint_map"]]
+    targets += [f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items()
+                if sc["stan"]]
     for ks in KSEL.values():
         targets += k_selection_points(ks)
     targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]

@@ -583,6 +583,7 @@ def _optimise_half(
         f_prev = state["f_prev"]
         state["f_prev"] = f
         if abs(f_prev - f) <= rel_tol * abs(f):
+            state["stop"] = f"relative objective change <= {rel_tol:g}"
             raise StopIteration
 
     f_start, _ = _symmetric_eval(s0, K, b_max, gradient=False)
@@ -606,9 +607,11 @@ def _optimise_half(
     if float(res.fun) < f:
         x, f = np.asarray(res.x), float(res.fun)
     if progress is not None:
+        reason = state.get("stop") or str(res.message)
         progress(
-            f"LCD design K={K} q={shape[1]}: done after {state['it']} iterations, "
-            f"distance {f:.7e}, {time.perf_counter() - t0:.1f} s ({res.message})"
+            f"LCD design K={K} q={shape[1]}: done after {state['it']} iterations "
+            f"({res.nfev} evaluations), distance {f:.7e}, {time.perf_counter() - t0:.1f} s, "
+            f"stopped: {reason}"
         )
     return x.reshape(shape).copy(), f, int(state["it"])
 

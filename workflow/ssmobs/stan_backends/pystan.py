@@ -61,7 +61,7 @@ from .base import Draws, SamplerSettings, SamplingError
 LOG = logging.getLogger("ssmobs.stan")
 
 #: one sampling call at a time per process (environment and module globals are shared)
-_CALL_LOCK = threading.Lock()
+_CALL_LOCK = threading.RLock()
 #: Unix socket paths must stay below ~107 bytes; private tmp dirs longer than this keep
 #: httpstan's socket files in the default temp dir
 _MAX_SOCKET_DIR_LEN = 70
@@ -116,6 +116,8 @@ class _PrivateCache:
 
     def __init__(self, tmp_root: str | None) -> None:
         self.pid = os.getpid()
+        #: XDG_CACHE_HOME values in force outside active(), innermost last
+        self.outer: list[str | None] = []
         self._reap_stale(tmp_root)
         self.root = Path(tempfile.mkdtemp(prefix=self.PREFIX, dir=tmp_root))
         self._lock_fh = open(self.root / ".owner.lock", "w")
@@ -144,6 +146,7 @@ class _PrivateCache:
 
         old_env = os.environ.get("XDG_CACHE_HOME")
         old_tempdir = tempfile.tempdir
+        self.outer.append(old_env)
         try:
             os.environ["XDG_CACHE_HOME"] = str(self.root)
             model_dir = httpstan.cache.model_directory(model_name)
@@ -156,6 +159,7 @@ class _PrivateCache:
                 tempfile.tempdir = str(self.root)  # httpstan's per-chain socket files
             yield model_dir
         finally:
+            self.outer.pop()
             tempfile.tempdir = old_tempdir
             if old_env is None:
                 os.environ.pop("XDG_CACHE_HOME", None)
@@ -179,6 +183,28 @@ class _PrivateCache:
 
 
 _PRIVATE: dict[int, _PrivateCache] = {}
+
+
+@contextlib.contextmanager
+def _shared_cache_env() -> Iterator[None]:
+    """The environment's own XDG_CACHE_HOME, even inside an active private cache."""
+    cache = _PRIVATE.get(os.getpid())
+    if cache is None or not cache.outer:
+        yield
+        return
+    saved = os.environ.get("XDG_CACHE_HOME")
+    outer = cache.outer[0]
+    try:
+        if outer is None:
+            os.environ.pop("XDG_CACHE_HOME", None)
+        else:
+            os.environ["XDG_CACHE_HOME"] = outer
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop("XDG_CACHE_HOME", None)
+        else:
+            os.environ["XDG_CACHE_HOME"] = saved
 
 
 def private_cache(tmp_root: str | None = None) -> _PrivateCache:
@@ -245,8 +271,9 @@ class PyStanBackend:
 
     Parameters
     ----------
-    tmp_root : directory for the private per-call caches (default: the system temp dir).
-        A fit with the paper's settings and T=100 takes about 130 MB there while it runs.
+    tmp_root : where this process's private httpstan cache is made (default: the system
+        temp dir); only the first use in a process decides.  A fit with the paper's
+        settings and T=100 takes about 130 MB there while it is read.
     refresh : Stan's progress-message interval; 0 (default) sends none.
     """
 
@@ -280,15 +307,18 @@ class PyStanBackend:
             return self._markers[key]
         model_name = httpstan.models.calculate_model_name(code)
         model_id = model_name.split("/")[1]
-        cache_dir = httpstan.cache.cache_directory()
-        model_dir = httpstan.cache.model_directory(model_name)
-        if not _has_extension(model_dir):
-            with _file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
-                if not _has_extension(model_dir):  # another process may have built it
-                    LOG.info("compiling %s into %s (about a minute)", path.name, model_dir)
-                    t0 = time.perf_counter()
-                    self._build_program(code, path)
-                    LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+        with _CALL_LOCK, _shared_cache_env():
+            cache_dir = httpstan.cache.cache_directory()
+            model_dir = httpstan.cache.model_directory(model_name)
+            if not _has_extension(model_dir):
+                with _file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
+                    if not _has_extension(model_dir):  # another process may have built it
+                        LOG.info("compiling %s into %s (about a minute)", path.name,
+                                 model_dir)
+                        t0 = time.perf_counter()
+                        self._build_program(code, path)
+                        LOG.info("compiled %s in %.1f s", path.name,
+                                 time.perf_counter() - t0)
         marker = {
             "backend": self.name,
             "stan_file": str(path),

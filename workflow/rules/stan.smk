@@ -1,0 +1,67 @@
+# Stage 3 (Sec. III.C): one NUTS run per design trajectory, convergence checks, marginal MAPs.
+
+
+rule build_stan_model:
+    """Compile stan/<model>.stan once with the configured backend (PyStan or cmdstanpy)."""
+    input:
+        lambda wc: str(REPO / "stan" / f"{wc.model}.stan"),
+    output:
+        "results/shared/stan/{model}.json",
+    log:
+        "results/shared/logs/build_stan_model/{model}.log",
+    params:
+        backend=config["stan"]["backend"],
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/build_stan_model.py"
+
+
+rule sample_nuts:
+    """NUTS for one batch of trajectories; one record per trajectory, resumable."""
+    input:
+        trajectories="results/{scenario}/design_trajectories/trajectories.nc",
+        marker=lambda wc: f"results/shared/stan/{SCENARIOS[wc.scenario]['model']}.json",
+    output:
+        "results/{scenario}/sample_nuts/batch{batch}.parquet",
+    log:
+        "results/{scenario}/logs/sample_nuts/batch{batch}.log",
+    benchmark:
+        "results/{scenario}/benchmarks/sample_nuts/batch{batch}.tsv"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
+        stan=config["stan"],
+        convergence=config["convergence"],
+        records="results/{scenario}/sample_nuts/records",
+        draws="results/{scenario}/draws",
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=lambda wc: 10 + 2 * config["stan"]["batch_size"],
+    group:
+        "nuts"
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/sample_nuts.py"
+
+
+rule gather_nuts:
+    """All trajectories of a scenario: |K^Stan|, marginal-MAP mean/var/MSE, coverage, bias."""
+    input:
+        trajectories="results/{scenario}/design_trajectories/trajectories.nc",
+        batches=nuts_batches,
+    output:
+        table="results/{scenario}/gather_nuts/marginal_map.parquet",
+        summary="results/{scenario}/gather_nuts/summary.json",
+    log:
+        "results/{scenario}/logs/gather_nuts.log",
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/gather_nuts.py"

@@ -1,0 +1,202 @@
+"""cmdstanpy backend (used when a CmdStan installation exists; see :func:`have_cmdstan`).
+
+Compiling
+    cmdstanpy writes the executable next to the ``.stan`` file and decides to recompile by
+    comparing timestamps only.  :meth:`CmdStanPyBackend.compile` therefore copies the
+    program into a cache directory keyed by CmdStan version and program hash,
+    ``$XDG_CACHE_HOME/ssmobs/cmdstan-<version>/<slug>-<sha256[:16]>/`` (default
+    ``~/.cache``), and compiles there once, under an exclusive ``fcntl.flock`` lock.  The
+    repository's ``stan/`` directory stays free of executables.
+
+Sampling
+    Each call writes the data and inits JSON and CmdStan's CSV files into a temporary
+    directory that is deleted afterwards (also on errors), so nothing accumulates; progress
+    bars are off and cmdstanpy's log goes to DEBUG.  Names map from
+    :class:`SamplerSettings`: ``workers`` -> ``parallel_chains``, ``iter_warmup``,
+    ``iter_sampling``, ``adapt_delta``, ``max_treedepth`` as they are.
+
+CmdStan writes 6 significant digits to its CSV files unless ``sig_figs`` is given.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import logging
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+
+from . import SAMPLER_COLUMNS, quiet_loggers
+from .base import Draws, SamplerSettings, SamplingError
+
+LOG = logging.getLogger("ssmobs.stan")
+
+
+def cache_root() -> Path:
+    """Root of the compiled-program cache (``$XDG_CACHE_HOME/ssmobs``, default ~/.cache)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "ssmobs"
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+def fit_to_draws(fit: Any) -> Draws:
+    """Convert a ``CmdStanMCMC`` to :class:`Draws` (arrays (chain, draw, *shape)).
+
+    Uses ``fit.draws(concat_chains=False)`` (draws, chains, columns), the program
+    variables of ``fit.metadata.stan_vars`` (stanio variables, reshaped column-major as
+    CmdStan writes them) and the sampler columns of ``fit.method_variables()``.
+    """
+    draws = np.asarray(fit.draws(concat_chains=False))
+    params = {}
+    for name, var in fit.metadata.stan_vars.items():
+        arr = np.asarray(var.extract_reshape(draws), dtype=float)  # (draw, chain, *shape)
+        params[name] = np.ascontiguousarray(np.swapaxes(arr, 0, 1))
+    method = fit.method_variables()
+    stats = {}
+    for name in SAMPLER_COLUMNS:
+        if name in method:
+            arr = np.asarray(method[name], dtype=float)
+            arr = arr.reshape(arr.shape[0], arr.shape[1])  # (draw, chain)
+            stats[name] = np.ascontiguousarray(arr.T)
+    return Draws(params=params, sample_stats=stats)
+
+
+class CmdStanPyBackend:
+    """Stan backend on cmdstanpy + CmdStan (see the module docstring).
+
+    Parameters
+    ----------
+    tmp_root : directory for the per-call output directories (default: system temp dir).
+    sig_figs : significant digits in CmdStan's CSV output (None: CmdStan's default, 6).
+    """
+
+    name = "cmdstanpy"
+
+    def __init__(self, tmp_root: str | os.PathLike | None = None,
+                 sig_figs: int | None = None) -> None:
+        self.tmp_root = None if tmp_root is None else str(tmp_root)
+        self.sig_figs = sig_figs
+        self._markers: dict[tuple[str, str], dict[str, Any]] = {}
+
+    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+        """Compile a copy of the program in the cache (once); return its marker.
+
+        Marker keys: ``backend``, ``stan_file`` (the repository file), ``program_sha256``,
+        ``model_name``, ``cache_dir``, ``exe_file``, ``cmdstan_path``, ``cmdstan_version``,
+        ``cmdstanpy_version``.  Raises RuntimeError when the program does not compile.
+        """
+        import cmdstanpy
+
+        path = Path(stan_file).resolve()
+        code = path.read_text()
+        sha = hashlib.sha256(code.encode()).hexdigest()
+        key = (str(path), sha)
+        if key in self._markers:
+            return self._markers[key]
+        version = cmdstanpy.cmdstan_version()
+        version_tag = ".".join(map(str, version)) if version else "unknown"
+        slug = path.stem
+        cache_dir = cache_root() / f"cmdstan-{version_tag}" / f"{slug}-{sha[:16]}"
+        copy = cache_dir / f"{slug}.stan"
+        exe = cache_dir / (slug + (".exe" if os.name == "nt" else ""))
+        if not exe.is_file():
+            with _file_lock(cache_dir / ".lock"):
+                if not exe.is_file():
+                    LOG.info("compiling %s with CmdStan %s in %s", path.name, version_tag,
+                             cache_dir)
+                    t0 = time.perf_counter()
+                    copy.write_text(code)
+                    try:
+                        with quiet_loggers(forward=("cmdstanpy",)):
+                            model = cmdstanpy.CmdStanModel(stan_file=str(copy))
+                    except Exception as err:
+                        raise RuntimeError(f"compiling {path} failed: {err}") from err
+                    built = Path(model.exe_file)
+                    if built != exe:
+                        shutil.move(str(built), exe)
+                    LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+        marker = {
+            "backend": self.name,
+            "stan_file": str(path),
+            "program_sha256": sha,
+            "model_name": slug,
+            "cache_dir": str(cache_dir),
+            "exe_file": str(exe),
+            "cmdstan_path": str(cmdstanpy.cmdstan_path()),
+            "cmdstan_version": version_tag,
+            "cmdstanpy_version": cmdstanpy.__version__,
+        }
+        self._markers[key] = marker
+        return marker
+
+    def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
+               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+        """Run NUTS and return the post-warmup draws (same contract as the PyStan backend).
+
+        ``timings``: ``sample`` is the ``CmdStanModel.sample`` call (CmdStan run and CSV
+        parsing), ``convert`` the reshaping, ``total`` the whole method.
+        """
+        import cmdstanpy
+
+        t_start = time.perf_counter()
+        if not 0 <= int(seed) < 2**32:
+            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+        if inits is not None and len(inits) != settings.chains:
+            raise ValueError(f"inits must have one dict per chain ({settings.chains}), "
+                             f"got {len(inits)}")
+        if settings.workers < 1:
+            raise ValueError(f"settings.workers must be >= 1, got {settings.workers}")
+        marker = self.compile(stan_file)
+        label = Path(marker["stan_file"]).name
+        tmp = Path(tempfile.mkdtemp(prefix="ssmobs-cmdstan-", dir=self.tmp_root))
+        try:
+            data_file = tmp / "data.json"
+            cmdstanpy.write_stan_json(str(data_file), dict(data))
+            init_arg: Any = None
+            if inits is not None:
+                init_arg = []
+                for i, init in enumerate(inits, start=1):
+                    f = tmp / f"init-{i}.json"
+                    cmdstanpy.write_stan_json(str(f), dict(init))
+                    init_arg.append(str(f))
+            with quiet_loggers(forward=("cmdstanpy",)):
+                model = cmdstanpy.CmdStanModel(exe_file=marker["exe_file"])
+                t0 = time.perf_counter()
+                try:
+                    fit = model.sample(
+                        data=str(data_file), chains=settings.chains,
+                        parallel_chains=settings.workers, seed=int(seed), inits=init_arg,
+                        iter_warmup=settings.iter_warmup,
+                        iter_sampling=settings.iter_sampling,
+                        adapt_delta=settings.adapt_delta,
+                        max_treedepth=settings.max_treedepth,
+                        output_dir=str(tmp / "output"), sig_figs=self.sig_figs,
+                        show_progress=False, show_console=False)
+                except RuntimeError as err:
+                    raise SamplingError(f"{label} (seed {seed}): {err}") from err
+                t_sample = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            draws = fit_to_draws(fit)
+            t_convert = time.perf_counter() - t0
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        draws.timings = {"sample": t_sample, "convert": t_convert,
+                         "total": time.perf_counter() - t_start}
+        return draws
