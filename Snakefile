@@ -28,6 +28,7 @@ include: "workflow/rules/design.smk"
 include: "workflow/rules/joint_map.smk"
 include: "workflow/rules/stan.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/outputs.smk"
 
 
 rule all:

@@ -7,6 +7,7 @@ sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
 from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
+from ssmobs import stages  # noqa: E402
 
 try:
     ssmobs_config.validate(config)
@@ -16,6 +17,17 @@ except ConfigError as err:
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 REPO = Path(workflow.basedir)
+JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
+STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
+TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
+
+
+def joint_summary(name):
+    return f"results/{name}/joint_map/summary.json"
+
+
+def stan_summary(name):
+    return f"results/{name}/gather_nuts/summary.json"
 
 
 wildcard_constraints:
@@ -77,4 +89,8 @@ def all_targets():
     for ks in KSEL.values():
         targets += k_selection_points(ks)
     targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]
+    targets += expand("paper_figures/{stem}.{ext}", ext=["csv", "md", "tex"],
+                      stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
+    targets += expand("paper_figures/{stem}.{ext}", ext=["pdf", "png"],
+                      stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
     return targets

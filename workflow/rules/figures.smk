@@ -6,7 +6,8 @@ rule figure_design_points:
     input:
         figure2_disturbances,
     output:
-        pdf="paper_figures/fig2_design_points.pdf",
+        pdf=report("paper_figures/fig2_design_points.pdf", caption="../report/fig2.rst",
+                   category="Figures"),
         png="paper_figures/fig2_design_points.png",
     log:
         "results/shared/logs/figure_design_points.log",

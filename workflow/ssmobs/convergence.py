@@ -151,11 +151,12 @@ def _average_ranks_1d(srt: np.ndarray, order: np.ndarray) -> np.ndarray:
     return out
 
 
-def _z_scale_rows(m: np.ndarray) -> np.ndarray:
+def _z_scale_rows(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rank-normalise every row: Phi^-1((rank - 3/8) / (n + 1/4)) (ArviZ ``_z_scale``).
 
     Rows without ties are a permutation of the ranks 1..n, so their z-values come from one
-    table of n normal quantiles; only rows with ties need their own ``ndtri``.
+    table of n normal quantiles; only rows with ties need their own ``ndtri``.  Also
+    returns the sorted rows (for medians and quantiles without another sort).
     """
     n = m.shape[1]
     order = np.argsort(m, axis=1)
@@ -163,9 +164,29 @@ def _z_scale_rows(m: np.ndarray) -> np.ndarray:
     z = np.empty(m.shape, dtype=float)
     np.put_along_axis(z, order, np.broadcast_to(table, m.shape), axis=1)
     srt = np.take_along_axis(m, order, axis=1)
-    for r in np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1)):
-        z[r] = special.ndtri((_average_ranks_1d(srt[r], order[r]) - 0.375) / (n + 0.25))
-    return z
+    eq = srt[:, 1:] == srt[:, :-1]
+    for r in np.flatnonzero(eq.any(axis=1)):
+        # only the tied positions change: they get the mean of their group's ranks
+        tied = np.zeros(n, dtype=bool)
+        tied[:-1] |= eq[r]
+        tied[1:] |= eq[r]
+        pos = np.flatnonzero(tied)
+        ranks = _average_ranks_1d(srt[r], np.arange(n))[pos]
+        z[r, order[r, pos]] = special.ndtri((ranks - 0.375) / (n + 0.25))
+    return z, srt
+
+
+def _sorted_quantile(srt: np.ndarray, prob: float) -> np.ndarray:
+    """Type-7 quantile of every row of the row-sorted array ``srt`` (as ``np.quantile``)."""
+    n = srt.shape[1]
+    h = (n - 1) * prob
+    lo = int(math.floor(h))
+    hi = min(lo + 1, n - 1)
+    frac = h - lo
+    # np.quantile's lerp: a + (b - a) * t, switched to b - (b - a) * (1 - t) for t >= 0.5
+    a, b = srt[:, lo], srt[:, hi]
+    diff = b - a
+    return np.where(frac >= 0.5, b - diff * (1 - frac), a + diff * frac)
 
 
 def _split(a: np.ndarray) -> np.ndarray:
@@ -202,16 +223,16 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     from scipy.fft import next_fast_len
 
     nfft = next_fast_len(2 * n)
-    xc = x - x.mean(axis=2, keepdims=True)
-    f = np.fft.rfft(xc, n=nfft, axis=2)
-    acov = np.fft.irfft(f * np.conjugate(f), n=nfft, axis=2)[:, :, :n] / n
     chain_mean = x.mean(axis=2)
-    mean_var = acov[:, :, 0].mean(axis=1) * n / (n - 1.0)
+    f = np.fft.rfft(x - chain_mean[:, :, None], n=nfft, axis=2)
+    power = (f.real ** 2 + f.imag ** 2).mean(axis=1)  # chain average before the inverse FFT
+    acov_mean = np.fft.irfft(power, n=nfft, axis=1)[:, :n] / n  # mean over chains of acov
+    mean_var = acov_mean[:, 0] * n / (n - 1.0)
     var_plus = mean_var * (n - 1.0) / n
     if m_chains > 1:
         var_plus = var_plus + chain_mean.var(axis=1, ddof=1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        rho = 1.0 - (mean_var[:, None] - acov.mean(axis=1)) / var_plus[:, None]
+        rho = 1.0 - (mean_var[:, None] - acov_mean) / var_plus[:, None]
     rho[:, 0] = 1.0
     jmax = (n - 3) // 2  # last pair (2j, 2j+1) ArviZ's loop can reach
     n_pairs = jmax + 1
@@ -262,9 +283,11 @@ def rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     sp = _split(xv)
     n_rows, m_chains, half = sp.shape
     flat = sp.reshape(n_rows, -1)
-    z_bulk = _z_scale_rows(flat).reshape(sp.shape)
-    folded = np.abs(flat - np.median(flat, axis=1, keepdims=True))
-    z_fold = _z_scale_rows(folded).reshape(sp.shape)
+    z_bulk, srt = _z_scale_rows(flat)
+    z_bulk = z_bulk.reshape(sp.shape)
+    n_flat = flat.shape[1]
+    median = 0.5 * (srt[:, (n_flat - 1) // 2] + srt[:, n_flat // 2])
+    z_fold = _z_scale_rows(np.abs(flat - median[:, None]))[0].reshape(sp.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
         if c >= 2:
             r_bulk, r_fold = _rhat_rows(z_bulk), _rhat_rows(z_fold)
@@ -273,10 +296,13 @@ def rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
             rhat[idx] = np.where(np.isnan(r_bulk) | np.isnan(r_fold), np.nan,
                                  np.maximum(r_bulk, r_fold))
     ess_bulk[idx] = _ess_rows(z_bulk)
-    q = _quantile_type7(xv.reshape(idx.size, -1), [0.05, 0.95])
-    ess_lo = _ess_rows(_split((xv <= q[0][:, None, None]).astype(float)))
-    ess_hi = _ess_rows(_split((xv <= q[1][:, None, None]).astype(float)))
-    ess_tail[idx] = np.minimum(ess_lo, ess_hi)
+    if 2 * half == s:  # the split chains hold every draw: quantiles from the sorted rows
+        q = [_sorted_quantile(srt, 0.05), _sorted_quantile(srt, 0.95)]
+    else:
+        q = list(_quantile_type7(xv.reshape(idx.size, -1), [0.05, 0.95]))
+    ind = np.concatenate([sp <= q[0][:, None, None], sp <= q[1][:, None, None]]).astype(float)
+    ess_q = _ess_rows(ind)
+    ess_tail[idx] = np.minimum(ess_q[:idx.size], ess_q[idx.size:])
     return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail}
 
 

@@ -4,7 +4,7 @@ The design disturbances of the paper (Sec. III.A) are K equally weighted points 
 approximate the standard normal distribution N(0, I_q).  For ``method="design"`` they are the
 point-symmetric set {s_1..s_N, -s_1..-s_N} (plus the origin for odd K) that minimises the modified
 Cramér–von Mises distance between localized cumulative distributions (LCDs), followed by a
-covariance correction.  Formulas, section numbers and equation names refer to
+covariance correction.  Formulas and section numbers refer to
 ``docs/lcd-design-disturbances.md`` ("the doc"):
 
 * distance (the doc's :math:`\\hat D`, normalised by :math:`\\pi^{-q/2}`): Sections 1-2, in the
@@ -20,7 +20,9 @@ pair and the working memory is a few (block x block) arrays.  In the small-argum
 occurs in practice (:math:`c = T/4B^2 \\le 1`, doc Section 7 item 1) :math:`E_1` is evaluated by
 its convergent power series (``-gamma - ln c + sum (-1)^{k+1} c^k / (k k!)``), which is about
 5x faster than ``scipy.special.exp1`` and agrees with it to ~1e-15 relative; larger arguments fall
-back to ``scipy.special.exp1``.
+back to ``scipy.special.exp1``.  :func:`design_disturbances` runs with a single OpenBLAS thread by
+default (see its ``blas_threads`` argument): the work is dominated by single-threaded element-wise
+NumPy loops, and multi-threaded BLAS on small GEMMs is 10-25x slower when the cores are shared.
 """
 
 from __future__ import annotations

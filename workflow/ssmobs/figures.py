@@ -74,3 +74,115 @@ def figure_design_points(disturbances: np.ndarray, a: float, x0: float,
     fig.tight_layout()
     save_figure(fig, paths)
     plt.close(fig)
+
+
+def figure_joint_vs_marginal(panels: list[dict], omega_true: float, x0_true: float,
+                             paths: Sequence[str | os.PathLike]) -> None:
+    """Figure 3 (Sec. IV.A): pairwise scatter of joint-MAP estimates (a^, x0^) over K^max
+    (left) and marginal-MAP estimates over K^Stan (right), one colour per T; true values as
+    lines.  ``panels``: dicts with ``T``, ``joint`` (DataFrame with a, x0) and ``marginal``
+    (DataFrame with a_map, x0_map), either possibly empty.
+    """
+    plt = _plt()
+    import seaborn as sns
+
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.0), sharex=False, sharey=False)
+    colours = sns.color_palette("deep", n_colors=max(len(panels), 1))
+    for panel, colour in zip(panels, colours):
+        j, m = panel["joint"], panel["marginal"]
+        axes[0].scatter(j["a"], j["x0"], s=6, alpha=0.5, color=colour,
+                        label=f"T={panel['T']} (|K^max|={len(j)})")
+        axes[1].scatter(m["a_map"], m["x0_map"], s=6, alpha=0.5, color=colour,
+                        label=f"T={panel['T']} (|K^Stan|={len(m)})")
+    for ax, title in zip(axes, ("joint MAP", "marginal MAP")):
+        ax.axvline(omega_true, color="k", lw=0.8)
+        ax.axhline(x0_true, color="k", lw=0.8)
+        ax.set_xlabel(r"$\hat a$")
+        ax.set_ylabel(r"$\hat x_0$")
+        ax.set_title(title)
+        ax.legend(fontsize=7, markerscale=2)
+    fig.tight_layout()
+    save_figure(fig, paths)
+    plt.close(fig)
+
+
+def figure_observability_ratios(frame: "pandas.DataFrame", paths: Sequence[str | os.PathLike]) -> None:  # noqa: F821
+    """|K^max|/K and |K^Stan|/K for every scenario, ours beside the paper's."""
+    import pandas as pd
+
+    plt = _plt()
+    import seaborn as sns
+
+    rows = []
+    for _, r in frame.iterrows():
+        for what, col in (("|K^max|/K", "K_max_frac"), ("|K^Stan|/K", "K_stan_frac")):
+            rows.append({"scenario": r["scenario"], "quantity": what, "source": "ours",
+                         "fraction": r[col]})
+            rows.append({"scenario": r["scenario"], "quantity": what, "source": "paper",
+                         "fraction": r[f"{col}_paper"]})
+    long = pd.DataFrame(rows)
+    g = sns.catplot(data=long, kind="bar", x="fraction", y="scenario", hue="source",
+                    col="quantity", height=max(3.0, 0.35 * len(frame) + 1.5), aspect=1.0,
+                    palette={"ours": "tab:blue", "paper": "tab:gray"})
+    g.set(xlim=(0, 1.05))
+    g.set_titles("{col_name}")
+    save_figure(g.figure, paths)
+    plt.close(g.figure)
+
+
+def figure_profile_posterior(a_values: np.ndarray, x0_values: np.ndarray, values: np.ndarray,
+                             a_true: float, x0_true: float, title: str,
+                             paths: Sequence[str | os.PathLike]) -> None:
+    """Figure 4 (Sec. IV.E): profile posterior pi(a, x0 | z~) = max over x_1..x_T."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    finite = values[np.isfinite(values)]
+    vmin = np.quantile(finite, 0.05) if finite.size else None
+    mesh = ax.pcolormesh(a_values, x0_values, values.T, shading="auto", cmap="viridis",
+                         vmin=vmin)
+    ax.contour(a_values, x0_values, values.T, levels=12, colors="white", linewidths=0.5)
+    fig.colorbar(mesh, ax=ax, label=r"$\pi(a, x_0 \mid \tilde z)$ (profile)")
+    ax.plot([a_true], [x0_true], "r+", ms=10, mew=2)
+    ax.set_xlabel("$a$")
+    ax.set_ylabel("$x_0$")
+    ax.set_title(title)
+    fig.tight_layout()
+    save_figure(fig, paths)
+    plt.close(fig)
+
+
+def figure_k_convergence(frame: "pandas.DataFrame", chosen: "pandas.DataFrame",  # noqa: F821
+                         title: str, paths: Sequence[str | os.PathLike]) -> None:
+    """Each component of V_{K_i} against K_i, one line per method and seed (Sec. IV.A).
+
+    ``frame``: long table with columns K, method, seed, component, value;
+    ``chosen``: method, seed, K_chosen (vertical markers).
+    """
+    plt = _plt()
+    import seaborn as sns
+
+    comps = list(dict.fromkeys(frame["component"]))
+    ncol = min(4, len(comps))
+    nrow = int(np.ceil(len(comps) / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 2.6 * nrow), squeeze=False)
+    frame = frame.assign(run=frame["method"] + " seed " + frame["seed"].astype(str))
+    palette = dict(zip(sorted(frame["run"].unique()),
+                       sns.color_palette("tab10", n_colors=frame["run"].nunique())))
+    for ax, comp in zip(axes.flat, comps):
+        sub = frame[frame["component"] == comp]
+        for run, g in sub.groupby("run", sort=True):
+            ax.plot(g["K"], g["value"], marker="o", ms=3, lw=1, color=palette[run], label=run)
+        ax.set_title(comp, fontsize=9)
+        ax.set_xlabel("K")
+    for ax in list(axes.flat)[len(comps):]:
+        ax.axis("off")
+    for _, c in chosen.iterrows():
+        if np.isfinite(c.get("K_chosen", np.nan)):
+            run = f"{c['method']} seed {c['seed']}"
+            for ax in list(axes.flat)[:len(comps)]:
+                ax.axvline(c["K_chosen"], color=palette.get(run, "k"), ls=":", lw=0.8)
+    axes.flat[0].legend(fontsize=6)
+    fig.suptitle(title)
+    fig.tight_layout()
+    save_figure(fig, paths)
+    plt.close(fig)

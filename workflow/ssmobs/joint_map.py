@@ -93,8 +93,13 @@ class JointMapSettings:
     newton_tol: float = 1e-9
     #: inner stopping rule for mu > mu_min: max |grad P_mu| <= inner_tol_factor * mu
     inner_tol_factor: float = 1.0
-    #: initial barrier parameter mu_0
+    #: initial barrier parameter: mu_0 = max(mu0, mu0_per_step * T).  -2 pi has up to T
+    #: log-singular terms per constraint (e.g. T log(1 - b^2) in (Sep, d=p=1), which go to
+    #: -inf at b -> 1 with x_t = z_t / b), so the first barrier problem is bounded below
+    #: only for mu_0 above about T; smaller values let the first Newton steps fall into
+    #: that singular edge of the joint posterior instead of an interior local maximum.
     mu0: float = 1.0
+    mu0_per_step: float = 2.0
     #: mu <- mu * mu_factor after each barrier stage
     mu_factor: float = 0.1
     #: final barrier parameter ("near zero")
@@ -115,20 +120,26 @@ class JointMapSettings:
     ridge_move_tol: float = 1e-4
     #: a slack s_i(Omega_hat) below this means the optimum is on the boundary
     boundary_tol: float = 1e-6
+    #: the iterations of a trajectory stop early once a slack falls below this
+    boundary_stop_tol: float = 1e-9
     #: |Theta|_inf above this means the iterates run off to infinity (boundary at infinity)
     divergence_limit: float = 1e6
+    #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
+    eigen_method: str = "lanczos"
+    #: Lanczos steps (exact spectrum when >= |Theta|)
+    lanczos_steps: int = 40
     #: trajectories per vectorised batch (0: chosen from |Theta| to bound memory)
     chunk_size: int = 0
 
     def __post_init__(self) -> None:
         positive = ("grad_tol", "eig_ratio_min", "newton_tol", "inner_tol_factor", "mu0",
                     "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol",
-                    "boundary_tol", "divergence_limit")
+                    "boundary_tol", "boundary_stop_tol", "divergence_limit")
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"joint-MAP setting {name}={value!r} must be a positive number")
-        for name in ("max_newton_iter", "max_backtracks", "max_damping_tries"):
+        for name in ("max_newton_iter", "max_backtracks", "max_damping_tries", "lanczos_steps"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be >= 1")
         if not 0 < self.mu_factor < 1:
@@ -139,6 +150,14 @@ class JointMapSettings:
         if self.mu_min > self.mu0:
             raise ValueError(f"joint-MAP setting mu_min={self.mu_min!r} must not exceed "
                              f"mu0={self.mu0!r}")
+        if self.mu0_per_step < 0:
+            raise ValueError(f"joint-MAP setting mu0_per_step={self.mu0_per_step!r} must be >= 0")
+        if self.boundary_stop_tol > self.boundary_tol:
+            raise ValueError(f"joint-MAP setting boundary_stop_tol={self.boundary_stop_tol!r} "
+                             f"must not exceed boundary_tol={self.boundary_tol!r}")
+        if self.eigen_method not in ("lanczos", "dense"):
+            raise ValueError(f"joint-MAP setting eigen_method={self.eigen_method!r} must be "
+                             f"'lanczos' or 'dense'")
         if self.pd_tol < 0:
             raise ValueError(f"joint-MAP setting pd_tol={self.pd_tol!r} must be >= 0")
         if self.chunk_size < 0:
@@ -156,6 +175,10 @@ class JointMapSettings:
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def initial_mu(self, T: int) -> float:
+        """mu_0 for trajectories of length T."""
+        return max(self.mu0, self.mu0_per_step * T)
 
 
 # =========================================================================== result
@@ -319,42 +342,106 @@ class _StateFactor:
         return np.moveaxis(v, 0, 1)
 
 
-def _arrow_newton_step(A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray,
-                       g: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Solve (H + tau I) d = -g for a batch of arrow matrices H = [[A, C^T], [C, D]].
+class _ArrowFactor:
+    """Factorisation of a batch of arrow matrices H = [[A, C^T], [C, D]] (+ tau I).
 
-    A (K, m, m); C (K, N, p, m) couples state t with Omega; D block-tridiagonal with
-    diagonal blocks Dd (K, N, p, p) and sub-diagonal blocks Dl (K, N-1, p, p); tau (K,).
-    Eliminates the states (block Cholesky of D) and solves the m x m Schur complement.
-    Returns d (K, n) and ok (K,): True where H + tau I is positive definite.
+    A (K, m, m) is the Omega block, C (K, N, p, m) couples state t with Omega and D is
+    block-tridiagonal with diagonal blocks Dd (K, N, p, p) and sub-diagonal blocks
+    Dl (K, N-1, p, p).  The states are eliminated by a block Cholesky of D, leaving the
+    m x m Schur complement S = A - C^T D^{-1} C; H is positive definite iff D and S are.
+    ``rhs`` (K, n), if given, is solved for together with D^{-1} C (one pass over t).
     """
-    K, N, p, m = C.shape
-    eye_p = np.eye(p)
-    fac = _StateFactor(Dd + tau[:, None, None, None] * eye_p, Dl)
-    gx = g[:, m:].reshape(K, N, p)
-    Y = fac.solve(np.concatenate([C, gx[..., None]], axis=-1))
-    YC, yg = Y[..., :m], Y[..., m]
-    with np.errstate(all="ignore"):
-        S = A + tau[:, None, None] * np.eye(m) - np.einsum("ktpi,ktpj->kij", C, YC)
-        r = -g[:, :m] + np.einsum("ktpi,ktp->ki", C, yg)
-        LSi, okS = _chol_inv(S)
-        dw = np.einsum("kji,kj->ki", LSi, np.einsum("kij,kj->ki", LSi, r))
-        dx = -yg - np.einsum("ktpi,ki->ktp", YC, dw)
-    d = np.concatenate([dw, dx.reshape(K, -1)], axis=1)
-    ok = fac.ok & okS & np.all(np.isfinite(d), axis=1)
-    return d, ok
+
+    def __init__(self, A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray,
+                 tau: np.ndarray | None = None, rhs: np.ndarray | None = None) -> None:
+        K, N, p, m = C.shape
+        self.K, self.N, self.p, self.m = K, N, p, m
+        self.A, self.C, self.Dd, self.Dl = A, C, Dd, Dl
+        if tau is not None:
+            A = A + tau[:, None, None] * np.eye(m)
+            Dd = Dd + tau[:, None, None, None] * np.eye(p)
+        self.fac = _StateFactor(Dd, Dl)
+        cols = [C] if rhs is None else [C, rhs[:, m:].reshape(K, N, p, 1)]
+        Y = self.fac.solve(np.concatenate(cols, axis=-1))
+        self.Y = Y[..., :m]
+        self._rhs, self._y_rhs = rhs, (None if rhs is None else Y[..., m])
+        with np.errstate(all="ignore"):
+            S = A - np.einsum("ktpi,ktpj->kij", C, self.Y)
+            self.LSi, okS = _chol_inv(S)
+        self.ok = (self.fac.ok & okS & np.all(np.isfinite(self.Y), axis=(1, 2, 3))
+                   & np.all(np.isfinite(self.LSi), axis=(1, 2)))
+
+    def _finish(self, bw: np.ndarray, y: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            r = bw - np.einsum("ktpi,ktp->ki", self.C, y)
+            xw = np.einsum("kji,kj->ki", self.LSi, np.einsum("kij,kj->ki", self.LSi, r))
+            xx = y - np.einsum("ktpi,ki->ktp", self.Y, xw)
+        return np.concatenate([xw, xx.reshape(self.K, -1)], axis=1)
+
+    def solve_rhs(self) -> np.ndarray:
+        """H^{-1} rhs for the ``rhs`` given at construction."""
+        return self._finish(self._rhs[:, :self.m], self._y_rhs)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """H^{-1} b for b (K, n)."""
+        y = self.fac.solve(b[:, self.m:].reshape(self.K, self.N, self.p, 1))[..., 0]
+        return self._finish(b[:, :self.m], y)
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        """H v for v (K, n) (unshifted H)."""
+        m = self.m
+        vw, vx = v[:, :m], v[:, m:].reshape(self.K, self.N, self.p)
+        out_w = np.einsum("kij,kj->ki", self.A, vw) + np.einsum("ktpi,ktp->ki", self.C, vx)
+        out_x = np.einsum("ktpi,ki->ktp", self.C, vw) + np.einsum("ktpq,ktq->ktp", self.Dd, vx)
+        out_x[:, 1:] += np.einsum("ktpq,ktq->ktp", self.Dl, vx[:, :-1])
+        out_x[:, :-1] += np.einsum("ktqp,ktq->ktp", self.Dl, vx[:, 1:])
+        return np.concatenate([out_w, out_x.reshape(self.K, -1)], axis=1)
+
+    def diag_inverse(self) -> np.ndarray:
+        """(K, n) diagonal of H^{-1} (selected inversion, O(n) per matrix).
+
+        (H^{-1})_{Omega} = S^{-1};  (H^{-1})_{x} = D^{-1} + Y S^{-1} Y^T with Y = D^{-1} C,
+        and the diagonal blocks Z_t of D^{-1} follow from the block Cholesky factor by
+        Z_{N-1} = L_{N-1}^{-T} L_{N-1}^{-1},
+        Z_t = L_t^{-T} (I + M_{t+1}^T Z_{t+1} M_{t+1}) L_t^{-1}.
+        """
+        K, N, p = self.K, self.N, self.p
+        with np.errstate(all="ignore"):
+            Sinv = np.einsum("kji,kjl->kil", self.LSi, self.LSi)
+            zd = np.empty((N, K, p))
+            if p == 1:
+                l, mm = self.fac.linv, self.fac.m
+                z = l[N - 1] ** 2
+                zd[N - 1, :, 0] = z
+                for t in range(N - 2, -1, -1):
+                    z = l[t] ** 2 * (1.0 + mm[t] ** 2 * z)
+                    zd[t, :, 0] = z
+            else:
+                Li, mm = self.fac.linv, self.fac.m
+                tr = lambda a: np.swapaxes(a, -1, -2)  # noqa: E731
+                Z = tr(Li[N - 1]) @ Li[N - 1]
+                zd[N - 1] = np.diagonal(Z, axis1=-2, axis2=-1)
+                for t in range(N - 2, -1, -1):
+                    inner = np.eye(p) + tr(mm[t]) @ Z @ mm[t]
+                    Z = tr(Li[t]) @ inner @ Li[t]
+                    zd[t] = np.diagonal(Z, axis1=-2, axis2=-1)
+            dx = np.moveaxis(zd, 0, 1) + np.einsum("ktpa,kab,ktpb->ktp", self.Y, Sinv, self.Y)
+        return np.concatenate([np.diagonal(Sinv, axis1=1, axis2=2), dx.reshape(K, -1)], axis=1)
 
 
-def _damped_newton_direction(A, C, Dd, Dl, g, settings: JointMapSettings
+def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings"
                              ) -> tuple[np.ndarray, np.ndarray]:
-    """Newton direction with a diagonal shift where the Hessian is not PD.
+    """Newton direction d = -H^{-1} g, with a diagonal shift where H is not PD.
 
-    Returns d (K, n) and the shift used (K,); where no shift up to
-    damping_init * 10^(tries-1) * scale works, d is the scaled steepest-descent direction.
+    Returns d (K, n) and the shift used (K,): where no shift up to
+    damping_init * 10^(tries-1) * (1 + max |H_jj|) works, d is the scaled steepest-descent
+    direction and the shift is inf.
     """
     K = g.shape[0]
     tau = np.zeros(K)
-    d, ok = _arrow_newton_step(A, C, Dd, Dl, g, tau)
+    d = _ArrowFactor(A, C, Dd, Dl, rhs=-g)
+    ok, d = d.ok, d.solve_rhs()
+    ok &= np.all(np.isfinite(d), axis=1)
     if ok.all():
         return d, tau
     scale = 1.0 + np.maximum(np.abs(np.diagonal(A, axis1=1, axis2=2)).max(axis=1),
@@ -362,7 +449,9 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: JointMapSettings
     bad = np.flatnonzero(~ok)
     t_bad = settings.damping_init * scale[bad]
     for _ in range(settings.max_damping_tries):
-        db, okb = _arrow_newton_step(A[bad], C[bad], Dd[bad], Dl[bad], g[bad], t_bad)
+        fac = _ArrowFactor(A[bad], C[bad], Dd[bad], Dl[bad], tau=t_bad, rhs=-g[bad])
+        db = fac.solve_rhs()
+        okb = fac.ok & np.all(np.isfinite(db), axis=1)
         d[bad[okb]] = db[okb]
         tau[bad[okb]] = t_bad[okb]
         bad, t_bad = bad[~okb], t_bad[~okb] * 10.0
@@ -371,6 +460,107 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: JointMapSettings
     d[bad] = -g[bad] / scale[bad, None]
     tau[bad] = np.inf
     return d, tau
+
+
+def _lanczos(apply, v0: np.ndarray, steps: int
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Batched Lanczos with full reorthogonalisation.
+
+    ``apply`` maps (K, n) -> (K, n) (a symmetric operator per k).  Returns the diagonal
+    alpha (K, s) and off-diagonal beta (K, s-1) of the Lanczos tridiagonal matrix and the
+    basis Q (K, s, n), s = min(steps, n); with s = n its eigenvalues are the exact spectrum.
+    An invariant subspace found early is continued with a fresh orthogonal direction
+    (beta = 0), which keeps the tridiagonal matrix's eigenvalues those of the operator.
+    """
+    K, n = v0.shape
+    s = min(steps, n)
+    Q = np.zeros((K, s, n))
+    alpha = np.zeros((K, s))
+    beta = np.zeros((K, max(s - 1, 0)))
+    fresh = np.random.default_rng(n)
+    q = v0 / np.linalg.norm(v0, axis=1, keepdims=True)
+
+    def orth(w, Qj):
+        for _ in range(2):  # "twice is enough"
+            w = w - (((w[:, None, :] @ np.swapaxes(Qj, 1, 2)) @ Qj)[:, 0])
+        return w
+
+    with np.errstate(all="ignore"):
+        for j in range(s):
+            Q[:, j] = q
+            w = apply(q)
+            alpha[:, j] = np.einsum("kn,kn->k", w, q)
+            if j == s - 1:
+                break
+            w = orth(w, Q[:, :j + 1])
+            b = np.linalg.norm(w, axis=1)
+            scale = np.abs(alpha[:, :j + 1]).max(axis=1) + 1e-300
+            dead = ~(b > 1e-10 * scale)
+            if dead.any():
+                r = np.broadcast_to(fresh.standard_normal(n), (int(dead.sum()), n)).copy()
+                w[dead] = orth(r, Q[dead, :j + 1])
+                b[dead] = 0.0
+            beta[:, j] = b
+            q = w / np.linalg.norm(w, axis=1, keepdims=True)
+    return alpha, beta, Q
+
+
+def _tridiag_max(a: np.ndarray, b: np.ndarray, iters: int = 80) -> np.ndarray:
+    """Largest eigenvalue of symmetric tridiagonal matrices (diag a (K, s), off b (K, s-1)).
+
+    Bisection on the Sturm sequence count inside the Gershgorin interval; vectorised over
+    K, no LAPACK (whose threaded batched calls are slow on small matrices).
+    """
+    K, s = a.shape
+    rad = np.zeros((K, s))
+    rad[:, :-1] += np.abs(b)
+    rad[:, 1:] += np.abs(b)
+    lo, hi = (a - rad).min(axis=1), (a + rad).max(axis=1)
+    b2 = b ** 2
+    tiny = np.finfo(float).tiny
+    with np.errstate(all="ignore"):
+        for _ in range(iters):
+            x = 0.5 * (lo + hi)
+            q = a[:, 0] - x
+            count = (q < 0).astype(int)
+            for i in range(1, s):
+                q = np.where(q == 0, tiny, q)
+                q = a[:, i] - x - b2[:, i - 1] / q
+                count += q < 0
+            all_below = count == s  # every eigenvalue < x: lambda_max < x
+            hi = np.where(all_below, x, hi)
+            lo = np.where(all_below, lo, x)
+    return hi
+
+
+def _tridiag_vector(a: np.ndarray, b: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Unit eigenvector (K, s) for the largest eigenvalue ``lam`` (inverse iteration).
+
+    The shift sits just above lam, so T - sigma I is negative definite and the Thomas
+    algorithm needs no pivoting.
+    """
+    K, s = a.shape
+    sigma = lam + 1e-9 * (np.abs(lam) + np.abs(a).max(axis=1) + 1e-300)
+    d = a - sigma[:, None]
+    y = np.ones((K, s))
+    with np.errstate(all="ignore"):
+        for _ in range(3):
+            # forward elimination / back substitution of (T - sigma I) x = y
+            c = np.empty((K, s))
+            r = np.empty((K, s))
+            piv = d[:, 0]
+            c[:, 0], r[:, 0] = 0.0, y[:, 0] / piv
+            for i in range(1, s):
+                piv_prev = piv
+                piv = d[:, i] - b[:, i - 1] ** 2 / piv_prev
+                c[:, i] = b[:, i - 1] / piv_prev
+                r[:, i] = (y[:, i] - b[:, i - 1] * r[:, i - 1]) / piv
+            x = np.empty((K, s))
+            x[:, -1] = r[:, -1]
+            for i in range(s - 2, -1, -1):
+                x[:, i] = r[:, i] - (b[:, i] / d_i_piv(d, b, i)) * x[:, i + 1] if False else r[:, i] - c[:, i + 1] * x[:, i + 1] * 0 - _thomas_coef(b, d, i) * x[:, i + 1]
+            y = x / np.linalg.norm(x, axis=1, keepdims=True)
+    return y
 
 
 # =========================================================================== barrier
@@ -446,7 +636,7 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
     """Batched primal barrier-Newton minimisation of -2 pi from ``theta0``.
 
     Returns theta (K, n), iterations (K,), final mu (K,) and the stop reason (K,) str:
-    converged, max-iter, line-search, non-finite, diverged.
+    converged, max-iter, line-search, non-finite, diverged, at-boundary.
     """
     K, n = theta0.shape
     m = model.n_params
@@ -532,6 +722,10 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
         big = np.abs(theta[idx]).max(axis=1) > settings.divergence_limit
         reason[idx[big]] = "diverged"
         active[idx[big]] = False
+        s_now = barrier.slacks(theta[idx, :m])
+        edge = ~big & (s_now.min(axis=1) < settings.boundary_stop_tol) if s_now.shape[1] else big & False
+        reason[idx[edge]] = "at-boundary"
+        active[idx[edge]] = False
     return theta, iters, mu, reason
 
 
@@ -540,15 +734,40 @@ def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
-def _eigen(H: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eigen-decomposition of finite symmetric matrices; NaN rows where not finite."""
-    K, n, _ = H.shape
-    lam = np.full((K, n), np.nan)
-    vec = np.full((K, n, n), np.nan)
-    fin = np.all(np.isfinite(H), axis=(1, 2))
-    if fin.any():
-        lam[fin], vec[fin] = np.linalg.eigh(H[fin])
-    return lam, vec, fin
+def _spectrum(fac: _ArrowFactor, settings: JointMapSettings
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smallest and largest eigenvalue of H and the unit eigenvector of the smallest.
+
+    ``lanczos``: Lanczos on H gives lambda_max (and lambda_min where H is not PD); where H
+    is PD, Lanczos on H^{-1} (applied through the factorisation) gives lambda_min and its
+    eigenvector accurately even when lambda_min << lambda_max.  ``dense``: LAPACK eigh of
+    the assembled Hessian (for checks; O(n^3) per trajectory).
+    """
+    K, n = fac.K, fac.m + fac.N * fac.p
+    if settings.eigen_method == "dense":
+        blocks = dict(omega=fac.A, cross=fac.C, diag=fac.Dd, lower=fac.Dl)
+        from .models.log_posterior import BlockHessian
+
+        H = BlockHessian(**blocks).to_dense()
+        lam_min, lam_max = np.full(K, np.nan), np.full(K, np.nan)
+        v_min = np.full((K, n), np.nan)
+        fin = np.all(np.isfinite(H), axis=(1, 2))
+        if fin.any():
+            lam, vec = np.linalg.eigh(H[fin])
+            lam_min[fin], lam_max[fin], v_min[fin] = lam[:, 0], lam[:, -1], vec[:, :, 0]
+        return lam_min, lam_max, v_min
+    v0 = np.broadcast_to(np.random.default_rng(n + 1).standard_normal(n), (K, n))
+    vals, vecs = _lanczos(fac.matvec, v0, settings.lanczos_steps)
+    lam_min, lam_max = vals[:, 0], vals[:, -1]
+    v_min = vecs[:, :, 0].copy()
+    pd_ = np.flatnonzero(fac.ok)
+    if pd_.size:
+        sub = _ArrowFactor(fac.A[pd_], fac.C[pd_], fac.Dd[pd_], fac.Dl[pd_])
+        ivals, ivecs = _lanczos(sub.solve, v0[pd_], settings.lanczos_steps)
+        with np.errstate(all="ignore"):
+            lam_min[pd_] = 1.0 / ivals[:, -1]
+        v_min[pd_] = ivecs[:, :, -1]
+    return lam_min, lam_max, v_min
 
 
 def _classify_chunk(model, z, theta, mu, stop, barrier, settings
@@ -558,21 +777,23 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
     m = model.n_params
     with np.errstate(all="ignore"):
         f, g, blk = neg2_log_posterior_blocks(model, theta, z)
-        H = blk.to_dense()
-    lam, vec, fin_h = _eigen(H)
+    fin_h = np.ones(K, dtype=bool)
+    for a in (blk.omega, blk.cross, blk.diag, blk.lower):
+        fin_h &= np.all(np.isfinite(a.reshape(K, -1)), axis=1)
     finite = (np.isfinite(f) & np.all(np.isfinite(g), axis=1) & fin_h
               & np.all(np.isfinite(theta), axis=1))
-    lam_min, lam_max = lam[:, 0], lam[:, -1]
+    fac = _ArrowFactor(blk.omega, blk.cross, blk.diag, blk.lower)
+    fac.ok &= finite
+    lam_min, lam_max, v_min = _spectrum(fac, settings)
     with np.errstate(all="ignore"):
         ratio = lam_min / lam_max
         grad_max = np.abs(g).max(axis=1)
         s = barrier.slacks(theta[:, :m])
         s_min = s.min(axis=1) if s.shape[1] else np.full(K, np.inf)
-        mult = mu / s_min
-    pd_ = lam_min > settings.pd_tol
-    with np.errstate(all="ignore"):
-        lvar = 2.0 * np.einsum("kji,ki->kj", vec ** 2, 1.0 / lam)
-    lvar[~(pd_ & finite)] = np.nan
+        mult = np.where(stop == "converged", mu / s_min, 0.0)
+        lvar = 2.0 * fac.diag_inverse()
+    pd_ = fac.ok & (lam_min > settings.pd_tol)
+    lvar[~pd_] = np.nan
 
     status = np.full(K, "ok", dtype=object)
     reason = np.full(K, "", dtype=object)
@@ -595,14 +816,15 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
     assign(mult > settings.grad_tol, "boundary",
            lambda k: f"barrier holds the optimum (mu/slack = {mult[k]:.3g})")
     assign(~pd_, "not-positive-definite",
-           lambda k: f"smallest Hessian eigenvalue {lam_min[k]:.3g} <= {settings.pd_tol:g}")
+           lambda k: f"Hessian not positive definite (smallest eigenvalue about "
+                     f"{lam_min[k]:.3g})")
     assign(~(grad_max < settings.grad_tol), "gradient",
            lambda k: f"max |gradient| {grad_max[k]:.3g} >= {settings.grad_tol:g} "
                      f"(optimiser stop: {stop[k]})")
 
-    cand = np.flatnonzero(undecided & (ratio < settings.eig_ratio_min))
+    cand = np.flatnonzero(undecided & ~(ratio >= settings.eig_ratio_min))
     if cand.size:
-        moved, dist = _ridge_check(model, z[cand], theta[cand], vec[cand, :, 0], barrier,
+        moved, dist = _ridge_check(model, z[cand], theta[cand], v_min[cand], barrier,
                                    settings)
         for j, k in enumerate(cand):
             if moved[j]:
@@ -699,7 +921,8 @@ def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
     for sl in _chunks(K, n, settings):
         zc = z[sl]
         theta0 = initial_theta(model, zc, omega, x0)
-        theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings, settings.mu0)
+        theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings,
+                                           settings.initial_mu(T))
         res = _classify_chunk(model, zc, theta, mu, stop, barrier, settings)
         out.theta_hat[sl] = theta
         out.iterations[sl] = iters

@@ -1,0 +1,8 @@
+"""Rule figure_joint_vs_marginal: Figure 3."""
+
+from ssmobs import log
+from ssmobs.stages import run_figure_joint_vs_marginal
+
+log.setup(snakemake.log[0])
+p = snakemake.params
+run_figure_joint_vs_marginal(p.scenarios, p.joint, p.marginal, list(snakemake.output))

@@ -1,0 +1,11 @@
+"""Rule paper_tables: Tables II, III and the Section IV summary."""
+
+from pathlib import Path
+
+from ssmobs import log
+from ssmobs.stages import run_paper_tables
+
+log.setup(snakemake.log[0])
+p = snakemake.params
+run_paper_tables(p.scenarios, p.joint, p.marginal, snakemake.input.paper_values,
+                 Path(snakemake.output[0]).parent)

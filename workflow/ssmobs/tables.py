@@ -1,0 +1,166 @@
+"""The paper's tables, ours beside the paper's values (config/paper_values.yaml).
+
+Every table is a pandas DataFrame written as CSV, Markdown and LaTeX.  A value the paper
+states appears in a ``paper`` column next to ``ours``, with ``rel_diff`` =
+RD(ours, paper) = |ours - paper| / max(|ours|, |paper|) (Sec. IV.A); where the paper gives
+no value the cells are empty.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from . import io
+
+
+def load_paper_values(path: str | os.PathLike) -> dict[str, Any]:
+    return yaml.safe_load(Path(path).read_text())
+
+
+def rel_diff(ours: float | None, paper: float | None) -> float:
+    """RD(ours, paper); NaN when either is missing; 0 when both are 0."""
+    if ours is None or paper is None:
+        return math.nan
+    ours, paper = float(ours), float(paper)
+    if not (math.isfinite(ours) and math.isfinite(paper)):
+        return math.nan
+    den = max(abs(ours), abs(paper))
+    return 0.0 if den == 0 else abs(ours - paper) / den
+
+
+def _get(mapping: Mapping | None, *keys: str) -> Any:
+    cur: Any = mapping
+    for k in keys:
+        if not isinstance(cur, Mapping) or k not in cur:
+            return None
+        cur = cur[k]
+    return cur
+
+
+def _num(v: Any) -> float:
+    return float(v) if v is not None else math.nan
+
+
+def write_table(frame: pd.DataFrame, stem: str | os.PathLike, caption: str = "") -> list[str]:
+    """Write ``stem``.csv, .md and .tex atomically; return the paths."""
+    stem = os.fspath(stem)
+    paths = [f"{stem}.csv", f"{stem}.md", f"{stem}.tex"]
+    io.write_text(paths[0], frame.to_csv(index=False, float_format="%.6g", na_rep=""))
+    md = frame.to_markdown(index=False, floatfmt=".4g", missingval="")
+    io.write_text(paths[1], (f"{caption}\n\n" if caption else "") + md + "\n")
+    tex = frame.to_latex(index=False, float_format="%.4g", na_rep="", caption=caption or None,
+                         escape=True)
+    io.write_text(paths[2], tex)
+    return paths
+
+
+# ---------------------------------------------------------------- Table II
+STATS = (("mean", "mean"), ("var", "variance"), ("mse", "MSE"))
+
+
+def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+    """Table II: empirical mean, variance and MSE of (a, x0), joint vs marginal MAP.
+
+    ``rows``: one dict per scenario with keys ``scenario``, ``T``, ``paper_ref``,
+    ``joint`` (joint_map summary) and ``marginal`` (gather_nuts summary, may be None).
+    """
+    out = []
+    for r in sorted(rows, key=lambda r: r["T"]):
+        pv = paper.get(r["paper_ref"], {})
+        for est_key, est_name in (("joint", "joint MAP"), ("marginal", "marginal MAP")):
+            summ = r.get(est_key) or {}
+            for stat, stat_name in STATS:
+                row = {"T": r["T"], "scenario": r["scenario"], "estimator": est_name,
+                       "statistic": stat_name}
+                for comp in ("a", "x0"):
+                    key = f"{stat}_{comp}" if est_key == "joint" else f"{comp}_{stat}"
+                    ours = _num(summ.get(key))
+                    ref = _get(pv, est_key, stat, comp)
+                    row[f"{comp}_ours"] = ours
+                    row[f"{comp}_paper"] = _num(ref)
+                    row[f"{comp}_rel_diff"] = rel_diff(ours, ref)
+                out.append(row)
+    return pd.DataFrame(out)
+
+
+# ---------------------------------------------------------------- Table III
+TABLE_III = (
+    ("cover90_a", "a_cover90", ("coverage", "cover90", "a")),
+    ("cover90_x0", "x0_cover90", ("coverage", "cover90", "x0")),
+    ("mean_cover90_states", "x_cover90_mean", ("coverage", "mean_cover90_states")),
+    ("mean_abs_bias_states", "x_abs_bias_mean", ("coverage", "mean_abs_bias_states")),
+    ("mean_mse_states", "x_mse_mean", ("coverage", "mean_mse_states")),
+)
+
+
+def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+    """Table III: Cover90 of (a, x0), mean over t of Cover90(x_t), |Bias(x_t)|, MSE(x_t)."""
+    out = []
+    for r in sorted(rows, key=lambda r: r["T"]):
+        pv = paper.get(r["paper_ref"], {})
+        summ = r.get("marginal") or {}
+        for label, key, ref_path in TABLE_III:
+            ours = _num(summ.get(key))
+            ref = _get(pv, *ref_path)
+            out.append({"T": r["T"], "scenario": r["scenario"], "quantity": label,
+                        "ours": ours, "paper": _num(ref), "rel_diff": rel_diff(ours, ref),
+                        "K_stan": summ.get("n_stan")})
+    return pd.DataFrame(out)
+
+
+# ---------------------------------------------------------------- Section IV summary
+def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+    """One row per scenario: settings, |K^max| and |K^Stan| (ours and the paper's, also as
+    fractions of K, since our K may be smaller than the paper's) and the estimator
+    properties of every Omega component and x0."""
+    out = []
+    for r in rows:
+        sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
+        pv = paper.get(sc.get("paper_ref", ""), {}) or {}
+        K = sc["K"]
+        row: dict[str, Any] = {
+            "scenario": sc["name"], "description": sc.get("description", ""),
+            "model": sc["model"], "omega": " ".join(f"{k}={v}" for k, v in sc["omega"].items()),
+            "x0": str(sc["x0"]), "prior": str(r.get("prior", sc.get("prior", ""))),
+            "T": sc["T"], "K": K, "method": sc["method"], "stan_init": sc["stan_init"],
+            "K_max": joint.get("K_max", math.nan) if sc["joint_map"] else math.nan,
+            "K_max_paper": _num(pv.get("K_max")), "K_paper": _num(pv.get("K")),
+            "K_stan": marg.get("n_stan", math.nan) if sc["stan"] else math.nan,
+            "K_stan_paper": _num(pv.get("K_stan")),
+        }
+        kp = row["K_paper"]
+        row["K_max_frac"] = row["K_max"] / K if sc["joint_map"] else math.nan
+        row["K_max_frac_paper"] = row["K_max_paper"] / kp if kp else math.nan
+        row["K_stan_frac"] = row["K_stan"] / K if sc["stan"] else math.nan
+        row["K_stan_frac_paper"] = row["K_stan_paper"] / kp if kp else math.nan
+        row["K_stan_frac_rel_diff"] = rel_diff(row["K_stan_frac"], row["K_stan_frac_paper"])
+        comps = joint.get("components") or list(sc["omega"]) + ["x0"]
+        for c in comps:
+            for stat in ("mean", "var", "mse"):
+                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{stat}_{c}"))
+                row[f"marginal_{stat}_{c}"] = _num(marg.get(f"{c}_{stat}"))
+            row[f"cover90_{c}"] = _num(marg.get(f"{c}_cover90"))
+        row["mean_cover90_states"] = _num(marg.get("x_cover90_mean"))
+        row["mean_abs_bias_states"] = _num(marg.get("x_abs_bias_mean"))
+        row["mean_mse_states"] = _num(marg.get("x_mse_mean"))
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+# ---------------------------------------------------------------- K selection
+def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
+    """Chosen K per k_selection entry, method and seed, with (c1, c2) and the paper's K."""
+    frame = pd.DataFrame(list(rows))
+    cols = ["name", "scenario", "method", "seed", "c1", "c2", "K_chosen", "K_max_grid",
+            "K_paper", "K_paper_range"]
+    for c in cols:
+        if c not in frame.columns:
+            frame[c] = np.nan
+    return frame[cols]
