@@ -536,29 +536,27 @@ def _tridiag_max(a: np.ndarray, b: np.ndarray, iters: int = 80) -> np.ndarray:
 def _tridiag_vector(a: np.ndarray, b: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Unit eigenvector (K, s) for the largest eigenvalue ``lam`` (inverse iteration).
 
-    The shift sits just above lam, so T - sigma I is negative definite and the Thomas
-    algorithm needs no pivoting.
+    The shift sits just above lam, so T - sigma I is negative definite and its LDL^T
+    factorisation (no pivoting) is stable.
     """
     K, s = a.shape
     sigma = lam + 1e-9 * (np.abs(lam) + np.abs(a).max(axis=1) + 1e-300)
     d = a - sigma[:, None]
+    piv = np.empty((K, s))
+    ell = np.zeros((K, s))
     y = np.ones((K, s))
     with np.errstate(all="ignore"):
+        piv[:, 0] = d[:, 0]
+        for i in range(1, s):
+            ell[:, i] = b[:, i - 1] / piv[:, i - 1]
+            piv[:, i] = d[:, i] - ell[:, i] * b[:, i - 1]
         for _ in range(3):
-            # forward elimination / back substitution of (T - sigma I) x = y
-            c = np.empty((K, s))
-            r = np.empty((K, s))
-            piv = d[:, 0]
-            c[:, 0], r[:, 0] = 0.0, y[:, 0] / piv
+            u = y.copy()
             for i in range(1, s):
-                piv_prev = piv
-                piv = d[:, i] - b[:, i - 1] ** 2 / piv_prev
-                c[:, i] = b[:, i - 1] / piv_prev
-                r[:, i] = (y[:, i] - b[:, i - 1] * r[:, i - 1]) / piv
-            x = np.empty((K, s))
-            x[:, -1] = r[:, -1]
+                u[:, i] -= ell[:, i] * u[:, i - 1]
+            x = u / piv
             for i in range(s - 2, -1, -1):
-                x[:, i] = r[:, i] - (b[:, i] / d_i_piv(d, b, i)) * x[:, i + 1] if False else r[:, i] - c[:, i + 1] * x[:, i + 1] * 0 - _thomas_coef(b, d, i) * x[:, i + 1]
+                x[:, i] -= ell[:, i + 1] * x[:, i + 1]
             y = x / np.linalg.norm(x, axis=1, keepdims=True)
     return y
 
@@ -741,32 +739,40 @@ def _spectrum(fac: _ArrowFactor, settings: JointMapSettings
     ``lanczos``: Lanczos on H gives lambda_max (and lambda_min where H is not PD); where H
     is PD, Lanczos on H^{-1} (applied through the factorisation) gives lambda_min and its
     eigenvector accurately even when lambda_min << lambda_max.  ``dense``: LAPACK eigh of
-    the assembled Hessian (for checks; O(n^3) per trajectory).
+    the assembled Hessian (O(n^3) per trajectory; for checks).
     """
     K, n = fac.K, fac.m + fac.N * fac.p
+    lam_min, lam_max = np.full(K, np.nan), np.full(K, np.nan)
+    v_min = np.full((K, n), np.nan)
     if settings.eigen_method == "dense":
-        blocks = dict(omega=fac.A, cross=fac.C, diag=fac.Dd, lower=fac.Dl)
         from .models.log_posterior import BlockHessian
 
-        H = BlockHessian(**blocks).to_dense()
-        lam_min, lam_max = np.full(K, np.nan), np.full(K, np.nan)
-        v_min = np.full((K, n), np.nan)
+        H = BlockHessian(omega=fac.A, cross=fac.C, diag=fac.Dd, lower=fac.Dl).to_dense()
         fin = np.all(np.isfinite(H), axis=(1, 2))
         if fin.any():
             lam, vec = np.linalg.eigh(H[fin])
             lam_min[fin], lam_max[fin], v_min[fin] = lam[:, 0], lam[:, -1], vec[:, :, 0]
         return lam_min, lam_max, v_min
     v0 = np.broadcast_to(np.random.default_rng(n + 1).standard_normal(n), (K, n))
-    vals, vecs = _lanczos(fac.matvec, v0, settings.lanczos_steps)
-    lam_min, lam_max = vals[:, 0], vals[:, -1]
-    v_min = vecs[:, :, 0].copy()
+    fin = np.flatnonzero(np.all(np.isfinite(fac.A), axis=(1, 2))
+                         & np.all(np.isfinite(fac.Dd.reshape(K, -1)), axis=1)
+                         & np.all(np.isfinite(fac.C.reshape(K, -1)), axis=1)
+                         & np.all(np.isfinite(fac.Dl.reshape(K, -1)), axis=1))
+    if fin.size:
+        sub = _ArrowFactor(fac.A[fin], fac.C[fin], fac.Dd[fin], fac.Dl[fin])
+        a, b, _ = _lanczos(sub.matvec, v0[fin], settings.lanczos_steps)
+        lam_max[fin] = _tridiag_max(a, b)
+        lam_min[fin] = -_tridiag_max(-a, b)
     pd_ = np.flatnonzero(fac.ok)
     if pd_.size:
         sub = _ArrowFactor(fac.A[pd_], fac.C[pd_], fac.Dd[pd_], fac.Dl[pd_])
-        ivals, ivecs = _lanczos(sub.solve, v0[pd_], settings.lanczos_steps)
+        a, b, Q = _lanczos(sub.solve, v0[pd_], settings.lanczos_steps)
+        top = _tridiag_max(a, b)
         with np.errstate(all="ignore"):
-            lam_min[pd_] = 1.0 / ivals[:, -1]
-        v_min[pd_] = ivecs[:, :, -1]
+            lam_min[pd_] = 1.0 / top
+        y = _tridiag_vector(a, b, top)
+        v = np.einsum("ksn,ks->kn", Q, y)
+        v_min[pd_] = v / np.linalg.norm(v, axis=1, keepdims=True)
     return lam_min, lam_max, v_min
 
 

@@ -1,0 +1,394 @@
+#!/usr/bin/env python
+"""Benchmark of the NUTS stage (issue 4): our overhead vs. the backend's sample call.
+
+Part 1, overhead (one process, like one batch job): model ``same`` (a = 0.9, x0 = 8),
+T = 20 and T = 100, the paper's settings (4 chains, 4 000 warmup + 6 000 kept draws), a
+few trajectories through :func:`ssmobs.nuts_stage.run_trajectories` with the PyStan
+backend.  Measured:
+
+* per job: imports (``ssmobs.nuts_stage`` and its numerics; ``stan``/``httpstan``, which
+  the backend imports at its first use) and the compile call (a cache hit);
+* per trajectory: the wall time of the backend's ``sample`` call, and inside it the
+  parent process's CPU time (httpstan's server: JSON transfer, gzip, parsing, conversion)
+  vs. the chain workers' CPU time (``RUSAGE_CHILDREN``: Stan itself), i.e. the
+  transfer/parsing share;
+* our own overhead: data preparation, convergence diagnostics, KDE modes and quantiles
+  (from the records' timings), and the rest of the loop (writing the record, progress);
+  the ratio (everything but the sample call) / (sample call);
+* the alternatives we did not take, on the last trajectory's draws: ArviZ's
+  ``az.rhat``/``az.ess``/``az.bfmi`` on ``az.from_dict`` vs. our vectorised diagnostics,
+  and ``az.kde`` per component vs. our batched FFT KDE.
+
+Part 2, throughput on 2 cores (``--cores 2``): N trajectories of T = 100 with the paper's
+settings, wall time from process start to finish (imports included), as
+
+* A: two stage processes side by side, each with 1 chain worker (N/2 trajectories each);
+* B: one stage process with 2 chain workers (N trajectories);
+* C: two bare samplers side by side: processes that only call the backend's ``sample``
+  (no diagnostics, KDE or records), 1 worker each (N/2 each) -- the ceiling A can reach.
+
+Usage::
+
+    python benchmarks/bench_nuts_stage.py            # full run (about 10 minutes here)
+    python benchmarks/bench_nuts_stage.py --quick    # fewer trajectories, T = 20 only
+    python benchmarks/bench_nuts_stage.py --no-write # print only
+
+The Markdown is printed and written into the section ``## Stan stage (issue 4)`` of
+BENCHMARKS.md (other sections are left untouched).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+T_PROC_START = time.perf_counter()
+REPO = Path(__file__).resolve().parents[1]
+SECTION = "## Stan stage (issue 4)"
+
+
+# --------------------------------------------------------------------------- helpers
+def _cpu_self() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _cpu_children() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+class TimedBackend:
+    """Wraps a backend; records wall and CPU (parent vs. chain workers) of each sample call."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.name = inner.name
+        self.calls: list[dict] = []
+        self.last_draws = None
+
+    def compile(self, stan_file):
+        return self.inner.compile(stan_file)
+
+    def sample(self, *args, **kwargs):
+        c0, k0, t0 = _cpu_self(), _cpu_children(), time.perf_counter()
+        draws = self.inner.sample(*args, **kwargs)
+        self.calls.append({"wall": time.perf_counter() - t0, "parent_cpu": _cpu_self() - c0,
+                           "children_cpu": _cpu_children() - k0,
+                           "backend": dict(draws.timings)})
+        self.last_draws = draws
+        return draws
+
+
+def _problem(T: int, n: int, seed: int = 1):
+    import numpy as np
+
+    from ssmobs.models import get_model
+
+    model = get_model("same")
+    rng = np.random.default_rng(seed)
+    x, z = model.simulate(np.array([0.9]), np.array([8.0]), rng.standard_normal((n, T, 1)),
+                          rng.standard_normal((n, T, 1)))
+    return model, x, z
+
+
+# --------------------------------------------------------------------------- workers
+def worker_stage(T: int, n: int, workers: int, warmup: int, sampling: int, records: str,
+                 first_k: int = 0) -> dict:
+    """One 'job': imports, compile, n trajectories through run_trajectories."""
+    t0 = time.perf_counter()
+    from ssmobs.convergence import ConvergenceSettings
+    from ssmobs.nuts_stage import run_trajectories
+    from ssmobs.stan_backends import get_backend, stan_file
+    from ssmobs.stan_backends.base import SamplerSettings
+    t_import_ssmobs = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    import stan  # noqa: F401 - what the backend imports at its first use
+    t_import_stan = time.perf_counter() - t0
+
+    model, x, z = _problem(T, first_k + n)
+    backend = TimedBackend(get_backend("pystan"))
+    t0 = time.perf_counter()
+    backend.compile(stan_file("same"))
+    t_compile = time.perf_counter() - t0
+    sampler = SamplerSettings(chains=4, iter_warmup=warmup, iter_sampling=sampling,
+                              workers=workers)
+    t0 = time.perf_counter()
+    recs = run_trajectories(model, backend, stan_file("same"), z, x,
+                            list(range(first_k, first_k + n)), model.prior_bounds({"a": 0.9}),
+                            {"a": 0.9}, 8.0, f"bench_T{T}", 1, sampler, ConvergenceSettings(),
+                            "random", records, set(), None, None)
+    t_loop = time.perf_counter() - t0
+    out = {"T": T, "n": n, "workers": workers, "import_ssmobs": t_import_ssmobs,
+           "import_stan": t_import_stan, "compile": t_compile, "loop": t_loop,
+           "calls": backend.calls, "timings": [r["timings"] for r in recs],
+           "converged": [r["converged"] for r in recs],
+           "wall_since_start": time.perf_counter() - T_PROC_START}
+    if backend.last_draws is not None:
+        out["alternatives"] = _alternatives(backend.last_draws, model, T)
+    return out
+
+
+def worker_bare(T: int, n: int, workers: int, warmup: int, sampling: int,
+                first_k: int = 0) -> dict:
+    """Only the backend's sample call, n times (no diagnostics, KDE or records)."""
+    from ssmobs import seeds
+    from ssmobs.stan_backends import get_backend, stan_file
+    from ssmobs.stan_backends.base import SamplerSettings
+
+    model, x, z = _problem(T, first_k + n)
+    backend = get_backend("pystan")
+    backend.compile(stan_file("same"))
+    bounds = model.prior_bounds({"a": 0.9})
+    sampler = SamplerSettings(chains=4, iter_warmup=warmup, iter_sampling=sampling,
+                              workers=workers)
+    t0 = time.perf_counter()
+    for k in range(first_k, first_k + n):
+        backend.sample(stan_file("same"), model.stan_data(z[k], bounds),
+                       seeds.int_seed(1, "nuts", f"bench_T{T}", k), sampler)
+    return {"loop": time.perf_counter() - t0,
+            "wall_since_start": time.perf_counter() - T_PROC_START}
+
+
+def _alternatives(draws, model, T: int) -> dict:
+    """Time the roads not taken on real draws: ArviZ diagnostics and az.kde per component."""
+    import warnings
+
+    import numpy as np
+
+    from ssmobs.convergence import ConvergenceSettings, check_convergence
+    from ssmobs.marginal_map import marginal_summary, theta_draws
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t0 = time.perf_counter()
+        import arviz as az
+        t_import_arviz = time.perf_counter() - t0
+        res = {"import_arviz": t_import_arviz}
+        t0 = time.perf_counter()
+        ours = check_convergence(draws)
+        res["diag_vectorized"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        ref = check_convergence(draws, ConvergenceSettings(implementation="arviz"))
+        res["diag_arviz"] = time.perf_counter() - t0
+        res["diag_max_rel_diff"] = max(
+            abs(ours[k] / ref[k] - 1) for k in ("max_rhat", "min_ess_bulk", "min_ess_tail"))
+        t0 = time.perf_counter()
+        summ = marginal_summary(draws, model, T)
+        res["kde_ours"] = time.perf_counter() - t0
+        th = theta_draws(draws, model, T)
+        t0 = time.perf_counter()
+        modes = []
+        for row in th:
+            g, d = az.kde(row)
+            modes.append(g[np.argmax(d)])
+        res["kde_arviz"] = time.perf_counter() - t0
+        sd = th.std(axis=1)
+        res["kde_max_mode_diff_sd"] = float(np.max(np.abs(summ["map"] - np.array(modes)) / sd))
+    return res
+
+
+def _spawn(args: list[str]) -> subprocess.Popen:
+    env = dict(os.environ)
+    return subprocess.Popen([sys.executable, __file__, *args], stdout=subprocess.PIPE,
+                            text=True, env=env, cwd=REPO)
+
+
+def _collect(procs: list[subprocess.Popen]) -> list[dict]:
+    outs = []
+    for p in procs:
+        stdout, _ = p.communicate()
+        if p.returncode != 0:
+            raise RuntimeError(f"worker failed with exit code {p.returncode}")
+        outs.append(json.loads(stdout.strip().splitlines()[-1]))
+    return outs
+
+
+# --------------------------------------------------------------------------- report
+def _fmt(v: float, nd: int = 2) -> str:
+    return f"{v:.{nd}f}"
+
+
+def overhead_table(res: dict) -> list[str]:
+    calls, tims = res["calls"], res["timings"]
+    n = len(calls)
+    sample = sum(c["wall"] for c in calls)
+    parent = sum(c["parent_cpu"] for c in calls)
+    child = sum(c["children_cpu"] for c in calls)
+    diag = sum(t["diagnostics"] for t in tims)
+    marg = sum(t["marginal"] for t in tims)
+    prep = sum(t["prepare"] for t in tims)
+    recorded = sum(t["overhead"] for t in tims)
+    loop_rest = res["loop"] - sum(t["sample_call"] for t in tims) - recorded
+    ours = res["loop"] - sum(t["sample_call"] for t in tims)
+    per = (lambda v: v / n)
+    alt = res.get("alternatives", {})
+    lines = [
+        f"| T = {res['T']} | {n} | {_fmt(per(sample))} | "
+        f"{_fmt(per(parent))} / {_fmt(per(child))} ({100 * parent / (parent + child):.0f} %) | "
+        f"{_fmt(per(prep), 4)} | {_fmt(per(diag), 3)} | {_fmt(per(marg), 3)} | "
+        f"{_fmt(per(loop_rest), 3)} | {_fmt(per(ours), 3)} | **{100 * ours / sample:.1f} %** | "
+        f"{_fmt(alt.get('diag_arviz', float('nan')), 3)} / "
+        f"{_fmt(alt.get('diag_vectorized', float('nan')), 3)} | "
+        f"{_fmt(alt.get('kde_arviz', float('nan')), 3)} / {_fmt(alt.get('kde_ours', float('nan')), 3)} |"
+    ]
+    return lines
+
+
+def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) -> str:
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import numpy
+    import stan
+
+    out = [SECTION, "",
+           f"Machine: {platform.node() or 'VM'}, {os.cpu_count()} vCPUs ({cpu}), "
+           f"{platform.python_implementation()} {platform.python_version()}, numpy "
+           f"{numpy.__version__}, pystan {stan.__version__}. Date: {started} (UTC). "
+           f"Load average at start / end: {load[0]:.1f} / {load[1]:.1f} (other work was "
+           f"running on this 2-vCPU machine, so absolute times are noisy; the ratios below "
+           f"come from the same run).", "",
+           f"Command: `python benchmarks/bench_nuts_stage.py"
+           f"{' --quick' if args.quick else ''}`", "",
+           f"### Our overhead vs. the backend's sample call (model same, a = 0.9, x0 = 8, "
+           f"4 chains x ({args.warmup} + {args.sampling}), 1 chain worker, one process)", "",
+           "Seconds per trajectory. *parent / workers CPU*: CPU time of this process during "
+           "the sample call (httpstan: JSON transfer, gzip, parsing, conversion) vs. of the "
+           "chain worker processes (Stan); the percentage is the transfer/parsing share. "
+           "*rest*: writing the record, logging, progress. *ours*: everything in the loop "
+           "but the sample call. Last two columns, on the last trajectory's draws: ArviZ "
+           "(`az.from_dict` + `az.rhat`/`az.ess`/`az.bfmi`) vs. our vectorised "
+           "diagnostics, and `az.kde` per component vs. our batched FFT KDE.", "",
+           "| case | n | sample call | parent / workers CPU | prepare | diagnostics | "
+           "KDE + quantiles | rest | ours | ours / sample | diag ArviZ / ours | "
+           "KDE ArviZ / ours |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in over:
+        out += overhead_table(r)
+    out.append("")
+    r0 = over[0]
+    out.append(f"Once per job (a process): importing `ssmobs.nuts_stage` and the backend module "
+               f"(numpy, scipy) {_fmt(r0['import_ssmobs'])} s, `import stan` "
+               f"{_fmt(r0['import_stan'])} s, compile call (cache hit) {_fmt(r0['compile'])} s; "
+               f"ArviZ is imported only to keep draws ({_fmt(r0['alternatives']['import_arviz'])} s"
+               f" when it is).  Agreement on these draws: diagnostics max relative difference "
+               f"{r0['alternatives']['diag_max_rel_diff']:.1e}; KDE modes differ by at most "
+               f"{r0['alternatives']['kde_max_mode_diff_sd']:.3f} posterior sd (different "
+               f"bandwidths: Silverman vs. ArviZ's 'experimental').")
+    for r in over:
+        conv = sum(r["converged"])
+        out.append(f"T = {r['T']}: {conv}/{len(r['converged'])} converged.")
+    out.append("")
+    if thr:
+        n = thr["n"]
+        out += [f"### Throughput on 2 cores: {n} trajectories, T = {thr['T']}, 4 x "
+                f"({args.warmup} + {args.sampling}), wall time incl. process start and "
+                f"imports", "",
+                "| layout | wall (s) | trajectories / min | relative to B |",
+                "|---|---|---|---|"]
+        base = thr["B"]
+        for key, label in (("A", "A: 2 stage processes x 1 worker"),
+                           ("B", "B: 1 stage process x 2 workers"),
+                           ("C", "C: 2 bare samplers x 1 worker (no stage work)")):
+            w = thr[key]
+            out.append(f"| {label} | {_fmt(w, 1)} | {60 * n / w:.2f} | {base / w:.2f}x |")
+        out += ["", f"A vs. C (our stage's cost under contention): "
+                    f"{100 * (thr['A'] / thr['C'] - 1):.1f} % more wall time."]
+        out.append("")
+    return "\n".join(out) + "\n"
+
+
+def write_section(path: Path, text: str) -> None:
+    old = path.read_text() if path.exists() else "# Benchmarks\n"
+    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(old):
+        new = pattern.sub(lambda _: text, old)
+    else:
+        new = old.rstrip("\n") + "\n\n" + text
+    from ssmobs import io
+
+    io.write_text(path, new)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--output", type=Path, default=REPO / "BENCHMARKS.md")
+    ap.add_argument("--warmup", type=int, default=4000)
+    ap.add_argument("--sampling", type=int, default=6000)
+    ap.add_argument("--n", type=int, default=3, help="trajectories per overhead case")
+    ap.add_argument("--n-throughput", type=int, default=4)
+    ap.add_argument("--throughput-T", type=int, default=100)
+    ap.add_argument("--worker", choices=["stage", "bare"], help=argparse.SUPPRESS)
+    ap.add_argument("--T", type=int, default=20, help=argparse.SUPPRESS)
+    ap.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--first-k", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--records", default="", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+
+    if args.worker == "stage":
+        print(json.dumps(worker_stage(args.T, args.n, args.workers, args.warmup, args.sampling,
+                                      args.records, args.first_k)))
+        return
+    if args.worker == "bare":
+        print(json.dumps(worker_bare(args.T, args.n, args.workers, args.warmup, args.sampling,
+                                     args.first_k)))
+        return
+
+    started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M")
+    load0 = os.getloadavg()[0]
+    common = ["--warmup", str(args.warmup), "--sampling", str(args.sampling)]
+    Ts = [20] if args.quick else [20, 100]
+    n = 2 if args.quick else args.n
+    with tempfile.TemporaryDirectory(prefix="bench-nuts-") as tmp:
+        over = []
+        for T in Ts:
+            print(f"overhead: T = {T}, {n} trajectories ...", file=sys.stderr)
+            over += _collect([_spawn(["--worker", "stage", "--T", str(T), "--n", str(n),
+                                      "--records", f"{tmp}/over{T}", *common])])
+        thr = None
+        if not args.quick:
+            T, N = args.throughput_T, args.n_throughput
+            half = N // 2
+            thr = {"T": T, "n": N}
+            for key, procs in (
+                ("A", lambda: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(half),
+                                       "--first-k", str(i * half), "--records",
+                                       f"{tmp}/A", *common]) for i in range(2)]),
+                ("B", lambda: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(N),
+                                       "--workers", "2", "--records", f"{tmp}/B", *common])]),
+                ("C", lambda: [_spawn(["--worker", "bare", "--T", str(T), "--n", str(half),
+                                       "--first-k", str(i * half), *common])
+                               for i in range(2)]),
+            ):
+                print(f"throughput {key} ...", file=sys.stderr)
+                t0 = time.perf_counter()
+                _collect(procs())
+                thr[key] = time.perf_counter() - t0
+    load1 = os.getloadavg()[0]
+    text = render(over, thr, args, started, (load0, load1))
+    print(text)
+    if not args.no_write:
+        write_section(args.output, text)
+        print(f"wrote {SECTION!r} to {args.output}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
