@@ -1,9 +1,8 @@
-"""Shared pytest fixtures and paths."""
+"""Make the package importable from the source tree even without `pip install -e .`."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "workflow"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))

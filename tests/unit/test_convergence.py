@@ -161,3 +161,18 @@ def test_arviz_implementation_gives_the_same_result():
     for key in ("max_rhat", "min_ess_bulk", "min_ess_tail", "min_ebfmi"):
         assert a[key] == pytest.approx(b[key], rel=1e-10)
     assert a["max_rhat_param"] == b["max_rhat_param"]
+
+
+@pytest.mark.parametrize("chains", [1, 2, 4])
+@pytest.mark.parametrize("n", [4, 5, 6, 7, 10, 13])
+def test_vectorized_equals_arviz_for_tiny_runs(chains, n):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import logging
+
+        logging.getLogger("arviz").setLevel(logging.ERROR)
+        from arviz.stats.diagnostics import _ess_bulk, _ess_tail, _rhat_rank
+    x = np.random.default_rng(n * 10 + chains).standard_normal((4, chains, n)).cumsum(axis=2)
+    ours = rank_diagnostics(x)
+    for key, fn in (("rhat", _rhat_rank), ("ess_bulk", _ess_bulk), ("ess_tail", _ess_tail)):
+        np.testing.assert_allclose(ours[key], [fn(r) for r in x], rtol=1e-10, err_msg=key)

@@ -234,7 +234,7 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         rho = 1.0 - (mean_var[:, None] - acov_mean) / var_plus[:, None]
     rho[:, 0] = 1.0
-    jmax = (n - 3) // 2  # last pair (2j, 2j+1) ArviZ's loop can reach
+    jmax = max((n - 3) // 2, 0)  # last pair (2j, 2j+1) ArviZ's loop can reach (n >= 2)
     n_pairs = jmax + 1
     ps = rho[:, 0:2 * n_pairs:2] + rho[:, 1:2 * n_pairs:2]  # pair sums, j = 0..jmax
     nonpos = ps <= 0

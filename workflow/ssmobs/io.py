@@ -19,7 +19,14 @@ import numpy as np
 
 
 class CorruptFileError(RuntimeError):
-    """An intermediate file exists but cannot be used (truncated, wrong content)."""
+    """An intermediate file exists but cannot be used (truncated, wrong content).
+
+    The message names the file and says how to recover: delete it and rerun, and the
+    workflow recomputes it (and everything that depends on it).
+    """
+
+    def __str__(self) -> str:
+        return f"{super().__str__()} -- delete this file and rerun to recompute it"
 
 
 @contextlib.contextmanager
