@@ -464,3 +464,15 @@ def test_invalid_arguments_low_level():
         lcd_distance(np.ones(3), 10.0)
     with pytest.raises(ValueError, match="q must be a positive integer"):
         b_max_rule(0)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("q, K", [(1, 5), (10, 51), (200, 401)])
+def test_quadrature_nodes_converged(q, K):
+    """The default fixed Gauss–Legendre rule agrees with a 400-node rule (doc 2.4)."""
+    B = b_max_rule(q)
+    half = np.random.default_rng(q).standard_normal((K // 2, q))
+    v1, g1 = symmetric_distance_and_gradient(half, K, B)
+    v2, g2 = symmetric_distance_and_gradient(half, K, B, n_nodes=400)
+    assert abs(v1 - v2) < 1e-11
+    assert np.max(np.abs(g1 - g2)) < 1e-10 * np.max(np.abs(g2))

@@ -121,7 +121,7 @@ class JointMapSettings:
     #: a slack s_i(Omega_hat) below this means the optimum is on the boundary
     boundary_tol: float = 1e-6
     #: the iterations of a trajectory stop early once a slack falls below this
-    boundary_stop_tol: float = 1e-9
+    boundary_stop_tol: float = 1e-6
     #: |Theta|_inf above this means the iterates run off to infinity (boundary at infinity)
     divergence_limit: float = 1e6
     #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
@@ -253,8 +253,22 @@ def _chol_inv(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(all="ignore"):
             inv = 1.0 / np.sqrt(np.where(ok, d, 1.0))
         return inv[..., None, None], ok
-    L = np.zeros_like(S)
     ok = np.all(np.isfinite(S), axis=(-2, -1))
+    if q == 2:
+        a, b, c = S[..., 0, 0], S[..., 1, 0], S[..., 1, 1]
+        with np.errstate(all="ignore"):
+            good = ok & (a > 0)
+            l11 = np.sqrt(np.where(good, a, 1.0))
+            l21 = b / l11
+            r = c - l21 ** 2
+            good &= r > 0
+            l22 = np.sqrt(np.where(good, r, 1.0))
+            Linv = np.zeros_like(S)
+            Linv[..., 0, 0] = 1.0 / l11
+            Linv[..., 1, 1] = 1.0 / l22
+            Linv[..., 1, 0] = -l21 / (l11 * l22)
+        return Linv, good
+    L = np.zeros_like(S)
     for j in range(q):
         s = S[..., j, j] - np.sum(L[..., j, :j] ** 2, axis=-1)
         good = s > 0
@@ -429,25 +443,31 @@ class _ArrowFactor:
         return np.concatenate([np.diagonal(Sinv, axis1=1, axis2=2), dx.reshape(K, -1)], axis=1)
 
 
-def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings"
+def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
+                             tau_hint: np.ndarray | None = None
                              ) -> tuple[np.ndarray, np.ndarray]:
-    """Newton direction d = -H^{-1} g, with a diagonal shift where H is not PD.
+    """Newton direction d = -(H + tau I)^{-1} g with the smallest tried tau making H + tau I PD.
 
-    Returns d (K, n) and the shift used (K,): where no shift up to
-    damping_init * 10^(tries-1) * (1 + max |H_jj|) works, d is the scaled steepest-descent
-    direction and the shift is inf.
+    Tries tau = 0 (or tau_hint / 10, the previous iteration's shift reduced, where that is
+    above the first shift), then damping_init * (1 + max |H_jj|) times 10, 100, ...
+    Returns d (K, n) and tau (K,); where no shift works, d is the scaled steepest-descent
+    direction and tau is inf.
     """
     K = g.shape[0]
-    tau = np.zeros(K)
-    d = _ArrowFactor(A, C, Dd, Dl, rhs=-g)
-    ok, d = d.ok, d.solve_rhs()
-    ok &= np.all(np.isfinite(d), axis=1)
-    if ok.all():
-        return d, tau
     scale = 1.0 + np.maximum(np.abs(np.diagonal(A, axis1=1, axis2=2)).max(axis=1),
                              np.abs(np.diagonal(Dd, axis1=2, axis2=3)).max(axis=(1, 2)))
+    first = settings.damping_init * scale
+    tau = np.zeros(K)
+    if tau_hint is not None:
+        hint = np.where(np.isfinite(tau_hint), tau_hint, 0.0) / 10.0
+        tau = np.where(hint >= first, hint, 0.0)
+    fac = _ArrowFactor(A, C, Dd, Dl, tau=tau if tau.any() else None, rhs=-g)
+    d = fac.solve_rhs()
+    ok = fac.ok & np.all(np.isfinite(d), axis=1)
+    if ok.all():
+        return d, tau
     bad = np.flatnonzero(~ok)
-    t_bad = settings.damping_init * scale[bad]
+    t_bad = np.maximum(first[bad], 10.0 * tau[bad])
     for _ in range(settings.max_damping_tries):
         fac = _ArrowFactor(A[bad], C[bad], Dd[bad], Dl[bad], tau=t_bad, rhs=-g[bad])
         db = fac.solve_rhs()
@@ -643,6 +663,7 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
     iters = np.zeros(K, dtype=np.int64)
     reason = np.full(K, "max-iter", dtype=object)
     active = np.ones(K, dtype=bool)
+    tau_last = np.zeros(K)
     eps = np.finfo(float).eps
 
     def grad_p(g, bg, mu_a):
@@ -683,8 +704,9 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
         th, zz, mu_s, gps = th[sel], zz[sel], mu_a[sel], gp[sel]
         P0 = f[sel] + mu_s * phi[sel]
         A = blk.omega[sel] + mu_s[:, None, None] * bh[sel]
-        d, _ = _damped_newton_direction(A, blk.cross[sel], blk.diag[sel], blk.lower[sel], gps,
-                                        settings)
+        d, tau_used = _damped_newton_direction(A, blk.cross[sel], blk.diag[sel], blk.lower[sel],
+                                               gps, settings, tau_last[idx])
+        tau_last[idx] = tau_used
         slope = np.einsum("kj,kj->k", gps, d)
         uphill = ~(slope < 0)
         if uphill.any():  # safeguard: never search along an ascent direction

@@ -9,7 +9,7 @@ Compiling
     repository's ``stan/`` directory stays free of executables.
 
 Sampling
-    Each call writes the data and inits JSON and CmdStan's CSV files into a temporary
+    Each call writes the data JSON and CmdStan's CSV and console files into a temporary
     directory that is deleted afterwards (also on errors), so nothing accumulates; progress
     bars are off and cmdstanpy's log goes to DEBUG.  Names map from
     :class:`SamplerSettings`: ``workers`` -> ``parallel_chains``, ``iter_warmup``,
@@ -169,13 +169,8 @@ class CmdStanPyBackend:
         try:
             data_file = tmp / "data.json"
             cmdstanpy.write_stan_json(str(data_file), dict(data))
-            init_arg: Any = None
-            if inits is not None:
-                init_arg = []
-                for i, init in enumerate(inits, start=1):
-                    f = tmp / f"init-{i}.json"
-                    cmdstanpy.write_stan_json(str(f), dict(init))
-                    init_arg.append(str(f))
+            # cmdstanpy writes one init file per chain and removes them afterwards
+            init_arg = None if inits is None else [dict(i) for i in inits]
             with quiet_loggers(forward=("cmdstanpy",)):
                 model = cmdstanpy.CmdStanModel(exe_file=marker["exe_file"])
                 t0 = time.perf_counter()

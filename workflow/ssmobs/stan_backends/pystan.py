@@ -44,6 +44,7 @@ import io
 import logging
 import multiprocessing as mp
 import os
+import re
 import shutil
 import tempfile
 import threading
@@ -129,7 +130,10 @@ class _PrivateCache:
         base = Path(tmp_root or tempfile.gettempdir())
         for cand in base.glob(cls.PREFIX + "*"):
             lock = cand / ".owner.lock"
-            if not lock.is_file():
+            try:  # skip young ones: their owner may not hold its lock yet
+                if not lock.is_file() or time.time() - cand.stat().st_mtime < 60:
+                    continue
+            except OSError:
                 continue
             try:
                 with open(lock, "a") as fh:
@@ -257,13 +261,14 @@ def fit_to_draws(fit: Any, n_chains: int, n_draws: int) -> Draws:
     return Draws(params=params, sample_stats=stats)
 
 
-def _failure_reason(err: BaseException, captured: str) -> str:
-    """Message of a failed run: the exception plus Stan's own lines (rejections etc.)."""
-    lines = [ln.strip() for ln in captured.splitlines()
-             if ln.strip() and not ln.strip().startswith(("Sampling:", "Building:"))]
-    tail = " | ".join(dict.fromkeys(lines[-6:]))
-    reason = str(err).strip() or type(err).__name__
-    return f"{reason} [{tail}]" if tail else reason
+def _failure_reason(err: BaseException) -> str:
+    """Stan's own message from a PyStan/httpstan error, without httpstan's wrapping."""
+    text = str(err).strip() or type(err).__name__
+    text = re.sub(r",\s*traceback:\s*`\[.*\]`\s*$", "", text, flags=re.S)
+    inner = re.search(r"`\w*(?:Error|Exception)\((['\"])(.*)\1\)`", text, flags=re.S)
+    if inner:
+        text = inner.group(2)
+    return " ".join(text.replace("\\n", " ").split())
 
 
 class PyStanBackend:
@@ -343,13 +348,17 @@ class PyStanBackend:
                 resp = await client.post("/models", json={"program_code": code})
                 return resp.status, resp.json()
 
-        with _captured(f"httpstan build {path.name}"), \
+        # stderr stays the real one: httpstan then sends the compiler's messages (which
+        # g++ writes to file descriptor 2) to a file instead, and returns them
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), \
                 quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
             status, body = asyncio.run(go())
+        log_captured(f"httpstan build {path.name}", out.getvalue())
         if status != 201:
             raise RuntimeError(f"compiling {path} failed: {body.get('message', body)}")
-        if body.get("stanc_warnings"):
-            LOG.debug("stanc warnings for %s:\n%s", path.name, body["stanc_warnings"])
+        log_captured(f"stanc warnings for {path.name}", body.get("stanc_warnings") or "")
+        log_captured(f"compiler for {path.name}", body.get("compiler_output") or "")
 
     # ------------------------------------------------------------------ sessions
     @contextlib.contextmanager
@@ -409,23 +418,23 @@ class PyStanBackend:
             kwargs["init"] = [dict(i) for i in inits]
         label = Path(marker["stan_file"]).name
         with self._session(marker):
-            with _captured(f"pystan build {label}") as buf:
+            with _captured(f"pystan build {label}"):
                 t0 = time.perf_counter()
                 try:
                     posterior = stan.build(code, data=dict(data), random_seed=int(seed))
                 except (RuntimeError, ValueError) as err:
                     raise ValueError(f"{label}: data rejected: "
-                                     f"{_failure_reason(err, buf.getvalue())}") from err
+                                     f"{_failure_reason(err)}") from err
                 if posterior is None:  # pystan swallows KeyboardInterrupt
                     raise KeyboardInterrupt
                 t_build = time.perf_counter() - t0
-            with _chain_pool(settings.workers), _captured(f"pystan sample {label}") as buf:
+            with _chain_pool(settings.workers), _captured(f"pystan sample {label}"):
                 t0 = time.perf_counter()
                 try:
                     fit = posterior.sample(**kwargs)
                 except RuntimeError as err:
                     raise SamplingError(f"{label} (seed {seed}): "
-                                        f"{_failure_reason(err, buf.getvalue())}") from err
+                                        f"{_failure_reason(err)}") from err
                 if fit is None:
                     raise KeyboardInterrupt
                 t_sample = time.perf_counter() - t0

@@ -1,0 +1,111 @@
+"""Choice of the number K of design trajectories by relative differences (Sec. IV.A).
+
+For K_i = i * step the scenario summary of the joint MAP estimator gives
+
+    V_{K_i} = (|K^max| / K_i,  E^ of every Omega and x_0 component,
+               Var^ of every component,  mean LVar of every component),
+
+and K = K_i for the smallest i with RD(V_{K_i}, V_{K_j}) < (c_1, ..., c_2, ...) component-wise
+for every computed j > i, where
+
+    RD(x, y) = |x - y| / max(|x|, |y|),   RD(0, 0) = 0,
+
+c_1 applies to the ratio and the means and c_2 to the variances and local variances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .models.base import StateSpaceModel
+
+
+def relative_difference(x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
+    """Component-wise RD(x, y) = |x - y| / max(|x|, |y|) with RD(0, 0) = 0.
+
+    NaN where either argument is NaN (e.g. a mean over an empty K^max), so such a
+    component never counts as converged.  RD lies in [0, 2]; it is 1 when exactly one
+    argument is 0 and 2 for opposite signs of equal size.
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    num = np.abs(x - y)
+    den = np.maximum(np.abs(x), np.abs(y))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rd = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return np.where(np.isnan(x) | np.isnan(y), np.nan, rd)
+
+
+@dataclass(frozen=True)
+class VVector:
+    """V_{K_i} with a label and a threshold class ("c1" or "c2") per component."""
+
+    values: np.ndarray
+    labels: tuple[str, ...]
+    kinds: tuple[str, ...]
+
+    def thresholds(self, c1: float, c2: float) -> np.ndarray:
+        """Per-component thresholds: c1 for the ratio and means, c2 for (local) variances."""
+        return np.array([c1 if k == "c1" else c2 for k in self.kinds], dtype=float)
+
+
+def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
+    """V_{K_i} from :func:`ssmobs.joint_map.joint_map_summary` (Sec. IV.A).
+
+    Order (the paper's, generalised to any number of components): ``ratio``, ``mean_c`` for
+    every component c of Omega and x_0, then ``var_c``, then ``mean_lvar_c``.  Kinds: c1
+    for the ratio and the means, c2 for the variances and the mean local variances.
+    """
+    comps = model.theta_names(0)
+    labels = (["ratio"] + [f"mean_{c}" for c in comps] + [f"var_{c}" for c in comps]
+              + [f"mean_lvar_{c}" for c in comps])
+    kinds = ["c1"] * (1 + len(comps)) + ["c2"] * (2 * len(comps))
+    missing = [lab for lab in labels if lab not in summary]
+    if missing:
+        raise ValueError(f"joint-MAP summary lacks {missing} for model '{model.slug}'")
+    values = np.array([float(summary[lab]) for lab in labels], dtype=float)
+    return VVector(values=values, labels=tuple(labels), kinds=tuple(kinds))
+
+
+def rd_matrix(vectors: np.ndarray) -> np.ndarray:
+    """(I, I, q) array of RD(V_{K_i}, V_{K_j}) for all pairs (for reports)."""
+    V = np.asarray(vectors, dtype=float)
+    return relative_difference(V[:, None, :], V[None, :, :])
+
+
+def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[float]],
+             thresholds: np.ndarray | Sequence[float]) -> int | None:
+    """Index i of the chosen K = K_i by the RD rule of Sec. IV.A, or None.
+
+    Parameters
+    ----------
+    k_values : (I,) strictly increasing K_i (e.g. i * step).
+    vectors : (I, q) V_{K_i}, one row per K_i.
+    thresholds : (q,) per-component thresholds (c1 / c2, see :meth:`VVector.thresholds`).
+
+    Returns
+    -------
+    The smallest index i < I - 1 with RD(V_{K_i}, V_{K_j}) < thresholds component-wise for
+    every j > i; None if there is none.  The last K_i is never chosen: with no computed
+    K_j beyond it the condition would hold vacuously, which says nothing about
+    convergence, so a sequence that only "converges" at its end returns None (compute
+    more K_i).  A NaN component (e.g. |K^max| = 0 or 1) never satisfies the condition.
+    """
+    k = np.asarray(k_values)
+    V = np.asarray(vectors, dtype=float)
+    thr = np.asarray(thresholds, dtype=float)
+    if k.ndim != 1 or V.ndim != 2 or V.shape[0] != k.size:
+        raise ValueError(f"need one V row per K_i: got {k.size} K values and vectors of shape "
+                         f"{V.shape}")
+    if thr.shape != (V.shape[1],):
+        raise ValueError(f"thresholds must have shape ({V.shape[1]},), got {thr.shape}")
+    if k.size > 1 and not np.all(np.diff(k) > 0):
+        raise ValueError(f"K values must be strictly increasing, got {k.tolist()}")
+    for i in range(k.size - 1):
+        rd = relative_difference(V[i][None, :], V[i + 1:])
+        if np.all(rd < thr):  # NaN compares False
+            return i
+    return None
