@@ -11,7 +11,7 @@ rule design_disturbances:
         "results/shared/benchmarks/design_disturbances/q{q}_K{K}_{method}_seed{seed}.tsv"
     params:
         design=config["design"],
-    threads: 2
+    threads: 1
     resources:
         mem_mb=4000,
         runtime=30,
