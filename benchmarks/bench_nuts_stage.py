@@ -104,7 +104,7 @@ def _problem(T: int, n: int, seed: int = 1):
 
 # --------------------------------------------------------------------------- workers
 def worker_stage(T: int, n: int, workers: int, warmup: int, sampling: int, records: str,
-                 first_k: int = 0) -> dict:
+                 first_k: int = 0, alternatives: bool = False) -> dict:
     """One 'job': imports, compile, n trajectories through run_trajectories."""
     t0 = time.perf_counter()
     from ssmobs.convergence import ConvergenceSettings
@@ -134,7 +134,7 @@ def worker_stage(T: int, n: int, workers: int, warmup: int, sampling: int, recor
            "calls": backend.calls, "timings": [r["timings"] for r in recs],
            "converged": [r["converged"] for r in recs],
            "wall_since_start": time.perf_counter() - T_PROC_START}
-    if backend.last_draws is not None:
+    if alternatives and backend.last_draws is not None:
         out["alternatives"] = _alternatives(backend.last_draws, model, T)
     return out
 
@@ -300,17 +300,19 @@ def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) 
         out += [f"### Throughput on 2 cores: {n} trajectories, T = {thr['T']}, 4 x "
                 f"({args.warmup} + {args.sampling}), wall time incl. process start and "
                 f"imports", "",
-                "| layout | wall (s) | trajectories / min | relative to B |",
+                "| layout | wall per round (s) | trajectories / min | throughput vs. B |",
                 "|---|---|---|---|"]
-        base = thr["B"]
+        med = {k: sorted(thr[k])[(len(thr[k]) - 1) // 2] for k in ("A", "B", "C")}
         for key, label in (("A", "A: 2 stage processes x 1 worker"),
                            ("B", "B: 1 stage process x 2 workers"),
                            ("C", "C: 2 bare samplers x 1 worker (no stage work)")):
-            w = thr[key]
-            out.append(f"| {label} | {_fmt(w, 1)} | {60 * n / w:.2f} | {base / w:.2f}x |")
-        out += ["", f"A vs. C (our stage's cost under contention): "
-                    f"{100 * (thr['A'] / thr['C'] - 1):.1f} % more wall time."]
-        out.append("")
+            runs = ", ".join(_fmt(w, 1) for w in thr[key])
+            out.append(f"| {label} | {runs} | {60 * n / med[key]:.2f} | "
+                       f"{med['B'] / med[key]:.2f}x |")
+        out += ["", f"Wall times of {len(thr['A'])} rounds (layouts run in turn); trajectories "
+                    f"per minute and the ratio use the lower median. A vs. C (the stage's "
+                    f"cost under contention, incl. one more import of ssmobs per process): "
+                    f"{100 * (med['A'] / med['C'] - 1):+.1f} % wall time.", ""]
     return "\n".join(out) + "\n"
 
 
@@ -341,11 +343,14 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--first-k", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--records", default="", help=argparse.SUPPRESS)
+    ap.add_argument("--alternatives", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--repeats", type=int, default=2,
+                    help="rounds of the throughput layouts (run in turn A, B, C, A, B, C, ...)")
     args = ap.parse_args()
 
     if args.worker == "stage":
         print(json.dumps(worker_stage(args.T, args.n, args.workers, args.warmup, args.sampling,
-                                      args.records, args.first_k)))
+                                      args.records, args.first_k, args.alternatives)))
         return
     if args.worker == "bare":
         print(json.dumps(worker_bare(args.T, args.n, args.workers, args.warmup, args.sampling,
@@ -362,26 +367,30 @@ def main() -> None:
         for T in Ts:
             print(f"overhead: T = {T}, {n} trajectories ...", file=sys.stderr)
             over += _collect([_spawn(["--worker", "stage", "--T", str(T), "--n", str(n),
-                                      "--records", f"{tmp}/over{T}", *common])])
+                                      "--records", f"{tmp}/over{T}", "--alternatives",
+                                      *common])])
         thr = None
         if not args.quick:
             T, N = args.throughput_T, args.n_throughput
             half = N // 2
-            thr = {"T": T, "n": N}
-            for key, procs in (
-                ("A", lambda: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(half),
-                                       "--first-k", str(i * half), "--records",
-                                       f"{tmp}/A", *common]) for i in range(2)]),
-                ("B", lambda: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(N),
-                                       "--workers", "2", "--records", f"{tmp}/B", *common])]),
-                ("C", lambda: [_spawn(["--worker", "bare", "--T", str(T), "--n", str(half),
-                                       "--first-k", str(i * half), *common])
-                               for i in range(2)]),
-            ):
-                print(f"throughput {key} ...", file=sys.stderr)
-                t0 = time.perf_counter()
-                _collect(procs())
-                thr[key] = time.perf_counter() - t0
+            thr = {"T": T, "n": N, "A": [], "B": [], "C": []}
+            layouts = {
+                "A": lambda r: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(half),
+                                        "--first-k", str(i * half), "--records",
+                                        f"{tmp}/A{r}", *common]) for i in range(2)],
+                "B": lambda r: [_spawn(["--worker", "stage", "--T", str(T), "--n", str(N),
+                                        "--workers", "2", "--records", f"{tmp}/B{r}",
+                                        *common])],
+                "C": lambda r: [_spawn(["--worker", "bare", "--T", str(T), "--n", str(half),
+                                        "--first-k", str(i * half), *common])
+                                for i in range(2)],
+            }
+            for r in range(args.repeats):
+                for key, procs in layouts.items():
+                    print(f"throughput {key}, round {r + 1} ...", file=sys.stderr)
+                    t0 = time.perf_counter()
+                    _collect(procs(r))
+                    thr[key].append(time.perf_counter() - t0)
     load1 = os.getloadavg()[0]
     text = render(over, thr, args, started, (load0, load1))
     print(text)

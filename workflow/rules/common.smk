@@ -86,8 +86,14 @@ def all_targets():
                 if sc["joint_map"]]
     targets += [f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items()
                 if sc["stan"]]
-    for ks in KSEL.values():
-        targets += k_selection_points(ks)
+    for name in KSEL:
+        targets += expand(f"paper_figures/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
+    if KSEL:
+        targets += expand("paper_figures/table_k_selection.{ext}", ext=["csv", "md", "tex"])
+    profile = stages.profile_scenario(config["scenarios"])
+    if profile is not None:
+        targets += expand(f"paper_figures/fig4_profile_posterior_{profile['name']}.{{ext}}",
+                          ext=["pdf", "png"])
     targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]
     targets += expand("paper_figures/{stem}.{ext}", ext=["csv", "md", "tex"],
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])

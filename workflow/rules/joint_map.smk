@@ -45,3 +45,68 @@ rule k_selection_point:
         "../../envs/ssmobs.yaml"
     script:
         "../scripts/k_selection_point.py"
+
+
+rule select_k:
+    """The smallest K_i whose V_{K_i} agrees with all larger K_j within (c1, c2), per method."""
+    input:
+        points=lambda wc: k_selection_points(KSEL[wc.ksel]),
+        paper_values="config/paper_values.yaml",
+    output:
+        json="results/k_selection/{ksel}/selection.json",
+        csv="results/k_selection/{ksel}/v_vectors.csv",
+        figure=report(
+            multiext("paper_figures/fig_k_convergence_{ksel}", ".pdf", ".png"),
+            caption="../report/k_convergence.rst",
+            category="Figures",
+        ),
+    log:
+        "results/k_selection/{ksel}/logs/select_k.log",
+    params:
+        ksel=lambda wc: KSEL[wc.ksel],
+        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/select_k.py"
+
+
+rule table_k_selection:
+    """Chosen K for every k_selection entry, method and seed, beside the paper's K."""
+    input:
+        [f"results/k_selection/{name}/selection.json" for name in KSEL],
+    output:
+        report(
+            multiext("paper_figures/table_k_selection", ".csv", ".md", ".tex"),
+            caption="../report/k_selection.rst",
+            category="Tables",
+        ),
+    log:
+        "results/shared/logs/table_k_selection.log",
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/table_k_selection.py"
+
+
+rule figure_profile_posterior:
+    """Figure 4: profile posterior of (a, x0) for trajectory k = 1 of ranWalk, T = 4."""
+    input:
+        "results/{scenario}/design_trajectories/trajectories.nc",
+    output:
+        report(
+            multiext("paper_figures/fig4_profile_posterior_{scenario}", ".pdf", ".png"),
+            caption="../report/fig4.rst",
+            category="Figures",
+        ),
+    log:
+        "results/{scenario}/logs/figure_profile_posterior.log",
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
+        grid=config["figure4"],
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/figure_profile_posterior.py"

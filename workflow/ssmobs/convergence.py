@@ -211,8 +211,8 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     p_rows, m_chains, n = a.shape
     a = np.asarray(a, dtype=float)
     out = np.full(p_rows, np.nan)
-    nan_rows = np.isnan(a).reshape(p_rows, -1).any(axis=1)
     flat = a.reshape(p_rows, -1)
+    nan_rows = np.isnan(flat.sum(axis=1))  # cheap: a NaN (or +-inf mix) poisons the sum
     const = (flat.max(axis=1) - flat.min(axis=1)) < np.finfo(float).resolution
     out[const & ~nan_rows] = m_chains * n
     todo = np.flatnonzero(~const & ~nan_rows)
@@ -225,7 +225,9 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     nfft = next_fast_len(2 * n)
     chain_mean = x.mean(axis=2)
     f = np.fft.rfft(x - chain_mean[:, :, None], n=nfft, axis=2)
-    power = (f.real ** 2 + f.imag ** 2).mean(axis=1)  # chain average before the inverse FFT
+    # |F|^2 averaged over chains before the one inverse FFT
+    power = (np.einsum("rck,rck->rk", f.real, f.real)
+             + np.einsum("rck,rck->rk", f.imag, f.imag)) / m_chains
     acov_mean = np.fft.irfft(power, n=nfft, axis=1)[:, :n] / n  # mean over chains of acov
     mean_var = acov_mean[:, 0] * n / (n - 1.0)
     var_plus = mean_var * (n - 1.0) / n
@@ -262,6 +264,10 @@ def _quantile_type7(m: np.ndarray, probs: list[float]) -> np.ndarray:
     return np.quantile(m, probs, axis=1)
 
 
+#: parameters processed together (bounds the temporaries to a few MB: faster than all at once)
+CHUNK_ROWS = 16
+
+
 def rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     """Rank R-hat, bulk-ESS and tail-ESS of every row of ``x`` (P, chain, draw), vectorised.
 
@@ -269,6 +275,13 @@ def rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     with a NaN give NaN; R-hat needs >= 2 chains and >= 4 draws (else NaN).
     """
     x = np.asarray(x, dtype=float)
+    if x.shape[0] > CHUNK_ROWS:
+        parts = [_rank_diagnostics(x[i:i + CHUNK_ROWS]) for i in range(0, x.shape[0], CHUNK_ROWS)]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return _rank_diagnostics(x)
+
+
+def _rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     p_rows, c, s = x.shape
     rhat = np.full(p_rows, np.nan)
     ess_bulk = np.full(p_rows, np.nan)

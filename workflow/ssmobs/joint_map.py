@@ -8,10 +8,18 @@ Theta = (Omega, x_0, x_1..x_T) with a primal log-barrier method ([26, Sec. 19.6]
 where the slacks s_i > 0 are the finite prior bounds (Omega_j - lower_j, upper_j - Omega_j)
 and the model constraints c(Omega) > 0 (e.g. 1 - a^2 - b^2 for (Sep, d=1, p=2)).  For each
 mu the barrier problem is solved by Newton's method with the analytic Hessian and an
-Armijo backtracking line search whose first trial step is cut to a fraction of the
-distance to the box boundary and which rejects any trial point with a non-positive slack,
-so every iterate stays strictly feasible.  mu is divided by ``mu_factor`` each time the
-barrier gradient falls below ``max(inner_tol_factor * mu, newton_tol)`` until ``mu_min``.
+Armijo backtracking line search whose first trial step is cut to a fraction
+(``fraction_to_boundary``) of the distance to the prior box and which rejects any trial
+point with a non-positive slack, so every iterate stays strictly feasible.  mu starts at
+``max(mu0, mu0_per_step * T)`` and is multiplied by ``mu_factor`` each time the barrier
+gradient falls below ``max(inner_tol_factor * mu, newton_tol)``, down to ``mu_min``; the
+iteration stops at ``max |grad P| <= newton_tol`` with mu = mu_min.
+
+Why mu_0 grows with T: in several models -2 pi is unbounded below at the edge of the
+support (in (Sep, d=p=1) it contains T log(1 - b^2), and x_t = z_t / b makes the
+observation residuals vanish as b -> 1).  With mu_0 above about T the first barrier
+problem is bounded, and the barrier path then tracks the interior local maximum when
+there is one, instead of the first Newton steps falling into the singular edge.
 
 All trajectories are optimised together: every Newton iteration evaluates the per-step
 symbolic derivatives for the whole batch and solves the K Newton systems at once.  The
@@ -19,33 +27,44 @@ Hessian is an "arrow" matrix (block-tridiagonal in the states plus m dense rows/
 for Omega), so each system is solved in O(T (p^3 + p^2 m + m^2) + m^3) by a block
 Cholesky of the state part and an m x m Schur complement, vectorised over k with a loop
 over t.  Where the Hessian is not positive definite a multiple of the identity is added
-(modified Newton, [26, Sec. 3.4]).
+(modified Newton, [26, Sec. 3.4]).  A trajectory stops early once it has run off to
+infinity (``divergence_limit``) or onto the boundary (slack < ``boundary_stop_tol``).
 
 Numerical checks at the result Theta_hat (Sec. III.B), giving one status per k, checked in
-this order:
+this order (the first that applies wins):
 
 ``failed``
     value, gradient, Hessian or Theta_hat not finite (reason in ``reason``).
 ``boundary``
     the optimum lies on the boundary of the prior's support: a slack below
-    ``boundary_tol``, or a barrier multiplier mu / s_i above ``grad_tol`` (the barrier is
-    what holds the point), or the iterates ran off to infinity (``|Theta|_inf`` above
-    ``divergence_limit``; the supremum is approached at the edge of an unbounded support).
+    ``boundary_tol``, or (for a converged run) a barrier multiplier mu / s_i above
+    ``grad_tol`` (the barrier is what holds the point), or (for a run that did not
+    converge) a slack below ``boundary_near_tol`` with -2 pi still decreasing towards that
+    constraint faster than ``grad_tol``, or the iterates ran off to infinity
+    (``|Theta|_inf`` above ``divergence_limit``; the supremum is approached at the edge of
+    an unbounded support, as for a ridge of variable height).
 ``not-positive-definite``
-    smallest eigenvalue of the Hessian of -2 pi not above ``pd_tol``.
+    the Hessian of -2 pi is not positive definite: its block Cholesky factorisation fails
+    or its smallest eigenvalue is not above ``pd_tol``.
 ``gradient``
-    largest absolute gradient component of -2 pi not below ``grad_tol`` (1e-5 in the paper).
+    largest absolute gradient component of -2 pi not below ``grad_tol`` (1e-5 in the paper);
+    typical for runs stopped by ``max_newton_iter`` while climbing a ridge.
 ``ridge``
     eigenvalue ratio lambda_min / lambda_max below ``eig_ratio_min`` (r_0 = 1e-5) and a new
     optimisation started at Theta_hat + h v_min (v_min the unit eigenvector of the smallest
-    eigenvalue, h = ``ridge_shift``) ends more than ``ridge_move_tol`` away (sup norm) or
-    fails.  If it returns to Theta_hat the trajectory is ``ok``.
+    eigenvalue, h = ``ridge_shift``, halved until the start is inside the support) ends more
+    than ``ridge_move_tol`` away (sup norm), or ends non-finite or diverged.  If it returns
+    to Theta_hat the trajectory is ``ok`` (the reason column records the check).
 ``ok``
     all checks passed: k belongs to K^max.
 
-Local variances (Sec. II.B): LVar_j = -H_pi^{-1}(Theta_hat)_jj = 2 (H_{-2 pi}^{-1})_jj,
-computed from the eigen-decomposition wherever the Hessian is positive definite (NaN
-otherwise).
+Eigenvalues: lambda_max by Lanczos on H, lambda_min and v_min by Lanczos on H^{-1} (applied
+through the factorisation), ``lanczos_steps`` steps with full reorthogonalisation;
+``eigen_method="dense"`` uses LAPACK instead (O(n^3), for checks).
+
+Local variances (Sec. II.B): LVar_j = -H_pi^{-1}(Theta_hat)_jj = 2 (H_{-2 pi}^{-1})_jj for
+every component, by a selected inversion of the factorised arrow matrix, wherever the
+Hessian is positive definite (NaN otherwise).
 
 Start (Sec. III.B): (Omega_true, x0_true, model.initial_states(Omega_true, z~(k))), i.e. the
 observations themselves when d == p as in the paper (see the models for d != p).
@@ -101,7 +120,7 @@ class JointMapSettings:
     mu0: float = 1.0
     mu0_per_step: float = 2.0
     #: mu <- mu * mu_factor after each barrier stage
-    mu_factor: float = 0.1
+    mu_factor: float = 0.01
     #: final barrier parameter ("near zero")
     mu_min: float = 1e-10
     #: a step goes at most this fraction of the way to a prior bound
@@ -122,19 +141,22 @@ class JointMapSettings:
     boundary_tol: float = 1e-6
     #: the iterations of a trajectory stop early once a slack falls below this
     boundary_stop_tol: float = 1e-6
+    #: a run that did not converge and ends with a slack below this while -2 pi still
+    #: decreases towards that constraint (gradient check would fail) is ``boundary``
+    boundary_near_tol: float = 1e-4
     #: |Theta|_inf above this means the iterates run off to infinity (boundary at infinity)
     divergence_limit: float = 1e6
     #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
     eigen_method: str = "lanczos"
     #: Lanczos steps (exact spectrum when >= |Theta|)
-    lanczos_steps: int = 40
+    lanczos_steps: int = 24
     #: trajectories per vectorised batch (0: chosen from |Theta| to bound memory)
     chunk_size: int = 0
 
     def __post_init__(self) -> None:
         positive = ("grad_tol", "eig_ratio_min", "newton_tol", "inner_tol_factor", "mu0",
                     "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol",
-                    "boundary_tol", "boundary_stop_tol", "divergence_limit")
+                    "boundary_tol", "boundary_stop_tol", "boundary_near_tol", "divergence_limit")
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -525,7 +547,7 @@ def _lanczos(apply, v0: np.ndarray, steps: int
     return alpha, beta, Q
 
 
-def _tridiag_max(a: np.ndarray, b: np.ndarray, iters: int = 80) -> np.ndarray:
+def _tridiag_max(a: np.ndarray, b: np.ndarray, iters: int = 60) -> np.ndarray:
     """Largest eigenvalue of symmetric tridiagonal matrices (diag a (K, s), off b (K, s-1)).
 
     Bisection on the Sturm sequence count inside the Gershgorin interval; vectorised over
@@ -600,6 +622,15 @@ class _Barrier:
                  self.upper[self.up_idx] - omega[:, self.up_idx]]
         if self.has_cons:
             parts.append(constraint_derivatives(self.model, omega)[0])
+        return np.concatenate(parts, axis=1)
+
+    def slack_gradients(self, omega: np.ndarray) -> np.ndarray:
+        """(K, n_s, m) gradients of the slacks, in the order of :meth:`slacks`."""
+        K, m = omega.shape
+        parts = [np.broadcast_to(np.eye(m)[self.lo_idx], (K, self.lo_idx.size, m)),
+                 np.broadcast_to(-np.eye(m)[self.up_idx], (K, self.up_idx.size, m))]
+        if self.has_cons:
+            parts.append(constraint_derivatives(self.model, omega)[1])
         return np.concatenate(parts, axis=1)
 
     def value(self, omega: np.ndarray) -> np.ndarray:
@@ -784,7 +815,9 @@ def _spectrum(fac: _ArrowFactor, settings: JointMapSettings
         sub = _ArrowFactor(fac.A[fin], fac.C[fin], fac.Dd[fin], fac.Dl[fin])
         a, b, _ = _lanczos(sub.matvec, v0[fin], settings.lanczos_steps)
         lam_max[fin] = _tridiag_max(a, b)
-        lam_min[fin] = -_tridiag_max(-a, b)
+        nonpd = ~fac.ok[fin]
+        if nonpd.any():  # H^{-1} is not available: the smallest Ritz value of H
+            lam_min[fin[nonpd]] = -_tridiag_max(-a[nonpd], b[nonpd])
     pd_ = np.flatnonzero(fac.ok)
     if pd_.size:
         sub = _ArrowFactor(fac.A[pd_], fac.C[pd_], fac.Dd[pd_], fac.Dl[pd_])
@@ -819,6 +852,12 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
         s = barrier.slacks(theta[:, :m])
         s_min = s.min(axis=1) if s.shape[1] else np.full(K, np.inf)
         mult = np.where(stop == "converged", mu / s_min, 0.0)
+        # rate of decrease of -2 pi when moving towards each constraint (unit normal)
+        ds = barrier.slack_gradients(theta[:, :m])
+        pull = (np.einsum("ki,ksi->ks", g[:, :m], ds)
+                / np.maximum(np.linalg.norm(ds, axis=2), 1e-300))
+        pushed = np.any((s < settings.boundary_near_tol) & (pull > settings.grad_tol), axis=1)
+        pushed &= stop != "converged"
         lvar = 2.0 * fac.diag_inverse()
     pd_ = fac.ok & (lam_min > settings.pd_tol)
     lvar[~pd_] = np.nan
@@ -843,6 +882,9 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
            lambda k: f"optimum on the boundary of the prior support (min slack {s_min[k]:.3g})")
     assign(mult > settings.grad_tol, "boundary",
            lambda k: f"barrier holds the optimum (mu/slack = {mult[k]:.3g})")
+    assign(pushed, "boundary",
+           lambda k: f"-2 pi still decreases towards the boundary (min slack {s_min[k]:.3g}, "
+                     f"optimiser stop: {stop[k]})")
     assign(~pd_, "not-positive-definite",
            lambda k: f"Hessian not positive definite (smallest eigenvalue about "
                      f"{lam_min[k]:.3g})")

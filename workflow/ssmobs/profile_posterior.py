@@ -24,7 +24,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .joint_map import _chol_inv, _StateFactor  # noqa: F401  (shared batched algebra)
+from .joint_map import _StateFactor  # shared batched block-tridiagonal Cholesky
 from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import in_support, neg2_log_posterior, neg2_log_posterior_blocks
 

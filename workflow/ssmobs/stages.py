@@ -242,3 +242,75 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
     from .figures import figure_observability_ratios
 
     figure_observability_ratios(pd.read_csv(summary_csv), paths)
+
+
+# ------------------------------------------------------------------ choice of K (Sec. IV.A)
+def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_values: PathLike,
+                 out_json: PathLike, out_csv: PathLike, figure_paths: list[str]) -> dict:
+    """Rule select_k: the RD rule over K_grid for every method and seed, and its figure."""
+    import pandas as pd
+
+    from .figures import figure_k_convergence
+    from .k_selection import select_k, v_vector
+    from .models import get_model
+    from .tables import load_paper_values
+
+    model = get_model(scenario["model"])
+    summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
+    long_rows, choices = [], []
+    runs = sorted({(s["method"], int(s["seed"])) for s in summaries})
+    paper = load_paper_values(paper_values).get(scenario.get("paper_ref", ""), {}) or {}
+    for method, seed in runs:
+        sel = sorted((s for s in summaries if s["method"] == method and int(s["seed"]) == seed),
+                     key=lambda s: s["K_i"])
+        ks = [int(s["K_i"]) for s in sel]
+        vecs = [v_vector(s, model) for s in sel]
+        V = np.array([v.values for v in vecs])
+        thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
+        idx = select_k(ks, V, thresholds)
+        ref = (paper.get("k_selection") or {}).get(method) or {}
+        choices.append({
+            "name": ksel["name"], "scenario": scenario["name"], "method": method, "seed": seed,
+            "c1": ksel["c1"], "c2": ksel["c2"], "K_chosen": ks[idx] if idx is not None else None,
+            "K_max_grid": ks[-1], "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
+        })
+        for K, v in zip(ks, vecs):
+            for label, value in zip(v.labels, v.values):
+                long_rows.append({"K": K, "method": method, "seed": seed, "component": label,
+                                  "value": float(value)})
+    frame = pd.DataFrame(long_rows)
+    io.write_text(out_csv, frame.to_csv(index=False, float_format="%.10g"))
+    chosen = pd.DataFrame(choices)
+    figure_k_convergence(frame, chosen.assign(K_chosen=chosen["K_chosen"].astype(float)),
+                         f"choice of K: {ksel['name']} (c1={ksel['c1']}, c2={ksel['c2']})",
+                         figure_paths)
+    io.write_json(out_json, {"choices": choices})
+    return {"choices": choices}
+
+
+def run_table_k_selection(selections: list[PathLike], stem: PathLike) -> None:
+    """Rule table_k_selection: chosen K per k_selection entry, method and seed."""
+    from .tables import k_selection_table, write_table
+
+    rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
+    write_table(k_selection_table(rows), stem,
+                "Choice of K by relative differences (Sec. IV.A): ours per method and seed "
+                "beside the paper's")
+
+
+def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: dict,
+                                 paths: list[str]) -> None:
+    """Rule figure_profile_posterior: Figure 4 for trajectory k = 0 of a ranWalk scenario."""
+    from .figures import figure_profile_posterior
+    from .profile_posterior import profile_posterior
+    from .trajectories import read_trajectories
+
+    traj = read_trajectories(trajectories)
+    model = traj.model
+    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
+    a = np.linspace(grid["a_min"], grid["a_max"], grid["n"])
+    x0 = np.linspace(grid["x0_min"], grid["x0_max"], grid["n"])
+    values = profile_posterior(model, traj.z[0], bounds, model.param_names[0], a, x0)
+    figure_profile_posterior(a, x0, values, float(traj.omega[0]), float(traj.x0[0]),
+                             f"profile posterior, {model.title}, T={traj.T}, k=1", paths)

@@ -53,7 +53,8 @@ def write_table(frame: pd.DataFrame, stem: str | os.PathLike, caption: str = "")
     stem = os.fspath(stem)
     paths = [f"{stem}.csv", f"{stem}.md", f"{stem}.tex"]
     io.write_text(paths[0], frame.to_csv(index=False, float_format="%.6g", na_rep=""))
-    md = frame.to_markdown(index=False, floatfmt=".4g", missingval="")
+    shown = frame.astype(object).where(frame.notna(), None)
+    md = shown.to_markdown(index=False, floatfmt=".4g", missingval="")
     io.write_text(paths[1], (f"{caption}\n\n" if caption else "") + md + "\n")
     tex = frame.to_latex(index=False, float_format="%.4g", na_rep="", caption=caption or None,
                          escape=True)

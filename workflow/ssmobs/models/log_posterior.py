@@ -299,16 +299,33 @@ def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.n
     grad = np.concatenate([go[:, :, :m].sum(axis=1) + gt[:, :, :m].sum(axis=1),
                            grad_states.reshape(K, -1)], axis=1)
 
-    ho = _full_from_triu(obs[1 + Lo:], cm.obs)    # (K, T, m+p, m+p)
-    ht = _full_from_triu(tr[1 + Lt:], cm.trans)   # (K, T, m+2p, m+2p)
-    h_omega = ho[:, :, :m, :m].sum(axis=1) + ht[:, :, :m, :m].sum(axis=1)
+    h_omega = np.zeros((K, m, m))
     cross = np.zeros((K, T + 1, p, m))
-    cross[:, 1:] += ho[:, :, m:, :m] + ht[:, :, m + p:, :m]
-    cross[:, :-1] += ht[:, :, m:m + p, :m]
     diag = np.zeros((K, T + 1, p, p))
-    diag[:, 1:] += ho[:, :, m:, m:] + ht[:, :, m + p:, m + p:]
-    diag[:, :-1] += ht[:, :, m:m + p, m:m + p]
-    lower = np.ascontiguousarray(ht[:, :, m + p:, m:m + p])
+    lower = np.zeros((K, T, p, p))
+    # local variables: obs term [Omega, x_t], transition term [Omega, x_{t-1}, x_t];
+    # role (shift, component) of a state variable: shift 0 = x_t, -1 = x_{t-1}
+    obs_roles = [None] * m + [(0, c) for c in range(p)]
+    tr_roles = [None] * m + [(-1, c) for c in range(p)] + [(0, c) for c in range(p)]
+    steps = {0: slice(1, None), -1: slice(None, -1)}
+    for vals, term, roles in ((obs[1 + Lo:], cm.obs, obs_roles), (tr[1 + Lt:], cm.trans, tr_roles)):
+        for v, i, j in zip(vals, *term.triu):
+            ri, rj = roles[i], roles[j]
+            if ri is None and rj is None:
+                tot = v.sum(axis=1)
+                h_omega[:, i, j] += tot
+                if i != j:
+                    h_omega[:, j, i] += tot
+            elif ri is None or rj is None:
+                (sh, c), w = (rj, i) if ri is None else (ri, j)
+                cross[:, steps[sh], c, w] += v
+            elif ri[0] == rj[0]:
+                diag[:, steps[ri[0]], ri[1], rj[1]] += v
+                if ri[1] != rj[1]:
+                    diag[:, steps[ri[0]], rj[1], ri[1]] += v
+            else:  # x_{t-1} with x_t: block (t, t-1)
+                (_, c_prev), (_, c_now) = (ri, rj) if ri[0] == -1 else (rj, ri)
+                lower[:, :, c_now, c_prev] += v
     return value, grad, BlockHessian(omega=h_omega, cross=cross, diag=diag, lower=lower)
 
 

@@ -1,0 +1,128 @@
+"""Choice of K by relative differences (Sec. IV.A)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ssmobs.joint_map import joint_map_summary
+from ssmobs.k_selection import VVector, rd_matrix, relative_difference, select_k, v_vector
+from ssmobs.models import get_model
+
+pytestmark = pytest.mark.unit
+
+
+def test_relative_difference_values():
+    assert relative_difference(1.0, 1.0) == 0.0
+    assert np.isclose(relative_difference(1.0, 1.1), 0.1 / 1.1)
+    assert np.isclose(relative_difference(-2.0, -1.0), 0.5)
+    assert relative_difference(0.0, 0.0) == 0.0  # defined as 0
+    assert relative_difference(0.0, 3.0) == 1.0
+    assert relative_difference(1.0, -1.0) == 2.0
+    assert np.isnan(relative_difference(np.nan, 1.0))
+    x, y = np.array([1.0, 0.0, 5.0]), np.array([2.0, 0.0, 4.0])
+    assert np.allclose(relative_difference(x, y), relative_difference(y, x))
+    assert np.allclose(relative_difference(x, y), [0.5, 0.0, 0.2])
+
+
+def test_select_k_on_a_hand_made_sequence():
+    k_values = [100, 200, 300, 400, 500, 600]
+    # component 0 (c1 = 0.01) settles from K = 300 on, component 1 (c2 = 0.05) from K = 200
+    V = np.array([
+        [0.50, 1.00],
+        [0.90, 2.00],
+        [1.000, 2.02],
+        [1.005, 2.05],
+        [1.002, 2.01],
+        [0.998, 2.04],
+    ])
+    thr = np.array([0.01, 0.05])
+    assert select_k(k_values, V, thr) == 2
+    # a looser c1 moves the choice earlier; component 0 then allows i = 1 too
+    assert select_k(k_values, V, np.array([0.2, 0.05])) == 1
+    # one late outlier in j > i rules out every earlier i
+    V2 = V.copy()
+    V2[5, 0] = 1.5
+    assert select_k(k_values, V2, thr) is None
+
+
+def test_select_k_never_picks_the_last_and_handles_nan():
+    k_values = [100, 200, 300]
+    V = np.array([[1.0], [2.0], [3.0]])
+    # only the last K_i would satisfy the condition (vacuously): not chosen
+    assert select_k(k_values, V, np.array([0.01])) is None
+    # the second-to-last can be chosen when it agrees with the last
+    V[2] = 2.001
+    assert select_k(k_values, V, np.array([0.01])) == 1
+    # a single K_i: nothing to compare with
+    assert select_k([100], np.array([[1.0]]), np.array([0.5])) is None
+    # NaN (e.g. |K^max| = 0) never counts as converged
+    Vn = np.array([[np.nan], [np.nan], [np.nan]])
+    assert select_k(k_values, Vn, np.array([0.5])) is None
+    # RD(0, 0) = 0: a ratio |K^max|/K that stays 0 converges
+    assert select_k(k_values, np.zeros((3, 1)), np.array([0.01])) == 0
+
+
+def test_select_k_input_checks():
+    with pytest.raises(ValueError, match="increasing"):
+        select_k([200, 100], np.ones((2, 1)), np.ones(1))
+    with pytest.raises(ValueError, match="one V row per K_i"):
+        select_k([100, 200], np.ones((3, 1)), np.ones(1))
+    with pytest.raises(ValueError, match="thresholds"):
+        select_k([100, 200], np.ones((2, 2)), np.ones(3))
+
+
+def test_rd_matrix_symmetric():
+    V = np.array([[1.0, 2.0], [1.5, 2.0], [0.0, 0.0]])
+    R = rd_matrix(V)
+    assert R.shape == (3, 3, 2)
+    assert np.allclose(R, np.swapaxes(R, 0, 1))
+    assert np.allclose(R[0, 1], [0.5 / 1.5, 0.0])
+
+
+def summary_for(slug, omega, x0, seed):
+    model = get_model(slug)
+    names = model.theta_names(0)
+    rng = np.random.default_rng(seed)
+    frame = pd.DataFrame({"status": ["ok"] * 5 + ["ridge"]})
+    for c in names:
+        frame[c] = rng.normal(size=6)
+        frame[f"lvar_{c}"] = rng.uniform(size=6)
+    return model, joint_map_summary(frame, model, omega, x0)
+
+
+def test_v_vector_layout_same():
+    model, s = summary_for("same", [0.9], 8.0, seed=0)
+    v = v_vector(s, model)
+    assert v.labels == ("ratio", "mean_a", "mean_x0", "var_a", "var_x0", "mean_lvar_a",
+                        "mean_lvar_x0")  # the paper's V in R^7 (Sec. IV.A)
+    assert v.kinds == ("c1", "c1", "c1", "c2", "c2", "c2", "c2")
+    assert np.isclose(v.values[0], 5 / 6)
+    assert np.isclose(v.values[1], s["mean_a"]) and np.isclose(v.values[4], s["var_x0"])
+    assert np.allclose(v.thresholds(0.01, 0.03), [0.01] * 3 + [0.03] * 4)
+
+
+def test_v_vector_layout_multivariate_and_missing():
+    model, s = summary_for("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0], seed=1)
+    v = v_vector(s, model)
+    assert len(v.values) == 1 + 3 * 6
+    assert v.labels[1:7] == tuple(f"mean_{c}" for c in ["a", "b", "c", "d", "x0_1", "x0_2"])
+    assert v.labels[-1] == "mean_lvar_x0_2"
+    del s["var_b"]
+    with pytest.raises(ValueError, match="var_b"):
+        v_vector(s, model)
+
+
+def test_selection_from_summaries_end_to_end():
+    """V vectors built from summaries feed select_k with their c1/c2 thresholds."""
+    model = get_model("same")
+    vs = []
+    for K, shift in [(100, 0.05), (200, 0.001), (300, 0.0), (400, 0.0005)]:
+        frame = pd.DataFrame({"status": ["ok"] * 4, "a": [0.9 + shift, 0.92, 0.94, 0.96],
+                              "x0": [7.0 + shift, 7.5, 8.0, 8.5], "lvar_a": [0.1] * 4,
+                              "lvar_x0": [1.0] * 4})
+        vs.append(v_vector(joint_map_summary(frame, model, [0.9], 8.0), model))
+    V = np.stack([v.values for v in vs])
+    assert isinstance(vs[0], VVector)
+    assert select_k([100, 200, 300, 400], V, vs[0].thresholds(0.01, 0.03)) == 1

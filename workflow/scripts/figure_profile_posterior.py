@@ -1,0 +1,8 @@
+"""Rule figure_profile_posterior: Figure 4."""
+
+from ssmobs import log
+from ssmobs.stages import run_figure_profile_posterior
+
+log.setup(snakemake.log[0])
+run_figure_profile_posterior(snakemake.input[0], snakemake.params.scenario,
+                             snakemake.params.grid, list(snakemake.output))
