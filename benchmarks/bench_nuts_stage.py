@@ -229,6 +229,7 @@ def overhead_table(res: dict) -> list[str]:
     marg = sum(t["marginal"] for t in tims)
     prep = sum(t["prepare"] for t in tims)
     recorded = sum(t["overhead"] for t in tims)
+    ours_cpu = sum(t["overhead_cpu"] for t in tims)
     loop_rest = res["loop"] - sum(t["sample_call"] for t in tims) - recorded
     ours = res["loop"] - sum(t["sample_call"] for t in tims)
     per = (lambda v: v / n)
@@ -237,7 +238,8 @@ def overhead_table(res: dict) -> list[str]:
         f"| T = {res['T']} | {n} | {_fmt(per(sample))} | "
         f"{_fmt(per(parent))} / {_fmt(per(child))} ({100 * parent / (parent + child):.0f} %) | "
         f"{_fmt(per(prep), 4)} | {_fmt(per(diag), 3)} | {_fmt(per(marg), 3)} | "
-        f"{_fmt(per(loop_rest), 3)} | {_fmt(per(ours), 3)} | **{100 * ours / sample:.1f} %** | "
+        f"{_fmt(per(loop_rest), 3)} | {_fmt(per(ours), 3)} ({_fmt(per(ours_cpu), 3)}) | "
+        f"**{100 * ours / sample:.1f} %** ({100 * ours_cpu / sample:.1f} %) | "
         f"{_fmt(alt.get('diag_arviz', float('nan')), 3)} / "
         f"{_fmt(alt.get('diag_vectorized', float('nan')), 3)} | "
         f"{_fmt(alt.get('kde_arviz', float('nan')), 3)} / {_fmt(alt.get('kde_ours', float('nan')), 3)} |"
@@ -272,7 +274,8 @@ def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) 
            "the sample call (httpstan: JSON transfer, gzip, parsing, conversion) vs. of the "
            "chain worker processes (Stan); the percentage is the transfer/parsing share. "
            "*rest*: writing the record, logging, progress. *ours*: everything in the loop "
-           "but the sample call. Last two columns, on the last trajectory's draws: ArviZ "
+           "but the sample call, wall time (in brackets: CPU time of our per-trajectory "
+           "code, which other load on the machine does not inflate). Last two columns, on the last trajectory's draws: ArviZ "
            "(`az.from_dict` + `az.rhat`/`az.ess`/`az.bfmi`) vs. our vectorised "
            "diagnostics, and `az.kde` per component vs. our batched FFT KDE.", "",
            "| case | n | sample call | parent / workers CPU | prepare | diagnostics | "

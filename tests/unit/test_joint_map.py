@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-import sympy as sp
 from scipy.optimize import minimize
 
 from ssmobs.joint_map import (
@@ -261,6 +260,24 @@ def test_maximum_on_the_prior_boundary():
     assert (res.status == "boundary").all()
     assert np.all(res.theta_hat[:, 0] > 0.499)
     assert all("boundary" in r or "barrier" in r for r in res.reason)
+
+
+def test_sep_singular_edge_is_boundary():
+    """(Sep, d=p=1): -2 pi -> -inf as b -> 1 with x_t = z_t / b (or a -> 1); runs that do not
+    find an interior local maximum end at that edge and are classified boundary."""
+    model, x, z = design("sep", [0.9, 0.9], [8.0], T=40, K=10, seed=2)
+    bounds = model.prior_bounds([0.9, 0.9])
+    res = joint_map(model, z, bounds, [0.9, 0.9], [8.0])
+    assert set(res.status) <= {"ok", "boundary"}
+    edge = res.status == "boundary"
+    assert edge.sum() >= 5
+    assert np.all(res.theta_hat[edge, :2].max(axis=1) > 0.9999)
+    # stopped before reaching boundary_tol: the descent towards the edge identifies it
+    res2 = joint_map(model, z, bounds, [0.9, 0.9], [8.0],
+                     JointMapSettings(boundary_tol=1e-12, boundary_stop_tol=1e-12,
+                                      max_newton_iter=30))
+    assert any("still decreases towards the boundary" in r for r in res2.reason)
+    assert not (res2.status[edge] == "ok").any()
 
 
 def test_non_finite_data_is_recorded_not_raised():

@@ -165,14 +165,22 @@ def _z_scale_rows(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     np.put_along_axis(z, order, np.broadcast_to(table, m.shape), axis=1)
     srt = np.take_along_axis(m, order, axis=1)
     eq = srt[:, 1:] == srt[:, :-1]
-    for r in np.flatnonzero(eq.any(axis=1)):
-        # only the tied positions change: they get the mean of their group's ranks
-        tied = np.zeros(n, dtype=bool)
-        tied[:-1] |= eq[r]
-        tied[1:] |= eq[r]
-        pos = np.flatnonzero(tied)
-        ranks = _average_ranks_1d(srt[r], np.arange(n))[pos]
-        z[r, order[r, pos]] = special.ndtri((ranks - 0.375) / (n + 0.25))
+    rows = np.flatnonzero(eq.any(axis=1))
+    if rows.size:
+        # tied values (common: PyStan transfers draws as ~6 significant digits) get the
+        # mean rank of their group; only their z-values change.  A group is a run
+        # eq[a..b-1] of equal neighbours: sorted positions a..b, ranks a+1..b+1.
+        edges = np.zeros((rows.size, n + 1), dtype=np.int8)
+        edges[:, 1:n] = eq[rows]
+        d = np.diff(edges, axis=1)
+        r_a, a = np.nonzero(d == 1)
+        _, b = np.nonzero(d == -1)  # same row-major order: pairs with the starts
+        size = b - a + 1
+        first = np.repeat(np.cumsum(size) - size, size)
+        pos = np.repeat(a, size) + (np.arange(size.sum()) - first)
+        r_i = rows[np.repeat(r_a, size)]
+        avg = np.repeat((a + b) / 2.0 + 1.0, size)
+        z[r_i, order[r_i, pos]] = special.ndtri((avg - 0.375) / (n + 0.25))
     return z, srt
 
 

@@ -150,7 +150,7 @@ class JointMapSettings:
     eigen_method: str = "lanczos"
     #: Lanczos steps (exact spectrum when >= |Theta|)
     lanczos_steps: int = 24
-    #: trajectories per vectorised batch (0: chosen from |Theta| to bound memory)
+    #: trajectories per vectorised batch (0: about 2e5 / |Theta|, between 64 and 2048)
     chunk_size: int = 0
 
     def __post_init__(self) -> None:
@@ -297,7 +297,8 @@ def _chol_inv(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ok &= good
         L[..., j, j] = np.sqrt(np.where(good, s, 1.0))
         for i in range(j + 1, q):
-            L[..., i, j] = (S[..., i, j] - np.sum(L[..., i, :j] * L[..., j, :j], axis=-1)) / L[..., j, j]
+            off = S[..., i, j] - np.sum(L[..., i, :j] * L[..., j, :j], axis=-1)
+            L[..., i, j] = off / L[..., j, j]
     Linv = np.zeros_like(S)
     for i in range(q):
         Linv[..., i, i] = 1.0 / L[..., i, i]
@@ -774,14 +775,16 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
         reason[idx[big]] = "diverged"
         active[idx[big]] = False
         s_now = barrier.slacks(theta[idx, :m])
-        edge = ~big & (s_now.min(axis=1) < settings.boundary_stop_tol) if s_now.shape[1] else big & False
-        reason[idx[edge]] = "at-boundary"
-        active[idx[edge]] = False
+        if s_now.shape[1]:
+            edge = ~big & (s_now.min(axis=1) < settings.boundary_stop_tol)
+            reason[idx[edge]] = "at-boundary"
+            active[idx[edge]] = False
     return theta, iters, mu, reason
 
 
 def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
-    size = settings.chunk_size or int(np.clip(1e7 / (n * n), 64, 2048))
+    """Contiguous batches of k; memory per trajectory is O(n (lanczos_steps + (m + 2p)^2))."""
+    size = settings.chunk_size or int(np.clip(2e5 / n, 64, 2048))
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
@@ -897,13 +900,13 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
         moved, dist = _ridge_check(model, z[cand], theta[cand], v_min[cand], barrier,
                                    settings)
         for j, k in enumerate(cand):
+            small = f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g}"
             if moved[j]:
                 status[k] = "ridge"
-                reason[k] = (f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g} and the "
-                             f"optimum moved by {dist[j]:.3g} after a shift along the ridge")
+                reason[k] = (f"{small} and the optimum moved by {dist[j]:.3g} after a shift "
+                             f"along the ridge")
             else:
-                reason[k] = (f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g} but the "
-                             f"optimum did not move (moved {dist[j]:.3g})")
+                reason[k] = f"{small} but the optimum did not move (moved {dist[j]:.3g})"
     return dict(neg2_log_post=f, local_variance=lvar, eig_ratio=ratio, grad_max=grad_max,
                 status=status, reason=reason)
 

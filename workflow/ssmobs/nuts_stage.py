@@ -35,7 +35,8 @@ Record format (JSON, one file per k; ``RECORD_VERSION``)::
     backend          backend name
     timings          seconds: sample_call (wall time of backend.sample), backend (the
                      backend's own breakdown, e.g. transfer), prepare, diagnostics, marginal,
-                     keep_draws, overhead (all of ours except writing this file)
+                     keep_draws, overhead (all of ours except writing this file) and
+                     overhead_cpu (its CPU time in this process: robust to other load)
 
 Timings are the only field that differs between reruns; :func:`records_to_frame` leaves
 them out, so tables built from records are byte-identical across reruns.
@@ -156,13 +157,13 @@ def load_record(path: str | Path, key: dict[str, Any] | None = None,
         LOG.warning("recomputing: %s", err)
         return None
     if rec.get("record_version") != RECORD_VERSION:
-        LOG.info("recomputing %s: record version %s != %s", path, rec.get("record_version"),
-                 RECORD_VERSION)
+        LOG.debug("recomputing %s: record version %s != %s", path, rec.get("record_version"),
+                  RECORD_VERSION)
         return None
     if key is not None and rec.get("key") != key:
         old = rec["key"] if isinstance(rec.get("key"), dict) else {}
         changed = sorted(k for k in set(key) | set(old) if old.get(k) != key.get(k))
-        LOG.info("recomputing %s: key changed (%s)", path, ", ".join(changed))
+        LOG.debug("recomputing %s: key changed (%s)", path, ", ".join(changed))
         return None
     if n_theta is not None and rec["map"] is not None and not (
             len(rec["map"]) == len(rec["q5"]) == len(rec["q95"]) == n_theta):
@@ -198,7 +199,8 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
                     ) -> dict[str, Any]:
     T = int(np.asarray(z_k).shape[0])
     names = model.theta_names(T)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
+    sample_cpu = 0.0
     timings: dict[str, Any] = {"sample_call": 0.0, "backend": {}, "prepare": 0.0,
                                "diagnostics": 0.0, "marginal": 0.0, "keep_draws": 0.0}
     rec: dict[str, Any] = {
@@ -213,12 +215,13 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
         data = model.stan_data(np.asarray(z_k, dtype=float), bounds)
         inits = (_inits(model, omega_true, x0_true, x_k, sampler.chains)
                  if init == "true" else None)
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         timings["prepare"] = t1 - t0
         try:
             draws = backend.sample(stan_file, data, key["stan_seed"], sampler, inits)
         finally:
             timings["sample_call"] = time.perf_counter() - t1
+            sample_cpu = time.process_time() - c1
     except SamplingError as err:
         rec.update(status="error", failed_checks=["sampling_error"],
                    reason=f"sampling error: {err}")
@@ -272,6 +275,7 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
         rec["reason"] = None if rec["converged"] else "; ".join(reasons) or "not converged"
     total = time.perf_counter() - t0
     timings["overhead"] = total - timings["sample_call"]
+    timings["overhead_cpu"] = time.process_time() - c0 - sample_cpu
     rec["timings"] = timings
     return rec
 
@@ -361,11 +365,11 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
             todo.append((k, key))
         else:
             records[k] = rec
-    if records:
-        LOG.info("%s: %d of %d trajectories already done, reusing their records", scenario,
-                 len(records), len(ks))
-        if progress is not None:
-            progress.update(len(records))
+    stale = sum(record_path(records_dir, k).exists() for k, _ in todo)
+    LOG.info("%s: %d trajectories to sample, %d records reused, %d stale or damaged records "
+             "recomputed", scenario, len(todo), len(records), stale)
+    if records and progress is not None:
+        progress.update(len(records))
     own_progress = progress is None
     if own_progress:
         progress = Progress(f"{scenario} NUTS", total=max(len(todo), 1), logger=LOG)
