@@ -19,9 +19,10 @@ Two implementations give the same numbers (tested to 1e-10):
 * ``"vectorized"`` (default): the same formulas as ArviZ 0.23's ``_rhat_rank``,
   ``_ess_bulk``, ``_ess_tail`` and ``_bfmi``, evaluated for all parameters at once with
   NumPy (one sort per parameter and transform instead of SciPy's ``rankdata`` and a Python
-  loop per parameter).  Measured for 102 parameters x 4 x 6 000 draws: about 0.25 s
-  against 1.1 s for ArviZ (``benchmarks/bench_nuts_stage.py``), which matters because the
-  stage's own overhead must stay below 10 % of the sampling call.
+  loop per parameter).  Measured on PyStan draws of model same, T = 100 (102 parameters
+  x 4 x 6 000 draws): about 0.36 s against 1.3 s for ArviZ (``BENCHMARKS.md``, section
+  "Stan stage (issue 4)"), which matters because the stage's own overhead must stay below
+  10 % of the sampling call (about 10 s there).
 * ``"arviz"``: ``az.rhat`` / ``az.ess`` / ``az.bfmi`` on ``az.from_dict`` of the draws;
   the reference the vectorised code is tested against.
 """
@@ -127,28 +128,6 @@ def to_inference_data(draws: Draws) -> Any:
         warnings.filterwarnings("ignore", category=FutureWarning)
         return az.from_dict(posterior={k: np.asarray(v) for k, v in draws.params.items()},
                             sample_stats=stats)
-
-
-def _rank_average(m: np.ndarray) -> np.ndarray:
-    """Ranks 1..n of each row (ties get their average rank, as scipy's 'average')."""
-    n = m.shape[1]
-    order = np.argsort(m, axis=1)
-    ranks = np.empty(m.shape, dtype=float)
-    np.put_along_axis(ranks, order, np.broadcast_to(np.arange(1.0, n + 1.0), m.shape), axis=1)
-    srt = np.take_along_axis(m, order, axis=1)
-    for r in np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1)):
-        ranks[r] = _average_ranks_1d(srt[r], order[r])
-    return ranks
-
-
-def _average_ranks_1d(srt: np.ndarray, order: np.ndarray) -> np.ndarray:
-    """Average ranks of one row given its sorted values and sort order."""
-    n = srt.size
-    starts = np.flatnonzero(np.r_[True, srt[1:] != srt[:-1]])
-    ends = np.r_[starts[1:], n]
-    out = np.empty(n)
-    out[order] = np.repeat((starts + ends + 1) / 2.0, ends - starts)  # mean of starts+1..ends
-    return out
 
 
 def _z_scale_rows(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -50,6 +50,21 @@ class PriorBounds:
         return np.all((omega > self.lower) & (omega < self.upper), axis=-1)
 
 
+def ar1_states(coef: np.ndarray | float, x0: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """States of X_t = c X_{t-1} + sqrt(1 - c^2) eta_t (component-wise c), t = 1..T.
+
+    ``coef`` is a scalar or (p,), ``x0`` (p,), ``eta`` (K, T, p); returns (K, T, p).
+    """
+    coef = np.broadcast_to(np.asarray(coef, dtype=float), (eta.shape[2],))
+    scale = np.sqrt(1 - coef**2)
+    x = np.empty_like(eta, dtype=float)
+    prev = np.broadcast_to(np.asarray(x0, dtype=float), eta.shape[::2])
+    for t in range(eta.shape[1]):
+        prev = coef * prev + scale * eta[:, t, :]
+        x[:, t, :] = prev
+    return x
+
+
 class StateSpaceModel:
     """Base class of a model of Section IV; a subclass is one paper model.
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from .base import StateSpaceModel
+from .base import StateSpaceModel, ar1_states
 
 
 class Same(StateSpaceModel):
@@ -31,12 +31,6 @@ class Same(StateSpaceModel):
 
     def simulate(self, omega, x0, eta, eps):
         a = omega[0]
-        s = np.sqrt(1 - a**2)
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 1))
-        prev = np.full(K, x0[0])
-        for t in range(T):
-            prev = a * prev + s * eta[:, t, 0]
-            x[:, t, 0] = prev
-        z = a * x + s * eps
+        x = ar1_states(a, x0, eta)
+        z = a * x + np.sqrt(1 - a**2) * eps
         return x, z

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from .base import StateSpaceModel
+from .base import StateSpaceModel, ar1_states
 
 
 class Sep(StateSpaceModel):
@@ -31,11 +31,6 @@ class Sep(StateSpaceModel):
 
     def simulate(self, omega, x0, eta, eps):
         a, b = omega
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 1))
-        prev = np.full(K, x0[0])
-        for t in range(T):
-            prev = a * prev + np.sqrt(1 - a**2) * eta[:, t, 0]
-            x[:, t, 0] = prev
+        x = ar1_states(a, x0, eta)
         z = b * x + np.sqrt(1 - b**2) * eps
         return x, z

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from .base import StateSpaceModel
+from .base import StateSpaceModel, ar1_states
 
 
 class SepD1P2(StateSpaceModel):
@@ -52,13 +52,6 @@ class SepD1P2(StateSpaceModel):
 
     def simulate(self, omega, x0, eta, eps):
         a, b, c, d = omega
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 2))
-        prev = np.tile(np.asarray(x0, float), (K, 1))
-        coef = np.array([c, d])
-        scale = np.sqrt(1 - coef**2)
-        for t in range(T):
-            prev = coef * prev + scale * eta[:, t, :]
-            x[:, t, :] = prev
+        x = ar1_states([c, d], x0, eta)
         z = (a * x[:, :, :1] + b * x[:, :, 1:]) + np.sqrt(1 - a**2 - b**2) * eps
         return x, z

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from .base import StateSpaceModel
+from .base import StateSpaceModel, ar1_states
 
 
 class SepD2P1(StateSpaceModel):
@@ -44,12 +44,7 @@ class SepD2P1(StateSpaceModel):
 
     def simulate(self, omega, x0, eta, eps):
         a, b, c = omega
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 1))
-        prev = np.full(K, x0[0])
-        for t in range(T):
-            prev = c * prev + np.sqrt(1 - c**2) * eta[:, t, 0]
-            x[:, t, 0] = prev
+        x = ar1_states(c, x0, eta)
         z = np.concatenate([a * x + np.sqrt(1 - a**2) * eps[:, :, :1],
                             b * x + np.sqrt(1 - b**2) * eps[:, :, 1:]], axis=2)
         return x, z

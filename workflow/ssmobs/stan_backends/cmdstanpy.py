@@ -34,6 +34,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 
 from . import SAMPLER_COLUMNS, quiet_loggers
+from ..io import file_lock
 from .base import Draws, SamplerSettings, SamplingError
 
 LOG = logging.getLogger("ssmobs.stan")
@@ -43,17 +44,6 @@ def cache_root() -> Path:
     """Root of the compiled-program cache (``$XDG_CACHE_HOME/ssmobs``, default ~/.cache)."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "ssmobs"
-
-
-@contextlib.contextmanager
-def _file_lock(path: Path) -> Iterator[None]:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a+") as fh:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
 def fit_to_draws(fit: Any) -> Draws:
@@ -117,7 +107,7 @@ class CmdStanPyBackend:
         copy = cache_dir / f"{slug}.stan"
         exe = cache_dir / (slug + (".exe" if os.name == "nt" else ""))
         if not exe.is_file():
-            with _file_lock(cache_dir / ".lock"):
+            with file_lock(cache_dir / ".lock"):
                 if not exe.is_file():
                     LOG.info("compiling %s with CmdStan %s in %s", path.name, version_tag,
                              cache_dir)

@@ -57,6 +57,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 
 from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
+from ..io import file_lock
 from .base import Draws, SamplerSettings, SamplingError
 
 LOG = logging.getLogger("ssmobs.stan")
@@ -88,17 +89,6 @@ def _captured(label: str) -> Iterator[io.StringIO]:
             yield buf
     finally:
         log_captured(label, buf.getvalue())
-
-
-@contextlib.contextmanager
-def _file_lock(path: Path) -> Iterator[None]:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a+") as fh:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
 class _PrivateCache:
@@ -316,7 +306,7 @@ class PyStanBackend:
             cache_dir = httpstan.cache.cache_directory()
             model_dir = httpstan.cache.model_directory(model_name)
             if not _has_extension(model_dir):
-                with _file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
+                with file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
                     if not _has_extension(model_dir):  # another process may have built it
                         LOG.info("compiling %s into %s (about a minute)", path.name,
                                  model_dir)
