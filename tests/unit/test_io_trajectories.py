@@ -99,3 +99,19 @@ def test_disturbance_layout_state_first(slug, omega, x0):
     assert eta.shape == (K, T, model.state_dim) and eps.shape == (K, T, model.obs_dim)
     np.testing.assert_array_equal(eta[1, 0], matrix[: model.state_dim, 1])
     np.testing.assert_array_equal(eps[0, 0], matrix[model.state_dim * T: model.state_dim * T + model.obs_dim, 0])
+
+
+def test_two_state_simulation_follows_eq_1():
+    """(Sep, d=1, p=2): two AR(1) states and Z_t = a X_t1 + b X_t2 + sqrt(1-a^2-b^2) eps_t."""
+    model = get_model("sep_d1_p2")
+    rng = np.random.default_rng(0)
+    eta, eps = rng.standard_normal((3, 4, 2)), rng.standard_normal((3, 4, 1))
+    a, b, c, d = 0.6, 0.5, 0.9, 0.8
+    x, z = model.simulate(np.array([a, b, c, d]), np.array([8.0, 7.0]), eta, eps)
+    prev = np.tile([8.0, 7.0], (3, 1))
+    coef = np.array([c, d])
+    for t in range(4):
+        prev = coef * prev + np.sqrt(1 - coef**2) * eta[:, t]
+        np.testing.assert_allclose(x[:, t], prev)
+    np.testing.assert_allclose(z[..., 0], a * x[..., 0] + b * x[..., 1]
+                               + np.sqrt(1 - a * a - b * b) * eps[..., 0])
