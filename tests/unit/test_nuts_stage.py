@@ -280,9 +280,9 @@ def test_records_are_deterministic_apart_from_timings(scenario, tmp_path):
         assert json.dumps(r1, sort_keys=True) == json.dumps(r2, sort_keys=True)
 
 
-def test_overhead_is_small_for_a_realistic_size(scenario):
-    """Our per-trajectory work for 102 Theta components x 24 000 draws stays well under a
-    second (the backend's sample call for T = 100 takes about 10 s on this machine)."""
+def test_realistic_size_record(scenario):
+    """A T = 100 record (102 Theta components x 24 000 draws) has every component and its
+    timings (the overhead target itself is measured in benchmarks/bench_nuts_stage.py)."""
     model = scenario["model"]
     z = np.random.default_rng(1).normal(0, 1, (1, 100, 1))
     z[0, 0, 0] = 0
@@ -291,4 +291,4 @@ def test_overhead_is_small_for_a_realistic_size(scenario):
     assert recs[0]["converged"]
     assert len(recs[0]["map"]) == len(model.theta_names(100))
     t = recs[0]["timings"]
-    assert t["overhead"] < 2.5, t  # generous: a shared, loaded 2-core machine
+    assert t["overhead"] >= t["diagnostics"] + t["marginal"] > 0, t
