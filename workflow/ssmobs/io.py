@@ -68,7 +68,8 @@ def write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
-def _json_default(obj: Any) -> Any:
+def json_default(obj: Any) -> Any:
+    """JSON form of NumPy scalars and arrays and of paths (for ``json.dumps(default=...)``)."""
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):
@@ -80,7 +81,7 @@ def _json_default(obj: Any) -> Any:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON atomically (sorted keys, so reruns give identical bytes)."""
-    write_text(path, json.dumps(obj, indent=1, sort_keys=True, default=_json_default,
+    write_text(path, json.dumps(obj, indent=1, sort_keys=True, default=json_default,
                                 allow_nan=True) + "\n")
 
 

@@ -78,18 +78,8 @@ ESTIMATOR = {"kde": "gaussian, silverman bw, linear binning + fft", "grid_per_bw
 
 # --------------------------------------------------------------------------- keys
 def _sha(obj: Any) -> str:
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_plain)
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=io.json_default)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _plain(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"cannot hash {type(obj).__name__}")
 
 
 def program_hash(stan_file: str | Path) -> str:
