@@ -113,3 +113,18 @@ def test_x0_dimension_checked():
     c = with_(["scenarios", 0, "x0"], [1.0, 2.0])
     with pytest.raises(cfg.ConfigError, match="x0 must have 1 component"):
         cfg.validate(c)
+
+
+def test_cmdstanpy_backend_without_cmdstan_is_refused():
+    from ssmobs.stan_backends import have_cmdstan
+
+    if have_cmdstan():
+        pytest.skip("CmdStan is installed here, so the cmdstanpy backend is valid")
+    c = {**base(), "stan": {"backend": "cmdstanpy"}}
+    with pytest.raises(cfg.ConfigError, match=r"stan.backend = 'cmdstanpy'.*CmdStan.*'pystan'"):
+        cfg.validate(c)
+
+
+def test_unknown_backend_name():
+    with pytest.raises(cfg.ConfigError, match=r"stan.backend = 'stan'.*allowed values"):
+        cfg.validate({**base(), "stan": {"backend": "stan"}})
