@@ -92,7 +92,7 @@ def test_mostly_tied_draws_use_the_sd():
 
 
 def _draws_for(model, T, rng, chains=4, n=500):
-    m, p = model.n_params, model.state_dim
+    p = model.state_dim
     params = {name: rng.normal(0.5, 0.1, (chains, n)) for name in model.param_names}
     params["x0"] = rng.normal(8, 1, (chains, n) + ((p,) if p > 1 else ()))
     params["x"] = rng.normal(0, 1, (chains, n, T) + ((p,) if p > 1 else ()))

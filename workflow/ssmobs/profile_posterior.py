@@ -131,7 +131,7 @@ def profile_posterior(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds
         raise ValueError(f"z must have shape (T, {model.obs_dim}) for model '{model.slug}', "
                          f"got {z.shape}")
     T = z.shape[0]
-    m, p = model.n_params, model.state_dim
+    p = model.state_dim
     if omega_grid_name not in model.param_names:
         raise ValueError(f"model '{model.slug}' has no parameter '{omega_grid_name}'; "
                          f"its parameters are {list(model.param_names)}")
