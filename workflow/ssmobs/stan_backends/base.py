@@ -50,6 +50,17 @@ class Draws:
         return next(iter(self.sample_stats.values())).shape[1]
 
 
+def check_sample_args(seed: int, settings: SamplerSettings, inits: list[dict] | None) -> None:
+    """ValueError for arguments no backend can run with (seed range, inits per chain, workers)."""
+    if not 0 <= int(seed) < 2**32:
+        raise ValueError(f"seed must be in [0, 2**32), got {seed}")
+    if inits is not None and len(inits) != settings.chains:
+        raise ValueError(f"inits must have one dict per chain ({settings.chains}), "
+                         f"got {len(inits)}")
+    if settings.workers < 1:
+        raise ValueError(f"settings.workers must be >= 1, got {settings.workers}")
+
+
 class SamplingError(RuntimeError):
     """A run that could not produce draws (initialisation failure, numerical exception)."""
 

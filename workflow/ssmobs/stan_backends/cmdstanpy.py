@@ -33,7 +33,7 @@ import numpy as np
 
 from . import SAMPLER_COLUMNS, quiet_loggers
 from ..io import file_lock
-from .base import Draws, SamplerSettings, SamplingError
+from .base import Draws, SamplerSettings, SamplingError, check_sample_args
 
 LOG = logging.getLogger("ssmobs.stan")
 
@@ -144,13 +144,7 @@ class CmdStanPyBackend:
         import cmdstanpy
 
         t_start = time.perf_counter()
-        if not 0 <= int(seed) < 2**32:
-            raise ValueError(f"seed must be in [0, 2**32), got {seed}")
-        if inits is not None and len(inits) != settings.chains:
-            raise ValueError(f"inits must have one dict per chain ({settings.chains}), "
-                             f"got {len(inits)}")
-        if settings.workers < 1:
-            raise ValueError(f"settings.workers must be >= 1, got {settings.workers}")
+        check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
         label = Path(marker["stan_file"]).name
         tmp = Path(tempfile.mkdtemp(prefix="ssmobs-cmdstan-", dir=self.tmp_root))
