@@ -23,13 +23,14 @@ import argparse
 import datetime as _dt
 import json
 import os
-import platform
 import re
 import resource
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from machine import machine_info
 
 REPO = Path(__file__).resolve().parents[1]
 FULL_GRID = [(8, 300), (40, 1300), (100, 3100), (200, 4000)]
@@ -73,32 +74,6 @@ def run_case(q: int, K: int, seed: int) -> dict:
         "antithetic_raw": anti.distance_raw,
         "antithetic_whitened": anti.distance,
     }
-
-
-def machine_info() -> str:
-    cpu = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    ram = "unknown RAM"
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemTotal"):
-                ram = f"{int(line.split()[1]) / 1024**2:.1f} GiB RAM"
-                break
-    except OSError:
-        pass
-    import numpy
-    import scipy
-
-    return (
-        f"{os.cpu_count()} CPUs (nproc), {cpu}, {ram}; Python {platform.python_version()}, "
-        f"NumPy {numpy.__version__}, SciPy {scipy.__version__}"
-    )
 
 
 def _short_reason(reason: str) -> str:

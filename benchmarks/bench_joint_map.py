@@ -41,13 +41,14 @@ import argparse
 import contextlib
 import datetime as _dt
 import os
-import platform
 import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from machine import machine_info
 
 REPO = Path(__file__).resolve().parents[1]
 SECTION = "## Joint MAP (issue 3)"
@@ -73,24 +74,6 @@ def blas_one_thread():
     except Exception:  # pragma: no cover - optional
         return contextlib.nullcontext()
     return _blas_threads(1)
-
-
-def machine_info() -> str:
-    cpu, ram = "unknown CPU", "unknown RAM"
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemTotal"):
-                ram = f"{int(line.split()[1]) / 1024**2:.1f} GiB RAM"
-                break
-    import scipy
-
-    return (f"{os.cpu_count()} CPUs (nproc), {cpu}, {ram}; Python {platform.python_version()}, "
-            f"NumPy {np.__version__}, SciPy {scipy.__version__}")
 
 
 def trajectories(slug, omega, x0, T, K, seed=0):

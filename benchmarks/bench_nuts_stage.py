@@ -255,14 +255,9 @@ def overhead_table(res: dict) -> list[str]:
 
 
 def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) -> str:
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    from machine import cpu_model
+
+    cpu = cpu_model()
     import numpy
     import stan
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import os
-import platform
 import resource
 import tempfile
 import time
@@ -22,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from machine import machine_info
 
 from ssmobs import config as cfg
 from ssmobs.convergence import ConvergenceSettings
@@ -80,7 +80,7 @@ def main() -> None:
         "## Cost of the paper profile's Stan stage (issue 5)",
         "",
         f"- Date: {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC; machine: "
-        f"{os.cpu_count()} CPUs, {platform.processor() or platform.machine()}; load average at "
+        f"{machine_info()}; load average at "
         f"end {os.getloadavg()[0]:.2f}",
         f"- Command: `python benchmarks/bench_paper_cost.py --n {args.n}`; config "
         f"`{Path(args.config).relative_to(REPO) if Path(args.config).is_absolute() else args.config}`"
