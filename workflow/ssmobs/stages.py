@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from . import io
+from .config import x0_list
 from .log import Progress
 
 logger = logging.getLogger("ssmobs")
@@ -36,20 +37,28 @@ def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> "xarray.D
     )
 
 
+def _joint_map_of(traj: Any, prior: Any, settings: dict, progress: Progress | None = None
+                  ) -> tuple[Any, Any, dict, Any]:
+    """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
+    from .joint_map import JointMapSettings, joint_map, joint_map_summary
+
+    model = traj.model
+    bounds = model.prior_bounds(traj.omega, prior)
+    result = joint_map(model, traj.z, bounds, traj.omega, traj.x0,
+                       JointMapSettings.from_mapping(settings), progress=progress)
+    frame = result.to_frame(model, traj.T)
+    return result, frame, joint_map_summary(frame, model, traj.omega, traj.x0), bounds
+
+
 def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
                   table: PathLike, summary: PathLike, theta: PathLike | None = None) -> dict:
     """Rule joint_map: joint MAP + checks for every design trajectory of a scenario."""
-    from .joint_map import JointMapSettings, joint_map, joint_map_summary
     from .trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
     progress = Progress(f"joint MAP {scenario['name']}", traj.K, logger)
-    result = joint_map(model, traj.z, bounds, traj.omega, traj.x0,
-                       JointMapSettings.from_mapping(settings), progress=progress)
-    frame = result.to_frame(model, traj.T)
-    info = joint_map_summary(frame, model, traj.omega, traj.x0)
+    result, frame, info, bounds = _joint_map_of(traj, scenario.get("prior"), settings, progress)
     info.update(scenario=scenario["name"], model=model.slug, T=traj.T,
                 method=scenario.get("method", "design"), seed=scenario.get("seed"),
                 prior=list(bounds.variants))
@@ -65,18 +74,13 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
 def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method: str,
                           seed: int, settings: dict, out: PathLike) -> dict:
     """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A)."""
-    from .joint_map import JointMapSettings, joint_map, joint_map_summary
     from .config import disturbance_dim
     from .trajectories import make_trajectories
 
     sc = {**scenario, "K": K, "method": method, "seed": seed}
     matrix, attrs = io.read_disturbances(disturbances, q=disturbance_dim(sc), K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
-    model = traj.model
-    bounds = model.prior_bounds(traj.omega, sc.get("prior"))
-    result = joint_map(model, traj.z, bounds, traj.omega, traj.x0,
-                       JointMapSettings.from_mapping(settings))
-    info = joint_map_summary(result.to_frame(model, traj.T), model, traj.omega, traj.x0)
+    _, _, info, _ = _joint_map_of(traj, sc.get("prior"), settings)
     info.update(K_i=K, method=method, seed=seed, scenario=scenario["name"])
     io.write_json(out, info)
     return info
@@ -165,7 +169,7 @@ def table_ii_scenarios(scenarios: list[dict]) -> list[dict]:
     """Scenarios of Tables II/III and Figure 3: model Same, (a, x0) = (0.9, 8), both stages."""
     return [sc for sc in scenarios
             if sc["model"] == "same" and sc["omega"].get("a") == 0.9
-            and float(sc["x0"] if not isinstance(sc["x0"], list) else sc["x0"][0]) == 8.0
+            and x0_list(sc) == [8.0]
             and sc["joint_map"] and sc["stan"]]
 
 
