@@ -51,6 +51,8 @@ class FakeBackend:
             raise SamplingError("Initialization failed after 100 attempts")
         if mode == "bug":
             raise ZeroDivisionError("numerical exception in the fake")
+        if mode == "reject":
+            raise ValueError("same.stan: data rejected: empty support for a")
         rng = np.random.default_rng(seed)
         c, n, t = settings.chains, settings.iter_sampling, data["T"]
         a = 0.9 + 0.02 * rng.standard_normal((c, n))
@@ -99,7 +101,7 @@ def run(sc, backend, ks=range(K), **kw):
                             kw.get("progress"), kw.get("retry_errors", False))
 
 
-MODES = {1: "raise", 2: "bad", 3: "const", 4: "nan", 5: "bug"}
+MODES = {1: "raise", 2: "bad", 3: "const", 4: "nan", 5: "reject"}
 
 
 def test_records_for_good_and_failing_trajectories(scenario):
@@ -145,9 +147,9 @@ def test_records_for_good_and_failing_trajectories(scenario):
     assert not nan["converged"] and {"nonfinite", "kde"} <= set(nan["failed_checks"])
     assert "non-finite" in nan["reason"]
 
-    bug = recs[5]
-    assert bug["status"] == "error" and bug["failed_checks"] == ["exception"]
-    assert "ZeroDivisionError" in bug["reason"]
+    rejected = recs[5]
+    assert rejected["status"] == "error" and rejected["failed_checks"] == ["exception"]
+    assert "data rejected" in rejected["reason"]
 
 
 def test_resume_skips_valid_records(scenario):
@@ -292,3 +294,32 @@ def test_realistic_size_record(scenario):
     assert len(recs[0]["map"]) == len(model.theta_names(100))
     t = recs[0]["timings"]
     assert t["overhead"] >= t["diagnostics"] + t["marginal"] > 0, t
+
+
+def test_backend_failure_fails_the_job_without_a_record(scenario):
+    """An error that is not the sampler's on these data (here a bug) is never stored."""
+    backend = FakeBackend({2: "bug"})
+    with pytest.raises(ZeroDivisionError):
+        run(scenario, backend)
+    assert record_path(scenario["records_dir"], 1).exists()
+    assert not record_path(scenario["records_dir"], 2).exists()
+
+
+class OtherStanFake(FakeBackend):
+    name = "other"
+
+    def identity(self):
+        return {"backend": self.name, "stan_version": "9.9"}
+
+
+def test_switching_backend_recomputes_records(scenario):
+    first = FakeBackend()
+    run(scenario, first)
+    assert len(first.calls) == K
+    again = FakeBackend()
+    run(scenario, again)
+    assert again.calls == []  # same backend: every record reused
+    other = OtherStanFake()
+    recs = run(scenario, other)
+    assert len(other.calls) == K
+    assert {r["key"]["backend"] for r in recs} == {"other 9.9"}

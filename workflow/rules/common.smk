@@ -8,10 +8,16 @@ sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
 from ssmobs import stages  # noqa: E402
+from ssmobs.stan_backends import resolve_backend  # noqa: E402
 
 try:
     ssmobs_config.validate(config)
 except ConfigError as err:
+    raise WorkflowError(str(err)) from None
+
+try:  # "auto" is resolved here, so the concrete backend is part of the rules' params
+    STAN_BACKEND = resolve_backend(config["stan"]["backend"])
+except ValueError as err:
     raise WorkflowError(str(err)) from None
 
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
@@ -38,6 +44,7 @@ wildcard_constraints:
     seed=r"\d+",
     method="design|random|antithetic",
     batch=r"\d+",
+    backend="native|cmdstanpy|pystan",
     model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
 
 

@@ -2,15 +2,15 @@
 
 
 rule build_stan_model:
-    """Compile stan/<model>.stan once with the configured backend (PyStan or cmdstanpy)."""
+    """Compile stan/<model>.stan once with the configured backend (native, cmdstanpy, PyStan)."""
     input:
         lambda wc: str(REPO / "stan" / f"{wc.model}.stan"),
     output:
-        "results/shared/stan/{model}.json",
+        "results/shared/stan/{backend}/{model}.json",
     log:
-        "results/shared/logs/build_stan_model/{model}.log",
+        "results/shared/logs/build_stan_model/{backend}/{model}.log",
     params:
-        backend=config["stan"]["backend"],
+        backend=lambda wc: wc.backend,
     resources:
         mem_mb=4000,
         runtime=30,
@@ -24,7 +24,7 @@ rule sample_nuts:
     """NUTS for one batch of trajectories; one record per trajectory, resumable."""
     input:
         trajectories="results/{scenario}/design_trajectories/trajectories.nc",
-        marker=lambda wc: f"results/shared/stan/{SCENARIOS[wc.scenario]['model']}.json",
+        marker=lambda wc: f"results/shared/stan/{STAN_BACKEND}/{SCENARIOS[wc.scenario]['model']}.json",
     output:
         "results/{scenario}/sample_nuts/batch{batch}.parquet",
     log:
@@ -34,6 +34,7 @@ rule sample_nuts:
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         stan=config["stan"],
+        backend=STAN_BACKEND,
         convergence=config["convergence"],
         records="results/{scenario}/sample_nuts/records",
         draws="results/{scenario}/draws",

@@ -11,15 +11,19 @@
    (:func:`ssmobs.marginal_map.marginal_summary`, Eq. (11), (12)),
 5. writes the record atomically, and the draws as NetCDF (ArviZ) for k in ``keep_draws_for``.
 
-Any exception of one trajectory (a :class:`SamplingError`, a KDE on zero-spread or
-non-finite draws, anything else) becomes a record with ``converged: false`` and the
-reason; the loop goes on.  Only the per-trajectory records (and draws where asked) are
+A failure of the sampler on one trajectory (:class:`SamplingError`, data the model
+rejects) or of our summaries (a KDE on zero-spread draws, anything in the checks) becomes a
+record with ``converged: false`` and the reason; the loop goes on.  Any other error of the
+backend (:class:`~ssmobs.stan_backends.base.BackendError`: a missing library, a killed
+driver) fails the job without a record, so a broken installation never yields a finished
+run with |K^Stan| = 0.  Only the per-trajectory records (and draws where asked) are
 written, so an interrupted batch resumes where it stopped.
 
 Record format (JSON, one file per k; ``RECORD_VERSION``)::
 
     record_version   int
-    key              {scenario, k, seed, stan_seed, program_hash, settings_hash, data_hash}
+    key              {scenario, k, seed, stan_seed, program_hash, settings_hash, backend
+                     ("<name> <Stan version>"), data_hash}
     k, scenario, model, T
     status           "ok" (draws were checked) | "error" (an exception before that)
     converged        bool: all convergence checks passed and the marginal summary exists
@@ -118,12 +122,19 @@ def _omega_vector(model: Any, omega_true: Any) -> list[float]:
     return _as_list(omega_true)
 
 
+def backend_identity(backend: Any) -> str:
+    """``"<backend> <Stan version>"``: records of another backend or Stan are not reused."""
+    ident = backend.identity() if hasattr(backend, "identity") else {
+        "backend": getattr(backend, "name", type(backend).__name__)}
+    return " ".join(str(ident[k]) for k in sorted(ident))
+
+
 def record_key(scenario: str, k: int, seed: int, prog_hash: str, set_hash: str,
-               z_k: np.ndarray, x_k: np.ndarray) -> dict[str, Any]:
+               z_k: np.ndarray, x_k: np.ndarray, backend: str = "") -> dict[str, Any]:
     """The key a stored record must match to be reused."""
     return {"scenario": scenario, "k": int(k), "seed": int(seed),
             "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
-            "program_hash": prog_hash, "settings_hash": set_hash,
+            "program_hash": prog_hash, "settings_hash": set_hash, "backend": backend,
             "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16]}
 
 
@@ -216,10 +227,12 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
         rec.update(status="error", failed_checks=["sampling_error"],
                    reason=f"sampling error: {err}")
         LOG.warning("k=%d: %s", k, rec["reason"])
-    except Exception as err:  # noqa: BLE001 - one trajectory must never stop the batch
+    except ValueError as err:  # the model rejected these data (e.g. a reject() statement)
         rec.update(status="error", failed_checks=["exception"],
                    reason=f"exception during sampling: {type(err).__name__}: {err}")
         LOG.warning("k=%d: %s", k, rec["reason"], exc_info=True)
+    # anything else (BackendError: a broken installation, a killed driver; bugs) is not a
+    # property of this trajectory: it fails the job and no record is written
 
     if draws is not None:
         timings["backend"] = {kk: float(v) for kk, v in (draws.timings or {}).items()}
@@ -336,6 +349,7 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
     prog = program_hash(stan_file)
     set_hash = settings_hash(model, T, sampler, convergence, init, bounds, omega_true, x0_true)
     n_theta = len(model.theta_names(T))
+    ident = backend_identity(backend)
 
     records: dict[int, dict[str, Any]] = {}
     todo: list[tuple[int, dict[str, Any]]] = []
@@ -343,7 +357,7 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
         k = int(k)
         if not 0 <= k < z.shape[0]:
             raise IndexError(f"trajectory k={k} outside 0..{z.shape[0] - 1}")
-        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k])
+        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k], ident)
         rec = load_record(record_path(records_dir, k), key, n_theta)
         if rec is not None and retry_errors and rec["status"] == "error":
             rec = None

@@ -1,9 +1,12 @@
-"""Stan backends: PyStan 3 (embedded, always there) and cmdstanpy (when CmdStan is installed).
+"""Stan backends: native (our driver on httpstan's Stan sources, the embedded default),
+cmdstanpy (when CmdStan is installed) and PyStan 3.
 
-``get_backend(name)`` picks one by the config key ``stan.backend`` ("auto", "pystan",
-"cmdstanpy"); ``stan_file(slug)`` is the repository's ``stan/<slug>.stan``.  Both backends
-take the data dict of :meth:`ssmobs.models.base.StateSpaceModel.stan_data` and return
-:class:`~ssmobs.stan_backends.base.Draws`.
+``get_backend(name)`` picks one by the config key ``stan.backend`` ("auto", "native",
+"cmdstanpy", "pystan"); ``resolve_backend`` turns "auto" into the concrete name (cmdstanpy
+when CmdStan is installed, else native); ``stan_file(slug)`` is the repository's
+``stan/<slug>.stan``.  All backends take the data dict of
+:meth:`ssmobs.models.base.StateSpaceModel.stan_data`, return
+:class:`~ssmobs.stan_backends.base.Draws` and give the same draws for the same seed.
 
 The backend modules import their Stan library lazily, so choosing one never needs the other.
 """
@@ -16,10 +19,10 @@ import os
 from pathlib import Path
 from typing import Iterator
 
-from .base import Draws, SamplerSettings, SamplingError, StanBackend
+from .base import BackendError, Draws, SamplerSettings, SamplingError, StanBackend
 
 #: values accepted for the config key ``stan.backend``
-BACKEND_NAMES: tuple[str, ...] = ("auto", "pystan", "cmdstanpy")
+BACKEND_NAMES: tuple[str, ...] = ("auto", "native", "cmdstanpy", "pystan")
 
 #: repository directory holding the Stan programs (workflow/ssmobs/../../stan)
 STAN_DIR = Path(__file__).resolve().parents[3] / "stan"
@@ -50,17 +53,30 @@ def have_cmdstan() -> bool:
     return stanc.is_file()
 
 
-def get_backend(name: str = "auto") -> StanBackend:
-    """The backend for the config value ``stan.backend``.
+def resolve_backend(name: str = "auto") -> str:
+    """The concrete backend name for the config value ``stan.backend``.
 
-    ``auto`` gives cmdstanpy when CmdStan is installed (:func:`have_cmdstan`), else PyStan.
-    ``cmdstanpy`` without CmdStan and unknown names raise ValueError.
+    ``auto`` gives cmdstanpy when CmdStan is installed (:func:`have_cmdstan`), else native.
+    Unknown names raise ValueError.
     """
     if name not in BACKEND_NAMES:
         raise ValueError(f"stan.backend: unknown value {name!r}; choose one of "
                          f"{list(BACKEND_NAMES)}")
     if name == "auto":
-        name = "cmdstanpy" if have_cmdstan() else "pystan"
+        return "cmdstanpy" if have_cmdstan() else "native"
+    return name
+
+
+def get_backend(name: str = "auto") -> StanBackend:
+    """The backend for the config value ``stan.backend`` (see :func:`resolve_backend`).
+
+    ``cmdstanpy`` without CmdStan and unknown names raise ValueError.
+    """
+    name = resolve_backend(name)
+    if name == "native":
+        from .native import NativeBackend
+
+        return NativeBackend()
     if name == "cmdstanpy":
         if not have_cmdstan():
             cmdstan_env = os.environ.get("CMDSTAN")
@@ -70,8 +86,8 @@ def get_backend(name: str = "auto") -> StanBackend:
                 f"stan.backend: 'cmdstanpy' needs a CmdStan installation, but none was found "
                 f"({where}). Install CmdStan with `python -m cmdstanpy.install_cmdstan` (needs "
                 f"network access to GitHub and a C++ toolchain) or point $CMDSTAN at an "
-                f"existing installation; or set stan.backend to 'pystan' (embedded, no CmdStan "
-                f"needed) or 'auto' (cmdstanpy when CmdStan is there, else pystan).")
+                f"existing installation; or set stan.backend to 'native' (embedded, no CmdStan "
+                f"needed) or 'auto' (cmdstanpy when CmdStan is there, else native).")
         from .cmdstanpy import CmdStanPyBackend
 
         return CmdStanPyBackend()
@@ -137,5 +153,6 @@ def log_captured(label: str, text: str, limit: int = 20000) -> None:
         LOG.debug("%s output:\n%s", label, text)
 
 
-__all__ = ["BACKEND_NAMES", "Draws", "SAMPLER_COLUMNS", "STAN_DIR", "SamplerSettings",
-           "SamplingError", "StanBackend", "get_backend", "have_cmdstan", "stan_file"]
+__all__ = ["BACKEND_NAMES", "BackendError", "Draws", "SAMPLER_COLUMNS", "STAN_DIR", "SamplerSettings",
+           "SamplingError", "StanBackend", "get_backend", "have_cmdstan", "resolve_backend",
+           "stan_file"]

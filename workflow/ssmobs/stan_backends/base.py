@@ -62,13 +62,26 @@ def check_sample_args(seed: int, settings: SamplerSettings, inits: list[dict] | 
 
 
 class SamplingError(RuntimeError):
-    """A run that could not produce draws (initialisation failure, numerical exception)."""
+    """The sampler failed on *these data* (initialisation failure, exception in the model).
+
+    Only this error (and a data set the model rejects, ValueError) may be stored as a
+    per-trajectory result; anything else is a broken installation or environment.
+    """
+
+
+class BackendError(RuntimeError):
+    """The backend itself cannot run (missing library, compiler, killed process): never a
+    property of one trajectory, so it fails the job instead of becoming a record."""
 
 
 class StanBackend(Protocol):
     """What the Stan stage needs from a backend."""
 
     name: str
+
+    def identity(self) -> dict[str, str]:
+        """What determines the draws besides program, data and settings: backend name and
+        Stan version (part of every record's key)."""
 
     def compile(self, stan_file: str) -> dict[str, Any]:
         """Compile (or find compiled) program; return a JSON-able marker (backend, program hash, paths)."""

@@ -3,19 +3,26 @@
 Compiling
     cmdstanpy writes the executable next to the ``.stan`` file and decides to recompile by
     comparing timestamps only.  :meth:`CmdStanPyBackend.compile` therefore copies the
-    program into a cache directory keyed by CmdStan version and program hash,
-    ``$XDG_CACHE_HOME/ssmobs/cmdstan-<version>/<slug>-<sha256[:16]>/`` (default
-    ``~/.cache``), and compiles there once, under an exclusive ``fcntl.flock`` lock.  The
-    repository's ``stan/`` directory stays free of executables.
+    program into a cache directory keyed by everything that determines the binary: the
+    program, the CmdStan installation's path and full version (from its makefile) and its
+    ``make/local``, ``<cache_root>/cmdstan/<slug>-<key>/`` (:mod:`.cache`), and compiles
+    there once, under an exclusive lock.  The repository's ``stan/`` stays free of
+    executables.
 
 Sampling
     Each call writes the data JSON and CmdStan's CSV and console files into a temporary
-    directory that is deleted afterwards (also on errors), so nothing accumulates; progress
-    bars are off and cmdstanpy's log goes to DEBUG.  Names map from
-    :class:`SamplerSettings`: ``workers`` -> ``parallel_chains``, ``iter_warmup``,
-    ``iter_sampling``, ``adapt_delta``, ``max_treedepth`` as they are.
+    directory that is deleted afterwards (also on errors; a killed job's directory is swept
+    by the next call), so nothing accumulates; progress bars are off and cmdstanpy's log
+    goes to DEBUG.  Names map from :class:`SamplerSettings`: ``workers`` ->
+    ``parallel_chains``, ``iter_warmup``, ``iter_sampling``, ``adapt_delta``,
+    ``max_treedepth`` as they are.  CSV output is written at full double precision
+    (``sig_figs=18``; CmdStan's default is 6 significant digits).
 
-CmdStan writes 6 significant digits to its CSV files unless ``sig_figs`` is given.
+Failures
+    CmdStan's own failure on these data (initialisation failed, an exception in the model)
+    raises :class:`SamplingError`; anything else (a missing shared library, exit code 127,
+    a killed process) raises :class:`BackendError` with the tail of CmdStan's console
+    output, so the job fails instead of writing per-trajectory error records.
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -33,15 +41,46 @@ import numpy as np
 
 from . import SAMPLER_COLUMNS, quiet_loggers
 from ..io import file_lock
-from .base import Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
+from .cache import cache_root, content_key, owned_tempdir_name, sweep_stale, tail
 
 LOG = logging.getLogger("ssmobs.stan")
 
+#: CSV digits: full double precision
+SIG_FIGS = 18
+TMP_PREFIX = "ssmobs-cmdstan-"
+#: CmdStan console text that means the sampler failed on these data (not the installation)
+SAMPLER_FAILURE = re.compile(r"Initialization failed|Rejecting initial value|"
+                             r"Exception:|Error evaluating the log probability", re.I)
 
-def cache_root() -> Path:
-    """Root of the compiled-program cache (``$XDG_CACHE_HOME/ssmobs``, default ~/.cache)."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "ssmobs"
+
+def cmdstan_identity(path: str | os.PathLike) -> dict[str, str]:
+    """Path, full version (``CMDSTAN_VERSION`` in the makefile) and ``make/local`` hash."""
+    root = Path(path)
+    version = "unknown"
+    try:
+        found = re.search(r"^CMDSTAN_VERSION\s*:?=\s*(\S+)", (root / "makefile").read_text(),
+                          re.M)
+        version = found.group(1) if found else version
+    except OSError:
+        pass
+    try:
+        local = (root / "make" / "local").read_text()
+    except OSError:
+        local = ""
+    return {"cmdstan_path": str(root.resolve()), "cmdstan_version": version,
+            "make_local": hashlib.sha256(local.encode()).hexdigest()[:16]}
+
+
+def _console_tail(directory: Path) -> str:
+    """The last lines of CmdStan's console files in ``directory`` (read before deletion)."""
+    texts = []
+    for f in sorted(directory.rglob("*stdout*.txt")) + sorted(directory.rglob("*.err")):
+        try:
+            texts.append(f"[{f.name}]\n" + tail(f.read_text(errors="replace"), 8))
+        except OSError:
+            continue
+    return "\n".join(texts)
 
 
 def fit_to_draws(fit: Any) -> Draws:
@@ -78,10 +117,17 @@ class CmdStanPyBackend:
     name = "cmdstanpy"
 
     def __init__(self, tmp_root: str | os.PathLike | None = None,
-                 sig_figs: int | None = None) -> None:
-        self.tmp_root = None if tmp_root is None else str(tmp_root)
+                 sig_figs: int | None = SIG_FIGS) -> None:
+        self.tmp_root = str(tmp_root or tempfile.gettempdir())
         self.sig_figs = sig_figs
         self._markers: dict[tuple[str, str], dict[str, Any]] = {}
+        self._swept = False
+
+    def identity(self) -> dict[str, str]:
+        import cmdstanpy
+
+        ident = cmdstan_identity(cmdstanpy.cmdstan_path())
+        return {"backend": self.name, "stan_version": f"cmdstan {ident['cmdstan_version']}"}
 
     def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
         """Compile a copy of the program in the cache (once); return its marker.
@@ -98,10 +144,10 @@ class CmdStanPyBackend:
         key = (str(path), sha)
         if key in self._markers:
             return self._markers[key]
-        version = cmdstanpy.cmdstan_version()
-        version_tag = ".".join(map(str, version)) if version else "unknown"
+        ident = cmdstan_identity(cmdstanpy.cmdstan_path())
+        version_tag = ident["cmdstan_version"]
         slug = path.stem
-        cache_dir = cache_root() / f"cmdstan-{version_tag}" / f"{slug}-{sha[:16]}"
+        cache_dir = cache_root() / "cmdstan" / f"{slug}-{content_key({'program': sha, **ident})}"
         copy = cache_dir / f"{slug}.stan"
         exe = cache_dir / (slug + (".exe" if os.name == "nt" else ""))
         if not exe.is_file():
@@ -127,8 +173,9 @@ class CmdStanPyBackend:
             "model_name": slug,
             "cache_dir": str(cache_dir),
             "exe_file": str(exe),
-            "cmdstan_path": str(cmdstanpy.cmdstan_path()),
+            "cmdstan_path": ident["cmdstan_path"],
             "cmdstan_version": version_tag,
+            "make_local_sha256": ident["make_local"],
             "cmdstanpy_version": cmdstanpy.__version__,
         }
         self._markers[key] = marker
@@ -147,7 +194,10 @@ class CmdStanPyBackend:
         check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
         label = Path(marker["stan_file"]).name
-        tmp = Path(tempfile.mkdtemp(prefix="ssmobs-cmdstan-", dir=self.tmp_root))
+        if not self._swept:
+            sweep_stale(Path(self.tmp_root), TMP_PREFIX)
+            self._swept = True
+        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
         try:
             data_file = tmp / "data.json"
             cmdstanpy.write_stan_json(str(data_file), dict(data))
@@ -167,7 +217,14 @@ class CmdStanPyBackend:
                         output_dir=str(tmp / "output"), sig_figs=self.sig_figs,
                         show_progress=False, show_console=False)
                 except RuntimeError as err:
-                    raise SamplingError(f"{label} (seed {seed}): {err}") from err
+                    console = _console_tail(tmp / "output")
+                    # cmdstanpy's message lists files that are deleted below: keep only its
+                    # first line and add the console's own words
+                    first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+                    text = f"{label} (seed {seed}): {first}\n{console}".strip()
+                    if SAMPLER_FAILURE.search(console) or SAMPLER_FAILURE.search(str(err)):
+                        raise SamplingError(text) from err
+                    raise BackendError(text) from err
                 t_sample = time.perf_counter() - t0
             t0 = time.perf_counter()
             draws = fit_to_draws(fit)

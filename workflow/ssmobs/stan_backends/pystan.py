@@ -274,6 +274,11 @@ class PyStanBackend:
 
     name = "pystan"
 
+    def identity(self) -> dict[str, str]:
+        import httpstan
+
+        return {"backend": self.name, "stan_version": f"httpstan {httpstan.__version__}"}
+
     def __init__(self, tmp_root: str | os.PathLike | None = None, refresh: int = 0) -> None:
         self.tmp_root = None if tmp_root is None else str(tmp_root)
         self.refresh = int(refresh)

@@ -1,0 +1,248 @@
+// ssmobs native Stan driver: one process runs NUTS (diag_e metric, adapted) for one
+// data set, with the same service call and arguments as CmdStan and PyStan, and writes
+// the post-warmup draws in a binary layout NumPy reads without parsing.
+//
+// Compiled together with a stanc-generated model (included as SSMOBS_MODEL_HPP) by
+// ssmobs.stan_backends.native.  Usage:
+//
+//   driver --data data.json --output draws.bin --seed S --chains C --warmup W
+//          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
+//          [--init-radius R] [--discard]
+//
+// Output (little-endian): "SSMOBSD1" (8 bytes), uint32 header length L, L bytes of
+// header text "chains=C\ndraws=N\ncolumns=name1,name2,...\n", then for every chain in
+// order its N rows of len(columns) float64 values (row-major).  With --discard nothing
+// is written (the sampler's floor, for benchmarks).
+//
+// Exit codes: 0 ok; 2 bad arguments; 3 the sampler failed on these data (initialisation
+// failed, exception in the model); 4 the data were rejected by the model's constructor;
+// 5 the output could not be written.
+
+#include SSMOBS_MODEL_HPP
+
+#include <stan/callbacks/interrupt.hpp>
+#include <stan/callbacks/logger.hpp>
+#include <stan/callbacks/writer.hpp>
+#include <stan/io/empty_var_context.hpp>
+#include <stan/io/json/json_data.hpp>
+#include <stan/math/prim/core/init_threadpool_tbb.hpp>
+#include <stan/services/sample/hmc_nuts_diag_e_adapt.hpp>
+
+#include <tbb/parallel_for.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+std::mutex stderr_mutex;
+
+// Sends Stan's messages to stderr, one line each, prefixed with the chain id.
+class StderrLogger : public stan::callbacks::logger {
+ public:
+  explicit StderrLogger(int chain) : prefix_("chain " + std::to_string(chain) + ": ") {}
+  void debug(const std::string& m) override {}
+  void debug(const std::stringstream& m) override {}
+  void info(const std::string& m) override { put("", m); }
+  void info(const std::stringstream& m) override { put("", m.str()); }
+  void warn(const std::string& m) override { put("warning: ", m); }
+  void warn(const std::stringstream& m) override { put("warning: ", m.str()); }
+  void error(const std::string& m) override { put("error: ", m); }
+  void error(const std::stringstream& m) override { put("error: ", m.str()); }
+  void fatal(const std::string& m) override { put("fatal: ", m); }
+  void fatal(const std::stringstream& m) override { put("fatal: ", m.str()); }
+
+ private:
+  void put(const char* level, const std::string& m) {
+    if (m.empty()) return;
+    std::lock_guard<std::mutex> lock(stderr_mutex);
+    std::cerr << prefix_ << level << m << '\n';
+  }
+  std::string prefix_;
+};
+
+// Keeps the column names and every row of numbers (post-warmup draws) in memory.
+class RowWriter : public stan::callbacks::writer {
+ public:
+  void operator()(const std::vector<std::string>& names) override { names_ = names; }
+  void operator()(const std::vector<double>& state) override {
+    if (discard_) {
+      ++n_rows_;
+      return;
+    }
+    values_.insert(values_.end(), state.begin(), state.end());
+    ++n_rows_;
+  }
+  bool discard_ = false;
+  std::vector<std::string> names_;
+  std::vector<double> values_;
+  std::size_t n_rows_ = 0;
+};
+
+struct Args {
+  std::string data, output;
+  std::vector<std::string> inits;
+  unsigned int seed = 0;
+  int chains = 4, warmup = 1000, samples = 1000, max_depth = 10, threads = 1;
+  double delta = 0.8, init_radius = 2.0;
+  bool discard = false;
+};
+
+[[noreturn]] void usage(const std::string& why) {
+  std::cerr << "driver: " << why << "\n";
+  std::exit(2);
+}
+
+Args parse(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    std::string k = argv[i];
+    if (k == "--discard") {
+      a.discard = true;
+      continue;
+    }
+    if (i + 1 >= argc) usage("missing value after " + k);
+    std::string v = argv[++i];
+    try {
+      if (k == "--data") a.data = v;
+      else if (k == "--output") a.output = v;
+      else if (k == "--init") a.inits.push_back(v);
+      else if (k == "--seed") a.seed = static_cast<unsigned int>(std::stoul(v));
+      else if (k == "--chains") a.chains = std::stoi(v);
+      else if (k == "--warmup") a.warmup = std::stoi(v);
+      else if (k == "--samples") a.samples = std::stoi(v);
+      else if (k == "--max-depth") a.max_depth = std::stoi(v);
+      else if (k == "--threads") a.threads = std::stoi(v);
+      else if (k == "--delta") a.delta = std::stod(v);
+      else if (k == "--init-radius") a.init_radius = std::stod(v);
+      else usage("unknown option " + k);
+    } catch (const std::exception&) {
+      usage("bad value for " + k + ": " + v);
+    }
+  }
+  if (a.data.empty()) usage("--data is required");
+  if (a.output.empty() && !a.discard) usage("--output (or --discard) is required");
+  if (a.chains < 1 || a.samples < 1 || a.warmup < 0 || a.threads < 1 || a.max_depth < 1)
+    usage("chains, samples, threads, max-depth must be >= 1 and warmup >= 0");
+  if (!a.inits.empty() && static_cast<int>(a.inits.size()) != a.chains)
+    usage("give one --init per chain or none");
+  return a;
+}
+
+std::unique_ptr<stan::io::var_context> read_json(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open " + path);
+  return std::make_unique<stan::json::json_data>(in);
+}
+
+bool write_output(const std::string& path, const std::vector<RowWriter>& writers,
+                  int samples) {
+  std::ostringstream header;
+  header << "chains=" << writers.size() << "\ndraws=" << samples << "\ncolumns=";
+  const auto& names = writers[0].names_;
+  for (std::size_t j = 0; j < names.size(); ++j) header << (j ? "," : "") << names[j];
+  header << "\n";
+  const std::string text = header.str();
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) return false;
+  const std::uint32_t len = static_cast<std::uint32_t>(text.size());
+  bool ok = std::fwrite("SSMOBSD1", 1, 8, f) == 8 &&
+            std::fwrite(&len, sizeof(len), 1, f) == 1 &&
+            std::fwrite(text.data(), 1, text.size(), f) == text.size();
+  for (const auto& w : writers) {
+    if (!ok) break;
+    ok = std::fwrite(w.values_.data(), sizeof(double), w.values_.size(), f) ==
+         w.values_.size();
+  }
+  ok = (std::fclose(f) == 0) && ok;
+  return ok;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args a = parse(argc, argv);
+
+  std::unique_ptr<stan::io::var_context> data;
+  std::unique_ptr<stan::model::model_base> model;
+  try {
+    data = read_json(a.data);
+    model.reset(&new_model(*data, a.seed, &std::cerr));
+  } catch (const std::exception& e) {
+    std::cerr << "data rejected: " << e.what() << "\n";
+    return 4;
+  }
+
+  std::vector<std::unique_ptr<stan::io::var_context>> inits;
+  try {
+    for (int c = 0; c < a.chains; ++c) {
+      if (a.inits.empty())
+        inits.emplace_back(std::make_unique<stan::io::empty_var_context>());
+      else
+        inits.emplace_back(read_json(a.inits[c]));
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "inits rejected: " << e.what() << "\n";
+    return 2;
+  }
+
+  std::vector<RowWriter> writers(a.chains);
+  for (auto& w : writers) {
+    w.discard_ = a.discard;
+    if (!a.discard) w.values_.reserve(static_cast<std::size_t>(a.samples) * 256);
+  }
+  std::vector<int> codes(a.chains, 0);
+  std::vector<std::string> failures(a.chains);
+
+  auto run_chain = [&](int c) {
+    StderrLogger logger(c + 1);
+    stan::callbacks::interrupt interrupt;
+    stan::callbacks::writer init_writer, diagnostic_writer;
+    try {
+      // Chain ids 1..C with one seed, the sampler defaults of CmdStan and PyStan.
+      codes[c] = stan::services::sample::hmc_nuts_diag_e_adapt(
+          *model, *inits[c], a.seed, static_cast<unsigned int>(c + 1), a.init_radius,
+          a.warmup, a.samples, /*num_thin=*/1, /*save_warmup=*/false, /*refresh=*/0,
+          /*stepsize=*/1.0, /*stepsize_jitter=*/0.0, a.max_depth, a.delta,
+          /*gamma=*/0.05, /*kappa=*/0.75, /*t0=*/10.0, /*init_buffer=*/75,
+          /*term_buffer=*/50, /*window=*/25, interrupt, logger, init_writer, writers[c],
+          diagnostic_writer);
+    } catch (const std::exception& e) {
+      codes[c] = -1;
+      failures[c] = e.what();
+    }
+  };
+
+  if (a.threads <= 1) {
+    for (int c = 0; c < a.chains; ++c) run_chain(c);
+  } else {
+    stan::math::init_threadpool_tbb(a.threads);
+    tbb::parallel_for(0, a.chains, 1, run_chain);
+  }
+
+  for (int c = 0; c < a.chains; ++c) {
+    if (codes[c] != 0) {
+      std::cerr << "chain " << c + 1 << " failed"
+                << (failures[c].empty() ? "" : ": " + failures[c]) << "\n";
+      return 3;
+    }
+    if (writers[c].n_rows_ != static_cast<std::size_t>(a.samples)) {
+      std::cerr << "chain " << c + 1 << " wrote " << writers[c].n_rows_ << " draws, "
+                << "expected " << a.samples << "\n";
+      return 3;
+    }
+  }
+  if (!a.discard && !write_output(a.output, writers, a.samples)) {
+    std::cerr << "cannot write " << a.output << ": " << std::strerror(errno) << "\n";
+    return 5;
+  }
+  return 0;
+}
