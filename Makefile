@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run test smoke paper clean
+.PHONY: setup run test smoke paper tables clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,16 @@ smoke: setup
 
 paper: setup
 	$(BIN)/snakemake --cores $(CORES) --configfile config/paper.yaml
+
+# Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).
+TABLES_DIR := paper_figures/paper_settings
+TABLES_TARGETS := $(foreach s,table2_joint_vs_marginal table3_coverage,$(foreach e,csv md tex,$(TABLES_DIR)/$(s).$(e))) \
+	$(TABLES_DIR)/fig3_joint_vs_marginal.pdf $(TABLES_DIR)/fig3_joint_vs_marginal.png
+
+tables: setup
+	start=$$(date +%s); \
+	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete $(TABLES_TARGETS) --configfile config/tables.yaml && \
+	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) --started $$start
 
 clean:
 	rm -rf results .snakemake

@@ -20,6 +20,8 @@ try:  # "auto" is resolved here, so the concrete backend is part of the rules' p
 except ValueError as err:
     raise WorkflowError(str(err)) from None
 
+#: where the tables and figures go (config key outputs_dir)
+OUT = config["outputs_dir"]
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 REPO = Path(workflow.basedir)
@@ -94,16 +96,16 @@ def all_targets():
     targets += [f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items()
                 if sc["stan"]]
     for name in KSEL:
-        targets += expand(f"paper_figures/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
+        targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
-        targets += expand("paper_figures/table_k_selection.{ext}", ext=["csv", "md", "tex"])
+        targets += expand(f"{OUT}/table_k_selection.{{ext}}", ext=["csv", "md", "tex"])
     profile = stages.profile_scenario(config["scenarios"])
     if profile is not None:
-        targets += expand(f"paper_figures/fig4_profile_posterior_{profile['name']}.{{ext}}",
+        targets += expand(f"{OUT}/fig4_profile_posterior_{profile['name']}.{{ext}}",
                           ext=["pdf", "png"])
-    targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]
-    targets += expand("paper_figures/{stem}.{ext}", ext=["csv", "md", "tex"],
+    targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
+    targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["csv", "md", "tex"],
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
-    targets += expand("paper_figures/{stem}.{ext}", ext=["pdf", "png"],
+    targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
     return targets

@@ -6,9 +6,9 @@ rule figure_design_points:
     input:
         figure2_disturbances,
     output:
-        pdf=report("paper_figures/fig2_design_points.pdf", caption="../report/fig2.rst",
+        pdf=report(f"{OUT}/fig2_design_points.pdf", caption="../report/fig2.rst",
                    category="Figures"),
-        png="paper_figures/fig2_design_points.png",
+        png=f"{OUT}/fig2_design_points.png",
     log:
         "results/shared/logs/figure_design_points.log",
     params:

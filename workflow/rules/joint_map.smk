@@ -56,7 +56,7 @@ rule select_k:
         json="results/k_selection/{ksel}/selection.json",
         csv="results/k_selection/{ksel}/v_vectors.csv",
         figure=report(
-            multiext("paper_figures/fig_k_convergence_{ksel}", ".pdf", ".png"),
+            multiext(f"{OUT}/fig_k_convergence_{{ksel}}", ".pdf", ".png"),
             caption="../report/k_convergence.rst",
             category="Figures",
         ),
@@ -78,7 +78,7 @@ rule table_k_selection:
         [f"results/k_selection/{name}/selection.json" for name in KSEL],
     output:
         report(
-            multiext("paper_figures/table_k_selection", ".csv", ".md", ".tex"),
+            multiext(f"{OUT}/table_k_selection", ".csv", ".md", ".tex"),
             caption="../report/k_selection.rst",
             category="Tables",
         ),
@@ -97,7 +97,7 @@ rule figure_profile_posterior:
         "results/{scenario}/design_trajectories/trajectories.nc",
     output:
         report(
-            multiext("paper_figures/fig4_profile_posterior_{scenario}", ".pdf", ".png"),
+            multiext(f"{OUT}/fig4_profile_posterior_{{scenario}}", ".pdf", ".png"),
             caption="../report/fig4.rst",
             category="Figures",
         ),

@@ -9,17 +9,17 @@ rule paper_tables:
         paper_values="config/paper_values.yaml",
     output:
         report(
-            multiext("paper_figures/table2_joint_vs_marginal", ".csv", ".md", ".tex"),
+            multiext(f"{OUT}/table2_joint_vs_marginal", ".csv", ".md", ".tex"),
             caption="../report/table2.rst",
             category="Tables",
         ),
         report(
-            multiext("paper_figures/table3_coverage", ".csv", ".md", ".tex"),
+            multiext(f"{OUT}/table3_coverage", ".csv", ".md", ".tex"),
             caption="../report/table3.rst",
             category="Tables",
         ),
         report(
-            multiext("paper_figures/section4_summary", ".csv", ".md", ".tex"),
+            multiext(f"{OUT}/section4_summary", ".csv", ".md", ".tex"),
             caption="../report/section4.rst",
             category="Tables",
         ),
@@ -43,7 +43,7 @@ rule figure_joint_vs_marginal:
         marginal=[f"results/{n}/gather_nuts/marginal_map.parquet" for n in TABLE_II_SCENARIOS],
     output:
         report(
-            multiext("paper_figures/fig3_joint_vs_marginal", ".pdf", ".png"),
+            multiext(f"{OUT}/fig3_joint_vs_marginal", ".pdf", ".png"),
             caption="../report/fig3.rst",
             category="Figures",
         ),
@@ -63,10 +63,10 @@ rule figure_joint_vs_marginal:
 rule figure_observability:
     """|K^max|/K and |K^Stan|/K across all scenarios, ours beside the paper's."""
     input:
-        "paper_figures/section4_summary.csv",
+        f"{OUT}/section4_summary.csv",
     output:
         report(
-            multiext("paper_figures/fig_observability_ratios", ".pdf", ".png"),
+            multiext(f"{OUT}/fig_observability_ratios", ".pdf", ".png"),
             caption="../report/observability.rst",
             category="Figures",
         ),
