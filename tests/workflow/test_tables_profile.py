@@ -1,0 +1,77 @@
+"""The tables profile (Tables II/III and Figure 3 at the paper's settings): it plans the
+paper's work, and its committed outputs hold the paper's values beside ours and a
+provenance that matches the profile."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from helpers import REPO, make_workdir, snakemake  # noqa: E402
+
+pytestmark = pytest.mark.workflow
+
+PROFILE = REPO / "config" / "tables.yaml"
+OUT = REPO / "paper_figures" / "paper_settings"
+TARGETS = [f"paper_figures/paper_settings/{stem}.{ext}"
+           for stem in ("table2_joint_vs_marginal", "table3_coverage") for ext in ("csv", "md", "tex")]
+TARGETS += [f"paper_figures/paper_settings/fig3_joint_vs_marginal.{ext}" for ext in ("pdf", "png")]
+
+
+def test_profile_is_the_papers_setting():
+    conf = yaml.safe_load(PROFILE.read_text())
+    rows = {(sc["T"], sc["K"]) for sc in conf["scenarios"]}
+    assert rows == {(20, 1300), (50, 3100)}
+    for sc in conf["scenarios"]:
+        assert sc["model"] == "same" and sc["omega"] == {"a": 0.9} and sc["x0"] == 8
+    # chains and iterations are the schema's defaults, which are the paper's
+    assert not {"chains", "iter_warmup", "iter_sampling"} & set(conf.get("stan", {}))
+    schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    stan = schema["properties"]["stan"]["properties"]
+    assert (stan["chains"]["default"], stan["iter_warmup"]["default"],
+            stan["iter_sampling"]["default"]) == (4, 4000, 6000)
+
+
+def test_dry_run_plans_every_trajectory(tmp_path):
+    workdir = make_workdir(tmp_path)
+    proc = snakemake(workdir, "-n", "--cores", "2", *TARGETS, "--configfile", "config/tables.yaml")
+    counts = dict(re.findall(r"^(\w+)\s+(\d+)$", proc.stdout, flags=re.M))
+    batch = yaml.safe_load(PROFILE.read_text())["stan"]["batch_size"]
+    assert int(counts["sample_nuts"]) == math.ceil(1300 / batch) + math.ceil(3100 / batch)
+    assert int(counts["joint_map"]) == 2 and int(counts["gather_nuts"]) == 2
+
+
+committed = pytest.mark.skipif(not (OUT / "provenance.json").is_file(),
+                               reason="no committed paper-settings outputs in this checkout")
+
+
+@committed
+def test_committed_provenance_matches_profile():
+    prov = yaml.safe_load((OUT / "provenance.json").read_text())
+    assert prov["config"] == yaml.safe_load(PROFILE.read_text())
+    assert prov["config_sha256"] == hashlib.sha256(PROFILE.read_bytes()).hexdigest()
+    assert prov["stan"]["backend"] in ("native", "cmdstanpy", "pystan")
+    assert prov["wall_seconds"] > 0 and re.fullmatch(r"[0-9a-f]{40}", prov["commit"])
+
+
+@committed
+def test_committed_tables_hold_paper_values_beside_ours():
+    t2 = pd.read_csv(OUT / "table2_joint_vs_marginal.csv")
+    assert {"ours", "paper", "rel_diff"} <= set(t2.columns)
+    assert set(t2["T"]) == {20, 50}
+    both = t2.dropna(subset=["ours", "paper"])
+    assert len(both) >= 24  # mean, variance, MSE of (a, x0), joint and marginal, two T
+    assert (both["rel_diff"] >= 0).all()
+    t3 = pd.read_csv(OUT / "table3_coverage.csv")
+    assert {"ours", "paper"} <= set(t3.columns) and t3["paper"].notna().any()
+    for ext in ("pdf", "png"):
+        assert (OUT / f"fig3_joint_vs_marginal.{ext}").stat().st_size > 1000
