@@ -70,13 +70,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--reps-slow", type=int, default=1, help="reps for (Sep, d=1, p=2)")
+    ap.add_argument("--cases", default="", help="comma-separated <model>:<T>, default all")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
+    wanted = {c.strip() for c in args.cases.split(",") if c.strip()}
     native, floor, pystan = NativeBackend(), NativeBackend(discard=True), get_backend("pystan")
     load0 = os.getloadavg()[0]
     t_start = time.perf_counter()
     rows = []
     for slug, omega, T, slow in CASES:
+        if wanted and f"{slug}:{T}" not in wanted:
+            continue
         for b in (native, pystan):
             b.compile(stan_file(slug))
         data = trajectory_data(slug, omega, T)

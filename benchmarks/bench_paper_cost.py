@@ -77,7 +77,7 @@ def main() -> None:
     total_h = sum(r["cpu_h_total"] for r in rows)
     lines = [
         "",
-        "## Cost of the paper profile's Stan stage (issue 5)",
+        f"## Cost of the paper profile's Stan stage, {backend.name} backend",
         "",
         f"- Date: {dt.datetime.now(dt.timezone.utc):%Y-%m-%d %H:%M} UTC; machine: "
         f"{machine_info()}; load average at "
@@ -85,7 +85,8 @@ def main() -> None:
         f"- Command: `python benchmarks/bench_paper_cost.py --n {args.n}`; config "
         f"`{Path(args.config).relative_to(REPO) if Path(args.config).is_absolute() else args.config}`"
         f" ({sampler.chains} chains x ({sampler.iter_warmup} + {sampler.iter_sampling}), "
-        f"1 chain worker, one trajectory after another)",
+        f"1 chain worker, one trajectory after another; backend {backend.name}, "
+        f"{backend.identity()['stan_version']})",
         "- CPU: this process and its chain worker processes (getrusage SELF + CHILDREN); "
         f"{args.n} trajectory(ies) per scenario from random disturbances, so a scenario's "
         "figure is a rough per-run estimate (hard trajectories cost more).",
