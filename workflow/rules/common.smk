@@ -12,7 +12,8 @@ from ssmobs import stages  # noqa: E402
 try:
     ssmobs_config.validate(config)
 except ConfigError as err:
-    raise WorkflowError(str(err)) from None
+    files = ", ".join(map(str, workflow.configfiles)) or "(none)"
+    raise WorkflowError(f"config file(s) {files}: {err}") from None
 
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
@@ -73,6 +74,21 @@ def nuts_batches(wildcards):
     sc = SCENARIOS[wildcards.scenario]
     n = len(batches(sc["K"], config["stan"]["batch_size"]))
     return [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(n)]
+
+
+def nuts_records(wildcards):
+    """The scenario's per-trajectory records that exist when the DAG is built.
+
+    Inputs of gather_nuts (no rule declares them as outputs), so that a record damaged or
+    deleted after its batch ran makes gather_nuts rerun, check every record against its
+    batch table and name the batch to rerun (stages.check_batch_records).
+    """
+    K = SCENARIOS[wildcards.scenario]["K"]
+    folder = Path(f"results/{wildcards.scenario}/sample_nuts/records")
+    if not folder.is_dir():
+        return []
+    return sorted(str(p) for p in folder.glob("k*.json")
+                  if p.stem[1:].isdigit() and int(p.stem[1:]) < K)
 
 
 def figure2_disturbances(wildcards=None):
