@@ -292,3 +292,54 @@ def test_realistic_size_record(scenario):
     assert len(recs[0]["map"]) == len(model.theta_names(100))
     t = recs[0]["timings"]
     assert t["overhead"] >= t["diagnostics"] + t["marginal"] > 0, t
+
+
+# ------------------------------------------- issue 14: gather_nuts checks the records
+@pytest.fixture()
+def batch(scenario, tmp_path):
+    """A batch of the Stan stage as on disk: records/k*.json and the batch table."""
+    from ssmobs import io
+
+    folder = tmp_path / "sample_nuts"
+    recs = run(scenario, FakeBackend(), records_dir=folder / "records")
+    table = folder / "batch0.parquet"
+    io.write_parquet(table, records_to_frame(recs, scenario["model"], T))
+    return table
+
+
+def check(table, scenario):
+    from ssmobs import io
+    from ssmobs.stages import check_batch_records
+
+    check_batch_records(table, io.read_parquet(table), scenario["model"], T)
+
+
+def test_intact_records_pass_the_check(batch, scenario):
+    check(batch, scenario)
+
+
+@pytest.mark.parametrize("damage,needle", [
+    ("truncate", r"record of trajectory k=2 is damaged .*k00002.json: not valid JSON"),
+    ("delete", r"record of trajectory k=2 .*k00002.json\) is missing"),
+    ("edit", r"records of trajectories k=\[2\] .* differ from it"),
+    ("other_k", r"k00002.json is of trajectory k=3, not k=2"),
+])
+def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle):
+    from ssmobs import io
+
+    path = batch.parent / "records" / "k00002.json"
+    if damage == "truncate":
+        path.write_text(path.read_text()[:100])
+    elif damage == "delete":
+        path.unlink()
+    elif damage == "edit":
+        rec = json.loads(path.read_text())
+        rec["converged"] = not rec["converged"]
+        path.write_text(json.dumps(rec))
+    else:
+        path.write_text((batch.parent / "records" / "k00003.json").read_text())
+    with pytest.raises(io.CorruptFileError, match=needle) as err:
+        check(batch, scenario)
+    msg = str(err.value)
+    assert msg.startswith(f"{batch}: ")
+    assert "this batch must be rerun" in msg and "delete this file and rerun" in msg

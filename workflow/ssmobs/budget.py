@@ -17,9 +17,9 @@ The coefficients are upper envelopes of peak NumPy memory measured with ``tracem
 (2026-11-29) plus the interpreter and imported libraries (about 170 MiB resident, measured):
 design optimisation 21-23 x the (q x K) matrix, random/antithetic sets 2-3 x the matrix plus
 the (q x q) covariance, joint MAP about 6 x the (K x |Theta|) results plus one chunk's
-working set ((40 + (m + 2p)^2) numbers per Theta component and trajectory), Figure 4
-about 10 numbers per Theta component and grid point.  Each estimate
-is multiplied by :data:`MARGIN`.
+working set (36-73 numbers per Theta component and trajectory, measured for the six models
+at T = 4..300; we take 100), Figure 4 about 10 numbers per Theta component and grid point.
+Each estimate is multiplied by :data:`MARGIN`.
 """
 
 from __future__ import annotations
@@ -42,6 +42,9 @@ LCD_BLOCK_BYTES = 80 * MIB
 MARGIN = 1.25
 #: joint-MAP chunk rule of ssmobs.joint_map._chunks (trajectories optimised together)
 JOINT_MAP_CHUNK_WORK = 2e5
+#: numbers of the joint-MAP working set per Theta component and trajectory of a chunk
+#: (measured 36-73 for the six models, T = 4..300)
+JOINT_MAP_PER_THETA = 100
 #: fixed jobs besides the per-scenario ones (tables, figures)
 FIXED_JOBS = 8
 
@@ -80,8 +83,7 @@ def joint_map_bytes(model: Any, T: int, K: int, chunk_size: int = 0) -> float:
     q = (model.obs_dim + model.state_dim) * T
     chunk = chunk_size or int(min(max(JOINT_MAP_CHUNK_WORK / n, 64), 2048))
     chunk = min(chunk, K)
-    per_theta = 40 + (model.n_params + 2 * model.state_dim) ** 2
-    return 6 * F8 * K * n + F8 * chunk * n * per_theta + 2 * F8 * q * K
+    return 6 * F8 * K * n + JOINT_MAP_PER_THETA * F8 * chunk * n + 2 * F8 * q * K
 
 
 def stan_batch_bytes(model: Any, T: int, K: int, stan: dict) -> float:
