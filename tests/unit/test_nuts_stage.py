@@ -343,3 +343,21 @@ def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle
     msg = str(err.value)
     assert msg.startswith(f"{batch}: ")
     assert "this batch must be rerun" in msg and "delete this file and rerun" in msg
+
+
+def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
+    import os
+
+    from ssmobs.stages import changed_batch_records
+
+    records = batch.parent / "records"
+    assert changed_batch_records(batch, range(K)) is None
+    assert changed_batch_records(batch.parent / "batch9.parquet", range(K)) is None  # not run
+    later = batch.stat().st_mtime_ns + 10**9
+    os.utime(records / "k00004.json", ns=(later, later))  # e.g. truncated after the batch ran
+    msg = changed_batch_records(batch, range(K))
+    assert msg.startswith(f"{batch}: the record of trajectory k=4 ")
+    assert "was changed after this table was written; this batch must be rerun" in msg
+    (records / "k00001.json").unlink()
+    assert "trajectory k=1" in changed_batch_records(batch, range(K))
+    assert "is missing" in changed_batch_records(batch, range(K))

@@ -120,9 +120,9 @@ def test_damaged_trajectories_are_reported_by_name(smoke_run, tmp_path):
 
 # ------------------------------------------------------------------------------ issue 14
 def test_damaged_record_is_reported_with_its_batch(smoke_run, tmp_path):
-    """A record damaged after its batch ran makes gather_nuts rerun and name the batch;
-    deleting that batch table recomputes it.  The rerun jobs sweep stale temporaries and
-    every output is readable by others (mode from the umask, not mkstemp's 0600)."""
+    """A record damaged after its batch ran stops the next run, naming the batch; deleting
+    that batch table recomputes it.  The rerun jobs sweep stale temporaries and every
+    output is readable by others (mode from the umask, not mkstemp's 0600)."""
     workdir = copy_run(smoke_run, tmp_path / "run")
     victim = workdir / "results/same_T4/sample_nuts/records/k00001.json"
     victim.write_text(victim.read_text()[:60])
@@ -133,9 +133,11 @@ def test_damaged_record_is_reported_with_its_batch(smoke_run, tmp_path):
     proc = snakemake(workdir, "--cores", "2", *SMOKE, check=False)
     assert proc.returncode != 0
     out = proc.stdout + proc.stderr
-    assert ("results/same_T4/sample_nuts/batch0.parquet: the record of trajectory k=1 is "
-            "damaged") in out
-    assert "this batch must be rerun" in out
+    assert ("results/same_T4/sample_nuts/batch0.parquet: the record of trajectory k=1 "
+            "(results/same_T4/sample_nuts/records/k00001.json) was changed after this table "
+            "was written; this batch must be rerun") in out
+    assert not (workdir / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns > (
+        smoke_run / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns
     (workdir / "results/same_T4/sample_nuts/batch0.parquet").unlink()
     snakemake(workdir, "--cores", "2", *SMOKE)
     assert victim.read_text().rstrip().endswith("}")

@@ -69,26 +69,20 @@ def k_selection_points(ks):
 
 
 def nuts_batches(wildcards):
-    from ssmobs.stages import batches
+    """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
+    record was changed or deleted after its finished batch table was written (a stat per
+    record: a damaged record must not go unnoticed until its batch reruns)."""
+    from ssmobs.stages import batches, changed_batch_records
 
     sc = SCENARIOS[wildcards.scenario]
-    n = len(batches(sc["K"], config["stan"]["batch_size"]))
-    return [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(n)]
-
-
-def nuts_records(wildcards):
-    """The scenario's per-trajectory records that exist when the DAG is built.
-
-    Inputs of gather_nuts (no rule declares them as outputs), so that a record damaged or
-    deleted after its batch ran makes gather_nuts rerun, check every record against its
-    batch table and name the batch to rerun (stages.check_batch_records).
-    """
-    K = SCENARIOS[wildcards.scenario]["K"]
-    folder = Path(f"results/{wildcards.scenario}/sample_nuts/records")
-    if not folder.is_dir():
-        return []
-    return sorted(str(p) for p in folder.glob("k*.json")
-                  if p.stem[1:].isdigit() and int(p.stem[1:]) < K)
+    ranges = batches(sc["K"], config["stan"]["batch_size"])
+    tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
+              for b in range(len(ranges))]
+    for table, ks in zip(tables, ranges):
+        problem = changed_batch_records(table, ks)
+        if problem:
+            raise WorkflowError(problem)
+    return tables
 
 
 def figure2_disturbances(wildcards=None):

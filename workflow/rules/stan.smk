@@ -54,7 +54,6 @@ rule gather_nuts:
     input:
         trajectories="results/{scenario}/design_trajectories/trajectories.nc",
         batches=nuts_batches,
-        records=nuts_records,
     output:
         table="results/{scenario}/gather_nuts/marginal_map.parquet",
         summary="results/{scenario}/gather_nuts/summary.json",

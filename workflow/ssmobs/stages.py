@@ -144,20 +144,53 @@ def batch_records_dir(batch_table: PathLike) -> Path:
     return Path(batch_table).parent / "records"
 
 
+def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
+    return io.CorruptFileError(f"{batch_table}: {what}; this batch must be rerun (only damaged "
+                               f"records are recomputed)")
+
+
+def changed_batch_records(batch_table: PathLike, ks: Any) -> str | None:
+    """Why the finished batch table ``batch_table`` no longer matches its records, or None.
+
+    Looks only at file times (cheap enough for every DAG build): a record of ``ks`` that is
+    missing or newer than the table was damaged, edited or deleted after the batch ran.
+    None when the table does not exist (the batch is still to run).
+    """
+    from .nuts_stage import record_path
+
+    table = Path(batch_table)
+    try:
+        written = table.stat().st_mtime_ns
+    except FileNotFoundError:
+        return None
+    folder = batch_records_dir(table)
+    for k in ks:
+        path = record_path(folder, k)
+        try:
+            changed = path.stat().st_mtime_ns > written
+        except FileNotFoundError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) is "
+                                             f"missing"))
+        if changed:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) was "
+                                             f"changed after this table was written"))
+    return None
+
+
 def check_batch_records(batch_table: PathLike, frame: "pandas.DataFrame",  # noqa: F821
                         model: Any, T: int) -> None:
     """The per-trajectory records a batch table was built from are all there, parse and
     give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
 
-    A damaged record would otherwise go unnoticed until its batch reruns.  Raises
+    Run by gather_nuts (the workflow also stops before it when a record is newer than its
+    table, :func:`changed_batch_records`).  Raises
     :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
     batch recomputes the damaged records only and reuses every valid one.
     """
     from .nuts_stage import RECORD_KEYS, record_path, records_to_frame
 
     def damaged(what: str) -> io.CorruptFileError:
-        return io.CorruptFileError(f"{batch_table}: {what}; this batch must be rerun (only "
-                                   f"damaged records are recomputed)")
+        return _damaged_batch(batch_table, what)
 
     records_dir = batch_records_dir(batch_table)
     recs = []
