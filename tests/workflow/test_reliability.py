@@ -182,3 +182,18 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
     assert needle in proc.stdout + proc.stderr
     assert "config file(s) " in proc.stdout + proc.stderr
     assert not (workdir / "results").exists()
+
+
+def test_job_count_estimate_matches_the_dry_run(tmp_path):
+    """The size budget counts the jobs Snakemake plans for the default profile."""
+    import yaml
+
+    from ssmobs import budget
+    from ssmobs.config import validate
+
+    workdir = make_workdir(tmp_path)
+    proc = snakemake(workdir, "-n", "--cores", "2", timeout=300)
+    totals = [line.split() for line in proc.stdout.splitlines() if line.startswith("total")]
+    planned = int(totals[-1][1])
+    conf = validate(yaml.safe_load((workdir / "config/config.yaml").read_text()))
+    assert sum(budget.job_counts(conf).values()) == planned

@@ -45,8 +45,8 @@ JOINT_MAP_CHUNK_WORK = 2e5
 #: numbers of the joint-MAP working set per Theta component and trajectory of a chunk
 #: (measured 36-73 for the six models, T = 4..300)
 JOINT_MAP_PER_THETA = 100
-#: fixed jobs besides the per-scenario ones (tables, figures)
-FIXED_JOBS = 8
+#: jobs besides the per-scenario ones: tables, figures 2-4, observability figure, `all`
+FIXED_JOBS = 7
 
 
 @dataclass(frozen=True)

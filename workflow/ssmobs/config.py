@@ -16,7 +16,6 @@ import jsonschema
 import yaml
 
 from .models import MODELS
-from .seeds import MAX_SEED
 
 #: folders directly under results/ that the workflow uses itself; no scenario may take them
 #: (compared case-insensitively, for case-insensitive file systems)

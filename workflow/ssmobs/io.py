@@ -37,12 +37,22 @@ class CorruptFileError(RuntimeError):
 _UMASK_LOCK = threading.Lock()
 
 
-def file_mode() -> int:
-    """The mode a new regular file gets under the process's umask (0o666 & ~umask)."""
-    with _UMASK_LOCK:  # os.umask can only be read by setting it
+def _umask() -> int:
+    try:  # Linux >= 4.7 shows it without changing it
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    with _UMASK_LOCK:  # elsewhere os.umask can only be read by setting it
         umask = os.umask(0o022)
         os.umask(umask)
-    return 0o666 & ~umask
+    return umask
+
+
+def file_mode() -> int:
+    """The mode a new regular file gets under the process's umask (0o666 & ~umask)."""
+    return 0o666 & ~_umask()
 
 
 def _temporary_suffix(path: Path, suffix: str | None) -> str:
