@@ -16,16 +16,25 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+# `make run CONFIG=my.yaml` runs another config file.
+CONFIG ?= config/config.yaml
+# Before Snakemake: one line for a missing, empty or malformed config file, and removal of a
+# stale lock left by a killed run when no Snakemake process runs here (ssmobs/preflight.py).
+PREFLIGHT := $(BIN)/python -m ssmobs.preflight --unlock-stale
+
 run: setup
-	$(BIN)/snakemake --cores $(CORES)
+	$(PREFLIGHT) $(CONFIG)
+	$(BIN)/snakemake --cores $(CORES) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
 
 test: setup
 	$(BIN)/pytest
 
 smoke: setup
+	$(PREFLIGHT) config/smoke.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/smoke.yaml
 
 paper: setup
+	$(PREFLIGHT) config/paper.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/paper.yaml
 
 # Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).

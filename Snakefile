@@ -11,14 +11,26 @@
 #
 # Default config: config/config.yaml; others with --configfile config/smoke.yaml|paper.yaml.
 
+import sys
+from pathlib import Path
+
 from snakemake.utils import min_version
 
 min_version("9.0")
+
+sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
 
 # config/config.yaml is the default; a profile given with --configfile replaces it whole
 # (Snakemake would otherwise deep-merge the two and leak default settings into it).
 if not workflow.overwrite_configfiles:
+    from ssmobs.config import ConfigError
+    from ssmobs.preflight import load_config_file
+
+    try:  # our reading first: one line naming the file (and line, column) when it is bad
+        load_config_file("config/config.yaml")
+    except ConfigError as err:
+        raise WorkflowError(str(err)) from None
 
     configfile: "config/config.yaml"
 

@@ -13,7 +13,8 @@ from ssmobs.stan_backends import resolve_backend  # noqa: E402
 try:
     ssmobs_config.validate(config)
 except ConfigError as err:
-    raise WorkflowError(str(err)) from None
+    files = ", ".join(map(str, workflow.configfiles)) or "(none)"
+    raise WorkflowError(f"config file(s) {files}: {err}") from None
 
 try:  # "auto" is resolved here, so the concrete backend is part of the rules' params
     STAN_BACKEND = resolve_backend(config["stan"]["backend"])
@@ -77,11 +78,20 @@ def k_selection_points(ks):
 
 
 def nuts_batches(wildcards):
-    from ssmobs.stages import batches
+    """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
+    record was changed or deleted after its finished batch table was written (a stat per
+    record: a damaged record must not go unnoticed until its batch reruns)."""
+    from ssmobs.stages import batches, changed_batch_records
 
     sc = SCENARIOS[wildcards.scenario]
-    n = len(batches(sc["K"], config["stan"]["batch_size"]))
-    return [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(n)]
+    ranges = batches(sc["K"], config["stan"]["batch_size"])
+    tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
+              for b in range(len(ranges))]
+    for table, ks in zip(tables, ranges):
+        problem = changed_batch_records(table, ks)
+        if problem:
+            raise WorkflowError(problem)
+    return tables
 
 
 def figure2_disturbances(wildcards=None):

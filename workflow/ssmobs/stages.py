@@ -139,6 +139,85 @@ def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, s
     io.write_parquet(out, records_to_frame(records, model, traj.T))
 
 
+def batch_records_dir(batch_table: PathLike) -> Path:
+    """The records folder of a batch table: ``results/<scenario>/sample_nuts/records``."""
+    return Path(batch_table).parent / "records"
+
+
+def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
+    return io.CorruptFileError(f"{batch_table}: {what}; this batch must be rerun (only damaged "
+                               f"records are recomputed)")
+
+
+def changed_batch_records(batch_table: PathLike, ks: Any) -> str | None:
+    """Why the finished batch table ``batch_table`` no longer matches its records, or None.
+
+    Looks only at file times (cheap enough for every DAG build): a record of ``ks`` that is
+    missing or newer than the table was damaged, edited or deleted after the batch ran.
+    None when the table does not exist (the batch is still to run).
+    """
+    from .nuts_stage import record_path
+
+    table = Path(batch_table)
+    try:
+        written = table.stat().st_mtime_ns
+    except FileNotFoundError:
+        return None
+    folder = batch_records_dir(table)
+    for k in ks:
+        path = record_path(folder, k)
+        try:
+            changed = path.stat().st_mtime_ns > written
+        except FileNotFoundError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) is "
+                                             f"missing"))
+        if changed:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) was "
+                                             f"changed after this table was written"))
+    return None
+
+
+def check_batch_records(batch_table: PathLike, frame: "pandas.DataFrame",  # noqa: F821
+                        model: Any, T: int) -> None:
+    """The per-trajectory records a batch table was built from are all there, parse and
+    give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
+
+    Run by gather_nuts (the workflow also stops before it when a record is newer than its
+    table, :func:`changed_batch_records`).  Raises
+    :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
+    batch recomputes the damaged records only and reuses every valid one.
+    """
+    from .nuts_stage import RECORD_KEYS, record_path, records_to_frame
+
+    def damaged(what: str) -> io.CorruptFileError:
+        return _damaged_batch(batch_table, what)
+
+    records_dir = batch_records_dir(batch_table)
+    recs = []
+    for k in frame["k"].tolist():
+        path = record_path(records_dir, k)
+        if not path.exists():
+            raise damaged(f"the record of trajectory k={k} ({path}) is missing")
+        try:
+            rec = io.read_json(path, required=RECORD_KEYS)
+        except io.CorruptFileError as err:
+            raise damaged(f"the record of trajectory k={k} is damaged ({err.args[0]})") from None
+        if rec["k"] != k:
+            raise damaged(f"the record {path} is of trajectory k={rec['k']}, not k={k}")
+        recs.append(rec)
+    try:
+        rebuilt = records_to_frame(recs, model, T)
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise damaged(f"its records under {records_dir} do not form a table ({err})") from None
+    if list(rebuilt.columns) != list(frame.columns) or len(rebuilt) != len(frame):
+        raise damaged(f"its records under {records_dir} give other columns or rows")
+    if not rebuilt.equals(frame):
+        bad = [int(k) for k, (_, a), (_, b) in zip(frame["k"], rebuilt.iterrows(),
+                                                   frame.iterrows())
+               if not a.equals(b)]
+        raise damaged(f"the records of trajectories k={bad} ({records_dir}) differ from it")
+
+
 def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenario: dict,
                     table: PathLike, summary: PathLike) -> dict:
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary."""
@@ -148,8 +227,10 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     from .trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
-    frame = pd.concat([io.read_parquet(p, required_columns=["k", "converged"])
-                       for p in batch_tables], ignore_index=True)
+    frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
+    for path, batch_frame in zip(batch_tables, frames):
+        check_batch_records(path, batch_frame, traj.model, traj.T)
+    frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
     if frame["k"].tolist() != list(range(traj.K)):
         raise io.CorruptFileError(f"batch tables of scenario {scenario['name']} do not cover "
