@@ -99,4 +99,7 @@ def all_targets():
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
     targets += expand("paper_figures/{stem}.{ext}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
+    if STAN_SCENARIOS:
+        targets += expand("paper_figures/table_convergence_sensitivity.{ext}",
+                          ext=["csv", "md", "tex"])
     return targets

@@ -164,6 +164,28 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     return info
 
 
+def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: dict,
+                                stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
+
+    Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
+    scenario names to their gather_nuts tables.
+    """
+    from .convergence import ConvergenceSettings, sensitivity_table
+    from .tables import write_table
+
+    frames = {name: io.read_parquet(path, required_columns=["k", "converged", "failed_checks"])
+              for name, path in tables.items()}
+    base = ConvergenceSettings(**convergence_cfg)
+    table = sensitivity_table(frames, base)
+    write_table(table, stem,
+                "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
+                f"or counted as a failure (other thresholds as configured: divergences <= "
+                f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
+                f"E-BFMI >= {base.ebfmi_min:g})")
+    return table
+
+
 # ------------------------------------------------------------------ paper tables and figures
 def table_ii_scenarios(scenarios: list[dict]) -> list[dict]:
     """Scenarios of Tables II/III and Figure 3: model Same, (a, x0) = (0.9, 8), both stages."""
