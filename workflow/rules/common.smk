@@ -37,6 +37,7 @@ wildcard_constraints:
     K=r"\d+",
     seed=r"\d+",
     method="design|random|antithetic",
+    sets="independent|nested",
     batch=r"\d+",
     model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
 
@@ -51,19 +52,23 @@ def scenario_disturbances(wildcards):
 
 
 def k_selection_disturbances(wildcards):
+    from ssmobs.k_selection import set_seed
+
     sc = SCENARIOS[KSEL[wildcards.ksel]["scenario"]]
     q = ssmobs_config.disturbance_dim(sc)
-    return disturbance_path(q, wildcards.K, wildcards.method, wildcards.seed)
+    seed = set_seed(int(wildcards.seed), int(wildcards.K), wildcards.sets)
+    return disturbance_path(q, wildcards.K, wildcards.method, seed)
 
 
 def k_selection_points(ks):
-    """Every (method, seed, K_i) summary of one k_selection entry (design uses its first seed)."""
+    """Every (method, sets, seed, K_i) summary of one k_selection entry (design: first seed)."""
     out = []
     for method in ks["methods"]:
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
-        for seed in seeds:
-            out += [f"results/k_selection/{ks['name']}/{method}_seed{seed}/K{K}.json"
-                    for K in ks["K_grid"]]
+        for sets in ks["sets"]:
+            for seed in seeds:
+                out += [f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
+                        for K in ks["K_grid"]]
     return out
 
 

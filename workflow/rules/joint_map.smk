@@ -27,13 +27,13 @@ rule joint_map:
 
 
 rule k_selection_point:
-    """Joint-MAP summary V_{K_i} for one K_i, disturbance method and seed (Sec. IV.A)."""
+    """Joint-MAP summary V_{K_i} for one K_i, disturbance method, set variant and seed (Sec. IV.A)."""
     input:
         k_selection_disturbances,
     output:
-        "results/k_selection/{ksel}/{method}_seed{seed}/K{K}.json",
+        "results/k_selection/{ksel}/{method}_{sets}_seed{seed}/K{K}.json",
     log:
-        "results/k_selection/{ksel}/logs/{method}_seed{seed}_K{K}.log",
+        "results/k_selection/{ksel}/logs/{method}_{sets}_seed{seed}_K{K}.log",
     params:
         scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
         settings=config["joint_map"],

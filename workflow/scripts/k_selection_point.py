@@ -6,4 +6,5 @@ from ssmobs.stages import run_k_selection_point
 log.setup(snakemake.log[0])
 wc = snakemake.wildcards
 run_k_selection_point(snakemake.input[0], snakemake.params.scenario, int(wc.K), wc.method,
-                      int(wc.seed), snakemake.params.settings, snakemake.output[0])
+                      int(wc.seed), snakemake.params.settings, snakemake.output[0],
+                      sets=wc.sets)

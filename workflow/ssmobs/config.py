@@ -104,6 +104,12 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
                             f"configured: {sorted(names)}")
         grid = ks["K_grid"]
+        if isinstance(grid, dict):  # the paper's K_i = i * step, i = 1 .. last / step
+            if grid["last"] % grid["step"] or grid["last"] < 2 * grid["step"]:
+                problems.append(f"{where}.K_grid = {grid}: 'last' must be a multiple of 'step' "
+                                f"and at least 2 * step")
+                continue
+            grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
     return problems

@@ -72,16 +72,23 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
 
 
 def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method: str,
-                          seed: int, settings: dict, out: PathLike) -> dict:
-    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A)."""
+                          seed: int, settings: dict, out: PathLike,
+                          sets: str = "independent") -> dict:
+    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A).
+
+    ``seed`` is the run's seed; the set itself was drawn with
+    :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
+    """
     from .config import disturbance_dim
+    from .k_selection import set_seed
     from .trajectories import make_trajectories
 
-    sc = {**scenario, "K": K, "method": method, "seed": seed}
+    sc = {**scenario, "K": K, "method": method, "seed": set_seed(seed, K, sets)}
     matrix, attrs = io.read_disturbances(disturbances, q=disturbance_dim(sc), K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
     _, _, info, _ = _joint_map_of(traj, sc.get("prior"), settings)
-    info.update(K_i=K, method=method, seed=seed, scenario=scenario["name"])
+    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc["seed"],
+                scenario=scenario["name"])
     io.write_json(out, info)
     return info
 
@@ -273,7 +280,7 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
 # ------------------------------------------------------------------ choice of K (Sec. IV.A)
 def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_values: PathLike,
                  out_json: PathLike, out_csv: PathLike, figure_paths: list[str]) -> dict:
-    """Rule select_k: the RD rule over K_grid for every method and seed, and its figure."""
+    """Rule select_k: the RD rule over K_grid for every method, set variant and seed; figure."""
     import pandas as pd
 
     from .figures import figure_k_convergence
@@ -284,10 +291,11 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
     model = get_model(scenario["model"])
     summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
     long_rows, choices = [], []
-    runs = sorted({(s["method"], int(s["seed"])) for s in summaries})
+    runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
     paper = load_paper_values(paper_values).get(scenario.get("paper_ref", ""), {}) or {}
-    for method, seed in runs:
-        sel = sorted((s for s in summaries if s["method"] == method and int(s["seed"]) == seed),
+    for method, sets, seed in runs:
+        sel = sorted((s for s in summaries if s["method"] == method
+                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
                      key=lambda s: s["K_i"])
         ks = [int(s["K_i"]) for s in sel]
         vecs = [v_vector(s, model) for s in sel]
@@ -296,19 +304,26 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
         idx = select_k(ks, V, thresholds)
         ref = (paper.get("k_selection") or {}).get(method) or {}
         choices.append({
-            "name": ksel["name"], "scenario": scenario["name"], "method": method, "seed": seed,
-            "c1": ksel["c1"], "c2": ksel["c2"], "K_chosen": ks[idx] if idx is not None else None,
-            "K_max_grid": ks[-1], "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "name": ksel["name"], "scenario": scenario["name"], "method": method, "sets": sets,
+            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
+            "K_chosen": ks[idx] if idx is not None else None,
+            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
+                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
+            "K_max_grid": ks[-1],
+            "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })
         for K, v in zip(ks, vecs):
             for label, value in zip(v.labels, v.values):
-                long_rows.append({"K": K, "method": method, "seed": seed, "component": label,
-                                  "value": float(value)})
+                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
+                                  "component": label, "value": float(value)})
     frame = pd.DataFrame(long_rows)
     io.write_text(out_csv, frame.to_csv(index=False, float_format="%.10g"))
     chosen = pd.DataFrame(choices)
-    figure_k_convergence(frame, chosen.assign(K_chosen=chosen["K_chosen"].astype(float)),
+    # one line per method, set variant and seed in the figure
+    figure_k_convergence(frame.assign(method=frame["method"] + " " + frame["sets"]),
+                         chosen.assign(K_chosen=chosen["K_chosen"].astype(float),
+                                       method=chosen["method"] + " " + chosen["sets"]),
                          f"choice of K: {ksel['name']} (c1={ksel['c1']}, c2={ksel['c2']})",
                          figure_paths)
     io.write_json(out_json, {"choices": choices})
@@ -321,8 +336,9 @@ def run_table_k_selection(selections: list[PathLike], stem: PathLike) -> None:
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
     write_table(k_selection_table(rows), stem,
-                "Choice of K by relative differences (Sec. IV.A): ours per method and seed "
-                "beside the paper's")
+                "Choice of K by relative differences (Sec. IV.A): ours per method, set variant "
+                "(independent sets per K_i, or nested: one seed for all K_i) and seed, beside "
+                "the paper's")
 
 
 def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: dict,
