@@ -19,6 +19,8 @@ KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
+MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
+                 if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]]
 TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
 
 
@@ -104,6 +106,8 @@ def all_targets():
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
     targets += expand("paper_figures/{stem}.{ext}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
+    if MU0_SCENARIOS:
+        targets += expand("paper_figures/table_mu0_sweep.{ext}", ext=["csv", "md", "tex"])
     if STAN_SCENARIOS:
         targets += expand("paper_figures/table_convergence_sensitivity.{ext}",
                           ext=["csv", "md", "tex"])

@@ -93,6 +93,9 @@ def _scenario_problems(config: dict) -> list[str]:
         model = MODELS[sc["model"]]
         for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior")):
             problems.append(f"{where}: {msg}")
+        if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
+            problems.append(f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
+                            f"has no sign-consistent start; allowed: 'observations'")
     names = {sc["name"] for sc in config["scenarios"]}
     ksel_seen: set[str] = set()
     for i, ks in enumerate(config.get("k_selection", [])):

@@ -58,10 +58,12 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
     traj = read_trajectories(trajectories)
     model = traj.model
     progress = Progress(f"joint MAP {scenario['name']}", traj.K, logger)
+    settings = {**settings, "start_states": scenario.get("joint_map_start", "observations")}
     result, frame, info, bounds = _joint_map_of(traj, scenario.get("prior"), settings, progress)
     info.update(scenario=scenario["name"], model=model.slug, T=traj.T,
                 method=scenario.get("method", "design"), seed=scenario.get("seed"),
-                prior=list(bounds.variants))
+                prior=list(bounds.variants), start_states=settings["start_states"],
+                mu0_median=float(np.nanmedian(frame["mu0"])))
     logger.info("scenario %s: |K^max| = %d of %d", scenario["name"], info["K_max"], info["K"])
     io.write_parquet(table, frame)
     if theta is not None:
@@ -91,6 +93,60 @@ def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method
                 scenario=scenario["name"])
     io.write_json(out, info)
     return info
+
+
+def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
+                   ) -> list[dict]:
+    """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
+    gradient-balance rule (:func:`ssmobs.joint_map.initial_mu_values`)."""
+    rows = []
+    variants = [("gradient balance", {"mu0_rule": "gradient_balance"})]
+    variants += [(f"{f:g} T", {"mu0_rule": "per_step", "mu0": f * traj.T, "mu0_per_step": 0.0})
+                 for f in mu0_per_T]
+    for label, extra in variants:
+        result, frame, info, _ = _joint_map_of(traj, prior, {**settings, **extra})
+        rows.append({"mu0": label, "mu0_over_T_median": float(np.median(result.mu_start)) / traj.T,
+                     "ratio": info["ratio"], "n_boundary": info["n_boundary"]})
+    return rows
+
+
+def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, dict],
+                            settings: dict, mu0_per_T: list[float], paper_values: PathLike,
+                            stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
+
+    One row per mu_0 setting (the gradient-balance rule first, with its median mu_0 / T),
+    one column per scenario, and a last row with the paper's |K^max| / K where stated.
+    """
+    import pandas as pd
+
+    from .tables import load_paper_values, write_table
+    from .trajectories import read_trajectories
+
+    paper = load_paper_values(paper_values)
+    table: dict[str, dict] = {}
+    paper_row: dict[str, Any] = {"mu0": "paper"}
+    for name, path in trajectories.items():
+        sc = scenarios[name]
+        traj = read_trajectories(path)
+        for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
+            entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
+            entry[f"{name} |K^max|/K"] = row["ratio"]
+            if row["mu0"] == "gradient balance":
+                entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
+        ref = paper.get(sc.get("paper_ref", ""), {}) or {}
+        paper_row[f"{name} |K^max|/K"] = (ref["K_max"] / ref["K"]
+                                          if ref.get("K_max") is not None and ref.get("K")
+                                          else None)
+        logger.info("mu0 sweep: %s done", name)
+    frame = pd.DataFrame([*table.values(), paper_row])
+    cols = ["mu0"] + [c for c in frame.columns if c.endswith("|K^max|/K")]
+    cols += [c for c in frame.columns if c.endswith("mu0/T")]
+    frame = frame[cols]
+    write_table(frame, stem,
+                "Joint MAP, |K^max|/K of the Sep models for barrier starts mu_0 = f T and for "
+                "the gradient-balance rule (mu0/T: its median over k), with the paper's")
+    return frame
 
 
 # ------------------------------------------------------------------ Stan stage (Sec. III.C)
