@@ -71,7 +71,7 @@ def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     frame = run_joint_map_mu0_sweep({"sep_small": tmp_path / "t.nc"}, {"sep_small": sc}, {},
                                     [0.5, 2.0], "config/paper_values.yaml", tmp_path / "sweep")
     assert frame["mu0"].tolist() == ["gradient balance", "0.5 T", "2 T", "paper"]
-    col = "sep_small |K^max|/K"
+    col = "sep_small K^max/K"
     assert frame[col].iloc[:3].between(0, 1).all()
     assert np.isclose(frame[col].iloc[3], 1956 / 4000)
     # the row "2 T" is the former default rule, recomputed here by hand

@@ -131,16 +131,16 @@ def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[s
         traj = read_trajectories(path)
         for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
             entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
-            entry[f"{name} |K^max|/K"] = row["ratio"]
+            entry[f"{name} K^max/K"] = row["ratio"]
             if row["mu0"] == "gradient balance":
                 entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
         ref = paper.get(sc.get("paper_ref", ""), {}) or {}
-        paper_row[f"{name} |K^max|/K"] = (ref["K_max"] / ref["K"]
+        paper_row[f"{name} K^max/K"] = (ref["K_max"] / ref["K"]
                                           if ref.get("K_max") is not None and ref.get("K")
                                           else None)
         logger.info("mu0 sweep: %s done", name)
     frame = pd.DataFrame([*table.values(), paper_row])
-    cols = ["mu0"] + [c for c in frame.columns if c.endswith("|K^max|/K")]
+    cols = ["mu0"] + [c for c in frame.columns if c.endswith("K^max/K")]
     cols += [c for c in frame.columns if c.endswith("mu0/T")]
     frame = frame[cols]
     write_table(frame, stem,
