@@ -176,7 +176,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     assert set(rows) == {"independent", "nested"}
     for c in rows.values():  # loose thresholds: the first K_i is chosen in both variants
         assert c["K_chosen"] == 40 and c["K_grid"] == "40-120 step 40"
-        assert c["K_paper_range"] == "2500-4500"
+        assert c["K_paper_range"] == ""  # not the paper's (0.01, 0.03): no comparison
     v = pd.read_csv(tmp_path / "v.csv")
     # the two variants differ: at K = 40 the nested and independent sets are other draws
     ratio = v[v["component"] == "mean_a"].pivot_table(index="K", columns="sets", values="value")
@@ -199,3 +199,26 @@ def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     names = {ks["name"]: ks for ks in c["k_selection"]}
     assert (names["same_a09_T4_random"]["c1"], names["same_a09_T4_random"]["c2"]) == (0.01, 0.03)
     assert (names["same_a07_T100"]["c2"], names["same_a07_T100"]["paper_K"]) == (0.06, 3600)
+
+
+def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
+    from ssmobs import io
+    from ssmobs.stages import run_select_k
+
+    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
+          "paper_ref": "same_a09_T4"}
+    model = get_model("same")
+    pts = []
+    for K in (100, 200, 300):
+        info = {"K_i": K, "method": "random", "seed": 1, "sets": "independent", "ratio": 1.0}
+        for c in model.theta_names(0):
+            info.update({f"mean_{c}": 1.0, f"var_{c}": 1.0, f"mean_lvar_{c}": 1.0})
+        io.write_json(tmp_path / f"K{K}.json", info)
+        pts.append(tmp_path / f"K{K}.json")
+    for (c1, c2), shown in (((0.01, 0.03), "2500-4500"), ((0.01, 0.01), "")):
+        res = run_select_k({"name": "t", "c1": c1, "c2": c2}, sc, pts,
+                           "config/paper_values.yaml", tmp_path / "s.json", tmp_path / "v.csv",
+                           [str(tmp_path / "f.png")])
+        row = res["choices"][0]
+        assert row["K_paper_range"] == shown and row["K_chosen"] == 100
+        assert row["c_paper"] == ("(0.01, 0.03)" if shown else "")

@@ -359,6 +359,8 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
         thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
         idx = select_k(ks, V, thresholds)
         ref = (paper.get("k_selection") or {}).get(method) or {}
+        if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
+            ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
         choices.append({
             "name": ksel["name"], "scenario": scenario["name"], "method": method, "sets": sets,
             "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
@@ -367,6 +369,7 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
                                               if len(set(np.diff(ks))) == 1 else " (uneven)"),
             "K_max_grid": ks[-1],
             "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })
         for K, v in zip(ks, vecs):

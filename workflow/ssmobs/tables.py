@@ -161,7 +161,7 @@ def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
     and the paper's K."""
     frame = pd.DataFrame(list(rows))
     cols = ["name", "scenario", "method", "sets", "seed", "c1", "c2", "K_chosen", "K_grid",
-            "K_paper", "K_paper_range"]
+            "K_paper", "K_paper_range", "c_paper"]
     for c in cols:
         if c not in frame.columns:
             frame[c] = np.nan
