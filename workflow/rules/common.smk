@@ -28,6 +28,8 @@ KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
+MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
+                 if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]]
 TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
 
 
@@ -46,6 +48,7 @@ wildcard_constraints:
     K=r"\d+",
     seed=r"\d+",
     method="design|random|antithetic",
+    sets="independent|nested",
     batch=r"\d+",
     backend="native|cmdstanpy|pystan",
     model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
@@ -61,19 +64,23 @@ def scenario_disturbances(wildcards):
 
 
 def k_selection_disturbances(wildcards):
+    from ssmobs.k_selection import set_seed
+
     sc = SCENARIOS[KSEL[wildcards.ksel]["scenario"]]
     q = ssmobs_config.disturbance_dim(sc)
-    return disturbance_path(q, wildcards.K, wildcards.method, wildcards.seed)
+    seed = set_seed(int(wildcards.seed), int(wildcards.K), wildcards.sets)
+    return disturbance_path(q, wildcards.K, wildcards.method, seed)
 
 
 def k_selection_points(ks):
-    """Every (method, seed, K_i) summary of one k_selection entry (design uses its first seed)."""
+    """Every (method, sets, seed, K_i) summary of one k_selection entry (design: first seed)."""
     out = []
     for method in ks["methods"]:
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
-        for seed in seeds:
-            out += [f"results/k_selection/{ks['name']}/{method}_seed{seed}/K{K}.json"
-                    for K in ks["K_grid"]]
+        for sets in ks["sets"]:
+            for seed in seeds:
+                out += [f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
+                        for K in ks["K_grid"]]
     return out
 
 
@@ -118,4 +125,9 @@ def all_targets():
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
     targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
+    if MU0_SCENARIOS:
+        targets += expand("paper_figures/table_mu0_sweep.{ext}", ext=["csv", "md", "tex"])
+    if STAN_SCENARIOS:
+        targets += expand("paper_figures/table_convergence_sensitivity.{ext}",
+                          ext=["csv", "md", "tex"])
     return targets

@@ -77,3 +77,25 @@ rule figure_observability:
         "../../envs/ssmobs.yaml"
     script:
         "../scripts/figure_observability.py"
+
+
+rule convergence_sensitivity:
+    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted."""
+    input:
+        [f"results/{n}/gather_nuts/marginal_map.parquet" for n in STAN_SCENARIOS],
+    output:
+        report(
+            multiext("paper_figures/table_convergence_sensitivity", ".csv", ".md", ".tex"),
+            caption="../report/convergence_sensitivity.rst",
+            category="Tables",
+        ),
+    log:
+        "results/shared/logs/convergence_sensitivity.log",
+    params:
+        tables={n: f"results/{n}/gather_nuts/marginal_map.parquet" for n in STAN_SCENARIOS},
+        convergence=config["convergence"],
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/convergence_sensitivity.py"

@@ -136,6 +136,9 @@ def _scenario_problems(config: dict) -> list[str]:
         model = MODELS[sc["model"]]
         for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior")):
             problems.append(f"{where}: {msg}")
+        if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
+            problems.append(f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
+                            f"has no sign-consistent start; allowed: 'observations'")
     names = {sc["name"] for sc in config["scenarios"]}
     ksel_seen: set[str] = set()
     for i, ks in enumerate(config.get("k_selection", [])):
@@ -147,6 +150,12 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
                             f"configured: {sorted(names)}")
         grid = ks["K_grid"]
+        if isinstance(grid, dict):  # the paper's K_i = i * step, i = 1 .. last / step
+            if grid["last"] % grid["step"] or grid["last"] < 2 * grid["step"]:
+                problems.append(f"{where}.K_grid = {grid}: 'last' must be a multiple of 'step' "
+                                f"and at least 2 * step")
+                continue
+            grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
     return problems + _keep_draws_problems(config) + _figure_problems(config)

@@ -58,10 +58,12 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
     traj = read_trajectories(trajectories)
     model = traj.model
     progress = Progress(f"joint MAP {scenario['name']}", traj.K, logger)
+    settings = {**settings, "start_states": scenario.get("joint_map_start", "observations")}
     result, frame, info, bounds = _joint_map_of(traj, scenario.get("prior"), settings, progress)
     info.update(scenario=scenario["name"], model=model.slug, T=traj.T,
                 method=scenario.get("method", "design"), seed=scenario.get("seed"),
-                prior=list(bounds.variants))
+                prior=list(bounds.variants), start_states=settings["start_states"],
+                mu0_median=float(np.nanmedian(frame["mu0"])))
     logger.info("scenario %s: |K^max| = %d of %d", scenario["name"], info["K_max"], info["K"])
     io.write_parquet(table, frame)
     if theta is not None:
@@ -72,18 +74,79 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
 
 
 def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method: str,
-                          seed: int, settings: dict, out: PathLike) -> dict:
-    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A)."""
+                          seed: int, settings: dict, out: PathLike,
+                          sets: str = "independent") -> dict:
+    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A).
+
+    ``seed`` is the run's seed; the set itself was drawn with
+    :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
+    """
     from .config import disturbance_dim
+    from .k_selection import set_seed
     from .trajectories import make_trajectories
 
-    sc = {**scenario, "K": K, "method": method, "seed": seed}
+    sc = {**scenario, "K": K, "method": method, "seed": set_seed(seed, K, sets)}
     matrix, attrs = io.read_disturbances(disturbances, q=disturbance_dim(sc), K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
     _, _, info, _ = _joint_map_of(traj, sc.get("prior"), settings)
-    info.update(K_i=K, method=method, seed=seed, scenario=scenario["name"])
+    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc["seed"],
+                scenario=scenario["name"])
     io.write_json(out, info)
     return info
+
+
+def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
+                   ) -> list[dict]:
+    """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
+    gradient-balance rule (:func:`ssmobs.joint_map.initial_mu_values`)."""
+    rows = []
+    variants = [("gradient balance", {"mu0_rule": "gradient_balance"})]
+    variants += [(f"{f:g} T", {"mu0_rule": "per_step", "mu0": f * traj.T, "mu0_per_step": 0.0})
+                 for f in mu0_per_T]
+    for label, extra in variants:
+        result, frame, info, _ = _joint_map_of(traj, prior, {**settings, **extra})
+        rows.append({"mu0": label, "mu0_over_T_median": float(np.median(result.mu_start)) / traj.T,
+                     "ratio": info["ratio"], "n_boundary": info["n_boundary"]})
+    return rows
+
+
+def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, dict],
+                            settings: dict, mu0_per_T: list[float], paper_values: PathLike,
+                            stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
+
+    One row per mu_0 setting (the gradient-balance rule first, with its median mu_0 / T),
+    one column per scenario, and a last row with the paper's |K^max| / K where stated.
+    """
+    import pandas as pd
+
+    from .tables import load_paper_values, write_table
+    from .trajectories import read_trajectories
+
+    paper = load_paper_values(paper_values)
+    table: dict[str, dict] = {}
+    paper_row: dict[str, Any] = {"mu0": "paper"}
+    for name, path in trajectories.items():
+        sc = scenarios[name]
+        traj = read_trajectories(path)
+        for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
+            entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
+            entry[f"{name} K^max/K"] = row["ratio"]
+            if row["mu0"] == "gradient balance":
+                entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
+        ref = paper.get(sc.get("paper_ref", ""), {}) or {}
+        paper_row[f"{name} K^max/K"] = (ref["K_max"] / ref["K"]
+                                          if ref.get("K_max") is not None and ref.get("K")
+                                          else None)
+        logger.info("mu0 sweep: %s done", name)
+    frame = pd.DataFrame([*table.values(), paper_row])
+    cols = ["mu0"] + [c for c in frame.columns if c.endswith("K^max/K")]
+    cols += [c for c in frame.columns if c.endswith("mu0/T")]
+    frame = frame[cols]
+    write_table(frame, stem,
+                "Joint MAP, |K^max|/K of the Sep models for barrier starts mu_0 = f T and for "
+                "the gradient-balance rule (mu0/T: its median over k), with the paper's")
+    return frame
 
 
 # ------------------------------------------------------------------ Stan stage (Sec. III.C)
@@ -245,6 +308,28 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     return info
 
 
+def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: dict,
+                                stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
+
+    Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
+    scenario names to their gather_nuts tables.
+    """
+    from .convergence import ConvergenceSettings, sensitivity_table
+    from .tables import write_table
+
+    frames = {name: io.read_parquet(path, required_columns=["k", "converged", "failed_checks"])
+              for name, path in tables.items()}
+    base = ConvergenceSettings(**convergence_cfg)
+    table = sensitivity_table(frames, base)
+    write_table(table, stem,
+                "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
+                f"or counted as a failure (other thresholds as configured: divergences <= "
+                f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
+                f"E-BFMI >= {base.ebfmi_min:g})")
+    return table
+
+
 # ------------------------------------------------------------------ paper tables and figures
 def table_ii_scenarios(scenarios: list[dict]) -> list[dict]:
     """Scenarios of Tables II/III and Figure 3: model Same, (a, x0) = (0.9, 8), both stages."""
@@ -332,7 +417,7 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
 # ------------------------------------------------------------------ choice of K (Sec. IV.A)
 def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_values: PathLike,
                  out_json: PathLike, out_csv: PathLike, figure_paths: list[str]) -> dict:
-    """Rule select_k: the RD rule over K_grid for every method and seed, and its figure."""
+    """Rule select_k: the RD rule over K_grid for every method, set variant and seed; figure."""
     import pandas as pd
 
     from .figures import figure_k_convergence
@@ -343,10 +428,11 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
     model = get_model(scenario["model"])
     summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
     long_rows, choices = [], []
-    runs = sorted({(s["method"], int(s["seed"])) for s in summaries})
+    runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
     paper = load_paper_values(paper_values).get(scenario.get("paper_ref", ""), {}) or {}
-    for method, seed in runs:
-        sel = sorted((s for s in summaries if s["method"] == method and int(s["seed"]) == seed),
+    for method, sets, seed in runs:
+        sel = sorted((s for s in summaries if s["method"] == method
+                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
                      key=lambda s: s["K_i"])
         ks = [int(s["K_i"]) for s in sel]
         vecs = [v_vector(s, model) for s in sel]
@@ -354,20 +440,30 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
         thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
         idx = select_k(ks, V, thresholds)
         ref = (paper.get("k_selection") or {}).get(method) or {}
+        if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
+            ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
         choices.append({
-            "name": ksel["name"], "scenario": scenario["name"], "method": method, "seed": seed,
-            "c1": ksel["c1"], "c2": ksel["c2"], "K_chosen": ks[idx] if idx is not None else None,
-            "K_max_grid": ks[-1], "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "name": ksel["name"], "scenario": scenario["name"], "method": method, "sets": sets,
+            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
+            "K_chosen": ks[idx] if idx is not None else None,
+            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
+                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
+            "K_max_grid": ks[-1],
+            "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })
         for K, v in zip(ks, vecs):
             for label, value in zip(v.labels, v.values):
-                long_rows.append({"K": K, "method": method, "seed": seed, "component": label,
-                                  "value": float(value)})
+                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
+                                  "component": label, "value": float(value)})
     frame = pd.DataFrame(long_rows)
     io.write_text(out_csv, frame.to_csv(index=False, float_format="%.10g"))
     chosen = pd.DataFrame(choices)
-    figure_k_convergence(frame, chosen.assign(K_chosen=chosen["K_chosen"].astype(float)),
+    # one line per method, set variant and seed in the figure
+    figure_k_convergence(frame.assign(method=frame["method"] + " " + frame["sets"]),
+                         chosen.assign(K_chosen=chosen["K_chosen"].astype(float),
+                                       method=chosen["method"] + " " + chosen["sets"]),
                          f"choice of K: {ksel['name']} (c1={ksel['c1']}, c2={ksel['c2']})",
                          figure_paths)
     io.write_json(out_json, {"choices": choices})
@@ -380,8 +476,9 @@ def run_table_k_selection(selections: list[PathLike], stem: PathLike) -> None:
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
     write_table(k_selection_table(rows), stem,
-                "Choice of K by relative differences (Sec. IV.A): ours per method and seed "
-                "beside the paper's")
+                "Choice of K by relative differences (Sec. IV.A): ours per method, set variant "
+                "(independent sets per K_i, or nested: one seed for all K_i) and seed, beside "
+                "the paper's")
 
 
 def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: dict,

@@ -157,10 +157,11 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 
 # ---------------------------------------------------------------- K selection
 def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
-    """Chosen K per k_selection entry, method and seed, with (c1, c2) and the paper's K."""
+    """Chosen K per k_selection entry, method, set variant and seed, with (c1, c2), the grid
+    and the paper's K."""
     frame = pd.DataFrame(list(rows))
-    cols = ["name", "scenario", "method", "seed", "c1", "c2", "K_chosen", "K_max_grid",
-            "K_paper", "K_paper_range"]
+    cols = ["name", "scenario", "method", "sets", "seed", "c1", "c2", "K_chosen", "K_grid",
+            "K_paper", "K_paper_range", "c_paper"]
     for c in cols:
         if c not in frame.columns:
             frame[c] = np.nan

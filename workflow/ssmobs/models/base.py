@@ -144,6 +144,15 @@ class StateSpaceModel:
                 f"override initial_states")
         return z.copy()
 
+    #: True where :meth:`sign_consistent_states` is defined
+    has_sign_consistent_start: bool = False
+
+    def sign_consistent_states(self, omega: np.ndarray, x0: np.ndarray,
+                               z: np.ndarray) -> np.ndarray:
+        """Alternative start of the states whose signs agree with x0 (see the models)."""
+        raise NotImplementedError(f"model '{self.slug}' defines no sign-consistent start; "
+                                  f"use joint_map_start: observations")
+
     # ----------------------------------------------------------------- derived facts
     @property
     def n_params(self) -> int:
