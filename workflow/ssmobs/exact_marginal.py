@@ -258,7 +258,7 @@ class ExactSettings:
     spike_distance: float = 1e-6
     spike_tol: float = 1e-3
     n_starts: int = 4
-    mixture_iter: int = 20
+    mixture_iter: int = 30
     valley_nodes: int = 200
     chunk_elements: int = 4_000_000
 
@@ -674,12 +674,17 @@ def _marginal_omega(axes, lpu, lo_box, hi_box, settings):
         # density of Omega_j itself (Jacobian of u = log|Omega| removed)
         log_dens_om = log_fine - np.where(axes.log_scale[j], u_fine, 0.0)
         om_fine = np.where(axes.log_scale[j], axes.sign[j] * np.exp(u_fine), u_fine)
-        i = np.clip(log_dens_om.argmax(1), 1, s_fine.size - 2)
+        # the highest interior local maximum of the marginal density (a density that is
+        # improper at a boundary rises toward the box edge there; that is not the MAP)
+        inner = log_dens_om[:, 1:-1]
+        is_max = (inner > log_dens_om[:, :-2]) & (inner >= log_dens_om[:, 2:])
+        has_max = is_max.any(1)
+        i = np.where(is_max, inner, -np.inf).argmax(1) + 1
         rows = np.arange(K)
         x = np.stack([om_fine[rows, i - 1], om_fine[rows, i], om_fine[rows, i + 1]], 1)
         y = np.stack([log_dens_om[rows, i - 1], log_dens_om[rows, i],
                       log_dens_om[rows, i + 1]], 1)
-        est[:, j] = _parabola_vertex(x, y)
+        est[:, j] = np.where(has_max, _parabola_vertex(x, y), np.nan)
         cdf = np.concatenate([np.zeros((K, 1)), np.cumsum(
             0.5 * (dens_u[:, 1:] + dens_u[:, :-1]), axis=1)], axis=1)
         cdf /= cdf[:, -1:]
@@ -759,10 +764,15 @@ def _mixture_mode_quantiles(w, mean, sd, settings):
     Newton's method on the log density from the heaviest component's mean, steps limited
     to half the mixture's standard deviation and kept inside the components' means.
     """
-    M = (w * mean).sum(1)
-    V = (w * (sd**2 + mean**2)).sum(1) - M**2
+    # scale and bracket from the components that matter (weight >= 1e-6 of the heaviest)
+    big = w >= 1e-6 * w.max(1, keepdims=True)
+    wb = np.where(big, w, 0.0)
+    wb = wb / wb.sum(1, keepdims=True)
+    M = (wb * mean).sum(1)
+    V = (wb * (sd**2 + mean**2)).sum(1) - M**2
     S = np.sqrt(np.maximum(V, 1e-300))
-    lo_m, hi_m = mean.min(1), mean.max(1)
+    lo_m = np.where(big, mean, np.inf).min(1)
+    hi_m = np.where(big, mean, -np.inf).max(1)
     x = mean[:, 0].copy()
     for _ in range(settings.mixture_iter):
         u = (x[:, None] - mean) / sd
@@ -779,8 +789,6 @@ def _mixture_mode_quantiles(w, mean, sd, settings):
     mode = x
     qs = []
     for level in QUANTILES:
-        # bracket from the components that matter (weight > 1e-9 of the heaviest)
-        big = w >= 1e-9 * w.max(1, keepdims=True)
         lo = np.where(big, mean - 12 * sd, np.inf).min(1)
         hi = np.where(big, mean + 12 * sd, -np.inf).max(1)
         x = np.clip(M + ndtri(level) * S, lo, hi)
