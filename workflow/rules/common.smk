@@ -20,6 +20,8 @@ REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
 TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
+EXACT_SCENARIOS = [n for n, sc in SCENARIOS.items() if stages.exact_applies(sc)]
+EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
 def joint_summary(name):
@@ -28,6 +30,28 @@ def joint_summary(name):
 
 def stan_summary(name):
     return f"results/{name}/gather_nuts/summary.json"
+
+
+def exact_table(name, K):
+    return f"results/{name}/exact_marginal/K{K}/marginal_map.parquet"
+
+
+def exact_summary_path(name):
+    """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
+    return f"results/{name}/exact_marginal/K{stages.exact_K(SCENARIOS[name])}/summary.json"
+
+
+def exact_trajectories(wildcards):
+    """The scenario's design trajectories when K is its own K, else those at K."""
+    sc = SCENARIOS[wildcards.scenario]
+    if int(wildcards.K) == sc["K"]:
+        return f"results/{wildcards.scenario}/design_trajectories/trajectories.nc"
+    return f"results/{wildcards.scenario}/exact_marginal/K{wildcards.K}/trajectories.nc"
+
+
+def exact_disturbances(wildcards):
+    sc = SCENARIOS[wildcards.scenario]
+    return disturbance_path(ssmobs_config.disturbance_dim(sc), wildcards.K, sc["method"], sc["seed"])
 
 
 wildcard_constraints:
@@ -90,6 +114,9 @@ def all_targets():
         targets += expand(f"paper_figures/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
         targets += expand("paper_figures/table_k_selection.{ext}", ext=["csv", "md", "tex"])
+    targets += [exact_summary_path(name) for name in EXACT_SCENARIOS]
+    targets += expand("paper_figures/fig_exact_vs_stan_{name}.{ext}",
+                      name=EXACT_VS_STAN_SCENARIOS, ext=["pdf", "png"])
     profile = stages.profile_scenario(config["scenarios"])
     if profile is not None:
         targets += expand(f"paper_figures/fig4_profile_posterior_{profile['name']}.{{ext}}",

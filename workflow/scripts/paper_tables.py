@@ -8,4 +8,4 @@ from ssmobs.stages import run_paper_tables
 log.setup(snakemake.log[0])
 p = snakemake.params
 run_paper_tables(p.scenarios, p.joint, p.marginal, snakemake.input.paper_values,
-                 Path(snakemake.output[0]).parent)
+                 Path(snakemake.output[0]).parent, exact=p.exact)
