@@ -101,12 +101,13 @@ def kalman_marginal(model: StateSpaceModel, omega: np.ndarray, z: np.ndarray,
 def _kalman_p1(f, q, h, r, z, smooth):
     T, d = z.shape[-2:]
     hr = h / r                                             # (..., d)
-    hrh = (h * hr).sum(-1)
+    hrh = sum(h[..., i] * hr[..., i] for i in range(d))
     a0 = f * f / q
     a_mid = hrh + 1 / q + a0
     a_end = hrh + 1 / q
     bm = -f / q                                            # block (t, t-1) of the precision
-    c = ((z * z).sum(-2) / r).sum(-1)
+    zz = (z * z).sum(-2)
+    c = sum(zz[..., i] / r[..., i] for i in range(d))
     S = a0
     y = np.zeros(np.broadcast_shapes(z.shape[:-2], np.shape(f)))
     logdet = np.log(S)
@@ -115,13 +116,14 @@ def _kalman_p1(f, q, h, r, z, smooth):
     for t in range(1, T + 1):
         g = bm / S
         S = (a_mid if t < T else a_end) - g * bm
-        y = (z[..., t - 1, :] * hr).sum(-1) - g * y        # H' R^-1 z_t - ...
+        b_t = sum(z[..., t - 1, i] * hr[..., i] for i in range(d))     # H' R^-1 z_t
+        y = b_t - g * y
         quad = quad + y * y / S
         logdet = logdet + np.log(S)
         if smooth:
             Ss.append(S)
             ys.append(y)
-    neg2 = (c - quad + logdet + T * (np.log(r).sum(-1) + np.log(q))
+    neg2 = (c - quad + logdet + T * (sum(np.log(r[..., i]) for i in range(d)) + np.log(q))
             + ((d + 1) * T - (T + 1)) * LOG_2PI)
     if not smooth:
         return KalmanMarginal(neg2)
@@ -258,7 +260,8 @@ class ExactSettings:
     spike_distance: float = 1e-6
     spike_tol: float = 1e-3
     n_starts: int = 4
-    mixture_iter: int = 30
+    mixture_iter: int = 16
+    mode_iter: int = 12
     valley_nodes: int = 200
     chunk_elements: int = 4_000_000
 
@@ -712,7 +715,14 @@ def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 # ====================================================================== step 4: states
 def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
-    """Marginal MAP and quantiles of x_0..x_T: mixtures over the thinned Omega grid."""
+    """Marginal MAP and quantiles of x_0..x_T: mixtures over the thinned Omega grid.
+
+    Node g of the thinned grid carries weight w_g ∝ p(Omega_g | z) x (trapezoid weight)
+    and the smoothed Gaussian N(mu_t(Omega_g), P_t(Omega_g)), widened by the variance of
+    mu_t across the node's cell, sum_j (d mu_t / d index_j)^2 / 12 (midpoint rule for the
+    cell, so that a coarse Omega grid does not make the mixture bumpy).  Nodes are pruned
+    to the heaviest ones holding ``mixture_mass`` of the weight.
+    """
     K = lpu.shape[0]
     m = lpu.ndim - 1
     n = lpu.shape[1]
@@ -735,16 +745,25 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
     w /= w.sum(1, keepdims=True)
     nodes = [np.linspace(lo_box[:, j], hi_box[:, j], n, axis=-1)[:, ::thin] for j in range(m)]
     grid = _tensor(nodes).reshape(K, -1, m)
-    grid = np.take_along_axis(grid, order[..., None], 1)
     T = z.shape[1]
     p = model.state_dim
     n_states = (T + 1) * p
     est = np.empty((K, n_states))
     q = np.empty((K, n_states, len(QUANTILES)))
-    for sl in _chunks(K, keep * n_states * 4, settings.chunk_elements):
+    for sl in _chunks(K, grid.shape[1] * n_states * 6, settings.chunk_elements):
         km = kalman_marginal(model, axes.omega(grid[sl]), z[sl, None], smooth=True)
-        mean = km.mean.reshape(km.mean.shape[:2] + (n_states,))    # (Kc, G, S)
-        var = km.var.reshape(mean.shape)
+        kc = km.mean.shape[0]
+        mean = km.mean.reshape((kc,) + (ns,) * m + (n_states,))
+        var = km.var.reshape(mean.shape).copy()
+        # each node stands for a cell of the grid, across which the smoothed mean moves
+        # (nearly linearly): spread the component by the cell's variance (gh)^2 / 12
+        for j in range(m):
+            var += np.gradient(mean, axis=1 + j) ** 2 / 12
+        mean = mean.reshape(kc, -1, n_states)
+        var = var.reshape(mean.shape)
+        idx = order[sl][:, :, None]
+        mean = np.take_along_axis(mean, idx, 1)                # (Kc, G_kept, S)
+        var = np.take_along_axis(var, idx, 1)
         wc = np.broadcast_to(w[sl][:, :, None], mean.shape)
         # a component whose smoother lost precision (far from the mode) gets weight 0
         bad = ~(np.isfinite(mean) & np.isfinite(var) & (var > 0))
