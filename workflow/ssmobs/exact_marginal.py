@@ -754,31 +754,33 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
         km = kalman_marginal(model, axes.omega(grid[sl]), z[sl, None], smooth=True)
         kc = km.mean.shape[0]
         mean = km.mean.reshape((kc,) + (ns,) * m + (n_states,))
-        var = km.var.reshape(mean.shape).copy()
-        # each node stands for a cell of the grid, across which the smoothed mean moves
-        # (nearly linearly): spread the component by the cell's variance (gh)^2 / 12
-        for j in range(m):
-            var += np.gradient(mean, axis=1 + j) ** 2 / 12
-        mean = mean.reshape(kc, -1, n_states)
-        var = var.reshape(mean.shape)
+        var = km.var.reshape(mean.shape)
+        # for the mode: each node stands for a cell of the grid, across which the smoothed
+        # mean moves (nearly linearly): spread the component by the cell's variance
+        # (gh)^2 / 12 so that the mixture density is not bumpy on a coarse grid.  The
+        # quantiles use the plain components (trapezoid rule: spectrally accurate).
+        spread = sum(np.gradient(mean, axis=1 + j) ** 2 for j in range(m)) / 12
         idx = order[sl][:, :, None]
-        mean = np.take_along_axis(mean, idx, 1)                # (Kc, G_kept, S)
-        var = np.take_along_axis(var, idx, 1)
+        mean, var, spread = (np.take_along_axis(a.reshape(kc, -1, n_states), idx, 1)
+                             for a in (mean, var, spread))           # (Kc, G_kept, S)
         wc = np.broadcast_to(w[sl][:, :, None], mean.shape)
         # a component whose smoother lost precision (far from the mode) gets weight 0
         bad = ~(np.isfinite(mean) & np.isfinite(var) & (var > 0))
         wc = np.where(bad, 0.0, wc)
         wc = wc / wc.sum(1, keepdims=True)
         mean = np.where(bad, mean[:, :1], mean)
-        sd = np.sqrt(np.where(bad, var[:, :1], var))
-        est[sl], q[sl] = _mixture_mode_quantiles(wc, mean, sd, settings)
+        var = np.where(bad, var[:, :1], var)
+        spread = np.where(np.isfinite(spread), spread, 0.0)
+        est[sl], q[sl] = _mixture_mode_quantiles(wc, mean, np.sqrt(var), settings,
+                                                 np.sqrt(var + spread))
     return est, q
 
 
-def _mixture_mode_quantiles(w, mean, sd, settings):
+def _mixture_mode_quantiles(w, mean, sd, settings, sd_mode=None):
     """Mode and quantiles of sum_g w_g N(mean_g, sd_g^2) along axis 1.
 
-    Weights are sorted (heaviest first).  Quantiles: Newton's method on the mixture CDF,
+    Weights are sorted (heaviest first); ``sd_mode`` (default ``sd``) are the component
+    standard deviations used for the mode.  Quantiles: Newton's method on the mixture CDF,
     safeguarded by bisection on a bracket that holds every component's ±12 sd; mode:
     Newton's method on the log density from the heaviest component's mean, steps limited
     to half the mixture's standard deviation and kept inside the components' means.
@@ -792,13 +794,14 @@ def _mixture_mode_quantiles(w, mean, sd, settings):
     S = np.sqrt(np.maximum(V, 1e-300))
     lo_m = np.where(big, mean, np.inf).min(1)
     hi_m = np.where(big, mean, -np.inf).max(1)
-    x = mean[:, 0].copy()
-    for _ in range(settings.mixture_iter):
-        u = (x[:, None] - mean) / sd
-        phi = w * np.exp(-0.5 * u * u) / sd
+    sdm = sd if sd_mode is None else sd_mode
+    x = mean[:, 0].copy()          # the heaviest component (weights are sorted)
+    for _ in range(settings.mode_iter):
+        u = (x[:, None] - mean) / sdm
+        phi = w * np.exp(-0.5 * u * u) / sdm
         f = phi.sum(1)
-        f1 = -(phi * u / sd).sum(1)
-        f2 = (phi * (u * u - 1) / sd**2).sum(1)
+        f1 = -(phi * u / sdm).sum(1)
+        f2 = (phi * (u * u - 1) / sdm**2).sum(1)
         with np.errstate(all="ignore"):
             g = f1 / f
             gp = f2 / f - g * g
