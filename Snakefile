@@ -5,6 +5,7 @@
 #     design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc   (q = (d+p)T)
 #   results/{scenario}/...    one folder per rule for each configured scenario
 #     design_trajectories/trajectories.nc
+#     exact_marginal/K{K}/                   exact marginal posteriors at K (issue 11)
 #   results/k_selection/{name}/...   runs of the choice of K (Sec. IV.A)
 #   results/{scenario}/logs, results/shared/logs    one log per job
 #   paper_figures/            final tables and figures (see paper_figures/README.md)
@@ -39,6 +40,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/design.smk"
 include: "workflow/rules/joint_map.smk"
 include: "workflow/rules/stan.smk"
+include: "workflow/rules/exact_marginal.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/outputs.smk"
 

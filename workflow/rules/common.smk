@@ -31,6 +31,8 @@ STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
 MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
                  if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]]
 TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
+EXACT_SCENARIOS = [n for n, sc in SCENARIOS.items() if stages.exact_applies(sc)]
+EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
 def joint_summary(name):
@@ -39,6 +41,28 @@ def joint_summary(name):
 
 def stan_summary(name):
     return f"results/{name}/gather_nuts/summary.json"
+
+
+def exact_table(name, K):
+    return f"results/{name}/exact_marginal/K{K}/marginal_map.parquet"
+
+
+def exact_summary_path(name):
+    """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
+    return f"results/{name}/exact_marginal/K{stages.exact_K(SCENARIOS[name])}/summary.json"
+
+
+def exact_trajectories(wildcards):
+    """The scenario's design trajectories when K is its own K, else those at K."""
+    sc = SCENARIOS[wildcards.scenario]
+    if int(wildcards.K) == sc["K"]:
+        return f"results/{wildcards.scenario}/design_trajectories/trajectories.nc"
+    return f"results/{wildcards.scenario}/exact_marginal/K{wildcards.K}/trajectories.nc"
+
+
+def exact_disturbances(wildcards):
+    sc = SCENARIOS[wildcards.scenario]
+    return disturbance_path(ssmobs_config.disturbance_dim(sc), wildcards.K, sc["method"], sc["seed"])
 
 
 wildcard_constraints:
@@ -116,6 +140,9 @@ def all_targets():
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
         targets += expand(f"{OUT}/table_k_selection.{{ext}}", ext=["csv", "md", "tex"])
+    targets += [exact_summary_path(name) for name in EXACT_SCENARIOS]
+    targets += expand(f"{OUT}/fig_exact_vs_stan_{{name}}.{{ext}}",
+                      name=EXACT_VS_STAN_SCENARIOS, ext=["pdf", "png"])
     profile = stages.profile_scenario(config["scenarios"])
     if profile is not None:
         targets += expand(f"{OUT}/fig4_profile_posterior_{profile['name']}.{{ext}}",
@@ -126,8 +153,8 @@ def all_targets():
     targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
     if MU0_SCENARIOS:
-        targets += expand("paper_figures/table_mu0_sweep.{ext}", ext=["csv", "md", "tex"])
+        targets += expand(f"{OUT}/table_mu0_sweep.{{ext}}", ext=["csv", "md", "tex"])
     if STAN_SCENARIOS:
-        targets += expand("paper_figures/table_convergence_sensitivity.{ext}",
+        targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}",
                           ext=["csv", "md", "tex"])
     return targets

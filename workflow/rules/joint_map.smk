@@ -119,7 +119,7 @@ rule joint_map_mu0_sweep:
         paper_values="config/paper_values.yaml",
     output:
         report(
-            multiext("paper_figures/table_mu0_sweep", ".csv", ".md", ".tex"),
+            multiext(f"{OUT}/table_mu0_sweep", ".csv", ".md", ".tex"),
             caption="../report/mu0_sweep.rst",
             category="Tables",
         ),

@@ -9,4 +9,4 @@ log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p = snakemake.params
 run_paper_tables(p.scenarios, p.joint, p.marginal, snakemake.input.paper_values,
-                 Path(snakemake.output[0]).parent)
+                 Path(snakemake.output[0]).parent, exact=p.exact)

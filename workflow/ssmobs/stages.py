@@ -7,6 +7,7 @@ calling it with the same paths; the numerics live in the modules it calls.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -352,11 +353,13 @@ def _maybe_json(path: PathLike | None) -> dict | None:
 
 
 def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dict[str, str],
-                     paper_values: PathLike, outdir: PathLike) -> dict[str, Any]:
+                     paper_values: PathLike, outdir: PathLike,
+                     exact: dict[str, str] | None = None) -> dict[str, Any]:
     """Rule paper_tables: Table II, Table III and the Section IV summary, paper values beside.
 
-    ``joint`` / ``marginal`` map scenario names to their summary JSON paths.
+    ``joint`` / ``marginal`` / ``exact`` map scenario names to their summary JSON paths.
     """
+    exact = exact or {}
     from . import tables
 
     paper = tables.load_paper_values(paper_values)
@@ -366,6 +369,7 @@ def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dic
         m = _maybe_json(marginal.get(sc["name"]))
         rows.append({"config": sc, "scenario": sc["name"], "T": sc["T"],
                      "paper_ref": sc.get("paper_ref", ""), "joint": j, "marginal": m,
+                     "exact": _maybe_json(exact.get(sc["name"])),
                      "prior": (j or {}).get("prior", sc.get("prior", ""))})
     t2_names = {sc["name"] for sc in table_ii_scenarios(scenarios)}
     t2_rows = [r for r in rows if r["scenario"] in t2_names]
@@ -373,13 +377,16 @@ def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dic
     frames = {
         "table2_joint_vs_marginal": (tables.table_ii(t2_rows, paper),
                                      "Table II: empirical mean, variance and MSE of (a, x0), "
-                                     "model Same, (a, x0) = (0.9, 8); ours beside the paper's"),
+                                     "model Same, (a, x0) = (0.9, 8); ours (Stan + KDE), exact "
+                                     "and the paper's"),
         "table3_coverage": (tables.table_iii(t2_rows, paper),
                             "Table III: coverage of the 90% intervals, mean |bias| and MSE of "
-                            "the states (marginal MAP); ours beside the paper's"),
+                            "the states (marginal MAP); ours (Stan + KDE), exact and the "
+                            "paper's"),
         "section4_summary": (tables.section_iv(rows, paper),
                              "Section IV: every scenario, |K^max| and |K^Stan| (ours and the "
-                             "paper's) and the estimators' properties"),
+                             "paper's), the estimators' properties and the exact marginal "
+                             "posteriors (models linear in the states)"),
     }
     for stem, (frame, caption) in frames.items():
         tables.write_table(frame, out / stem, caption)
@@ -496,3 +503,86 @@ def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: d
     values = profile_posterior(model, traj.z[0], bounds, model.param_names[0], a, x0)
     figure_profile_posterior(a, x0, values, float(traj.omega[0]), float(traj.x0[0]),
                              f"profile posterior, {model.title}, T={traj.T}, k=1", paths)
+
+
+# ------------------------------------------------------------------ exact marginal (issue 11)
+def exact_applies(sc: dict) -> bool:
+    """The exact stage runs for a scenario when enabled and its model is linear in the states."""
+    from .models import get_model
+
+    return bool(sc.get("exact", True)) and get_model(sc["model"]).linear_in_states
+
+
+def exact_K(sc: dict) -> int:
+    """K of the design trajectories of the exact stage (``exact_K``, else the scenario's K)."""
+    return int(sc.get("exact_K") or sc["K"])
+
+
+def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarray) -> dict:
+    """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
+    trajectories with a unique interior maximum) plus Definition 3's counts and the share of
+    trajectories whose posterior is improper at each boundary."""
+    from .stan_metrics import stan_summary
+
+    info = stan_summary(frame, model, omega, x0, x_true)
+    info["n_exact"] = info["n_stan"]
+    for kind in ("unique", "several", "none"):
+        info[f"n_{kind}"] = int((frame["maxima"] == kind).sum())
+    info["n_box_truncated"] = int(frame["box_truncated"].sum())
+    info["n_spike"] = int((frame["maxima"].eq("unique") & ~frame["box_truncated"]
+                           & ~frame["converged"]).sum())
+    for name in model.param_names:
+        for side in ("lower", "upper"):
+            col = frame[f"improper_{side}_{name}"]
+            info[f"improper_{side}_{name}_share"] = float(col.mean()) if len(col) else math.nan
+            slopes = frame[f"slope_{side}_{name}"].to_numpy(dtype=float)
+            info[f"slope_{side}_{name}_median"] = (float(np.nanmedian(slopes))
+                                                   if np.isfinite(slopes).any() else math.nan)
+    return info
+
+
+def run_exact_marginal(trajectories: PathLike, scenario: dict, table: PathLike,
+                       summary: PathLike) -> dict:
+    """Rule exact_marginal: exact marginal posteriors of every design trajectory."""
+    import time
+
+    from .exact_marginal import exact_marginal
+    from .trajectories import read_trajectories
+
+    traj = read_trajectories(trajectories)
+    model = traj.model
+    if not model.linear_in_states:
+        raise ValueError(f"scenario {scenario['name']}: model '{model.slug}' is not linear "
+                         f"in the states; the exact stage does not apply")
+    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
+    start = time.perf_counter()
+    result = exact_marginal(model, traj.z, bounds)
+    seconds = time.perf_counter() - start
+    frame = result.to_frame(model)
+    info = exact_summary(frame, model, traj.omega, traj.x0, traj.x)
+    info.update(scenario=scenario["name"], model=model.slug, T=traj.T, seconds=seconds,
+                grid=result.info, prior=list(bounds.variants))
+    logger.info("scenario %s (exact): %d of %d with a unique interior maximum, %.1f s",
+                scenario["name"], info["n_exact"], traj.K, seconds)
+    io.write_parquet(table, frame)
+    io.write_json(summary, info)
+    return info
+
+
+def run_figure_exact_vs_stan(scenario: dict, stan_table: PathLike, exact_table: PathLike,
+                             paths: list[str]) -> dict:
+    """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k."""
+    from .figures import figure_exact_vs_stan
+    from .models import get_model
+
+    model = get_model(scenario["model"])
+    names = list(model.param_names) + (["x0"] if model.state_dim == 1 else
+                                       [f"x0_{i + 1}" for i in range(model.state_dim)])
+    cols = ["k", "converged"] + [f"{n}_{s}" for n in names for s in ("map", "q5", "q95")]
+    stan = io.read_parquet(stan_table, cols)
+    exact = io.read_parquet(exact_table, cols)
+    if stan["k"].tolist() != exact["k"].tolist():
+        raise ValueError(f"scenario {scenario['name']}: the Stan and exact tables hold "
+                         f"different trajectories (K = {len(stan)} and {len(exact)})")
+    both = stan["converged"].to_numpy(bool) & exact["converged"].to_numpy(bool)
+    return figure_exact_vs_stan(stan[both], exact[both], names, scenario["name"], paths)

@@ -21,6 +21,8 @@ class SepMult(StateSpaceModel):
     default_prior = {"a": "half_line"}
     allowed_priors = {"a": ("half_line", "restricted")}
     positive_params = ("a",)
+    #: multiplicative observation noise: not linear-Gaussian in the states
+    linear_in_states = False
 
     def obs_term(self, omega, x, z):
         (a,), (xt,), (zt,) = omega, x, z
