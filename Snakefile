@@ -29,6 +29,7 @@ include: "workflow/rules/joint_map.smk"
 include: "workflow/rules/stan.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/outputs.smk"
+include: "workflow/rules/own_model.smk"
 
 
 rule all:

@@ -16,6 +16,7 @@ except ConfigError as err:
 
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
+STUDIES = {st["name"]: st for st in config["observability_studies"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
@@ -33,6 +34,7 @@ def stan_summary(name):
 wildcard_constraints:
     scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
     ksel="|".join(map(re.escape, KSEL)) or "NONE",
+    study="|".join(map(re.escape, STUDIES)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
@@ -43,6 +45,11 @@ wildcard_constraints:
 
 def disturbance_path(q, K, method, seed):
     return f"results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc"
+
+
+def model_check(wildcards):
+    """The check of the scenario's model (rule check_model), needed before its trajectories."""
+    return f"results/shared/check_model/{SCENARIOS[wildcards.scenario]['model']}.json"
 
 
 def scenario_disturbances(wildcards):
@@ -94,6 +101,9 @@ def all_targets():
     if profile is not None:
         targets += expand(f"paper_figures/fig4_profile_posterior_{profile['name']}.{{ext}}",
                           ext=["pdf", "png"])
+    for name in STUDIES:
+        targets += expand(f"paper_figures/ours_{name}_observability.{{ext}}",
+                          ext=["csv", "md", "png"])
     targets += ["paper_figures/fig2_design_points.pdf", "paper_figures/fig2_design_points.png"]
     targets += expand("paper_figures/{stem}.{ext}", ext=["csv", "md", "tex"],
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
