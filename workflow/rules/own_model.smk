@@ -12,7 +12,7 @@ rule check_model:
     log:
         "results/shared/logs/check_model/{model}.log",
     params:
-        scenarios=config["scenarios"],
+        scenarios=lambda wc: [sc for sc in config["scenarios"] if sc["model"] == wc.model],
         stan=lambda wc: any(sc["stan"] for sc in config["scenarios"] if sc["model"] == wc.model),
     resources:
         mem_mb=4000,

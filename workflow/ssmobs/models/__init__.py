@@ -3,9 +3,10 @@
 A model is one module ``workflow/ssmobs/models/<slug>.py`` that defines exactly one
 :class:`~ssmobs.models.base.StateSpaceModel` subclass whose ``slug`` is the file name, plus
 one Stan program ``stan/<slug>.stan`` (see ``docs/your-own-model.md``).  Every such module
-is imported when this package is imported and checked by :func:`definition_problems`; a
-module that breaks the contract stops the import with one :class:`ModelDefinitionError`
-naming the file and what is wrong, before any work is done.  Modules whose name starts
+is imported at the first lookup in :data:`MODELS` and checked by
+:func:`definition_problems`; a module that breaks the contract stops the lookup with one
+:class:`ModelDefinitionError`
+naming the file and what is wrong, at the first lookup (before any work is done).  Modules whose name starts
 with ``_`` and the package's own modules (``base``, ``log_posterior``) are not models.
 """
 
@@ -16,10 +17,11 @@ import importlib.util
 import inspect
 import keyword
 import re
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from types import ModuleType
 
-from .base import PRIOR_VARIANTS, PriorBounds, StateSpaceModel
+from .base import PRIOR_VARIANTS, ModelDefinitionError, PriorBounds, StateSpaceModel
 
 #: directory searched for model modules
 MODELS_DIR = Path(__file__).resolve().parent
@@ -38,10 +40,6 @@ REQUIRED_METHODS: tuple[str, ...] = ("obs_term", "trans_term", "simulate")
 RESERVED_NAMES: frozenset[str] = frozenset({"x0", "x", "z", "T"})
 
 _IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-
-
-class ModelDefinitionError(ValueError):
-    """A model module breaks the model contract; the message names the file and the problem."""
 
 
 def definition_problems(cls: type, expected_slug: str) -> list[str]:
@@ -167,7 +165,29 @@ def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
     return {cls.slug: cls() for _, cls in found}
 
 
-MODELS: dict[str, StateSpaceModel] = discover_models()
+class _Registry(Mapping[str, StateSpaceModel]):
+    """The models of :data:`MODELS_DIR` by slug, discovered on first use (so that importing
+    this package never fails; the first lookup raises :class:`ModelDefinitionError`)."""
+
+    def __init__(self) -> None:
+        self._models: dict[str, StateSpaceModel] | None = None
+
+    def _load(self) -> dict[str, StateSpaceModel]:
+        if self._models is None:
+            self._models = discover_models()
+        return self._models
+
+    def __getitem__(self, slug: str) -> StateSpaceModel:
+        return self._load()[slug]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+
+MODELS: Mapping[str, StateSpaceModel] = _Registry()
 
 
 def get_model(slug: str) -> StateSpaceModel:
