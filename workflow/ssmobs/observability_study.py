@@ -4,7 +4,8 @@ For the scenarios of one ``observability_studies`` config entry (same model, dif
 one table and one figure of the two observability measures of Sec. III: |K^max|/K (joint
 MAP found and passing the checks of Sec. III.B) and |K^Stan|/K (NUTS converged, Sec.
 III.C), with the reasons the others failed (joint-MAP status counts, failed convergence
-checks) and the marginal-MAP means of Omega over K^Stan.
+checks), the marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the
+draws went, the median over all K of the KDE modes of Omega (converged or not).
 """
 
 from __future__ import annotations
@@ -45,6 +46,13 @@ def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
     for n in model.param_names:
         row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
         row[f"{n}_mean_joint"] = joint.get(f"mean_{n}", np.nan) if joint else np.nan
+    if stan_table is not None:
+        # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
+        for n in model.param_names:
+            col = f"{n}_map"
+            row[f"{n}_map_median_all_k"] = (float(np.nanmedian(stan_table[col]))
+                                            if col in stan_table and stan_table[col].notna().any()
+                                            else np.nan)
     return row
 
 
