@@ -43,6 +43,7 @@ include: "workflow/rules/stan.smk"
 include: "workflow/rules/exact_marginal.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/outputs.smk"
+include: "workflow/rules/own_model.smk"
 
 
 rule all:

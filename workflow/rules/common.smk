@@ -7,12 +7,13 @@ sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
 from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
+from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 
 try:
-    ssmobs_config.validate(config)
-except ConfigError as err:
+    ssmobs_config.validate(config)  # also finds and checks every model module
+except (ConfigError, ModelDefinitionError) as err:
     files = ", ".join(map(str, workflow.configfiles)) or "(none)"
     raise WorkflowError(f"config file(s) {files}: {err}") from None
 
@@ -25,6 +26,7 @@ except ValueError as err:
 OUT = config["outputs_dir"]
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
+STUDIES = {st["name"]: st for st in config["observability_studies"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
@@ -68,6 +70,7 @@ def exact_disturbances(wildcards):
 wildcard_constraints:
     scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
     ksel="|".join(map(re.escape, KSEL)) or "NONE",
+    study="|".join(map(re.escape, STUDIES)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
@@ -80,6 +83,14 @@ wildcard_constraints:
 
 def disturbance_path(q, K, method, seed):
     return f"results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc"
+
+
+def model_check(wildcards):
+    """The check of the scenario's model (rule check_model), needed before its trajectories.
+
+    ancient: a check rerun because a scenario of the model was added (new check case) must
+    not make the trajectories of the other scenarios out of date."""
+    return ancient(f"results/shared/check_model/{SCENARIOS[wildcards.scenario]['model']}.json")
 
 
 def scenario_disturbances(wildcards):
@@ -147,6 +158,9 @@ def all_targets():
     if profile is not None:
         targets += expand(f"{OUT}/fig4_profile_posterior_{profile['name']}.{{ext}}",
                           ext=["pdf", "png"])
+    for name in STUDIES:
+        targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}",
+                          ext=["csv", "md", "png"])
     targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
     targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["csv", "md", "tex"],
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])

@@ -158,6 +158,20 @@ def _scenario_problems(config: dict) -> list[str]:
             grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
+    models = {sc["name"]: sc["model"] for sc in config["scenarios"]}
+    study_seen: set[str] = set()
+    for i, st in enumerate(config.get("observability_studies", [])):
+        where = f"observability_studies[{i}] ('{st['name']}')"
+        if st["name"] in study_seen:
+            problems.append(f"{where}.name = {st['name']!r}: used twice; names must be unique")
+        study_seen.add(st["name"])
+        unknown = [n for n in st["scenarios"] if n not in names]
+        if unknown:
+            problems.append(f"{where}.scenarios: no scenario(s) named {unknown}; configured: "
+                            f"{sorted(names)}")
+        elif len({models[n] for n in st["scenarios"]}) > 1:
+            problems.append(f"{where}.scenarios = {st['scenarios']}: must all use one model, "
+                            f"got {sorted({models[n] for n in st['scenarios']})}")
     return problems + _keep_draws_problems(config) + _figure_problems(config)
 
 

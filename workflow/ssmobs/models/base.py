@@ -36,6 +36,10 @@ import sympy as sp
 PRIOR_VARIANTS: tuple[str, ...] = ("restricted", "unrestricted", "half_line")
 
 
+class ModelDefinitionError(ValueError):
+    """A model module breaks the model contract; the message names the file and the problem."""
+
+
 @dataclass(frozen=True)
 class PriorBounds:
     """Support of the (flat) prior on Omega: ``lower < Omega < upper`` component-wise."""
