@@ -11,8 +11,12 @@ A run passes when, over its post-warmup draws,
 * all draws are finite,
 
 and tree-depth saturation (draws with ``treedepth__ >= max_treedepth``) is reported as a
-warning, or fails the run when ``treedepth_fails`` is set.  Default thresholds are the
-decision summary of ``shared/docs/stan-arviz-snakemake-facts.md`` (Sec. 1).
+warning, or fails the run when ``treedepth_fails`` is set.  Default thresholds are those of
+Stan's runtime-warnings page, the paper's reference [2] for "the exact thresholds used in
+Stan" (R-hat < 1.01, bulk-/tail-ESS > 100 per chain, E-BFMI 0.3, no divergences, tree-depth
+saturation an efficiency warning; quoted in config/README.md).  :func:`threshold_failures`
+applies them to a run's worst diagnostics, so stored records can be re-evaluated under other
+thresholds (:func:`converged_under`, :func:`sensitivity_table`) without new sampling.
 
 Two implementations give the same numbers (tested to 1e-10):
 
