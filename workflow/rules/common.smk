@@ -123,10 +123,10 @@ def nuts_batches(wildcards):
     """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
     record was changed or deleted after its finished batch table was written (a stat per
     record: a damaged record must not go unnoticed until its batch reruns)."""
-    from ssmobs.stages import batches, changed_batch_records
+    from ssmobs.stages import batches, changed_batch_records, stan_batch_size
 
     sc = SCENARIOS[wildcards.scenario]
-    ranges = batches(sc["K"], config["stan"]["batch_size"])
+    ranges = batches(sc["K"], stan_batch_size(sc, config["stan"]))
     tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
               for b in range(len(ranges))]
     for table, ks in zip(tables, ranges):

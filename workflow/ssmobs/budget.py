@@ -163,7 +163,6 @@ def estimates(config: dict) -> list[JobEstimate]:
 
 def job_counts(config: dict) -> dict[str, int]:
     """Number of jobs of the run, by what makes them (an upper bound: shared files counted once)."""
-    batch = config["stan"]["batch_size"]
     counts: dict[str, int] = {}
     disturbances: set[tuple] = set()
     for sc in config["scenarios"]:
@@ -172,6 +171,7 @@ def job_counts(config: dict) -> dict[str, int]:
         disturbances.add((q, sc["K"], sc["method"], sc["seed"]))
         n = 1 + int(sc["joint_map"])
         if sc["stan"]:
+            batch = sc.get("stan_batch_size") or config["stan"]["batch_size"]
             n += math.ceil(sc["K"] / batch) + 1
         counts[f"scenario '{sc['name']}'"] = n
     scenarios = {sc["name"]: sc for sc in config["scenarios"]}

@@ -151,6 +151,11 @@ def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[s
 
 
 # ------------------------------------------------------------------ Stan stage (Sec. III.C)
+def stan_batch_size(scenario: dict, stan_cfg: dict) -> int:
+    """Trajectories per Stan job: the scenario's ``stan_batch_size``, else ``stan.batch_size``."""
+    return int(scenario.get("stan_batch_size") or stan_cfg["batch_size"])
+
+
 def batches(K: int, batch_size: int) -> list[range]:
     """Contiguous trajectory ranges of the Stan jobs: a pure function of (K, batch_size)."""
     return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
@@ -190,7 +195,7 @@ def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, s
     traj = read_trajectories(trajectories)
     model = traj.model
     backend_name = io.read_json(marker, required=["backend"])["backend"]
-    ks = list(batches(traj.K, stan_cfg["batch_size"])[batch])
+    ks = list(batches(traj.K, stan_batch_size(scenario, stan_cfg))[batch])
     bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
     progress = Progress(f"NUTS {scenario['name']} batch {batch}", len(ks), logger)
     records = run_trajectories(
