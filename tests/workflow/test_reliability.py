@@ -177,7 +177,7 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
     workdir = make_workdir(tmp_path)
     (workdir / "bad.yaml").write_text(yaml.safe_dump(conf))
     proc = snakemake(workdir, "--cores", "2", "--configfile", "bad.yaml", check=False,
-                     timeout=120)
+                     timeout=600)
     assert proc.returncode != 0
     assert needle in proc.stdout + proc.stderr
     assert "config file(s) " in proc.stdout + proc.stderr

@@ -129,8 +129,8 @@ def nuts_batches(wildcards):
     ranges = batches(sc["K"], stan_batch_size(sc, config["stan"]))
     tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
               for b in range(len(ranges))]
-    for table, ks in zip(tables, ranges):
-        problem = changed_batch_records(table, ks)
+    for table in tables:
+        problem = changed_batch_records(table)
         if problem:
             raise WorkflowError(problem)
     return tables

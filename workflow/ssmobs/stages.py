@@ -218,19 +218,23 @@ def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
                                f"records are recomputed)")
 
 
-def changed_batch_records(batch_table: PathLike, ks: Any) -> str | None:
+def changed_batch_records(batch_table: PathLike) -> str | None:
     """Why the finished batch table ``batch_table`` no longer matches its records, or None.
 
-    Looks only at file times (cheap enough for every DAG build): a record of ``ks`` that is
-    missing or newer than the table was damaged, edited or deleted after the batch ran.
-    None when the table does not exist (the batch is still to run).
+    Reads only the table's ``k`` column and the records' file times (cheap enough for every
+    DAG build): a record of one of those k that is missing or newer than the table was
+    damaged, edited or deleted after the batch ran.  None when the table does not exist
+    (the batch is still to run) or cannot be read (gather_nuts reports that).
     """
+    import pyarrow.parquet as pq
+
     from .nuts_stage import record_path
 
     table = Path(batch_table)
     try:
         written = table.stat().st_mtime_ns
-    except FileNotFoundError:
+        ks = pq.read_table(table, columns=["k"]).column("k").to_pylist()
+    except Exception:  # noqa: BLE001 - missing or unreadable: not this check's business
         return None
     folder = batch_records_dir(table)
     for k in ks:
