@@ -189,9 +189,9 @@ def main() -> None:
     lines += [
         "",
         f"Grid accuracy ({args.accuracy_K} trajectories per model, seed 1): median / largest "
-        "absolute change from the default grids to refined ones (coarse and fine grids about 1.5x denser "
-        "per axis, box ±9 instead of ±7 Laplace sd), in units of the trajectory's 90 % interval "
-        "width q95 - q5, over the trajectories with a unique maximum under both; "
+        "absolute change from the default grids to refined ones (coarse and fine grids about "
+        "1.5x denser per axis, box ±9 instead of ±7 Laplace sd), in units of the "
+        "trajectory's 90 % interval width q95 - q5, over the trajectories with a unique maximum under both; "
         "'same class' is the share with the same Definition 3 class.",
         "",
         "| case | trajectories compared | same class | Omega MAP | Omega q5/q95 | states MAP "

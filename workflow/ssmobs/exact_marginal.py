@@ -34,8 +34,11 @@ integrable there (likewise c -> 0 for (Sep, d=2, p=1), c, d -> 0 for (Sep, d=1, 
 a -> 0 for Sep and ranWalk).  :func:`boundary_slopes` measures d log p / d log(distance to
 the boundary) along each axis; a slope <= -1 at a finite boundary (>= -1 at infinity)
 means the posterior is improper there.  The marginal MAP reported is then the interior
-local maximum and the quantiles are those of the posterior restricted to the box of step 3,
-which excludes the non-integrable spike at the boundary.
+local maximum and the quantiles are those of the posterior restricted to the basin of that
+maximum (the box of step 3 stops at the valley between it and the improper boundary).
+``spike_ratio`` estimates the mass of what was cut off, down to ``spike_distance`` from
+the boundary, relative to the basin's (along the axis through the mode), so a user sees
+where the interior basin does not dominate.
 """
 
 from __future__ import annotations
@@ -290,8 +293,11 @@ class ExactResult:
 
     def to_frame(self, model: StateSpaceModel) -> "pandas.DataFrame":  # noqa: F821
         """One row per trajectory, columns like the Stan stage's gather table:
-        ``k``, ``status``, ``converged`` (= unique interior maximum, the grid box not
-        truncated and ``spike_ratio`` < ``spike_tol``), ``maxima``, ``spike_ratio``,
+        ``k``, ``status``, ``converged`` (= unique interior maximum and the grid box not
+        truncated: Definition 3's set, the rows the statistics use), ``maxima``,
+        ``spike_ratio`` and ``spike_not_negligible`` (>= ``spike_tol``: the non-integrable
+        part near an improper boundary, down to ``spike_distance`` from it, is not
+        negligible against the interior mode's basin; reported, not used as a filter),
         ``n_local_max``, ``box_truncated``, ``improper_lower_<p>``/``improper_upper_<p>``,
         ``slope_lower_<p>``/``slope_upper_<p>``, ``mode_<p>``, ``laplace_sd_<p>`` and
         ``<name>_map``/``_q5``/``_q95`` for every component of Theta."""
@@ -301,8 +307,8 @@ class ExactResult:
         cols: dict[str, Any] = {
             "k": np.arange(K, dtype=np.int64),
             "status": np.where(self.maxima == "none", "no_interior_maximum", "ok"),
-            "converged": (self.maxima == "unique") & ~self.box_truncated
-            & (self.spike_ratio < self.spike_tol),
+            "converged": (self.maxima == "unique") & ~self.box_truncated,
+            "spike_not_negligible": self.spike_ratio >= self.spike_tol,
             "maxima": self.maxima.astype(str),
             "n_local_max": self.n_local_max.astype(np.int64),
             "box_truncated": self.box_truncated.astype(bool),

@@ -538,8 +538,8 @@ def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarra
     for kind in ("unique", "several", "none"):
         info[f"n_{kind}"] = int((frame["maxima"] == kind).sum())
     info["n_box_truncated"] = int(frame["box_truncated"].sum())
-    info["n_spike"] = int((frame["maxima"].eq("unique") & ~frame["box_truncated"]
-                           & ~frame["converged"]).sum())
+    info["n_spike_not_negligible"] = int((frame["converged"]
+                                          & frame["spike_not_negligible"]).sum())
     for name in model.param_names:
         for side in ("lower", "upper"):
             col = frame[f"improper_{side}_{name}"]
