@@ -39,7 +39,7 @@ def test_prior_bound_stan_does_not_share(tmp_path):
     problems = stan_problems(get_model("stoch_vol"), path, case)
     assert len(problems) == 1
     msg = problems[0]
-    assert "Stan accepts sigma=0.999" in msg and "upper bound 1" in msg
+    assert "Stan accepts sigma=1.001" in msg and "upper bound 1" in msg
     assert "does not share this prior bound" in msg
 
 

@@ -306,7 +306,8 @@ def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: i
         try:
             post = stan.build(stan_path.read_text(), data=data)
         except Exception as err:  # noqa: BLE001 - reported as a problem
-            return [f"{stan_path.name}: Stan rejects the data of the Python model {where}: "
+            return [f"{stan_path.name}: building the program with the Python model's data "
+                    f"failed {where} (rejected data, or a PyStan/httpstan error): "
                     f"{type(err).__name__}: {err}"]
         want = expected_parameters(model)
         got = list(post.param_names)
