@@ -39,13 +39,14 @@ def test_prior_bound_stan_does_not_share(tmp_path):
     problems = stan_problems(get_model("stoch_vol"), path, case)
     assert len(problems) == 1
     msg = problems[0]
-    assert "Stan accepts sigma=0.999" in msg and "upper bound 1" in msg
+    assert "Stan accepts sigma=1.001" in msg and "upper bound 1" in msg
     assert "does not share this prior bound" in msg
 
 
 def test_log_density_that_differs_is_named(tmp_path):
     # exp(x) instead of exp(x / 2): the observation standard deviation is wrong
-    path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));", "z ~ normal(0, exp(x));")
+    path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));",
+                   "z ~ normal(0, exp(x));  // wrong scale")
     problems = stan_problems(get_model("stoch_vol"), path,
                              CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0]))
     assert len(problems) == 1

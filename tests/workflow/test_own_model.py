@@ -56,6 +56,18 @@ def fresh(tmp_path_factory):
     return make_workdir(tmp_path_factory.mktemp("own_model"))
 
 
+@pytest.fixture(autouse=True)
+def copy_package_first(monkeypatch, request):
+    """Snakemake's jobs import ssmobs from the copy (not from a PYTHONPATH of the caller)."""
+    work = None
+    for name in ("fresh", "tmp_path"):
+        if name in request.fixturenames:
+            work = request.getfixturevalue(name)
+            break
+    if work is not None:
+        monkeypatch.setenv("PYTHONPATH", str(work / "workflow"))
+
+
 def test_step_check_command(fresh):
     proc = _python(fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile",
                    "config/stoch_vol.yaml")

@@ -93,6 +93,11 @@ def model_check(wildcards):
     return ancient(f"results/shared/check_model/{SCENARIOS[wildcards.scenario]['model']}.json")
 
 
+def study_scenarios(name):
+    """The scenario entries of one observability study, in config order."""
+    return [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
+
+
 def scenario_disturbances(wildcards):
     sc = SCENARIOS[wildcards.scenario]
     return disturbance_path(ssmobs_config.disturbance_dim(sc), sc["K"], sc["method"], sc["seed"])

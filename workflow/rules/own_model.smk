@@ -23,10 +23,6 @@ rule check_model:
         "../scripts/check_model.py"
 
 
-def study_scenarios(name):
-    return [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
-
-
 rule observability_study:
     """|K^max|/K and |K^Stan|/K of one model over T: table and figure in paper_figures/."""
     input:

@@ -306,7 +306,8 @@ def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: i
         try:
             post = stan.build(stan_path.read_text(), data=data)
         except Exception as err:  # noqa: BLE001 - reported as a problem
-            return [f"{stan_path.name}: Stan rejects the data of the Python model {where}: "
+            return [f"{stan_path.name}: building the program with the Python model's data "
+                    f"failed {where} (rejected data, or a PyStan/httpstan error): "
                     f"{type(err).__name__}: {err}"]
         want = expected_parameters(model)
         got = list(post.param_names)
@@ -423,7 +424,7 @@ def check_model(slug: str, cases: Sequence[CheckCase] | None = None, stan: bool 
 
 
 def run_check_model(slug: str, scenarios: Sequence[Mapping[str, Any]], out: str | Path,
-                    stan: bool = True) -> CheckReport:
+                    stan: bool = True, stan_path: str | Path | None = None) -> CheckReport:
     """Rule check_model: check the model for the default cases and every configured case;
     write the report; raise :class:`ModelCheckError` listing every problem."""
     model = get_model(slug)
@@ -431,7 +432,7 @@ def run_check_model(slug: str, scenarios: Sequence[Mapping[str, Any]], out: str 
     for case in cases_from_scenarios(scenarios, slug):
         if case not in cases:
             cases.append(case)
-    report = check_model(slug, cases, stan=stan)
+    report = check_model(slug, cases, stan=stan, stan_path=stan_path)
     if report.problems:
         raise ModelCheckError(f"model '{slug}': the Python model and the Stan program "
                               f"disagree:\n  - " + "\n  - ".join(report.problems))
