@@ -16,27 +16,40 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+# `make run CONFIG=my.yaml` runs another config file.
+CONFIG ?= config/config.yaml
+# Before Snakemake: one line for a missing, empty or malformed config file, and removal of a
+# stale lock left by a killed run when no Snakemake process runs here (ssmobs/preflight.py).
+PREFLIGHT := $(BIN)/python -m ssmobs.preflight --unlock-stale
+
 run: setup
-	$(BIN)/snakemake --cores $(CORES)
+	$(PREFLIGHT) $(CONFIG)
+	$(BIN)/snakemake --cores $(CORES) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
 
 test: setup
 	$(BIN)/pytest
 
 smoke: setup
+	$(PREFLIGHT) config/smoke.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/smoke.yaml
 
 paper: setup
+	$(PREFLIGHT) config/paper.yaml
 	$(BIN)/snakemake --cores $(CORES) --configfile config/paper.yaml
 
 # Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).
 TABLES_DIR := paper_figures/paper_settings
 TABLES_TARGETS := $(foreach s,table2_joint_vs_marginal table3_coverage,$(foreach e,csv md tex,$(TABLES_DIR)/$(s).$(e))) \
-	$(TABLES_DIR)/fig3_joint_vs_marginal.pdf $(TABLES_DIR)/fig3_joint_vs_marginal.png
+	$(foreach s,fig3_joint_vs_marginal $(foreach T,20 50,fig_exact_vs_stan_tables_same_a09_T$(T)),$(foreach e,pdf png,$(TABLES_DIR)/$(s).$(e)))
+# free text for the provenance file (e.g. that Stan records of an earlier run were reused)
+TABLES_NOTE ?=
 
 tables: setup
+	$(PREFLIGHT) config/tables.yaml
 	start=$$(date +%s); \
 	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete $(TABLES_TARGETS) --configfile config/tables.yaml && \
-	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) --started $$start
+	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) \
+		--started $$start --note "$(TABLES_NOTE)"
 
 clean:
 	rm -rf results .snakemake

@@ -5,20 +5,33 @@
 #     design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc   (q = (d+p)T)
 #   results/{scenario}/...    one folder per rule for each configured scenario
 #     design_trajectories/trajectories.nc
+#     exact_marginal/K{K}/                   exact marginal posteriors at K (issue 11)
 #   results/k_selection/{name}/...   runs of the choice of K (Sec. IV.A)
 #   results/{scenario}/logs, results/shared/logs    one log per job
 #   paper_figures/            final tables and figures (see paper_figures/README.md)
 #
 # Default config: config/config.yaml; others with --configfile config/smoke.yaml|paper.yaml.
 
+import sys
+from pathlib import Path
+
 from snakemake.utils import min_version
 
 min_version("9.0")
+
+sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
 
 # config/config.yaml is the default; a profile given with --configfile replaces it whole
 # (Snakemake would otherwise deep-merge the two and leak default settings into it).
 if not workflow.overwrite_configfiles:
+    from ssmobs.config import ConfigError
+    from ssmobs.preflight import load_config_file
+
+    try:  # our reading first: one line naming the file (and line, column) when it is bad
+        load_config_file("config/config.yaml")
+    except ConfigError as err:
+        raise WorkflowError(str(err)) from None
 
     configfile: "config/config.yaml"
 
@@ -27,8 +40,10 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/design.smk"
 include: "workflow/rules/joint_map.smk"
 include: "workflow/rules/stan.smk"
+include: "workflow/rules/exact_marginal.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/outputs.smk"
+include: "workflow/rules/own_model.smk"
 
 
 rule all:

@@ -128,3 +128,198 @@ def test_cmdstanpy_backend_without_cmdstan_is_refused():
 def test_unknown_backend_name():
     with pytest.raises(cfg.ConfigError, match=r"stan.backend = 'stan'.*allowed values"):
         cfg.validate({**base(), "stan": {"backend": "stan"}})
+
+
+# ----------------------------------------------------------------- issue 14: silent wrong answers
+def number_keys(schema: dict, path: tuple = ()) -> list[tuple]:
+    """Every key the schema types as a number (also in lists of objects), as a config path."""
+    out = []
+    kinds = schema.get("type")
+    kinds = kinds if isinstance(kinds, list) else [kinds]
+    if "number" in kinds:
+        out.append(path)
+    for key, sub in schema.get("properties", {}).items():
+        out += number_keys(sub, path + (key,))
+    if isinstance(schema.get("items"), dict) and schema["items"].get("type") == "object":
+        out += number_keys(schema["items"], path + (0,))
+    return out
+
+
+def full_config() -> dict:
+    """base() with every optional section present, so each number key has a place to go."""
+    c = base()
+    c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20]}]
+    for section in ("figure2", "figure4", "design", "joint_map", "stan", "convergence",
+                    "limits"):
+        c[section] = {}
+    return c
+
+
+NUMBER_KEYS = number_keys(cfg.load_schema())
+
+
+def test_schema_has_the_numbers_of_the_issue():
+    names = {".".join(map(str, p)) for p in NUMBER_KEYS}
+    for key in ("convergence.ess_bulk_min", "stan.adapt_delta", "convergence.rhat_max",
+                "k_selection.0.c1", "joint_map.grad_tol", "figure2.a", "limits.job_memory_gib"):
+        assert key in names
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), float("-inf")],
+                         ids=["nan", "inf", "-inf"])
+@pytest.mark.parametrize("path", NUMBER_KEYS, ids=[".".join(map(str, p)) for p in NUMBER_KEYS])
+def test_every_number_key_must_be_finite(path, value):
+    c = full_config()
+    target = c
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    with pytest.raises(cfg.ConfigError, match="must be a finite number") as err:
+        cfg.validate(c)
+    key = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    assert f"{key} = {value!r}" in str(err.value)
+
+
+@pytest.mark.parametrize("where", [("scenarios", 0, "omega", "a"), ("scenarios", 0, "x0")])
+def test_nan_in_true_values_refused(where):
+    c = base()
+    target = c
+    for key in where[:-1]:
+        target = target[key]
+    target[where[-1]] = float("nan")
+    with pytest.raises(cfg.ConfigError, match="must be a finite number"):
+        cfg.validate(c)
+
+
+def test_yaml_nan_from_a_config_file_refused():
+    c = yaml.safe_load("convergence: {ess_bulk_min: .nan}\nstan: {adapt_delta: .inf}\n")
+    c.update(base())
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(c)
+    assert "convergence.ess_bulk_min = nan" in str(err.value)
+    assert "stan.adapt_delta = inf" in str(err.value)
+
+
+@pytest.mark.parametrize("a", [1.5, 1.0, -1.0, -2.0])
+def test_figure2_a_outside_the_stationary_range_refused(a):
+    with pytest.raises(cfg.ConfigError, match=rf"figure2.a = {a}"):
+        cfg.validate({**base(), "figure2": {"a": a}})
+
+
+def test_figure2_a_inside_range_accepted():
+    assert cfg.validate({**base(), "figure2": {"a": -0.5}})["figure2"]["a"] == -0.5
+
+
+def test_figure4_empty_grid_refused():
+    with pytest.raises(cfg.ConfigError, match="figure4.a_min = 2.0, figure4.a_max = 1.0"):
+        cfg.validate({**base(), "figure4": {"a_min": 2.0, "a_max": 1.0}})
+
+
+def test_keep_draws_beyond_K_refused():
+    with pytest.raises(cfg.ConfigError, match=r"stan.keep_draws = \[0, 999\]: k = \[999\]"):
+        cfg.validate({**base(), "stan": {"keep_draws": [0, 999]}})
+    with pytest.raises(cfg.ConfigError, match=r"k = \[10\]"):  # k counts from 0: K = 10
+        cfg.validate({**base(), "stan": {"keep_draws": [10]}})
+    assert cfg.validate({**base(), "stan": {"keep_draws": [9]}})["stan"]["keep_draws"] == [9]
+
+
+def test_keep_draws_checked_against_the_largest_stan_scenario():
+    c = base()
+    c["scenarios"].append({**c["scenarios"][0], "name": "big", "K": 50})
+    c["stan"] = {"keep_draws": [40]}  # only 'big' has k = 40: kept there
+    cfg.validate(copy.deepcopy(c))
+    c["scenarios"][1]["stan"] = False  # now no Stan scenario has it
+    with pytest.raises(cfg.ConfigError, match="largest K is 10"):
+        cfg.validate(c)
+
+
+@pytest.mark.parametrize("name", ["shared", "k_selection", "Shared"])
+def test_reserved_scenario_names(name):
+    c = with_(["scenarios", 0, "name"], name)
+    with pytest.raises(cfg.ConfigError, match=rf"name = '{name}': reserved"):
+        cfg.validate(c)
+
+
+@pytest.mark.parametrize("section", ["scenario", "k_selection", "figure2"])
+def test_seeds_bounded_to_32_bits(section):
+    def conf(seed):
+        c = base()
+        if section == "scenario":
+            c["scenarios"][0]["seed"] = seed
+        elif section == "k_selection":
+            c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20],
+                                 "seeds": [1, seed]}]
+        else:
+            c["figure2"] = {"seed": seed}
+        return c
+
+    cfg.validate(conf(2**32 - 1))
+    with pytest.raises(cfg.ConfigError, match="must be <= 4294967295"):
+        cfg.validate(conf(2**70))
+
+
+def test_seed_checked_where_it_is_read():
+    from ssmobs import seeds
+
+    assert seeds.int_seed(2**32 - 1, "nuts", "s", 0) >= 0
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 4294967295\]"):
+        seeds.rng(2**70, "nuts", "s", 0)
+
+
+def test_top_level_not_a_mapping():
+    with pytest.raises(cfg.ConfigError, match="top level must be a mapping"):
+        cfg.validate(["scenarios"])
+
+
+# ----------------------------------------------------------------- issue 14: runaway sizes
+def huge() -> dict:
+    return with_(["scenarios", 0], {"name": "huge", "model": "same", "omega": {"a": 0.9},
+                                    "x0": 8, "T": 1000, "K": 10_000_000})
+
+
+def test_runaway_size_refused_naming_scenario_estimate_and_limit():
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(huge())
+    msg = str(err.value)
+    assert "scenario 'huge': a design_disturbances job needs about" in msg
+    assert "K = 10000000, T = 1000, q = 2000" in msg
+    assert "limits.job_memory_gib = 10 GiB" in msg
+    assert "more than limits.jobs = 20000" in msg
+    gib = float(msg.split("design_disturbances job needs about ")[1].split(" GiB")[0])
+    assert gib > 74.5  # at least the (q x K) matrix the design stage would allocate
+
+
+def test_raised_limits_accept_it_and_accept_strings_from_the_command_line():
+    c = huge()
+    c["limits"] = {"job_memory_gib": "100000", "jobs": "1000000"}  # as --config passes them
+    c["stan"] = {"batch_size": 1000}
+    assert cfg.validate(c)["limits"] == {"job_memory_gib": 100000, "jobs": 1000000}
+
+
+def test_too_many_jobs_refused_even_when_memory_fits():
+    c = with_(["scenarios", 0, "K"], 100_000)
+    c["scenarios"][0]["T"] = 1
+    c["stan"] = {"batch_size": 1}
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(c)
+    msg = str(err.value)
+    assert "job needs about" not in msg
+    assert "about 100013 jobs, more than limits.jobs = 20000" in msg
+    assert "scenario 's': 100003" in msg
+
+
+def test_slurm_profile_raises_the_limits():
+    profile = yaml.safe_load((REPO / "config/profiles/slurm/config.yaml").read_text())
+    limits = profile["config"]["limits"]
+    schema = cfg.load_schema()["properties"]["limits"]["properties"]
+    assert limits["job_memory_gib"] > schema["job_memory_gib"]["default"]
+    assert limits["jobs"] > schema["jobs"]["default"]
+
+
+def test_schema_seed_bound_is_the_one_the_readers_check():
+    from ssmobs.seeds import MAX_SEED
+
+    props = cfg.load_schema()["properties"]
+    assert props["scenarios"]["items"]["properties"]["seed"]["maximum"] == MAX_SEED
+    assert props["k_selection"]["items"]["properties"]["seeds"]["items"]["maximum"] == MAX_SEED
+    assert props["figure2"]["properties"]["seed"]["maximum"] == MAX_SEED

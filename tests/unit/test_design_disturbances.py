@@ -447,7 +447,8 @@ def test_explicit_b_max():
         (dict(q=2, K=0), r"K must be a positive integer.*got 0"),
         (dict(q=2, K=True), r"K must be a positive integer.*got True"),
         (dict(q=2, K=5, method="sobol"), r"method must be one of \('design', 'random', 'antithetic'\); got 'sobol'"),
-        (dict(q=2, K=5, seed=-1), r"seed must be a non-negative integer; got -1"),
+        (dict(q=2, K=5, seed=-1), r"seed must be an integer in \[0, 4294967295\]; got -1"),
+        (dict(q=2, K=5, seed=2**70), r"seed must be an integer in \[0, 4294967295\]; got 1180"),
         (dict(q=2, K=5, b_max=0.0), r"b_max must be a positive finite number; got 0\.0"),
     ],
 )

@@ -115,3 +115,57 @@ def test_two_state_simulation_follows_eq_1():
         np.testing.assert_allclose(x[:, t], prev)
     np.testing.assert_allclose(z[..., 0], a * x[..., 0] + b * x[..., 1]
                                + np.sqrt(1 - a * a - b * b) * eps[..., 0])
+
+
+# ------------------------------------------------- issue 14: modes and stale temporaries
+@pytest.fixture()
+def umask():
+    """Set the process umask for one test and restore it."""
+    old = os.umask(0o022)
+    os.umask(old)
+    yield lambda mask: os.umask(mask)
+    os.umask(old)
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o027, 0o002])
+def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
+    import pandas as pd
+    import xarray as xr
+
+    from ssmobs.figures import _plt, save_figure
+
+    umask(mask)
+    io.write_json(tmp_path / "a.json", {"x": 1})
+    io.write_text(tmp_path / "b.md", "table\n")
+    io.write_parquet(tmp_path / "c.parquet", pd.DataFrame({"x": [1.0]}))
+    io.write_netcdf(tmp_path / "d.nc", xr.Dataset({"x": ("k", np.arange(3.0))}))
+    plt = _plt()
+    fig, _ = plt.subplots()
+    save_figure(fig, [tmp_path / "e.png", tmp_path / "e.pdf"])
+    plt.close(fig)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir()}
+    assert modes == {name: 0o666 & ~mask for name in
+                     ["a.json", "b.md", "c.parquet", "d.nc", "e.png", "e.pdf"]}
+
+
+def test_sweep_removes_only_our_stale_temporaries(tmp_path):
+    target = tmp_path / "fig_x.png"
+    stale = [tmp_path / ".fig_x.png.ab_cd123.png", tmp_path / ".fig_x.png.0123abcd.png"]
+    keep = [tmp_path / ".fig_x.png.short.png", tmp_path / ".fig_y.png.ab_cd123.png",
+            tmp_path / "fig_x.png.ab_cd123.png", tmp_path / ".fig_x.png.ab_cd123.pdf",
+            tmp_path / ".fig_x.png.ab_cd123.png.keep"]
+    for p in stale + keep:
+        p.write_bytes(b"")
+    assert io.temporaries(target) == sorted(stale)
+    assert io.sweep_temporaries([target, tmp_path / "missing_dir" / "t.csv"]) == sorted(stale)
+    assert sorted(tmp_path.iterdir()) == sorted(keep)
+
+
+def test_sweep_finds_what_a_killed_atomic_write_leaves(tmp_path):
+    target = tmp_path / "table.csv"
+    with io.atomic_path(target) as tmp:  # a writer killed here leaves tmp behind
+        left = tmp
+        assert io.temporaries(target) == [left]
+        tmp.write_text("x\n")
+    assert io.temporaries(target) == []
+    assert target.read_text() == "x\n"

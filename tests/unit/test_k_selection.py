@@ -126,3 +126,99 @@ def test_selection_from_summaries_end_to_end():
     V = np.stack([v.values for v in vs])
     assert isinstance(vs[0], VVector)
     assert select_k([100, 200, 300, 400], V, vs[0].thresholds(0.01, 0.03)) == 1
+
+
+# ------------------------------------------------------------------ set variants (issue 12)
+def test_nested_random_sets_share_points_and_independent_sets_do_not():
+    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.k_selection import set_seed
+
+    q = 8
+    small = {s: design_disturbances(q, 100, "random", set_seed(1, 100, s)).points
+             for s in ("nested", "independent")}
+    large = {s: design_disturbances(q, 200, "random", set_seed(1, 200, s)).points
+             for s in ("nested", "independent")}
+    assert set_seed(1, 100, "nested") == set_seed(1, 200, "nested") == 1
+    assert np.array_equal(large["nested"][:100], small["nested"])  # the K=100 set is a prefix
+    assert set_seed(1, 100, "independent") != set_seed(1, 200, "independent")
+    # independent sets: no shared point, and their first columns are uncorrelated draws
+    assert not np.isin(small["independent"], large["independent"]).any()
+    r = np.corrcoef(small["independent"].ravel(), large["independent"][:100].ravel())[0, 1]
+    assert abs(r) < 0.1
+    assert set_seed(2, 100, "independent") != set_seed(1, 100, "independent")
+    with pytest.raises(ValueError, match="sets"):
+        set_seed(1, 100, "shared")
+
+
+def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
+    from ssmobs import io
+    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.k_selection import set_seed
+    from ssmobs.stages import run_k_selection_point, run_select_k
+
+    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
+          "prior": "restricted", "paper_ref": "same_a09_T4"}
+    points = []
+    for sets in ("independent", "nested"):
+        for K in (40, 80, 120):
+            d = design_disturbances(8, K, "random", set_seed(3, K, sets))
+            path = tmp_path / f"d_{sets}_{K}.nc"
+            io.write_disturbances(path, d)
+            out = tmp_path / f"{sets}_K{K}.json"
+            info = run_k_selection_point(path, sc, K, "random", 3, {}, out, sets=sets)
+            assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3,
+                                                                      set_seed(3, K, sets))
+            points.append(out)
+    ksel = {"name": "t", "c1": 0.5, "c2": 2.0, "paper_K": 300}
+    res = run_select_k(ksel, sc, points, "config/paper_values.yaml", tmp_path / "sel.json",
+                       tmp_path / "v.csv", [str(tmp_path / "f.png")])
+    rows = {c["sets"]: c for c in res["choices"]}
+    assert set(rows) == {"independent", "nested"}
+    for c in rows.values():  # loose thresholds: the first K_i is chosen in both variants
+        assert c["K_chosen"] == 40 and c["K_grid"] == "40-120 step 40"
+        assert c["K_paper_range"] == ""  # not the paper's (0.01, 0.03): no comparison
+    v = pd.read_csv(tmp_path / "v.csv")
+    # the two variants differ: at K = 40 the nested and independent sets are other draws
+    ratio = v[v["component"] == "mean_a"].pivot_table(index="K", columns="sets", values="value")
+    assert not np.allclose(ratio["independent"], ratio["nested"])
+
+
+def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
+    import yaml
+
+    from ssmobs import config as cfg
+
+    c = cfg.validate(yaml.safe_load(open("config/paper.yaml")))
+    for ks in c["k_selection"]:
+        grid = ks["K_grid"]
+        assert grid == list(range(100, grid[-1] + 1, 100))
+        top = 4500 if "random" in ks["methods"] else ks["paper_K"]
+        assert grid[-1] == -(-(top + 500) // 500) * 500, ks["name"]
+        assert ks["sets"] == (["independent", "nested"] if ks["scenario"] == "same_a09_T4"
+                              else ["independent"])
+    names = {ks["name"]: ks for ks in c["k_selection"]}
+    assert (names["same_a09_T4_random"]["c1"], names["same_a09_T4_random"]["c2"]) == (0.01, 0.03)
+    assert (names["same_a07_T100"]["c2"], names["same_a07_T100"]["paper_K"]) == (0.06, 3600)
+
+
+def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
+    from ssmobs import io
+    from ssmobs.stages import run_select_k
+
+    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
+          "paper_ref": "same_a09_T4"}
+    model = get_model("same")
+    pts = []
+    for K in (100, 200, 300):
+        info = {"K_i": K, "method": "random", "seed": 1, "sets": "independent", "ratio": 1.0}
+        for c in model.theta_names(0):
+            info.update({f"mean_{c}": 1.0, f"var_{c}": 1.0, f"mean_lvar_{c}": 1.0})
+        io.write_json(tmp_path / f"K{K}.json", info)
+        pts.append(tmp_path / f"K{K}.json")
+    for (c1, c2), shown in (((0.01, 0.03), "2500-4500"), ((0.01, 0.01), "")):
+        res = run_select_k({"name": "t", "c1": c1, "c2": c2}, sc, pts,
+                           "config/paper_values.yaml", tmp_path / "s.json", tmp_path / "v.csv",
+                           [str(tmp_path / "f.png")])
+        row = res["choices"][0]
+        assert row["K_paper_range"] == shown and row["K_chosen"] == 100
+        assert row["c_paper"] == ("(0.01, 0.03)" if shown else "")

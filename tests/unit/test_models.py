@@ -1,4 +1,4 @@
-"""The six models of Section IV: derivatives, simulation, disturbances, priors, true values."""
+"""The models (the six of Section IV and ours): derivatives, simulation, disturbances, priors."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ TRUE = {
     "sep_d1_p2": ([0.6, 0.5, 0.9, 0.9], [8.0, 8.0]),
     "sep_ranwalk": ([0.9], [8.0]),
     "sep_mult": ([0.9], [8.0]),
+    "stoch_vol": ([0.9, 0.5], [0.0]),  # ours (config/stoch_vol.yaml); not in the paper
 }
 
 

@@ -323,3 +323,78 @@ def test_switching_backend_recomputes_records(scenario):
     recs = run(scenario, other)
     assert len(other.calls) == K
     assert {r["key"]["backend"] for r in recs} == {"other 9.9"}
+
+
+# ------------------------------------------- issue 14: gather_nuts checks the records
+@pytest.fixture()
+def batch(scenario, tmp_path):
+    """A batch of the Stan stage as on disk: records/k*.json and the batch table."""
+    from ssmobs import io
+
+    folder = tmp_path / "sample_nuts"
+    recs = run(scenario, FakeBackend(), records_dir=folder / "records")
+    table = folder / "batch0.parquet"
+    io.write_parquet(table, records_to_frame(recs, scenario["model"], T))
+    return table
+
+
+def check(table, scenario):
+    from ssmobs import io
+    from ssmobs.stages import check_batch_records
+
+    check_batch_records(table, io.read_parquet(table), scenario["model"], T)
+
+
+def test_intact_records_pass_the_check(batch, scenario):
+    check(batch, scenario)
+
+
+@pytest.mark.parametrize("damage,needle", [
+    ("truncate", r"record of trajectory k=2 is damaged .*k00002.json: not valid JSON"),
+    ("delete", r"record of trajectory k=2 .*k00002.json\) is missing"),
+    ("edit", r"records of trajectories k=\[2\] .* differ from it"),
+    ("other_k", r"k00002.json is of trajectory k=3, not k=2"),
+])
+def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle):
+    from ssmobs import io
+
+    path = batch.parent / "records" / "k00002.json"
+    if damage == "truncate":
+        path.write_text(path.read_text()[:100])
+    elif damage == "delete":
+        path.unlink()
+    elif damage == "edit":
+        rec = json.loads(path.read_text())
+        rec["converged"] = not rec["converged"]
+        path.write_text(json.dumps(rec))
+    else:
+        path.write_text((batch.parent / "records" / "k00003.json").read_text())
+    with pytest.raises(io.CorruptFileError, match=needle) as err:
+        check(batch, scenario)
+    msg = str(err.value)
+    assert msg.startswith(f"{batch}: ")
+    assert "this batch must be rerun" in msg and "delete this file and rerun" in msg
+
+
+def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
+    import os
+
+    from ssmobs import io
+    from ssmobs.stages import changed_batch_records
+
+    records = batch.parent / "records"
+    assert changed_batch_records(batch) is None
+    assert changed_batch_records(batch.parent / "batch9.parquet") is None  # not run yet
+    later = batch.stat().st_mtime_ns + 10**9
+    os.utime(records / "k00004.json", ns=(later, later))  # e.g. truncated after the batch ran
+    msg = changed_batch_records(batch)
+    assert msg.startswith(f"{batch}: the record of trajectory k=4 ")
+    assert "was changed after this table was written; this batch must be rerun" in msg
+    # only the k the table was built from count (e.g. after a change of stan.batch_size)
+    small = batch.parent / "batch1.parquet"
+    io.write_parquet(small, io.read_parquet(batch).iloc[:3])
+    os.utime(small, ns=(later - 10, later - 10))
+    assert changed_batch_records(small) is None
+    (records / "k00001.json").unlink()
+    assert "trajectory k=1" in changed_batch_records(batch)
+    assert "is missing" in changed_batch_records(batch)

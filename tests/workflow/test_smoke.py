@@ -89,3 +89,27 @@ def test_pystan_backend_gives_the_same_tables(smoke_run, tmp_path):
     assert yaml.safe_load(rec.read_text())["key"]["backend"].startswith("pystan")
     native_rec = smoke_run / "results" / "same_T4" / "sample_nuts" / "records" / rec.name
     assert yaml.safe_load(native_rec.read_text())["key"]["backend"].startswith("native")
+
+
+def test_every_model_was_checked_before_its_trajectories(smoke_run):
+    from ssmobs import io
+
+    for model in {sc["model"] for sc in smoke_config()["scenarios"]}:
+        check = smoke_run / "results" / "shared" / "check_model" / f"{model}.json"
+        report = io.read_json(check)
+        assert report["ok"] and report["problems"] == []
+        stan_used = any(sc.get("stan", True) for sc in smoke_config()["scenarios"]
+                        if sc["model"] == model)
+        assert any("stan compiled" in c for c in report["checks"]) == stan_used
+
+
+def test_own_model_observability_study_written(smoke_run):
+    import pandas as pd
+
+    frame = pd.read_csv(smoke_run / "paper_figures" / "ours_stoch_vol_observability.csv")
+    assert frame["scenario"].tolist() == ["stoch_vol_T5"]
+    assert frame["K"].tolist() == [4]
+    for col in ("K_max_ratio", "K_stan_ratio"):
+        assert 0.0 <= frame[col].iloc[0] <= 1.0
+    assert (smoke_run / "paper_figures" / "ours_stoch_vol_observability.png").stat().st_size > 1000
+    assert "|K^max|/K" in (smoke_run / "paper_figures" / "ours_stoch_vol_observability.md").read_text()

@@ -7,13 +7,15 @@ sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
 from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
+from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 
 try:
-    ssmobs_config.validate(config)
-except ConfigError as err:
-    raise WorkflowError(str(err)) from None
+    ssmobs_config.validate(config)  # also finds and checks every model module
+except (ConfigError, ModelDefinitionError) as err:
+    files = ", ".join(map(str, workflow.configfiles)) or "(none)"
+    raise WorkflowError(f"config file(s) {files}: {err}") from None
 
 try:  # "auto" is resolved here, so the concrete backend is part of the rules' params
     STAN_BACKEND = resolve_backend(config["stan"]["backend"])
@@ -24,10 +26,15 @@ except ValueError as err:
 OUT = config["outputs_dir"]
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
+STUDIES = {st["name"]: st for st in config["observability_studies"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
+MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
+                 if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]]
 TABLE_II_SCENARIOS = [sc["name"] for sc in stages.table_ii_scenarios(config["scenarios"])]
+EXACT_SCENARIOS = [n for n, sc in SCENARIOS.items() if stages.exact_applies(sc)]
+EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
 def joint_summary(name):
@@ -38,13 +45,37 @@ def stan_summary(name):
     return f"results/{name}/gather_nuts/summary.json"
 
 
+def exact_table(name, K):
+    return f"results/{name}/exact_marginal/K{K}/marginal_map.parquet"
+
+
+def exact_summary_path(name):
+    """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
+    return f"results/{name}/exact_marginal/K{stages.exact_K(SCENARIOS[name])}/summary.json"
+
+
+def exact_trajectories(wildcards):
+    """The scenario's design trajectories when K is its own K, else those at K."""
+    sc = SCENARIOS[wildcards.scenario]
+    if int(wildcards.K) == sc["K"]:
+        return f"results/{wildcards.scenario}/design_trajectories/trajectories.nc"
+    return f"results/{wildcards.scenario}/exact_marginal/K{wildcards.K}/trajectories.nc"
+
+
+def exact_disturbances(wildcards):
+    sc = SCENARIOS[wildcards.scenario]
+    return disturbance_path(ssmobs_config.disturbance_dim(sc), wildcards.K, sc["method"], sc["seed"])
+
+
 wildcard_constraints:
     scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
     ksel="|".join(map(re.escape, KSEL)) or "NONE",
+    study="|".join(map(re.escape, STUDIES)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
     method="design|random|antithetic",
+    sets="independent|nested",
     batch=r"\d+",
     backend="native|cmdstanpy|pystan",
     model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
@@ -54,34 +85,60 @@ def disturbance_path(q, K, method, seed):
     return f"results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc"
 
 
+def model_check(wildcards):
+    """The check of the scenario's model (rule check_model), needed before its trajectories.
+
+    ancient: a check rerun because a scenario of the model was added (new check case) must
+    not make the trajectories of the other scenarios out of date."""
+    return ancient(f"results/shared/check_model/{SCENARIOS[wildcards.scenario]['model']}.json")
+
+
+def study_scenarios(name):
+    """The scenario entries of one observability study, in config order."""
+    return [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
+
+
 def scenario_disturbances(wildcards):
     sc = SCENARIOS[wildcards.scenario]
     return disturbance_path(ssmobs_config.disturbance_dim(sc), sc["K"], sc["method"], sc["seed"])
 
 
 def k_selection_disturbances(wildcards):
+    from ssmobs.k_selection import set_seed
+
     sc = SCENARIOS[KSEL[wildcards.ksel]["scenario"]]
     q = ssmobs_config.disturbance_dim(sc)
-    return disturbance_path(q, wildcards.K, wildcards.method, wildcards.seed)
+    seed = set_seed(int(wildcards.seed), int(wildcards.K), wildcards.sets)
+    return disturbance_path(q, wildcards.K, wildcards.method, seed)
 
 
 def k_selection_points(ks):
-    """Every (method, seed, K_i) summary of one k_selection entry (design uses its first seed)."""
+    """Every (method, sets, seed, K_i) summary of one k_selection entry (design: first seed)."""
     out = []
     for method in ks["methods"]:
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
-        for seed in seeds:
-            out += [f"results/k_selection/{ks['name']}/{method}_seed{seed}/K{K}.json"
-                    for K in ks["K_grid"]]
+        for sets in ks["sets"]:
+            for seed in seeds:
+                out += [f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
+                        for K in ks["K_grid"]]
     return out
 
 
 def nuts_batches(wildcards):
-    from ssmobs.stages import batches
+    """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
+    record was changed or deleted after its finished batch table was written (a stat per
+    record: a damaged record must not go unnoticed until its batch reruns)."""
+    from ssmobs.stages import batches, changed_batch_records, stan_batch_size
 
     sc = SCENARIOS[wildcards.scenario]
-    n = len(batches(sc["K"], config["stan"]["batch_size"]))
-    return [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(n)]
+    ranges = batches(sc["K"], stan_batch_size(sc, config["stan"]))
+    tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
+              for b in range(len(ranges))]
+    for table in tables:
+        problem = changed_batch_records(table)
+        if problem:
+            raise WorkflowError(problem)
+    return tables
 
 
 def figure2_disturbances(wildcards=None):
@@ -99,13 +156,24 @@ def all_targets():
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
         targets += expand(f"{OUT}/table_k_selection.{{ext}}", ext=["csv", "md", "tex"])
+    targets += [exact_summary_path(name) for name in EXACT_SCENARIOS]
+    targets += expand(f"{OUT}/fig_exact_vs_stan_{{name}}.{{ext}}",
+                      name=EXACT_VS_STAN_SCENARIOS, ext=["pdf", "png"])
     profile = stages.profile_scenario(config["scenarios"])
     if profile is not None:
         targets += expand(f"{OUT}/fig4_profile_posterior_{profile['name']}.{{ext}}",
                           ext=["pdf", "png"])
+    for name in STUDIES:
+        targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}",
+                          ext=["csv", "md", "png"])
     targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
     targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["csv", "md", "tex"],
                       stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
     targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["pdf", "png"],
                       stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
+    if MU0_SCENARIOS:
+        targets += expand(f"{OUT}/table_mu0_sweep.{{ext}}", ext=["csv", "md", "tex"])
+    if STAN_SCENARIOS:
+        targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}",
+                          ext=["csv", "md", "tex"])
     return targets

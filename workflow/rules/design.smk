@@ -25,6 +25,7 @@ rule design_trajectories:
     """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1))."""
     input:
         scenario_disturbances,
+        checked=model_check,
     output:
         "results/{scenario}/design_trajectories/trajectories.nc",
     log:

@@ -27,13 +27,13 @@ rule joint_map:
 
 
 rule k_selection_point:
-    """Joint-MAP summary V_{K_i} for one K_i, disturbance method and seed (Sec. IV.A)."""
+    """Joint-MAP summary V_{K_i} for one K_i, disturbance method, set variant and seed (Sec. IV.A)."""
     input:
         k_selection_disturbances,
     output:
-        "results/k_selection/{ksel}/{method}_seed{seed}/K{K}.json",
+        "results/k_selection/{ksel}/{method}_{sets}_seed{seed}/K{K}.json",
     log:
-        "results/k_selection/{ksel}/logs/{method}_seed{seed}_K{K}.log",
+        "results/k_selection/{ksel}/logs/{method}_{sets}_seed{seed}_K{K}.log",
     params:
         scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
         settings=config["joint_map"],
@@ -110,3 +110,31 @@ rule figure_profile_posterior:
         "../../envs/ssmobs.yaml"
     script:
         "../scripts/figure_profile_posterior.py"
+
+
+rule joint_map_mu0_sweep:
+    """|K^max|/K of the Sep models over barrier starts mu_0 (the gradient-balance rule first)."""
+    input:
+        trajectories=[f"results/{n}/design_trajectories/trajectories.nc" for n in MU0_SCENARIOS],
+        paper_values="config/paper_values.yaml",
+    output:
+        report(
+            multiext(f"{OUT}/table_mu0_sweep", ".csv", ".md", ".tex"),
+            caption="../report/mu0_sweep.rst",
+            category="Tables",
+        ),
+    log:
+        "results/shared/logs/joint_map_mu0_sweep.log",
+    params:
+        trajectories={n: f"results/{n}/design_trajectories/trajectories.nc" for n in MU0_SCENARIOS},
+        scenarios={n: SCENARIOS[n] for n in MU0_SCENARIOS},
+        settings=config["joint_map"],
+        mu0_per_T=config["mu0_sweep"]["mu0_per_T"],
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=120,
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/joint_map_mu0_sweep.py"

@@ -6,6 +6,7 @@ rule paper_tables:
     input:
         joint=[joint_summary(n) for n in JOINT_SCENARIOS],
         marginal=[stan_summary(n) for n in STAN_SCENARIOS],
+        exact=[exact_summary_path(n) for n in EXACT_SCENARIOS],
         paper_values="config/paper_values.yaml",
     output:
         report(
@@ -29,6 +30,7 @@ rule paper_tables:
         scenarios=config["scenarios"],
         joint={n: joint_summary(n) for n in JOINT_SCENARIOS},
         marginal={n: stan_summary(n) for n in STAN_SCENARIOS},
+        exact={n: exact_summary_path(n) for n in EXACT_SCENARIOS},
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
@@ -77,3 +79,25 @@ rule figure_observability:
         "../../envs/ssmobs.yaml"
     script:
         "../scripts/figure_observability.py"
+
+
+rule convergence_sensitivity:
+    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted."""
+    input:
+        [f"results/{n}/gather_nuts/marginal_map.parquet" for n in STAN_SCENARIOS],
+    output:
+        report(
+            multiext(f"{OUT}/table_convergence_sensitivity", ".csv", ".md", ".tex"),
+            caption="../report/convergence_sensitivity.rst",
+            category="Tables",
+        ),
+    log:
+        "results/shared/logs/convergence_sensitivity.log",
+    params:
+        tables={n: f"results/{n}/gather_nuts/marginal_map.parquet" for n in STAN_SCENARIOS},
+        convergence=config["convergence"],
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
+    script:
+        "../scripts/convergence_sensitivity.py"

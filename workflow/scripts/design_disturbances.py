@@ -4,6 +4,7 @@ from ssmobs import io, log
 from ssmobs.design_disturbances import design_disturbances
 
 logger = log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 wc = snakemake.wildcards
 q, K, seed = int(wc.q), int(wc.K), int(wc.seed)
 logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, wc.method, seed)

@@ -5,6 +5,7 @@ from ssmobs.config import disturbance_dim
 from ssmobs.trajectories import make_trajectories, write_trajectories
 
 logger = log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 sc = snakemake.params.scenario
 matrix, attrs = io.read_disturbances(snakemake.input[0], q=disturbance_dim(sc), K=sc["K"])
 traj = make_trajectories(sc, matrix, provenance=attrs)

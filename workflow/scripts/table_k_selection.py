@@ -2,8 +2,9 @@
 
 from pathlib import Path
 
-from ssmobs import log
+from ssmobs import io, log
 from ssmobs.stages import run_table_k_selection
 
 log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 run_table_k_selection(list(snakemake.input), Path(snakemake.output[0]).with_suffix(""))

@@ -8,6 +8,7 @@ expensive work and before anything is written to ``results/``.
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,10 @@ import jsonschema
 import yaml
 
 from .models import MODELS
+
+#: folders directly under results/ that the workflow uses itself; no scenario may take them
+#: (compared case-insensitively, for case-insensitive file systems)
+RESERVED_SCENARIO_NAMES = ("shared", "k_selection")
 
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "config.schema.yaml"
 
@@ -41,10 +46,7 @@ def _with_defaults(validator_class):
 
 
 def _path(error: jsonschema.ValidationError) -> str:
-    out = ""
-    for part in error.absolute_path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
+    return _key(tuple(error.absolute_path))
 
 
 def _describe(error: jsonschema.ValidationError) -> str:
@@ -70,6 +72,43 @@ def _describe(error: jsonschema.ValidationError) -> str:
     return f"{key} = {value!r}: {error.message}"
 
 
+def _key(path: tuple) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def _nonfinite_problems(obj: Any, path: tuple = ()) -> list[str]:
+    """Every NaN or infinite number anywhere in the config (JSON schema ranges let NaN pass)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return [f"{_key(path)} = {obj!r}: must be a finite number"]
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in _nonfinite_problems(v, path + (k,))]
+    if isinstance(obj, list):
+        return [p for i, v in enumerate(obj) for p in _nonfinite_problems(v, path + (i,))]
+    return []
+
+
+def _numbers_from_command_line(config: dict) -> None:
+    """Numbers of ``limits`` given as strings become numbers (in place).
+
+    Snakemake parses nested values of ``--config`` (and of a profile's ``config:``) with
+    YAML's BaseLoader, i.e. as strings; this lets a profile raise the limits.
+    """
+    limits = config.get("limits")
+    if not isinstance(limits, dict):
+        return
+    for key, value in limits.items():
+        if isinstance(value, str):
+            try:
+                parsed = yaml.safe_load(value)
+            except yaml.YAMLError:
+                continue
+            if isinstance(parsed, (int, float)) and not isinstance(parsed, bool):
+                limits[key] = parsed
+
+
 def _schema_problems(config: dict) -> list[str]:
     schema = load_schema()
     Validator = _with_defaults(jsonschema.Draft202012Validator)
@@ -86,6 +125,10 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.name = {sc['name']!r}: used twice (also scenarios"
                             f"[{seen[sc['name']]}]); scenario names must be unique")
         seen.setdefault(sc["name"], i)
+        if sc["name"].lower() in RESERVED_SCENARIO_NAMES:
+            problems.append(f"{where}.name = {sc['name']!r}: reserved (results/{sc['name']}/ "
+                            f"holds the workflow's own files); reserved names: "
+                            f"{list(RESERVED_SCENARIO_NAMES)}")
         if sc["model"] not in MODELS:
             problems.append(f"{where}.model = {sc['model']!r}: unknown model; allowed: "
                             f"{sorted(MODELS)}")
@@ -93,6 +136,9 @@ def _scenario_problems(config: dict) -> list[str]:
         model = MODELS[sc["model"]]
         for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior")):
             problems.append(f"{where}: {msg}")
+        if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
+            problems.append(f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
+                            f"has no sign-consistent start; allowed: 'observations'")
     names = {sc["name"] for sc in config["scenarios"]}
     ksel_seen: set[str] = set()
     for i, ks in enumerate(config.get("k_selection", [])):
@@ -104,8 +150,53 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
                             f"configured: {sorted(names)}")
         grid = ks["K_grid"]
+        if isinstance(grid, dict):  # the paper's K_i = i * step, i = 1 .. last / step
+            if grid["last"] % grid["step"] or grid["last"] < 2 * grid["step"]:
+                problems.append(f"{where}.K_grid = {grid}: 'last' must be a multiple of 'step' "
+                                f"and at least 2 * step")
+                continue
+            grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
+    models = {sc["name"]: sc["model"] for sc in config["scenarios"]}
+    study_seen: set[str] = set()
+    for i, st in enumerate(config.get("observability_studies", [])):
+        where = f"observability_studies[{i}] ('{st['name']}')"
+        if st["name"] in study_seen:
+            problems.append(f"{where}.name = {st['name']!r}: used twice; names must be unique")
+        study_seen.add(st["name"])
+        unknown = [n for n in st["scenarios"] if n not in names]
+        if unknown:
+            problems.append(f"{where}.scenarios: no scenario(s) named {unknown}; configured: "
+                            f"{sorted(names)}")
+        elif len({models[n] for n in st["scenarios"]}) > 1:
+            problems.append(f"{where}.scenarios = {st['scenarios']}: must all use one model, "
+                            f"got {sorted({models[n] for n in st['scenarios']})}")
+    return problems + _keep_draws_problems(config) + _figure_problems(config)
+
+
+def _keep_draws_problems(config: dict) -> list[str]:
+    """stan.keep_draws: every k must be a trajectory of at least one Stan scenario."""
+    stan_K = {sc["name"]: sc["K"] for sc in config["scenarios"] if sc.get("stan", True)}
+    if not stan_K:
+        return []
+    largest = max(stan_K.values())
+    beyond = [k for k in config["stan"]["keep_draws"] if k >= largest]
+    if not beyond:
+        return []
+    return [f"stan.keep_draws = {config['stan']['keep_draws']}: k = {beyond} is beyond every "
+            f"Stan scenario (k counts from 0, so k < K; the largest K is {largest}); "
+            f"K per Stan scenario: {stan_K}"]
+
+
+def _figure_problems(config: dict) -> list[str]:
+    """Ranges that make the figures meaningful (Figure 2's |a| < 1 is in the schema)."""
+    f4 = config["figure4"]
+    problems = []
+    for lo, hi in (("a_min", "a_max"), ("x0_min", "x0_max")):
+        if not f4[lo] < f4[hi]:
+            problems.append(f"figure4.{lo} = {f4[lo]!r}, figure4.{hi} = {f4[hi]!r}: "
+                            f"{lo} must be < {hi} (the grid of Figure 4 would be empty)")
     return problems
 
 
@@ -127,9 +218,17 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
 
     Raises :class:`ConfigError` listing every problem (key, value, what is allowed).
     """
-    problems = _schema_problems(config)
+    if not isinstance(config, dict):
+        raise ConfigError(f"invalid configuration: the top level must be a mapping with the "
+                          f"required key 'scenarios', got {type(config).__name__}")
+    _numbers_from_command_line(config)
+    problems = _nonfinite_problems(config) or _schema_problems(config)
     if not problems:
         problems = _scenario_problems(config) + _backend_problems(config)
+    if not problems:
+        from . import budget
+
+        problems = budget.problems(config)
     if problems:
         raise ConfigError("invalid configuration:\n  - " + "\n  - ".join(problems))
     return config

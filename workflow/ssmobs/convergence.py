@@ -11,8 +11,12 @@ A run passes when, over its post-warmup draws,
 * all draws are finite,
 
 and tree-depth saturation (draws with ``treedepth__ >= max_treedepth``) is reported as a
-warning, or fails the run when ``treedepth_fails`` is set.  Default thresholds are the
-decision summary of ``shared/docs/stan-arviz-snakemake-facts.md`` (Sec. 1).
+warning, or fails the run when ``treedepth_fails`` is set.  Default thresholds are those of
+Stan's runtime-warnings page, the paper's reference [2] for "the exact thresholds used in
+Stan" (R-hat < 1.01, bulk-/tail-ESS > 100 per chain, E-BFMI 0.3, no divergences, tree-depth
+saturation an efficiency warning; quoted in config/README.md).  :func:`threshold_failures`
+applies them to a run's worst diagnostics, so stored records can be re-evaluated under other
+thresholds (:func:`converged_under`, :func:`sensitivity_table`) without new sampling.
 
 Two implementations give the same numbers (tested to 1e-10):
 
@@ -32,7 +36,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 from scipy import special
@@ -345,6 +349,92 @@ def _worst(values: np.ndarray, names: list[str], largest: bool) -> tuple[float, 
     return float(values[i]), names[i]
 
 
+# --------------------------------------------------------------------------- thresholds
+#: the checks decided by a threshold on a run's worst diagnostic (the others - nonfinite
+#: draws, a failed KDE, a sampling error - do not depend on ConvergenceSettings)
+THRESHOLD_CHECKS = ("divergences", "rhat", "ess_bulk", "ess_tail", "ebfmi", "treedepth")
+
+
+def threshold_failures(worst: Mapping[str, Any], settings: ConvergenceSettings) -> list[str]:
+    """Names (in :data:`CHECKS` order) of the threshold checks a run fails.
+
+    ``worst`` holds the run's worst diagnostics as :func:`check_convergence` returns them and
+    every per-trajectory record keeps them: ``n_divergent``, ``max_rhat``, ``min_ess_bulk``,
+    ``min_ess_tail``, ``min_ebfmi`` and ``n_treedepth_hits``.  A NaN (or missing) value fails
+    its check.  Tree-depth saturation fails only when ``settings.treedepth_fails``.  Used by
+    :func:`check_convergence` and to re-evaluate stored records under other thresholds
+    (:func:`converged_under`).
+    """
+    def num(key: str) -> float:
+        v = worst.get(key)
+        return math.nan if v is None else float(v)
+
+    failed = []
+    if not num("n_divergent") <= settings.max_divergences:
+        failed.append("divergences")
+    if not num("max_rhat") < settings.rhat_max:
+        failed.append("rhat")
+    if not num("min_ess_bulk") >= settings.ess_bulk_min:
+        failed.append("ess_bulk")
+    if not num("min_ess_tail") >= settings.ess_tail_min:
+        failed.append("ess_tail")
+    if not num("min_ebfmi") >= settings.ebfmi_min:
+        failed.append("ebfmi")
+    if settings.treedepth_fails and not num("n_treedepth_hits") == 0:
+        failed.append("treedepth")
+    return failed
+
+
+def converged_under(table: "pandas.DataFrame", settings: ConvergenceSettings  # noqa: F821
+                    ) -> np.ndarray:
+    """(K,) bool: would each trajectory of a Stan-stage table pass under ``settings``?
+
+    ``table`` is the per-trajectory table of rule gather_nuts (columns ``failed_checks``,
+    comma-separated, and the worst diagnostics).  A trajectory passes when it failed no
+    check outside :data:`THRESHOLD_CHECKS` (non-finite draws, KDE, sampling errors stay
+    failures) and :func:`threshold_failures` finds none under the new thresholds.  No new
+    sampling: the records keep every diagnostic the thresholds act on.
+    """
+    out = np.zeros(len(table), dtype=bool)
+    for i, row in enumerate(table.to_dict("records")):
+        other = [c for c in str(row.get("failed_checks") or "").split(",")
+                 if c and c not in THRESHOLD_CHECKS]
+        if other or row.get("status", "ok") != "ok":
+            continue
+        out[i] = not threshold_failures(row, settings)
+    return out
+
+
+#: the variants of the sensitivity table: (column, R-hat threshold, tree depth counted)
+SENSITIVITY_VARIANTS = (("rhat1.01_treedepth_warns", 1.01, False),
+                        ("rhat1.01_treedepth_fails", 1.01, True),
+                        ("rhat1.05_treedepth_warns", 1.05, False),
+                        ("rhat1.05_treedepth_fails", 1.05, True))
+
+
+def sensitivity_table(tables: Mapping[str, "pandas.DataFrame"],  # noqa: F821
+                      base: ConvergenceSettings) -> "pandas.DataFrame":  # noqa: F821
+    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted.
+
+    ``tables`` maps scenario names to their gather_nuts tables; the other thresholds are
+    those of ``base`` (the run's config).  Column ``K_stan_run`` is |K^Stan| as the run
+    decided it, so a reader sees which variant the run used.
+    """
+    import pandas as pd
+
+    rows = []
+    for name, table in tables.items():
+        row: dict[str, Any] = {"scenario": name, "K": int(len(table)),
+                               "K_stan_run": int(np.asarray(table["converged"], bool).sum())}
+        for col, rhat_max, td in SENSITIVITY_VARIANTS:
+            settings = ConvergenceSettings(**{**base.to_dict(), "rhat_max": rhat_max,
+                                              "treedepth_fails": td})
+            row[col] = int(converged_under(table, settings).sum())
+        rows.append(row)
+    return pd.DataFrame(rows, columns=["scenario", "K", "K_stan_run",
+                                       *[v[0] for v in SENSITIVITY_VARIANTS]])
+
+
 # --------------------------------------------------------------------------- main entry
 def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
                       max_treedepth: int = 10) -> dict[str, Any]:
@@ -433,6 +523,10 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
             warns.append(text)
 
     failed = [c for c in CHECKS if c in failed]
+    # one rule for the thresholds: the same function re-evaluates stored records
+    worst = {"n_divergent": n_div, "max_rhat": max_rhat, "min_ess_bulk": min_bulk,
+             "min_ess_tail": min_tail, "min_ebfmi": min_bfmi, "n_treedepth_hits": hits}
+    assert [c for c in failed if c in THRESHOLD_CHECKS] == threshold_failures(worst, settings)
     return {
         "converged": not failed,
         "failed_checks": failed,

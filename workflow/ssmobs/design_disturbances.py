@@ -39,6 +39,8 @@ from typing import Callable, Iterator
 import numpy as np
 from scipy import optimize, special
 
+from .seeds import check_seed
+
 __all__ = [
     "METHODS",
     "DesignResult",
@@ -690,16 +692,14 @@ def design_disturbances(
     Raises
     ------
     ValueError
-        If q < 1, K < 1, the method is unknown, the seed is not a non-negative integer or b_max is
-        not positive.
+        If q < 1, K < 1, the method is unknown, the seed is not an integer in
+        [0, 2**32 - 1] or b_max is not positive.
     """
     q = _check_positive_int("q", q)
     K = _check_positive_int("K", K)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
-    seed = int(seed)
+    seed = check_seed(seed)
     bm = b_max_rule(q) if b_max is None else _check_b_max(b_max)
     if not (float(rel_tol) >= 0.0 and float(grad_tol) >= 0.0):
         raise ValueError(f"rel_tol and grad_tol must be >= 0; got {rel_tol!r}, {grad_tol!r}")

@@ -10,12 +10,17 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
+import re
 import tempfile
+import threading
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
+
+LOG = logging.getLogger("ssmobs.io")
 
 
 class CorruptFileError(RuntimeError):
@@ -29,12 +34,42 @@ class CorruptFileError(RuntimeError):
         return f"{super().__str__()} -- delete this file and rerun to recompute it"
 
 
+_UMASK_LOCK = threading.Lock()
+
+
+def _umask() -> int:
+    try:  # Linux >= 4.7 shows it without changing it
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    with _UMASK_LOCK:  # elsewhere os.umask can only be read by setting it
+        umask = os.umask(0o022)
+        os.umask(umask)
+    return umask
+
+
+def file_mode() -> int:
+    """The mode a new regular file gets under the process's umask (0o666 & ~umask)."""
+    return 0o666 & ~_umask()
+
+
+def _temporary_suffix(path: Path, suffix: str | None) -> str:
+    return suffix or path.suffix or ".tmp"
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; rename it to ``path`` on success."""
+    """Yield a temporary path next to ``path``; rename it to ``path`` on success.
+
+    The temporary is ``.<name>.<8 random characters><suffix>`` (see
+    :func:`sweep_temporaries`).  Before the rename it gets the mode the umask implies
+    (``mkstemp`` creates it 0600, and the mode would survive the rename).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp",
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=_temporary_suffix(path, suffix),
                                dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
@@ -42,10 +77,36 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         yield tmp_path
         with open(tmp_path, "rb") as fh:
             os.fsync(fh.fileno())
+        os.chmod(tmp_path, file_mode())
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def temporaries(path: str | os.PathLike, suffix: str | None = None) -> list[Path]:
+    """Temporaries that :func:`atomic_path` made for ``path`` and that are still there."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    pattern = re.compile(re.escape(f".{path.name}.") + r"[A-Za-z0-9_]{8}"
+                         + re.escape(_temporary_suffix(path, suffix)) + "$")
+    return sorted(p for p in path.parent.iterdir() if pattern.match(p.name) and p.is_file())
+
+
+def sweep_temporaries(paths: Iterable[str | os.PathLike]) -> list[Path]:
+    """Delete what killed writers of ``paths`` left: call at the start of the job that
+    writes them (Snakemake runs one job per output at a time, so none is in use).
+
+    Returns the deleted files (each is logged).
+    """
+    removed = []
+    for path in paths:
+        for tmp in temporaries(path):
+            tmp.unlink(missing_ok=True)
+            LOG.info("removed the temporary %s of an interrupted earlier job", tmp)
+            removed.append(tmp)
+    return removed
 
 
 @contextlib.contextmanager

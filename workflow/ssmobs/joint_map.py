@@ -15,11 +15,21 @@ point with a non-positive slack, so every iterate stays strictly feasible.  mu s
 gradient falls below ``max(inner_tol_factor * mu, newton_tol)``, down to ``mu_min``; the
 iteration stops at ``max |grad P| <= newton_tol`` with mu = mu_min.
 
-Why mu_0 grows with T: in several models -2 pi is unbounded below at the edge of the
-support (in (Sep, d=p=1) it contains T log(1 - b^2), and x_t = z_t / b makes the
-observation residuals vanish as b -> 1).  With mu_0 above about T the first barrier
-problem is bounded, and the barrier path then tracks the interior local maximum when
-there is one, instead of the first Newton steps falling into the singular edge.
+The barrier start mu_0 (the paper gives none).  ``mu0_rule = "gradient_balance"`` (the
+default) takes, per trajectory, the mu_0 at which the barrier and -2 pi pull equally hard
+on Omega at the start Theta_0:
+
+    mu_0 = || grad_Omega (-2 pi)(Theta_0) ||_2 / || grad_Omega B(Theta_0) ||_2,
+    B = -sum log s_i,
+
+i.e. the barrier term holds half of the Omega-gradient of P_mu at the start (floored at
+``mu_min``; where there is no barrier the value does not matter).  A smaller mu_0 lets the
+first Newton steps follow -2 pi alone, which in several models is unbounded below at the
+edge of the support (in (Sep, d=p=1) it contains T log(1 - b^2), and x_t = z_t / b makes
+the observation residuals vanish as b -> 1); a much larger one makes the first stages
+ignore the data.  ``mu0_rule = "per_step"`` keeps the former rule mu_0 = max(mu0,
+mu0_per_step * T) (mu_0 above about T bounds that singular term); the rule
+``joint_map_mu0_sweep`` compares both over a range of mu_0.
 
 All trajectories are optimised together: every Newton iteration evaluates the per-step
 symbolic derivatives for the whole batch and solves the K Newton systems at once.  The
@@ -68,6 +78,12 @@ Hessian is positive definite (NaN otherwise).
 
 Start (Sec. III.B): (Omega_true, x0_true, model.initial_states(Omega_true, z~(k))), i.e. the
 observations themselves when d == p as in the paper (see the models for d != p).
+``start_states = "sign_of_x0"`` instead starts the states at
+``model.sign_consistent_states`` (for (Sep, Multiplicative): |z_t| / sqrt(a) with the sign
+of x_0), an alternative shown beside the paper's start.
+
+The ridge re-check records both how far the re-optimised point moved (sup norm) and how
+much -2 pi changed; ``ridge_test`` says which decides (see :class:`JointMapSettings`).
 """
 
 from __future__ import annotations
@@ -119,6 +135,12 @@ class JointMapSettings:
     #: that singular edge of the joint posterior instead of an interior local maximum.
     mu0: float = 1.0
     mu0_per_step: float = 2.0
+    #: how mu_0 is chosen: "gradient_balance" (per trajectory: the barrier's Omega-gradient
+    #: equals that of -2 pi at the start; module docstring) or "per_step" (the formula above)
+    mu0_rule: str = "gradient_balance"
+    #: start of the states: "observations" (the paper's x = z) or "sign_of_x0"
+    #: (model.sign_consistent_states; only models that define it)
+    start_states: str = "observations"
     #: mu <- mu * mu_factor after each barrier stage
     mu_factor: float = 0.01
     #: final barrier parameter ("near zero")
@@ -137,6 +159,13 @@ class JointMapSettings:
     ridge_shift: float = 0.1
     #: the ridge re-optimisation "moved" if it ends farther than this (sup norm) from Theta_hat
     ridge_move_tol: float = 1e-4
+    #: ... or, with ridge_test = "value", if -2 pi there differs by more than
+    #: ridge_value_tol * (1 + |-2 pi(Theta_hat)|)
+    ridge_value_tol: float = 1e-8
+    #: what decides a ridge after the re-optimisation: "location" (the point moved: catches
+    #: ridges of constant height, where the value cannot change) or "value" (the paper's
+    #: wording "leads to a different value")
+    ridge_test: str = "location"
     #: a slack s_i(Omega_hat) below this means the optimum is on the boundary
     boundary_tol: float = 1e-6
     #: the iterations of a trajectory stop early once a slack falls below this
@@ -155,7 +184,7 @@ class JointMapSettings:
 
     def __post_init__(self) -> None:
         positive = ("grad_tol", "eig_ratio_min", "newton_tol", "inner_tol_factor", "mu0",
-                    "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol",
+                    "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol", "ridge_value_tol",
                     "boundary_tol", "boundary_stop_tol", "boundary_near_tol", "divergence_limit")
         for name in positive:
             value = getattr(self, name)
@@ -177,6 +206,12 @@ class JointMapSettings:
         if self.boundary_stop_tol > self.boundary_tol:
             raise ValueError(f"joint-MAP setting boundary_stop_tol={self.boundary_stop_tol!r} "
                              f"must not exceed boundary_tol={self.boundary_tol!r}")
+        for name, allowed in (("mu0_rule", ("gradient_balance", "per_step")),
+                              ("start_states", ("observations", "sign_of_x0")),
+                              ("ridge_test", ("location", "value"))):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be one "
+                                 f"of {list(allowed)}")
         if self.eigen_method not in ("lanczos", "dense"):
             raise ValueError(f"joint-MAP setting eigen_method={self.eigen_method!r} must be "
                              f"'lanczos' or 'dense'")
@@ -199,7 +234,7 @@ class JointMapSettings:
         return dataclasses.asdict(self)
 
     def initial_mu(self, T: int) -> float:
-        """mu_0 for trajectories of length T."""
+        """mu_0 of the ``per_step`` rule for trajectories of length T."""
         return max(self.mu0, self.mu0_per_step * T)
 
 
@@ -219,6 +254,8 @@ class JointMapResult:
     status : (K,) one of :data:`STATUSES`.
     reason : (K,) short explanation ("" for ok).
     theta_names : names of the components of Theta.
+    mu_start : (K,) the barrier start mu_0 of each trajectory.
+    ridge_value_change : (K,) |change of -2 pi| in the ridge re-check (NaN where not run).
     """
 
     theta_hat: np.ndarray
@@ -230,6 +267,8 @@ class JointMapResult:
     status: np.ndarray
     reason: np.ndarray
     theta_names: list[str] = field(default_factory=list)
+    mu_start: np.ndarray | None = None
+    ridge_value_change: np.ndarray | None = None
 
     @property
     def ok(self) -> np.ndarray:
@@ -250,6 +289,11 @@ class JointMapResult:
             "grad_max": self.grad_max.astype(float),
             "iterations": self.iterations.astype(np.int64),
         })
+        K = self.theta_hat.shape[0]
+        frame["mu0"] = (np.full(K, np.nan) if self.mu_start is None
+                        else self.mu_start.astype(float))
+        frame["ridge_value_change"] = (np.full(K, np.nan) if self.ridge_value_change is None
+                                       else self.ridge_value_change.astype(float))
         for j, name in enumerate(names[:head]):
             frame[name] = self.theta_hat[:, j]
         for j, name in enumerate(names[:head]):
@@ -681,7 +725,7 @@ class _Barrier:
 
 # =========================================================================== optimiser
 def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier: _Barrier,
-              settings: JointMapSettings, mu_start: float
+              settings: JointMapSettings, mu_start: float | np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Batched primal barrier-Newton minimisation of -2 pi from ``theta0``.
 
@@ -691,7 +735,7 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
     K, n = theta0.shape
     m = model.n_params
     theta = theta0.astype(float).copy()
-    mu = np.full(K, float(mu_start))
+    mu = np.broadcast_to(np.asarray(mu_start, dtype=float), (K,)).copy()
     iters = np.zeros(K, dtype=np.int64)
     reason = np.full(K, "max-iter", dtype=object)
     active = np.ones(K, dtype=bool)
@@ -896,23 +940,31 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
                      f"(optimiser stop: {stop[k]})")
 
     cand = np.flatnonzero(undecided & ~(ratio >= settings.eig_ratio_min))
+    value_change = np.full(K, np.nan)
     if cand.size:
-        moved, dist = _ridge_check(model, z[cand], theta[cand], v_min[cand], barrier,
-                                   settings)
+        ridge, dist, dval = _ridge_check(model, z[cand], theta[cand], f[cand], v_min[cand],
+                                         barrier, settings)
+        value_change[cand] = dval
         for j, k in enumerate(cand):
             small = f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g}"
-            if moved[j]:
+            what = f"moved {dist[j]:.3g} (sup norm), -2 pi changed by {dval[j]:.3g}"
+            if ridge[j]:
                 status[k] = "ridge"
-                reason[k] = (f"{small} and the optimum moved by {dist[j]:.3g} after a shift "
-                             f"along the ridge")
+                reason[k] = f"{small}; after a shift along the ridge the re-optimisation {what}"
             else:
-                reason[k] = f"{small} but the optimum did not move (moved {dist[j]:.3g})"
+                reason[k] = (f"{small} but the re-optimisation returned ({what}; "
+                             f"test: {settings.ridge_test})")
     return dict(neg2_log_post=f, local_variance=lvar, eig_ratio=ratio, grad_max=grad_max,
-                status=status, reason=reason)
+                status=status, reason=reason, ridge_value_change=value_change)
 
 
-def _ridge_check(model, z, theta, v, barrier, settings) -> tuple[np.ndarray, np.ndarray]:
-    """Re-optimise from Theta_hat + h v (or - h v if that leaves the support); moved?"""
+def _ridge_check(model, z, theta, f_hat, v, barrier, settings
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Re-optimise from Theta_hat + h v (or - h v if that leaves the support).
+
+    Returns (ridge, distance moved (sup norm), |change of -2 pi|); ``ridge`` by
+    ``settings.ridge_test``.  A non-finite or diverged re-optimisation counts as a ridge.
+    """
     m = model.n_params
     start = theta.copy()
     placed = np.zeros(theta.shape[0], dtype=bool)
@@ -929,22 +981,55 @@ def _ridge_check(model, z, theta, v, barrier, settings) -> tuple[np.ndarray, np.
     new, _, _, stop = _optimize(model, z, start, barrier, settings, settings.mu_min)
     with np.errstate(all="ignore"):
         dist = np.abs(new - theta).max(axis=1)
-    moved = ~(dist <= settings.ridge_move_tol) | (stop == "non-finite") | (stop == "diverged")
-    return moved, dist
+        (f_new,) = neg2_log_posterior(model, new, z, None, order=0)
+        dval = np.abs(f_new - f_hat)
+    if settings.ridge_test == "location":
+        differs = ~(dist <= settings.ridge_move_tol)
+    else:
+        differs = ~(dval <= settings.ridge_value_tol * (1.0 + np.abs(f_hat)))
+    ridge = differs | (stop == "non-finite") | (stop == "diverged")
+    return ridge, dist, dval
 
 
 # =========================================================================== public API
 def initial_theta(model: StateSpaceModel, z: np.ndarray, omega_true: np.ndarray,
-                  x0_true: np.ndarray) -> np.ndarray:
-    """Start of Sec. III.B: (Omega_true, x0_true, initial_states(Omega_true, z)) for every k."""
+                  x0_true: np.ndarray, start_states: str = "observations") -> np.ndarray:
+    """Start of Sec. III.B: (Omega_true, x0_true, initial_states(Omega_true, z)) for every k.
+
+    ``start_states="sign_of_x0"``: the states start at
+    ``model.sign_consistent_states(Omega_true, x0_true, z)`` instead.
+    """
     K, T, _ = z.shape
-    x = np.asarray(model.initial_states(omega_true, z), dtype=float)
+    if start_states == "sign_of_x0":
+        x = np.asarray(model.sign_consistent_states(omega_true, x0_true, z), dtype=float)
+    else:
+        x = np.asarray(model.initial_states(omega_true, z), dtype=float)
     if x.shape != (K, T, model.state_dim):
         raise ValueError(f"initial_states of model '{model.slug}' returned shape {x.shape}, "
                          f"expected {(K, T, model.state_dim)}")
     return np.concatenate([np.broadcast_to(omega_true, (K, model.n_params)),
                            np.broadcast_to(x0_true, (K, model.state_dim)),
                            x.reshape(K, -1)], axis=1)
+
+
+def initial_mu_values(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray,
+                      barrier: "_Barrier", settings: JointMapSettings) -> np.ndarray:
+    """(K,) barrier start mu_0 of every trajectory (``settings.mu0_rule``).
+
+    ``gradient_balance``: mu_0 = ||grad_Omega(-2 pi)(Theta_0)||_2 / ||grad_Omega B(Theta_0)||_2,
+    the mu at which the barrier holds half of P_mu's Omega-gradient at the start, floored
+    at ``mu_min`` (and ``mu_min`` where there is no barrier or the ratio is not finite).
+    ``per_step``: max(mu0, mu0_per_step * T) for every k.
+    """
+    K, T = z.shape[0], z.shape[1]
+    if settings.mu0_rule == "per_step":
+        return np.full(K, settings.initial_mu(T))
+    m = model.n_params
+    with np.errstate(all="ignore"):
+        _, g = neg2_log_posterior(model, theta0, z, None, order=1)[:2]
+        _, bg, _ = barrier.derivatives(theta0[:, :m])
+        mu0 = np.linalg.norm(g[:, :m], axis=1) / np.linalg.norm(bg, axis=1)
+    return np.where(np.isfinite(mu0), np.maximum(mu0, settings.mu_min), settings.mu_min)
 
 
 def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
@@ -990,13 +1075,15 @@ def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
         local_variance=np.full((K, n), np.nan), eig_ratio=np.full(K, np.nan),
         grad_max=np.full(K, np.nan), iterations=np.zeros(K, dtype=np.int64),
         status=np.full(K, "failed", dtype=object), reason=np.full(K, "", dtype=object),
-        theta_names=model.theta_names(T))
+        theta_names=model.theta_names(T), mu_start=np.full(K, np.nan),
+        ridge_value_change=np.full(K, np.nan))
     for sl in _chunks(K, n, settings):
         zc = z[sl]
-        theta0 = initial_theta(model, zc, omega, x0)
-        theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings,
-                                           settings.initial_mu(T))
+        theta0 = initial_theta(model, zc, omega, x0, settings.start_states)
+        mu_start = initial_mu_values(model, zc, theta0, barrier, settings)
+        theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings, mu_start)
         res = _classify_chunk(model, zc, theta, mu, stop, barrier, settings)
+        out.mu_start[sl] = mu_start
         out.theta_hat[sl] = theta
         out.iterations[sl] = iters
         for key, val in res.items():

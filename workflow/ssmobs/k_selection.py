@@ -11,6 +11,12 @@ for every computed j > i, where
     RD(x, y) = |x - y| / max(|x|, |y|),   RD(0, 0) = 0,
 
 c_1 applies to the ratio and the means and c_2 to the variances and local variances.
+
+Every K_i gets its own disturbance set.  The paper does not say whether the sets of
+different K_i share points; we offer both (:func:`set_seed`): ``independent`` draws each
+set from its own seed stream, ``nested`` uses one seed for every K_i, so a random set of
+size K_i is the first K_i points of the set of size K_j > K_i (numpy draws row by row),
+which correlates V_{K_i} and V_{K_j} and makes the RD rule stop earlier.
 """
 
 from __future__ import annotations
@@ -20,7 +26,25 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from . import seeds
 from .models.base import StateSpaceModel
+
+#: how the disturbance sets of the K_i relate (see the module docstring)
+SET_VARIANTS = ("independent", "nested")
+
+
+def set_seed(seed: int, K: int, sets: str) -> int:
+    """Seed of the disturbance set of size K for a choice-of-K run with ``seed``.
+
+    ``nested``: ``seed`` itself for every K (random sets of different K share their first
+    points).  ``independent``: a seed drawn from the stream (seed, "disturbances",
+    "k_selection", K), so the sets of different K are independent draws.
+    """
+    if sets == "nested":
+        return int(seed)
+    if sets == "independent":
+        return seeds.int_seed(int(seed), "disturbances", "k_selection", int(K))
+    raise ValueError(f"k_selection sets must be one of {SET_VARIANTS}, got {sets!r}")
 
 
 def relative_difference(x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:

@@ -57,7 +57,7 @@ def backend_info(config: dict[str, Any]) -> dict[str, str]:
 
 
 def provenance(config_path: str | os.PathLike, started: float, finished: float,
-               command: str) -> dict[str, Any]:
+               command: str, note: str = "") -> dict[str, Any]:
     """The provenance record of one run of ``config_path`` (see the module docstring)."""
     text = Path(config_path).read_text()
     config = yaml.safe_load(text)
@@ -70,6 +70,7 @@ def provenance(config_path: str | os.PathLike, started: float, finished: float,
         "stan": backend_info(config),
         "wall_seconds": round(finished - started, 1),
         "command": command,
+        "note": note,
         "config_file": str(config_path),
         "config_sha256": hashlib.sha256(text.encode()).hexdigest(),
         "config": config,
@@ -82,8 +83,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--outputs-dir", required=True)
     parser.add_argument("--started", type=float, required=True, help="start, Unix seconds")
     parser.add_argument("--command", default="make tables")
+    parser.add_argument("--note", default="", help="e.g. what an earlier, resumed run did")
     args = parser.parse_args(argv)
-    record = provenance(args.config, args.started, time.time(), args.command)
+    record = provenance(args.config, args.started, time.time(), args.command, args.note)
     io.write_json(Path(args.outputs_dir) / "provenance.json", record)
 
 

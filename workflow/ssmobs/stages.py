@@ -7,6 +7,7 @@ calling it with the same paths; the numerics live in the modules it calls.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -58,10 +59,12 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
     traj = read_trajectories(trajectories)
     model = traj.model
     progress = Progress(f"joint MAP {scenario['name']}", traj.K, logger)
+    settings = {**settings, "start_states": scenario.get("joint_map_start", "observations")}
     result, frame, info, bounds = _joint_map_of(traj, scenario.get("prior"), settings, progress)
     info.update(scenario=scenario["name"], model=model.slug, T=traj.T,
                 method=scenario.get("method", "design"), seed=scenario.get("seed"),
-                prior=list(bounds.variants))
+                prior=list(bounds.variants), start_states=settings["start_states"],
+                mu0_median=float(np.nanmedian(frame["mu0"])))
     logger.info("scenario %s: |K^max| = %d of %d", scenario["name"], info["K_max"], info["K"])
     io.write_parquet(table, frame)
     if theta is not None:
@@ -72,21 +75,87 @@ def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
 
 
 def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method: str,
-                          seed: int, settings: dict, out: PathLike) -> dict:
-    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A)."""
+                          seed: int, settings: dict, out: PathLike,
+                          sets: str = "independent") -> dict:
+    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A).
+
+    ``seed`` is the run's seed; the set itself was drawn with
+    :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
+    """
     from .config import disturbance_dim
+    from .k_selection import set_seed
     from .trajectories import make_trajectories
 
-    sc = {**scenario, "K": K, "method": method, "seed": seed}
+    sc = {**scenario, "K": K, "method": method, "seed": set_seed(seed, K, sets)}
     matrix, attrs = io.read_disturbances(disturbances, q=disturbance_dim(sc), K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
     _, _, info, _ = _joint_map_of(traj, sc.get("prior"), settings)
-    info.update(K_i=K, method=method, seed=seed, scenario=scenario["name"])
+    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc["seed"],
+                scenario=scenario["name"])
     io.write_json(out, info)
     return info
 
 
+def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
+                   ) -> list[dict]:
+    """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
+    gradient-balance rule (:func:`ssmobs.joint_map.initial_mu_values`)."""
+    rows = []
+    variants = [("gradient balance", {"mu0_rule": "gradient_balance"})]
+    variants += [(f"{f:g} T", {"mu0_rule": "per_step", "mu0": f * traj.T, "mu0_per_step": 0.0})
+                 for f in mu0_per_T]
+    for label, extra in variants:
+        result, frame, info, _ = _joint_map_of(traj, prior, {**settings, **extra})
+        rows.append({"mu0": label, "mu0_over_T_median": float(np.median(result.mu_start)) / traj.T,
+                     "ratio": info["ratio"], "n_boundary": info["n_boundary"]})
+    return rows
+
+
+def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, dict],
+                            settings: dict, mu0_per_T: list[float], paper_values: PathLike,
+                            stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
+
+    One row per mu_0 setting (the gradient-balance rule first, with its median mu_0 / T),
+    one column per scenario, and a last row with the paper's |K^max| / K where stated.
+    """
+    import pandas as pd
+
+    from .tables import load_paper_values, write_table
+    from .trajectories import read_trajectories
+
+    paper = load_paper_values(paper_values)
+    table: dict[str, dict] = {}
+    paper_row: dict[str, Any] = {"mu0": "paper"}
+    for name, path in trajectories.items():
+        sc = scenarios[name]
+        traj = read_trajectories(path)
+        for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
+            entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
+            entry[f"{name} K^max/K"] = row["ratio"]
+            if row["mu0"] == "gradient balance":
+                entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
+        ref = paper.get(sc.get("paper_ref", ""), {}) or {}
+        paper_row[f"{name} K^max/K"] = (ref["K_max"] / ref["K"]
+                                          if ref.get("K_max") is not None and ref.get("K")
+                                          else None)
+        logger.info("mu0 sweep: %s done", name)
+    frame = pd.DataFrame([*table.values(), paper_row])
+    cols = ["mu0"] + [c for c in frame.columns if c.endswith("K^max/K")]
+    cols += [c for c in frame.columns if c.endswith("mu0/T")]
+    frame = frame[cols]
+    write_table(frame, stem,
+                "Joint MAP, |K^max|/K of the Sep models for barrier starts mu_0 = f T and for "
+                "the gradient-balance rule (mu0/T: its median over k), with the paper's")
+    return frame
+
+
 # ------------------------------------------------------------------ Stan stage (Sec. III.C)
+def stan_batch_size(scenario: dict, stan_cfg: dict) -> int:
+    """Trajectories per Stan job: the scenario's ``stan_batch_size``, else ``stan.batch_size``."""
+    return int(scenario.get("stan_batch_size") or stan_cfg["batch_size"])
+
+
 def batches(K: int, batch_size: int) -> list[range]:
     """Contiguous trajectory ranges of the Stan jobs: a pure function of (K, batch_size)."""
     return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
@@ -126,7 +195,7 @@ def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, s
     traj = read_trajectories(trajectories)
     model = traj.model
     backend_name = io.read_json(marker, required=["backend"])["backend"]
-    ks = list(batches(traj.K, stan_cfg["batch_size"])[batch])
+    ks = list(batches(traj.K, stan_batch_size(scenario, stan_cfg))[batch])
     bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
     progress = Progress(f"NUTS {scenario['name']} batch {batch}", len(ks), logger)
     records = run_trajectories(
@@ -139,6 +208,89 @@ def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, s
     io.write_parquet(out, records_to_frame(records, model, traj.T))
 
 
+def batch_records_dir(batch_table: PathLike) -> Path:
+    """The records folder of a batch table: ``results/<scenario>/sample_nuts/records``."""
+    return Path(batch_table).parent / "records"
+
+
+def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
+    return io.CorruptFileError(f"{batch_table}: {what}; this batch must be rerun (only damaged "
+                               f"records are recomputed)")
+
+
+def changed_batch_records(batch_table: PathLike) -> str | None:
+    """Why the finished batch table ``batch_table`` no longer matches its records, or None.
+
+    Reads only the table's ``k`` column and the records' file times (cheap enough for every
+    DAG build): a record of one of those k that is missing or newer than the table was
+    damaged, edited or deleted after the batch ran.  None when the table does not exist
+    (the batch is still to run) or cannot be read (gather_nuts reports that).
+    """
+    import pyarrow.parquet as pq
+
+    from .nuts_stage import record_path
+
+    table = Path(batch_table)
+    try:
+        written = table.stat().st_mtime_ns
+        ks = pq.read_table(table, columns=["k"]).column("k").to_pylist()
+    except Exception:  # noqa: BLE001 - missing or unreadable: not this check's business
+        return None
+    folder = batch_records_dir(table)
+    for k in ks:
+        path = record_path(folder, k)
+        try:
+            changed = path.stat().st_mtime_ns > written
+        except FileNotFoundError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) is "
+                                             f"missing"))
+        if changed:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) was "
+                                             f"changed after this table was written"))
+    return None
+
+
+def check_batch_records(batch_table: PathLike, frame: "pandas.DataFrame",  # noqa: F821
+                        model: Any, T: int) -> None:
+    """The per-trajectory records a batch table was built from are all there, parse and
+    give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
+
+    Run by gather_nuts (the workflow also stops before it when a record is newer than its
+    table, :func:`changed_batch_records`).  Raises
+    :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
+    batch recomputes the damaged records only and reuses every valid one.
+    """
+    from .nuts_stage import RECORD_KEYS, record_path, records_to_frame
+
+    def damaged(what: str) -> io.CorruptFileError:
+        return _damaged_batch(batch_table, what)
+
+    records_dir = batch_records_dir(batch_table)
+    recs = []
+    for k in frame["k"].tolist():
+        path = record_path(records_dir, k)
+        if not path.exists():
+            raise damaged(f"the record of trajectory k={k} ({path}) is missing")
+        try:
+            rec = io.read_json(path, required=RECORD_KEYS)
+        except io.CorruptFileError as err:
+            raise damaged(f"the record of trajectory k={k} is damaged ({err.args[0]})") from None
+        if rec["k"] != k:
+            raise damaged(f"the record {path} is of trajectory k={rec['k']}, not k={k}")
+        recs.append(rec)
+    try:
+        rebuilt = records_to_frame(recs, model, T)
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise damaged(f"its records under {records_dir} do not form a table ({err})") from None
+    if list(rebuilt.columns) != list(frame.columns) or len(rebuilt) != len(frame):
+        raise damaged(f"its records under {records_dir} give other columns or rows")
+    if not rebuilt.equals(frame):
+        bad = [int(k) for k, (_, a), (_, b) in zip(frame["k"], rebuilt.iterrows(),
+                                                   frame.iterrows())
+               if not a.equals(b)]
+        raise damaged(f"the records of trajectories k={bad} ({records_dir}) differ from it")
+
+
 def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenario: dict,
                     table: PathLike, summary: PathLike) -> dict:
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary."""
@@ -148,8 +300,10 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     from .trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
-    frame = pd.concat([io.read_parquet(p, required_columns=["k", "converged"])
-                       for p in batch_tables], ignore_index=True)
+    frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
+    for path, batch_frame in zip(batch_tables, frames):
+        check_batch_records(path, batch_frame, traj.model, traj.T)
+    frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
     if frame["k"].tolist() != list(range(traj.K)):
         raise io.CorruptFileError(f"batch tables of scenario {scenario['name']} do not cover "
@@ -162,6 +316,28 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     io.write_parquet(table, frame)
     io.write_json(summary, info)
     return info
+
+
+def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: dict,
+                                stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+    """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
+
+    Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
+    scenario names to their gather_nuts tables.
+    """
+    from .convergence import ConvergenceSettings, sensitivity_table
+    from .tables import write_table
+
+    frames = {name: io.read_parquet(path, required_columns=["k", "converged", "failed_checks"])
+              for name, path in tables.items()}
+    base = ConvergenceSettings(**convergence_cfg)
+    table = sensitivity_table(frames, base)
+    write_table(table, stem,
+                "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
+                f"or counted as a failure (other thresholds as configured: divergences <= "
+                f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
+                f"E-BFMI >= {base.ebfmi_min:g})")
+    return table
 
 
 # ------------------------------------------------------------------ paper tables and figures
@@ -186,11 +362,13 @@ def _maybe_json(path: PathLike | None) -> dict | None:
 
 
 def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dict[str, str],
-                     paper_values: PathLike, outdir: PathLike) -> dict[str, Any]:
+                     paper_values: PathLike, outdir: PathLike,
+                     exact: dict[str, str] | None = None) -> dict[str, Any]:
     """Rule paper_tables: Table II, Table III and the Section IV summary, paper values beside.
 
-    ``joint`` / ``marginal`` map scenario names to their summary JSON paths.
+    ``joint`` / ``marginal`` / ``exact`` map scenario names to their summary JSON paths.
     """
+    exact = exact or {}
     from . import tables
 
     paper = tables.load_paper_values(paper_values)
@@ -200,6 +378,7 @@ def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dic
         m = _maybe_json(marginal.get(sc["name"]))
         rows.append({"config": sc, "scenario": sc["name"], "T": sc["T"],
                      "paper_ref": sc.get("paper_ref", ""), "joint": j, "marginal": m,
+                     "exact": _maybe_json(exact.get(sc["name"])),
                      "prior": (j or {}).get("prior", sc.get("prior", ""))})
     t2_names = {sc["name"] for sc in table_ii_scenarios(scenarios)}
     t2_rows = [r for r in rows if r["scenario"] in t2_names]
@@ -207,13 +386,16 @@ def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dic
     frames = {
         "table2_joint_vs_marginal": (tables.table_ii(t2_rows, paper),
                                      "Table II: empirical mean, variance and MSE of (a, x0), "
-                                     "model Same, (a, x0) = (0.9, 8); ours beside the paper's"),
+                                     "model Same, (a, x0) = (0.9, 8); ours (Stan + KDE), exact "
+                                     "and the paper's"),
         "table3_coverage": (tables.table_iii(t2_rows, paper),
                             "Table III: coverage of the 90% intervals, mean |bias| and MSE of "
-                            "the states (marginal MAP); ours beside the paper's"),
+                            "the states (marginal MAP); ours (Stan + KDE), exact and the "
+                            "paper's"),
         "section4_summary": (tables.section_iv(rows, paper),
                              "Section IV: every scenario, |K^max| and |K^Stan| (ours and the "
-                             "paper's) and the estimators' properties"),
+                             "paper's), the estimators' properties and the exact marginal "
+                             "posteriors (models linear in the states)"),
     }
     for stem, (frame, caption) in frames.items():
         tables.write_table(frame, out / stem, caption)
@@ -251,7 +433,7 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
 # ------------------------------------------------------------------ choice of K (Sec. IV.A)
 def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_values: PathLike,
                  out_json: PathLike, out_csv: PathLike, figure_paths: list[str]) -> dict:
-    """Rule select_k: the RD rule over K_grid for every method and seed, and its figure."""
+    """Rule select_k: the RD rule over K_grid for every method, set variant and seed; figure."""
     import pandas as pd
 
     from .figures import figure_k_convergence
@@ -262,10 +444,11 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
     model = get_model(scenario["model"])
     summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
     long_rows, choices = [], []
-    runs = sorted({(s["method"], int(s["seed"])) for s in summaries})
+    runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
     paper = load_paper_values(paper_values).get(scenario.get("paper_ref", ""), {}) or {}
-    for method, seed in runs:
-        sel = sorted((s for s in summaries if s["method"] == method and int(s["seed"]) == seed),
+    for method, sets, seed in runs:
+        sel = sorted((s for s in summaries if s["method"] == method
+                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
                      key=lambda s: s["K_i"])
         ks = [int(s["K_i"]) for s in sel]
         vecs = [v_vector(s, model) for s in sel]
@@ -273,20 +456,30 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
         thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
         idx = select_k(ks, V, thresholds)
         ref = (paper.get("k_selection") or {}).get(method) or {}
+        if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
+            ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
         choices.append({
-            "name": ksel["name"], "scenario": scenario["name"], "method": method, "seed": seed,
-            "c1": ksel["c1"], "c2": ksel["c2"], "K_chosen": ks[idx] if idx is not None else None,
-            "K_max_grid": ks[-1], "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "name": ksel["name"], "scenario": scenario["name"], "method": method, "sets": sets,
+            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
+            "K_chosen": ks[idx] if idx is not None else None,
+            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
+                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
+            "K_max_grid": ks[-1],
+            "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })
         for K, v in zip(ks, vecs):
             for label, value in zip(v.labels, v.values):
-                long_rows.append({"K": K, "method": method, "seed": seed, "component": label,
-                                  "value": float(value)})
+                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
+                                  "component": label, "value": float(value)})
     frame = pd.DataFrame(long_rows)
     io.write_text(out_csv, frame.to_csv(index=False, float_format="%.10g"))
     chosen = pd.DataFrame(choices)
-    figure_k_convergence(frame, chosen.assign(K_chosen=chosen["K_chosen"].astype(float)),
+    # one line per method, set variant and seed in the figure
+    figure_k_convergence(frame.assign(method=frame["method"] + " " + frame["sets"]),
+                         chosen.assign(K_chosen=chosen["K_chosen"].astype(float),
+                                       method=chosen["method"] + " " + chosen["sets"]),
                          f"choice of K: {ksel['name']} (c1={ksel['c1']}, c2={ksel['c2']})",
                          figure_paths)
     io.write_json(out_json, {"choices": choices})
@@ -299,8 +492,9 @@ def run_table_k_selection(selections: list[PathLike], stem: PathLike) -> None:
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
     write_table(k_selection_table(rows), stem,
-                "Choice of K by relative differences (Sec. IV.A): ours per method and seed "
-                "beside the paper's")
+                "Choice of K by relative differences (Sec. IV.A): ours per method, set variant "
+                "(independent sets per K_i, or nested: one seed for all K_i) and seed, beside "
+                "the paper's")
 
 
 def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: dict,
@@ -318,3 +512,86 @@ def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: d
     values = profile_posterior(model, traj.z[0], bounds, model.param_names[0], a, x0)
     figure_profile_posterior(a, x0, values, float(traj.omega[0]), float(traj.x0[0]),
                              f"profile posterior, {model.title}, T={traj.T}, k=1", paths)
+
+
+# ------------------------------------------------------------------ exact marginal (issue 11)
+def exact_applies(sc: dict) -> bool:
+    """The exact stage runs for a scenario when enabled and its model is linear in the states."""
+    from .models import get_model
+
+    return bool(sc.get("exact", True)) and get_model(sc["model"]).linear_in_states
+
+
+def exact_K(sc: dict) -> int:
+    """K of the design trajectories of the exact stage (``exact_K``, else the scenario's K)."""
+    return int(sc.get("exact_K") or sc["K"])
+
+
+def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarray) -> dict:
+    """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
+    trajectories with a unique interior maximum) plus Definition 3's counts and the share of
+    trajectories whose posterior is improper at each boundary."""
+    from .stan_metrics import stan_summary
+
+    info = stan_summary(frame, model, omega, x0, x_true)
+    info["n_exact"] = info["n_stan"]
+    for kind in ("unique", "several", "none"):
+        info[f"n_{kind}"] = int((frame["maxima"] == kind).sum())
+    info["n_box_truncated"] = int(frame["box_truncated"].sum())
+    info["n_spike_not_negligible"] = int((frame["converged"]
+                                          & frame["spike_not_negligible"]).sum())
+    for name in model.param_names:
+        for side in ("lower", "upper"):
+            col = frame[f"improper_{side}_{name}"]
+            info[f"improper_{side}_{name}_share"] = float(col.mean()) if len(col) else math.nan
+            slopes = frame[f"slope_{side}_{name}"].to_numpy(dtype=float)
+            info[f"slope_{side}_{name}_median"] = (float(np.nanmedian(slopes))
+                                                   if np.isfinite(slopes).any() else math.nan)
+    return info
+
+
+def run_exact_marginal(trajectories: PathLike, scenario: dict, table: PathLike,
+                       summary: PathLike) -> dict:
+    """Rule exact_marginal: exact marginal posteriors of every design trajectory."""
+    import time
+
+    from .exact_marginal import exact_marginal
+    from .trajectories import read_trajectories
+
+    traj = read_trajectories(trajectories)
+    model = traj.model
+    if not model.linear_in_states:
+        raise ValueError(f"scenario {scenario['name']}: model '{model.slug}' is not linear "
+                         f"in the states; the exact stage does not apply")
+    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
+    start = time.perf_counter()
+    result = exact_marginal(model, traj.z, bounds)
+    seconds = time.perf_counter() - start
+    frame = result.to_frame(model)
+    info = exact_summary(frame, model, traj.omega, traj.x0, traj.x)
+    info.update(scenario=scenario["name"], model=model.slug, T=traj.T, seconds=seconds,
+                grid=result.info, prior=list(bounds.variants))
+    logger.info("scenario %s (exact): %d of %d with a unique interior maximum, %.1f s",
+                scenario["name"], info["n_exact"], traj.K, seconds)
+    io.write_parquet(table, frame)
+    io.write_json(summary, info)
+    return info
+
+
+def run_figure_exact_vs_stan(scenario: dict, stan_table: PathLike, exact_table: PathLike,
+                             paths: list[str]) -> dict:
+    """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k."""
+    from .figures import figure_exact_vs_stan
+    from .models import get_model
+
+    model = get_model(scenario["model"])
+    names = list(model.param_names) + (["x0"] if model.state_dim == 1 else
+                                       [f"x0_{i + 1}" for i in range(model.state_dim)])
+    cols = ["k", "converged"] + [f"{n}_{s}" for n in names for s in ("map", "q5", "q95")]
+    stan = io.read_parquet(stan_table, cols)
+    exact = io.read_parquet(exact_table, cols)
+    if stan["k"].tolist() != exact["k"].tolist():
+        raise ValueError(f"scenario {scenario['name']}: the Stan and exact tables hold "
+                         f"different trajectories (K = {len(stan)} and {len(exact)})")
+    both = stan["converged"].to_numpy(bool) & exact["converged"].to_numpy(bool)
+    return figure_exact_vs_stan(stan[both], exact[both], names, scenario["name"], paths)

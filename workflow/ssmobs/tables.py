@@ -70,7 +70,9 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     """Table II: empirical mean, variance and MSE of (a, x0), joint vs marginal MAP.
 
     ``rows``: one dict per scenario with keys ``scenario``, ``T``, ``paper_ref``,
-    ``joint`` (joint_map summary) and ``marginal`` (gather_nuts summary, may be None).
+    ``joint`` (joint_map summary), ``marginal`` (gather_nuts summary, may be None) and
+    ``exact`` (exact_marginal summary at its K, may be None): ``<comp>_ours`` is Stan + KDE,
+    ``<comp>_exact`` the exact marginal posterior's (marginal-MAP rows only).
     """
     out = []
     for r in sorted(rows, key=lambda r: r["T"]):
@@ -80,11 +82,13 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
             for stat, stat_name in STATS:
                 row = {"T": r["T"], "scenario": r["scenario"], "estimator": est_name,
                        "statistic": stat_name}
+                exact = r.get("exact") or {} if est_key == "marginal" else {}
                 for comp in ("a", "x0"):
                     key = f"{stat}_{comp}" if est_key == "joint" else f"{comp}_{stat}"
                     ours = _num(summ.get(key))
                     ref = _get(pv, est_key, stat, comp)
                     row[f"{comp}_ours"] = ours
+                    row[f"{comp}_exact"] = _num(exact.get(f"{comp}_{stat}"))
                     row[f"{comp}_paper"] = _num(ref)
                     row[f"{comp}_rel_diff"] = rel_diff(ours, ref)
                 out.append(row)
@@ -102,17 +106,21 @@ TABLE_III = (
 
 
 def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
-    """Table III: Cover90 of (a, x0), mean over t of Cover90(x_t), |Bias(x_t)|, MSE(x_t)."""
+    """Table III: Cover90 of (a, x0), mean over t of Cover90(x_t), |Bias(x_t)|, MSE(x_t);
+    ``ours`` = Stan + KDE, ``exact`` = exact marginal posteriors (over ``n_exact`` of
+    ``K_exact`` trajectories)."""
     out = []
     for r in sorted(rows, key=lambda r: r["T"]):
         pv = paper.get(r["paper_ref"], {})
         summ = r.get("marginal") or {}
+        exact = r.get("exact") or {}
         for label, key, ref_path in TABLE_III:
             ours = _num(summ.get(key))
             ref = _get(pv, *ref_path)
             out.append({"T": r["T"], "scenario": r["scenario"], "quantity": label,
-                        "ours": ours, "paper": _num(ref), "rel_diff": rel_diff(ours, ref),
-                        "K_stan": summ.get("n_stan")})
+                        "ours": ours, "exact": _num(exact.get(key)), "paper": _num(ref),
+                        "rel_diff": rel_diff(ours, ref), "K_stan": summ.get("n_stan"),
+                        "K_exact": exact.get("K"), "n_exact": exact.get("n_exact")})
     return pd.DataFrame(out)
 
 
@@ -120,7 +128,9 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     """One row per scenario: settings, |K^max| and |K^Stan| (ours and the paper's, also as
     fractions of K, since our K may be smaller than the paper's) and the estimator
-    properties of every Omega component and x0."""
+    properties of every Omega component and x0; ``exact_*`` columns: the exact marginal
+    stage at its K (``K_exact``): Definition 3's counts (unique / several / none) and the
+    same statistics over the ``K_exact_used`` trajectories with a unique maximum."""
     out = []
     for r in rows:
         sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
@@ -151,16 +161,30 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         row["mean_cover90_states"] = _num(marg.get("x_cover90_mean"))
         row["mean_abs_bias_states"] = _num(marg.get("x_abs_bias_mean"))
         row["mean_mse_states"] = _num(marg.get("x_mse_mean"))
+        exact = r.get("exact")
+        row["K_exact"] = exact.get("K", math.nan) if exact else math.nan
+        for kind in ("unique", "several", "none"):
+            row[f"exact_{kind}"] = exact.get(f"n_{kind}", math.nan) if exact else math.nan
+        row["exact_unique_frac"] = (row["exact_unique"] / row["K_exact"]) if exact else math.nan
+        row["K_exact_used"] = exact.get("n_exact", math.nan) if exact else math.nan
+        ex = exact or {}
+        for c in comps:
+            for stat in ("mean", "var", "mse", "cover90"):
+                row[f"exact_{stat}_{c}"] = _num(ex.get(f"{c}_{stat}"))
+        row["exact_mean_cover90_states"] = _num(ex.get("x_cover90_mean"))
+        row["exact_mean_abs_bias_states"] = _num(ex.get("x_abs_bias_mean"))
+        row["exact_mean_mse_states"] = _num(ex.get("x_mse_mean"))
         out.append(row)
     return pd.DataFrame(out)
 
 
 # ---------------------------------------------------------------- K selection
 def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
-    """Chosen K per k_selection entry, method and seed, with (c1, c2) and the paper's K."""
+    """Chosen K per k_selection entry, method, set variant and seed, with (c1, c2), the grid
+    and the paper's K."""
     frame = pd.DataFrame(list(rows))
-    cols = ["name", "scenario", "method", "seed", "c1", "c2", "K_chosen", "K_max_grid",
-            "K_paper", "K_paper_range"]
+    cols = ["name", "scenario", "method", "sets", "seed", "c1", "c2", "K_chosen", "K_grid",
+            "K_paper", "K_paper_range", "c_paper"]
     for c in cols:
         if c not in frame.columns:
             frame[c] = np.nan

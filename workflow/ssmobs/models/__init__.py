@@ -1,22 +1,193 @@
-"""The six state space models of Section IV, by slug.
+"""State space models by slug, found automatically.
 
-A new model is one module here (a :class:`~ssmobs.models.base.StateSpaceModel` subclass)
-plus one ``stan/<slug>.stan`` program, registered in :data:`MODELS`.
+A model is one module ``workflow/ssmobs/models/<slug>.py`` that defines exactly one
+:class:`~ssmobs.models.base.StateSpaceModel` subclass whose ``slug`` is the file name, plus
+one Stan program ``stan/<slug>.stan`` (see ``docs/your-own-model.md``).  Every such module
+is imported at the first lookup in :data:`MODELS` and checked by
+:func:`definition_problems`; a module that breaks the contract stops the lookup with one
+:class:`ModelDefinitionError`
+naming the file and what is wrong, at the first lookup (before any work is done).  Modules whose name starts
+with ``_`` and the package's own modules (``base``, ``log_posterior``) are not models.
 """
 
 from __future__ import annotations
 
-from .base import PRIOR_VARIANTS, PriorBounds, StateSpaceModel
-from .same import Same
-from .sep import Sep
-from .sep_d1_p2 import SepD1P2
-from .sep_d2_p1 import SepD2P1
-from .sep_mult import SepMult
-from .sep_ranwalk import SepRanWalk
+import importlib
+import importlib.util
+import inspect
+import keyword
+import re
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from types import ModuleType
 
-MODELS: dict[str, StateSpaceModel] = {
-    m.slug: m for m in (Same(), Sep(), SepD2P1(), SepD1P2(), SepRanWalk(), SepMult())
-}
+from .base import PRIOR_VARIANTS, ModelDefinitionError, PriorBounds, StateSpaceModel
+
+#: directory searched for model modules
+MODELS_DIR = Path(__file__).resolve().parent
+
+#: modules of this package that are not models
+INTERNAL_MODULES: frozenset[str] = frozenset({"base", "log_posterior"})
+
+#: class attributes every model sets (see :class:`StateSpaceModel`)
+REQUIRED_ATTRIBUTES: tuple[str, ...] = ("slug", "title", "obs_dim", "state_dim", "param_names",
+                                        "default_prior", "allowed_priors")
+
+#: methods every model implements
+REQUIRED_METHODS: tuple[str, ...] = ("obs_term", "trans_term", "simulate")
+
+#: names a parameter may not take: Theta's states and the Stan data of every program
+RESERVED_NAMES: frozenset[str] = frozenset({"x0", "x", "z", "T"})
+
+_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+def definition_problems(cls: type, expected_slug: str) -> list[str]:
+    """Problems of a model class (empty list when it fulfils the contract).
+
+    Checks the required attributes and methods, their types, that ``slug`` equals the
+    module's file name ``expected_slug``, that parameter names are unique identifiers usable
+    in Stan, and that ``default_prior`` / ``allowed_priors`` name exactly the parameters
+    with known variants.
+    """
+    problems: list[str] = []
+    missing = [a for a in REQUIRED_ATTRIBUTES if not hasattr(cls, a)]
+    if missing:
+        problems.append(f"missing required class attribute(s) {missing}")
+    not_implemented = [m for m in REQUIRED_METHODS
+                       if getattr(cls, m, None) is getattr(StateSpaceModel, m)]
+    if not_implemented:
+        problems.append(f"missing required method(s) {not_implemented} (see "
+                        f"ssmobs.models.base.StateSpaceModel)")
+    if missing:
+        return problems
+    if cls.slug != expected_slug:
+        problems.append(f"slug = {cls.slug!r} but the file is {expected_slug}.py; a model's slug "
+                        f"is its file name (set slug = {expected_slug!r})")
+    for dim in ("obs_dim", "state_dim"):
+        value = getattr(cls, dim)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            problems.append(f"{dim} = {value!r} must be an integer >= 1")
+    names = cls.param_names
+    if not isinstance(names, tuple) or not names or not all(isinstance(n, str) for n in names):
+        problems.append(f"param_names = {names!r} must be a non-empty tuple of strings")
+        return problems
+    bad = [n for n in names if not _IDENTIFIER.match(n) or keyword.iskeyword(n)
+           or n in RESERVED_NAMES or n.endswith(("_lower", "_upper"))]
+    if bad:
+        problems.append(f"param_names {list(bad)} are not allowed: use identifiers (letters, "
+                        f"digits, _) other than {sorted(RESERVED_NAMES)} and not ending in "
+                        f"_lower/_upper")
+    if len(set(names)) != len(names):
+        problems.append(f"param_names = {names!r} lists a name twice")
+    for attr in ("default_prior", "allowed_priors"):
+        mapping = getattr(cls, attr)
+        if not isinstance(mapping, dict) or set(mapping) != set(names):
+            keys = sorted(mapping) if isinstance(mapping, dict) else mapping
+            problems.append(f"{attr} must have exactly one entry per parameter {list(names)}, "
+                            f"got {keys!r}")
+            return problems
+    for name in names:
+        default, allowed = cls.default_prior[name], cls.allowed_priors[name]
+        if isinstance(allowed, str) or not all(v in PRIOR_VARIANTS for v in allowed):
+            problems.append(f"allowed_priors[{name!r}] = {allowed!r} must be a tuple of "
+                            f"variants from {list(PRIOR_VARIANTS)}")
+        elif default not in allowed:
+            problems.append(f"default_prior[{name!r}] = {default!r} is not in "
+                            f"allowed_priors[{name!r}] = {allowed!r}")
+    for attr in ("unit_interval_params", "positive_params"):
+        unknown = [n for n in getattr(cls, attr) if n not in names]
+        if unknown:
+            problems.append(f"{attr} names {unknown}, which are not in param_names {list(names)}")
+    return problems
+
+
+def model_files(directory: Path = MODELS_DIR) -> list[Path]:
+    """The model modules of ``directory``: ``*.py`` except ``_*`` and the package's own."""
+    return sorted(p for p in Path(directory).glob("*.py")
+                  if not p.stem.startswith("_") and p.stem not in INTERNAL_MODULES)
+
+
+def _import(path: Path, directory: Path) -> ModuleType:
+    if Path(directory).resolve() == MODELS_DIR:
+        return importlib.import_module(f"{__name__}.{path.stem}")
+    name = f"_ssmobs_user_models_{abs(hash(str(directory)))}.{path.stem}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _model_class(path: Path, module: ModuleType) -> type:
+    classes = [obj for obj in vars(module).values()
+               if inspect.isclass(obj) and issubclass(obj, StateSpaceModel)
+               and obj is not StateSpaceModel and obj.__module__ == module.__name__]
+    if len(classes) != 1:
+        found = [c.__name__ for c in classes]
+        raise ModelDefinitionError(
+            f"model module {path}: must define exactly one subclass of "
+            f"ssmobs.models.base.StateSpaceModel, found {found or 'none'}")
+    return classes[0]
+
+
+def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
+    """Import every model module of ``directory`` and return its models by slug.
+
+    Raises :class:`ModelDefinitionError` (one message listing every problem, each naming its
+    file) when a module fails to import, does not define exactly one model class, breaks the
+    contract of :func:`definition_problems`, or declares a slug that another module uses.
+    """
+    problems: list[str] = []
+    found: list[tuple[Path, type]] = []
+    for path in model_files(directory):
+        try:
+            module = _import(path, directory)
+            found.append((path, _model_class(path, module)))
+        except ModelDefinitionError as err:
+            problems.append(str(err))
+        except Exception as err:  # noqa: BLE001 - reported with the file it came from
+            problems.append(f"model module {path}: import failed: {type(err).__name__}: {err}")
+    by_slug: dict[str, list[tuple[Path, type]]] = {}
+    for path, cls in found:
+        by_slug.setdefault(getattr(cls, "slug", path.stem), []).append((path, cls))
+    for slug, owners in by_slug.items():
+        if len(owners) > 1:
+            where = " and ".join(f"{p.name} ({c.__name__})" for p, c in owners)
+            problems.append(f"slug {slug!r} is used twice: by {where}; each model needs its own "
+                            f"slug, equal to its file name")
+    for path, cls in found:
+        if len(by_slug[getattr(cls, "slug", path.stem)]) > 1:
+            continue
+        for msg in definition_problems(cls, path.stem):
+            problems.append(f"model module {path} ({cls.__name__}): {msg}")
+    if problems:
+        raise ModelDefinitionError("invalid model definition(s):\n  - " + "\n  - ".join(problems))
+    return {cls.slug: cls() for _, cls in found}
+
+
+class _Registry(Mapping[str, StateSpaceModel]):
+    """The models of :data:`MODELS_DIR` by slug, discovered on first use (so that importing
+    this package never fails; the first lookup raises :class:`ModelDefinitionError`)."""
+
+    def __init__(self) -> None:
+        self._models: dict[str, StateSpaceModel] | None = None
+
+    def _load(self) -> dict[str, StateSpaceModel]:
+        if self._models is None:
+            self._models = discover_models()
+        return self._models
+
+    def __getitem__(self, slug: str) -> StateSpaceModel:
+        return self._load()[slug]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+
+MODELS: Mapping[str, StateSpaceModel] = _Registry()
 
 
 def get_model(slug: str) -> StateSpaceModel:
@@ -24,7 +195,10 @@ def get_model(slug: str) -> StateSpaceModel:
     try:
         return MODELS[slug]
     except KeyError:
-        raise ValueError(f"unknown model '{slug}'; known models: {sorted(MODELS)}") from None
+        raise ValueError(f"unknown model '{slug}'; known models: {sorted(MODELS)} (a model "
+                         f"'{slug}' would be the module workflow/ssmobs/models/{slug}.py)"
+                         ) from None
 
 
-__all__ = ["MODELS", "PRIOR_VARIANTS", "PriorBounds", "StateSpaceModel", "get_model"]
+__all__ = ["MODELS", "PRIOR_VARIANTS", "ModelDefinitionError", "PriorBounds", "StateSpaceModel",
+           "definition_problems", "discover_models", "get_model"]

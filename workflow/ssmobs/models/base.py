@@ -36,6 +36,10 @@ import sympy as sp
 PRIOR_VARIANTS: tuple[str, ...] = ("restricted", "unrestricted", "half_line")
 
 
+class ModelDefinitionError(ValueError):
+    """A model module breaks the model contract; the message names the file and the problem."""
+
+
 @dataclass(frozen=True)
 class PriorBounds:
     """Support of the (flat) prior on Omega: ``lower < Omega < upper`` component-wise."""
@@ -87,6 +91,9 @@ class StateSpaceModel:
     positive_params: ClassVar[tuple[str, ...]] = ()
     #: readable form of each expression of :meth:`support_constraints`, for messages
     constraint_text: ClassVar[tuple[str, ...]] = ()
+    #: True when, for fixed Omega, the model is linear and Gaussian in the states (then
+    #: :meth:`state_space_matrices` gives it and :mod:`ssmobs.exact_marginal` applies)
+    linear_in_states: ClassVar[bool] = False
 
     # ----------------------------------------------------------------- symbolic terms
     def obs_term(self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol],
@@ -102,6 +109,17 @@ class StateSpaceModel:
     def support_constraints(self, omega: Sequence[sp.Symbol]) -> list[sp.Expr]:
         """Expressions c(Omega) that must be > 0 besides the prior box (e.g. 1 - a^2 - b^2)."""
         return []
+
+    def state_space_matrices(self, omega: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Linear-Gaussian form for models with :attr:`linear_in_states`, batched over Omega.
+
+        ``omega`` (..., m) gives F (..., p, p), state-noise variances Q (..., p), H (..., d, p)
+        and observation-noise variances R (..., d) of
+
+            x_t = F x_{t-1} + N(0, diag Q),   z_t = H x_t + N(0, diag R).
+        """
+        raise NotImplementedError(f"model '{self.slug}' is not linear-Gaussian in the states")
 
     # ----------------------------------------------------------------- simulation
     def simulate(self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray,
@@ -143,6 +161,15 @@ class StateSpaceModel:
                 f"model '{self.slug}' has d={self.obs_dim} != p={self.state_dim} and must "
                 f"override initial_states")
         return z.copy()
+
+    #: True where :meth:`sign_consistent_states` is defined
+    has_sign_consistent_start: bool = False
+
+    def sign_consistent_states(self, omega: np.ndarray, x0: np.ndarray,
+                               z: np.ndarray) -> np.ndarray:
+        """Alternative start of the states whose signs agree with x0 (see the models)."""
+        raise NotImplementedError(f"model '{self.slug}' defines no sign-consistent start; "
+                                  f"use joint_map_start: observations")
 
     # ----------------------------------------------------------------- derived facts
     @property

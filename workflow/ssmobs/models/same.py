@@ -20,6 +20,7 @@ class Same(StateSpaceModel):
     default_prior = {"a": "restricted"}
     allowed_priors = {"a": ("restricted", "unrestricted")}
     unit_interval_params = ("a",)
+    linear_in_states = True
 
     def obs_term(self, omega, x, z):
         (a,), (xt,), (zt,) = omega, x, z
@@ -28,6 +29,11 @@ class Same(StateSpaceModel):
     def trans_term(self, omega, x_prev, x):
         (a,), (xp,), (xt,) = omega, x_prev, x
         return (xt - a * xp) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+
+    def state_space_matrices(self, omega):
+        a = np.asarray(omega, dtype=float)[..., 0]
+        v = 1 - a**2
+        return a[..., None, None], v[..., None], a[..., None, None], v[..., None]
 
     def simulate(self, omega, x0, eta, eps):
         a = omega[0]

@@ -20,6 +20,7 @@ class Sep(StateSpaceModel):
     default_prior = {"a": "restricted", "b": "restricted"}
     allowed_priors = {"a": ("restricted", "unrestricted"), "b": ("restricted", "unrestricted")}
     unit_interval_params = ("a", "b")
+    linear_in_states = True
 
     def obs_term(self, omega, x, z):
         (_, b), (xt,), (zt,) = omega, x, z
@@ -28,6 +29,11 @@ class Sep(StateSpaceModel):
     def trans_term(self, omega, x_prev, x):
         (a, _), (xp,), (xt,) = omega, x_prev, x
         return (xt - a * xp) ** 2 / (1 - a**2) + sp.log(1 - a**2)
+
+    def state_space_matrices(self, omega):
+        omega = np.asarray(omega, dtype=float)
+        a, b = omega[..., 0], omega[..., 1]
+        return a[..., None, None], (1 - a**2)[..., None], b[..., None, None], (1 - b**2)[..., None]
 
     def simulate(self, omega, x0, eta, eps):
         a, b = omega

@@ -24,6 +24,7 @@ class SepD1P2(StateSpaceModel):
     allowed_priors = {n: ("restricted", "unrestricted") for n in ("a", "b", "c", "d")}
     unit_interval_params = ("a", "b", "c", "d")
     constraint_text = ("a^2 + b^2 < 1",)
+    linear_in_states = True
 
     def support_constraints(self, omega):
         a, b = omega[0], omega[1]
@@ -49,6 +50,15 @@ class SepD1P2(StateSpaceModel):
         """
         z = np.asarray(z, dtype=float)
         return np.repeat(z, 2, axis=2)
+
+    def state_space_matrices(self, omega):
+        omega = np.asarray(omega, dtype=float)
+        a, b, c, d = (omega[..., i] for i in range(4))
+        zero = np.zeros_like(c)
+        F = np.stack([np.stack([c, zero], -1), np.stack([zero, d], -1)], axis=-2)
+        Q = np.stack([1 - c**2, 1 - d**2], axis=-1)
+        H = np.stack([a, b], axis=-1)[..., None, :]
+        return F, Q, H, (1 - a**2 - b**2)[..., None]
 
     def simulate(self, omega, x0, eta, eps):
         a, b, c, d = omega

@@ -21,6 +21,7 @@ class SepD2P1(StateSpaceModel):
     default_prior = {"a": "restricted", "b": "restricted", "c": "restricted"}
     allowed_priors = {n: ("restricted", "unrestricted") for n in ("a", "b", "c")}
     unit_interval_params = ("a", "b", "c")
+    linear_in_states = True
 
     def obs_term(self, omega, x, z):
         (a, b, _), (xt,), (z1, z2) = omega, x, z
@@ -41,6 +42,13 @@ class SepD2P1(StateSpaceModel):
         """
         z = np.asarray(z, dtype=float)
         return z.mean(axis=2, keepdims=True)
+
+    def state_space_matrices(self, omega):
+        omega = np.asarray(omega, dtype=float)
+        a, b, c = omega[..., 0], omega[..., 1], omega[..., 2]
+        H = np.stack([a, b], axis=-1)[..., None]
+        R = np.stack([1 - a**2, 1 - b**2], axis=-1)
+        return c[..., None, None], (1 - c**2)[..., None], H, R
 
     def simulate(self, omega, x0, eta, eps):
         a, b, c = omega

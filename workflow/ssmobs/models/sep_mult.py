@@ -21,6 +21,8 @@ class SepMult(StateSpaceModel):
     default_prior = {"a": "half_line"}
     allowed_priors = {"a": ("half_line", "restricted")}
     positive_params = ("a",)
+    #: multiplicative observation noise: not linear-Gaussian in the states
+    linear_in_states = False
 
     def obs_term(self, omega, x, z):
         (a,), (xt,), (zt,) = omega, x, z
@@ -29,6 +31,16 @@ class SepMult(StateSpaceModel):
     def trans_term(self, omega, x_prev, x):
         (a,), (xp,), (xt,) = omega, x_prev, x
         return (xt - a - xp) ** 2
+
+    has_sign_consistent_start = True
+
+    def sign_consistent_states(self, omega, x0, z):
+        """|z_t| / sqrt(a) with the sign of x0: Z_t = sqrt(a) X_t eps_t leaves the sign of X_t
+        unidentified by z_t, so the paper's start x = z gives states of random sign; this
+        start puts them on x0's side of zero (the side X_t stays on for X_0 = 8, a = 0.9)."""
+        a = float(np.asarray(omega, dtype=float).ravel()[0])
+        sign = 1.0 if float(np.asarray(x0, dtype=float).ravel()[0]) >= 0 else -1.0
+        return sign * np.abs(np.asarray(z, dtype=float)) / np.sqrt(a)
 
     def simulate(self, omega, x0, eta, eps):
         a = omega[0]

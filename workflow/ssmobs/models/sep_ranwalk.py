@@ -18,6 +18,7 @@ class SepRanWalk(StateSpaceModel):
     param_names = ("a",)
     default_prior = {"a": "half_line"}
     allowed_priors = {"a": ("half_line", "restricted", "unrestricted")}
+    linear_in_states = True
 
     def obs_term(self, omega, x, z):
         (a,), (xt,), (zt,) = omega, x, z
@@ -26,6 +27,11 @@ class SepRanWalk(StateSpaceModel):
     def trans_term(self, omega, x_prev, x):
         (xp,), (xt,) = x_prev, x
         return (xt - xp) ** 2
+
+    def state_space_matrices(self, omega):
+        a = np.asarray(omega, dtype=float)[..., 0]
+        one = np.ones_like(a)
+        return one[..., None, None], one[..., None], a[..., None, None], one[..., None]
 
     def simulate(self, omega, x0, eta, eps):
         a = omega[0]

@@ -1,0 +1,111 @@
+"""The model check's Python and Stan-source parts (no compilation)."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from ssmobs.check_model import (CheckCase, cases_from_scenarios, declared_names, default_cases,
+                                python_problems, stan_block, stan_source_problems)
+from ssmobs.models import MODELS, get_model
+from ssmobs.models.base import StateSpaceModel
+from ssmobs.stan_backends import stan_file
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.mark.parametrize("slug", sorted(MODELS))
+def test_every_model_passes_the_python_and_source_checks(slug):
+    model = get_model(slug)
+    cases = default_cases(model)
+    assert cases, "no valid default case"
+    for case in cases:
+        assert python_problems(model, case) == []
+    assert stan_source_problems(model, stan_file(slug)) == []
+
+
+def test_default_cases_cover_every_allowed_variant():
+    model = get_model("stoch_vol")
+    priors = [c.prior for c in default_cases(model)]
+    assert priors == [None, {"phi": "unrestricted"}, {"sigma": "restricted"}]
+
+
+def test_declared_names_read_bounds_sizes_and_comments():
+    code = """
+    data { int<lower=1> T;  // steps
+      array[T] vector[2] z; real<lower=fmax(a_lower, 0)> a_upper; /* c; */ }
+    transformed parameters { real y = 1; }
+    parameters {
+      real<lower=a_lo, upper=a_upper> a;  # comment
+      vector<lower=-1, upper=1>[2] b;
+      real x0;
+      matrix[T, 2] x;
+    }
+    """
+    assert declared_names(stan_block(code, "parameters")) == ["a", "b", "x0", "x"]
+    assert declared_names(stan_block(code, "data")) == ["T", "z", "a_upper"]
+
+
+def test_swapped_parameters_are_named(tmp_path):
+    model = get_model("stoch_vol")
+    code = stan_file("stoch_vol").read_text()
+    lines = code.splitlines()
+    i = next(k for k, l in enumerate(lines) if l.strip().startswith("real<lower=phi_lower, upper"))
+    lines[i], lines[i + 1] = lines[i + 1], lines[i]
+    bad = tmp_path / "stoch_vol.stan"
+    bad.write_text("\n".join(lines))
+    (msg,) = stan_source_problems(model, bad)
+    assert "declares ['sigma', 'phi', 'x0', 'x']" in msg
+    assert "needs exactly ['phi', 'sigma', 'x0', 'x'] in this order" in msg
+
+
+def test_undeclared_prior_bound_is_named(tmp_path):
+    model = get_model("stoch_vol")
+    code = stan_file("stoch_vol").read_text()
+    code = code.replace("  real<lower=sigma_lower> sigma_upper;\n", "")
+    code = code.replace("upper=sigma_upper", "upper=positive_infinity()")
+    bad = tmp_path / "stoch_vol.stan"
+    bad.write_text(code)
+    (msg,) = stan_source_problems(model, bad)
+    assert "does not declare ['sigma_upper']" in msg
+
+
+def test_missing_stan_file(tmp_path):
+    (msg,) = stan_source_problems(get_model("stoch_vol"), tmp_path / "nope.stan")
+    assert "every model needs stan/stoch_vol.stan" in msg
+
+
+class WrongShape(StateSpaceModel):
+    slug = "wrong_shape"
+    title = "simulator drops the last axis"
+    obs_dim = 1
+    state_dim = 1
+    param_names = ("a",)
+    default_prior = {"a": "restricted"}
+    allowed_priors = {"a": ("restricted",)}
+
+    def obs_term(self, omega, x, z):
+        return (z[0] - x[0]) ** 2
+
+    def trans_term(self, omega, x_prev, x):
+        return (x[0] - omega[0] * x_prev[0]) ** 2
+
+    def simulate(self, omega, x0, eta, eps):
+        x = omega[0] * np.cumsum(eta[:, :, 0], axis=1)
+        return x, x + eps[:, :, 0]  # (K, T) instead of (K, T, 1)
+
+
+def test_simulator_with_wrong_shape_is_named():
+    problems = python_problems(WrongShape(), CheckCase({"a": 0.5}, [0.0]), T=5)
+    assert len(problems) == 2
+    assert re.search(r"simulate returned x of shape \(3, 5\) for K=3, T=5; expected .* = "
+                     r"\(3, 5, 1\)", problems[0])
+
+
+def test_cases_from_scenarios_deduplicate():
+    scs = [{"model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0, "prior": None,
+            "T": T} for T in (20, 50)] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
+    cases = cases_from_scenarios(scs, "stoch_vol")
+    assert cases == [CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], None)]

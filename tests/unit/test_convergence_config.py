@@ -1,0 +1,88 @@
+"""Thresholds from the config reach the convergence check and the re-evaluation of records."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ssmobs import config as cfg
+from ssmobs import io
+from ssmobs.convergence import (ConvergenceSettings, check_convergence, converged_under,
+                                sensitivity_table, threshold_failures)
+from ssmobs.stages import run_convergence_sensitivity
+
+from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
+
+pytestmark = pytest.mark.unit
+
+
+def config_with(**convergence) -> dict:
+    return cfg.validate({"scenarios": [{"name": "s", "model": "same", "omega": {"a": 0.9},
+                                        "x0": 8, "T": 4, "K": 10}],
+                         "convergence": convergence})
+
+
+def saturated_draws():
+    """Well-mixed draws whose only fault is 7 draws at the maximum tree depth 10."""
+    d = make_draws()
+    d.sample_stats["treedepth__"][2, :7] = 10
+    return d
+
+
+@pytest.mark.parametrize("counted", [False, True])
+def test_treedepth_from_config_decides_a_run_that_fails_only_on_tree_depth(counted):
+    c = config_with(treedepth_fails=counted) if counted else config_with()
+    settings = ConvergenceSettings(**c["convergence"])  # as rule sample_nuts builds them
+    res = check_convergence(saturated_draws(), settings, max_treedepth=10)
+    assert res["n_treedepth_hits"] == 7
+    assert res["converged"] is (not counted)
+    assert res["failed_checks"] == (["treedepth"] if counted else [])
+    # the same record re-evaluated from its stored worst values agrees
+    assert threshold_failures(res, settings) == res["failed_checks"]
+
+
+def test_rhat_threshold_from_config_reaches_the_check():
+    d = make_draws(shift=0.15)  # chains slightly apart: R-hat between 1.01 and 1.05
+    res = check_convergence(d, ConvergenceSettings(**config_with()["convergence"]))
+    assert 1.01 <= res["max_rhat"] < 1.05, res["max_rhat"]
+    assert res["failed_checks"] == ["rhat"]
+    loose = ConvergenceSettings(**config_with(rhat_max=1.05)["convergence"])
+    assert check_convergence(d, loose)["converged"]
+
+
+def table(rows):
+    base = {"status": "ok", "converged": True, "failed_checks": "", "max_rhat": 1.001,
+            "min_ess_bulk": 900.0, "min_ess_tail": 800.0, "n_divergent": 0.0,
+            "n_treedepth_hits": 0.0, "min_ebfmi": 0.7}
+    return pd.DataFrame([{**base, "k": k, **r} for k, r in enumerate(rows)])
+
+
+def test_converged_under_reclassifies_records_and_keeps_other_failures():
+    t = table([{},                                                   # passes everywhere
+               {"n_treedepth_hits": 12.0},                           # only tree depth
+               {"max_rhat": 1.03, "converged": False, "failed_checks": "rhat"},
+               {"converged": False, "failed_checks": "kde"},          # not a threshold
+               {"status": "error", "converged": False, "failed_checks": "sampling_error",
+                "max_rhat": np.nan}])
+    warn = ConvergenceSettings()
+    assert converged_under(t, warn).tolist() == [True, True, False, False, False]
+    counted = ConvergenceSettings(treedepth_fails=True)
+    assert converged_under(t, counted).tolist() == [True, False, False, False, False]
+    loose = ConvergenceSettings(rhat_max=1.05)
+    assert converged_under(t, loose).tolist() == [True, True, True, False, False]
+    s = sensitivity_table({"x": t}, warn).iloc[0]
+    assert (s["K"], s["K_stan_run"]) == (5, 2)
+    assert (s["rhat1.01_treedepth_warns"], s["rhat1.01_treedepth_fails"],
+            s["rhat1.05_treedepth_warns"], s["rhat1.05_treedepth_fails"]) == (2, 1, 3, 2)
+
+
+def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
+    t = table([{}, {"n_treedepth_hits": 3.0}, {"max_rhat": 1.02, "converged": False,
+                                                "failed_checks": "rhat"}])
+    io.write_parquet(tmp_path / "a.parquet", t)
+    out = run_convergence_sensitivity({"a": tmp_path / "a.parquet"},
+                                      config_with()["convergence"], tmp_path / "sens")
+    assert out["rhat1.05_treedepth_fails"].tolist() == [2]
+    text = (tmp_path / "sens.md").read_text()
+    assert "rhat1.01_treedepth_warns" in text and "| a " in text

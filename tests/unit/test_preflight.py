@@ -1,0 +1,120 @@
+"""Checks before Snakemake (make targets): config file messages and stale-lock removal."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ssmobs import preflight
+from ssmobs.config import ConfigError
+
+pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def message(path) -> str:
+    with pytest.raises(ConfigError) as err:
+        preflight.check_config_file(path)
+    text = str(err.value)
+    return text
+
+
+def test_missing_file_is_one_line(tmp_path):
+    msg = message(tmp_path / "nope.yaml")
+    assert msg == f"config file {tmp_path / 'nope.yaml'} does not exist"
+
+
+def test_yaml_syntax_error_gives_file_line_and_column(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("scenarios:\n  - {name: a, model: same\n  bad: [\n")
+    msg = message(path)
+    assert msg.startswith(f"config file {path}, line 3, column 6: YAML syntax error: ")
+    assert "\n" not in msg
+
+
+def test_tab_indentation_error_located(tmp_path):
+    path = tmp_path / "tab.yaml"
+    path.write_text("scenarios:\n\t- {name: a}\n")
+    assert f"config file {path}, line 2, column 1: YAML syntax error" in message(path)
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n", "\n\n"])
+def test_empty_file_names_file_and_required_key(tmp_path, text):
+    path = tmp_path / "empty.yaml"
+    path.write_text(text)
+    msg = message(path)
+    assert msg == (f"config file {path} is empty; it needs at least the key 'scenarios' "
+                   f"(a list of scenarios; see config/README.md)")
+
+
+def test_file_without_scenarios_or_not_a_mapping(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("stan: {chains: 2}\n")
+    assert "has no key 'scenarios'" in message(path)
+    path.write_text("- 1\n- 2\n")
+    assert "top level must be a mapping" in message(path)
+
+
+def test_invalid_values_name_the_file(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("scenarios:\n  - {name: s, model: same, omega: {a: 0.9}, x0: 8, T: 4, "
+                    "K: 10}\nconvergence: {ess_bulk_min: .nan}\n")
+    msg = message(path)
+    assert msg.startswith(f"config file {path}: invalid configuration")
+    assert "convergence.ess_bulk_min = nan: must be a finite number" in msg
+
+
+@pytest.mark.parametrize("name", ["config.yaml", "smoke.yaml", "paper.yaml"])
+def test_profiles_pass(name):
+    assert preflight.check_config_file(REPO / "config" / name)["scenarios"]
+
+
+def test_command_line_prints_one_line_and_fails(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "ssmobs.preflight", str(tmp_path / "x.yaml")],
+                          capture_output=True, text=True, cwd=tmp_path,
+                          env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"})
+    assert proc.returncode == 1
+    assert proc.stderr == f"error: config file {tmp_path / 'x.yaml'} does not exist\n"
+
+
+# ------------------------------------------------------------------------ stale locks
+def make_lock(workdir: Path) -> None:
+    locks = workdir / ".snakemake" / "locks"
+    locks.mkdir(parents=True)
+    (locks / "0.output.lock").write_text("results/x\n")
+
+
+def fake_snakemake(cwd: Path) -> subprocess.Popen:
+    """A process whose command line mentions snakemake, running in ``cwd``."""
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", "snakemake"],
+                            cwd=cwd)
+    time.sleep(0.2)
+    return proc
+
+
+def test_no_lock_nothing_to_do(tmp_path):
+    assert preflight.unlock_if_stale(tmp_path, None) is None
+
+
+@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs /proc (Linux)")
+def test_lock_of_a_running_snakemake_is_left_alone(tmp_path):
+    make_lock(tmp_path)
+    other = tmp_path / "elsewhere"
+    other.mkdir()
+    proc = fake_snakemake(tmp_path)
+    elsewhere = fake_snakemake(other)
+    try:
+        found = preflight.snakemake_processes(tmp_path)
+        assert proc.pid in found and elsewhere.pid not in found
+        note = preflight.unlock_if_stale(tmp_path, None)
+        assert f"PIDs [{proc.pid}]" in note and "left as it is" in note
+        assert preflight.lock_files(tmp_path)
+    finally:
+        for p in (proc, elsewhere):
+            p.kill()
+            p.wait()

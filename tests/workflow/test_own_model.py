@@ -1,0 +1,113 @@
+"""docs/your-own-model.md, step by step, on a fresh copy of the repository.
+
+The tutorial's listings are the repository's files (so the tutorial cannot drift from the
+code), its check command passes, its quick run on the smoke profile writes the table and
+figure, and the two mistakes it shows stop the run with the message it quotes, before any
+design trajectory of the model is written.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from helpers import REPO, make_workdir, snakemake
+
+pytestmark = pytest.mark.workflow
+
+TUTORIAL = REPO / "docs" / "your-own-model.md"
+TARGET = "paper_figures/ours_stoch_vol_observability.png"
+
+
+def listing(path: str) -> str:
+    """The fenced block that follows the line naming ``path`` in the tutorial."""
+    text = TUTORIAL.read_text()
+    m = re.search(rf"^`{re.escape(path)}`:?\s*\n+```[a-z]*\n(.*?)^```", text, flags=re.M | re.S)
+    assert m, f"no listing of {path} in the tutorial"
+    return m.group(1)
+
+
+@pytest.mark.parametrize("path", ["workflow/ssmobs/models/stoch_vol.py", "stan/stoch_vol.stan"])
+def test_listings_are_the_repository_files(path):
+    assert listing(path) == (REPO / path).read_text()
+
+
+def test_config_entry_in_tutorial_is_the_config():
+    text = TUTORIAL.read_text()
+    for line in (REPO / "config" / "stoch_vol.yaml").read_text().splitlines():
+        if line.startswith("  - {name: stoch_vol_T20"):
+            assert line in text
+
+
+def _python(workdir, *args):
+    env = {**os.environ, "PYTHONPATH": str(workdir / "workflow")}
+    return subprocess.run([sys.executable, *args], cwd=workdir, env=env, capture_output=True,
+                          text=True, timeout=900)
+
+
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory):
+    return make_workdir(tmp_path_factory.mktemp("own_model"))
+
+
+@pytest.fixture(autouse=True)
+def copy_package_first(monkeypatch, request):
+    """Snakemake's jobs import ssmobs from the copy (not from a PYTHONPATH of the caller)."""
+    work = None
+    for name in ("fresh", "tmp_path"):
+        if name in request.fixturenames:
+            work = request.getfixturevalue(name)
+            break
+    if work is not None:
+        monkeypatch.setenv("PYTHONPATH", str(work / "workflow"))
+
+
+def test_step_check_command(fresh):
+    proc = _python(fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile",
+                   "config/stoch_vol.yaml")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
+
+
+def test_step_quick_run_on_smoke_profile(fresh):
+    snakemake(fresh, "--cores", "2", TARGET, "--configfile", "config/smoke.yaml")
+    frame = pd.read_csv(fresh / "paper_figures" / "ours_stoch_vol_observability.csv")
+    assert frame["T"].tolist() == [5]
+    assert {"K_max_ratio", "K_stan_ratio", "joint_not_ok", "stan_failed_checks"} <= set(frame)
+    assert (fresh / "results" / "shared" / "check_model" / "stoch_vol.json").is_file()
+
+
+def test_mistake_swapped_stan_parameters(tmp_path):
+    work = make_workdir(tmp_path)
+    stan = work / "stan" / "stoch_vol.stan"
+    code = stan.read_text()
+    phi = "  real<lower=phi_lower, upper=phi_upper> phi;  // persistence of the log-variance\n"
+    sigma = ("  real<lower=sigma_lo, upper=sigma_upper> sigma;  // volatility of the "
+             "log-variance\n")
+    assert phi + sigma in code
+    stan.write_text(code.replace(phi + sigma, sigma + phi))
+    proc = snakemake(work, "--cores", "1", TARGET, "--configfile", "config/smoke.yaml",
+                     check=False)
+    assert proc.returncode != 0
+    log = (work / "results" / "shared" / "logs" / "check_model" / "stoch_vol.log").read_text()
+    assert ("the parameters block declares ['sigma', 'phi', 'x0', 'x'], but the Python model "
+            "'stoch_vol' (param_names = ['phi', 'sigma']) needs exactly ['phi', 'sigma', 'x0', "
+            "'x'] in this order") in log
+    assert not (work / "results" / "stoch_vol_T5" / "design_trajectories").exists()
+
+
+def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
+    work = make_workdir(tmp_path)
+    models = work / "workflow" / "ssmobs" / "models"
+    shutil.copy(models / "stoch_vol.py", models / "my_model.py")
+    proc = snakemake(work, "-n", "--cores", "1", TARGET, "--configfile", "config/smoke.yaml",
+                     check=False)
+    assert proc.returncode != 0
+    assert ("slug 'stoch_vol' is used twice: by my_model.py (StochVol) and stoch_vol.py "
+            "(StochVol)") in proc.stdout + proc.stderr

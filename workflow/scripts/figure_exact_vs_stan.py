@@ -1,0 +1,9 @@
+"""Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one."""
+
+from ssmobs import log
+from ssmobs.stages import run_figure_exact_vs_stan
+
+logger = log.setup(snakemake.log[0])
+stats = run_figure_exact_vs_stan(snakemake.params.scenario, snakemake.input.stan,
+                                 snakemake.input.exact, list(snakemake.output))
+logger.info("Stan + KDE vs exact: %s", stats)

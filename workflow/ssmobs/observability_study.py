@@ -1,0 +1,111 @@
+"""An observability study of one model over several horizons T (ours, not the paper's).
+
+For the scenarios of one ``observability_studies`` config entry (same model, different T),
+one table and one figure of the two observability measures of Sec. III: |K^max|/K (joint
+MAP found and passing the checks of Sec. III.B) and |K^Stan|/K (NUTS converged, Sec.
+III.C), with the reasons the others failed (joint-MAP status counts, failed convergence
+checks), the marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the
+draws went, the median over all K of the KDE modes of Omega (converged or not).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from . import io
+from .convergence import CHECKS
+from .joint_map import STATUSES
+from .models import get_model
+
+
+def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
+              stan: Mapping[str, Any] | None, stan_table: pd.DataFrame | None) -> dict[str, Any]:
+    """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega."""
+    model = get_model(scenario["model"])
+    row: dict[str, Any] = {"scenario": scenario["name"], "model": model.slug, "T": scenario["T"],
+                           "K": scenario["K"], "method": scenario.get("method", "design")}
+    row.update({f"{n}_true": float(scenario["omega"][n]) for n in model.param_names})
+    row["K_max"] = joint["K_max"] if joint else np.nan
+    row["K_max_ratio"] = joint["ratio"] if joint else np.nan
+    row["K_stan"] = stan["n_stan"] if stan else np.nan
+    row["K_stan_ratio"] = stan["ratio"] if stan else np.nan
+    if joint:
+        failed = {st: joint.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
+        row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"
+    if stan_table is not None:
+        counts: Counter[str] = Counter()
+        for checks in stan_table.loc[~stan_table["converged"].astype(bool), "failed_checks"]:
+            counts.update(c for c in str(checks).split(",") if c)
+        row["stan_failed_checks"] = ", ".join(f"{c} {counts[c]}" for c in CHECKS
+                                              if counts[c]) or "none"
+    for n in model.param_names:
+        row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
+        row[f"{n}_mean_joint"] = joint.get(f"mean_{n}", np.nan) if joint else np.nan
+    if stan_table is not None:
+        # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
+        for n in model.param_names:
+            col = f"{n}_map"
+            row[f"{n}_map_median_all_k"] = (float(np.nanmedian(stan_table[col]))
+                                            if col in stan_table and stan_table[col].notna().any()
+                                            else np.nan)
+    return row
+
+
+def study_table(scenarios: Sequence[Mapping[str, Any]], joint: Mapping[str, Mapping],
+                stan: Mapping[str, Mapping], stan_tables: Mapping[str, pd.DataFrame]
+                ) -> pd.DataFrame:
+    """Rows of :func:`study_row` sorted by T (a stage not run gives NaN)."""
+    rows = [study_row(sc, joint.get(sc["name"]), stan.get(sc["name"]),
+                      stan_tables.get(sc["name"])) for sc in scenarios]
+    return pd.DataFrame(rows).sort_values("T", kind="stable").reset_index(drop=True)
+
+
+def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> None:
+    """|K^max|/K and |K^Stan|/K against T."""
+    from .figures import _plt, save_figure
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(4.6, 3.2))
+    ax.plot(frame["T"], frame["K_max_ratio"], "o-", label=r"$|\mathcal{K}^{\max}|/K$ (joint MAP)")
+    ax.plot(frame["T"], frame["K_stan_ratio"], "s--",
+            label=r"$|\mathcal{K}^{\mathrm{Stan}}|/K$ (marginal MAP)")
+    ax.set_xlabel("T")
+    ax.set_ylabel("fraction of the K trajectories")
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_xticks(frame["T"].tolist())
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8, loc="best")
+    save_figure(fig, [path])
+    plt.close(fig)
+
+
+def run_observability_study(study: Mapping[str, Any], scenarios: Sequence[Mapping[str, Any]],
+                            joint: Mapping[str, str], stan: Mapping[str, str],
+                            stan_tables: Mapping[str, str], csv: str | os.PathLike,
+                            md: str | os.PathLike, png: str | os.PathLike,
+                            stan_settings: Mapping[str, Any] | None = None) -> pd.DataFrame:
+    """Rule observability_study: read the scenario summaries, write table (CSV, Markdown)
+    and figure (PNG)."""
+    frame = study_table(
+        scenarios,
+        {n: io.read_json(p) for n, p in joint.items()},
+        {n: io.read_json(p) for n, p in stan.items()},
+        {n: io.read_parquet(p, required_columns=["converged", "failed_checks"])
+         for n, p in stan_tables.items()})
+    io.write_text(csv, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
+    model = get_model(scenarios[0]["model"])
+    caption = (f"Observability of {model.title} ({study['name']}, ours): |K^max|/K (joint MAP, "
+               f"Sec. III.B) and |K^Stan|/K (NUTS, Sec. III.C) over T.")
+    if stan_settings:
+        caption += (f" Stan: {stan_settings['chains']} chains x ({stan_settings['iter_warmup']}"
+                    f" + {stan_settings['iter_sampling']}) iterations.")
+    shown = frame.astype(object).where(frame.notna(), None)
+    io.write_text(md, caption + "\n\n" + shown.to_markdown(index=False, floatfmt=".4g",
+                                                          missingval="") + "\n")
+    figure_study(frame, f"{model.title}: observability over T", png)
+    return frame
