@@ -24,16 +24,14 @@ import os
 import resource
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
-from machine import machine_info
+from machine import machine_info, report
 
 from ssmobs.models import get_model
 from ssmobs.stan_backends import SamplerSettings, get_backend, stan_file
 from ssmobs.stan_backends.native import NativeBackend, stan_version
 
-REPO = Path(__file__).resolve().parents[1]
 PAPER = SamplerSettings(chains=4, iter_warmup=4000, iter_sampling=6000, workers=1)
 CASES = [("same", {"a": 0.9}, 20, False), ("same", {"a": 0.9}, 50, False),
          ("same", {"a": 0.9}, 100, False),
@@ -123,10 +121,7 @@ def main() -> None:
                      f"{n[1]:.2f} | {p[1]:.2f} | **{n[0] / f[0]:.3f}** | **{n[0] / p[0]:.3f}** | "
                      f"{'yes' if same else 'NO'} |")
     text = "\n".join(lines) + "\n"
-    print(text)
-    if not args.no_write:
-        with open(REPO / "BENCHMARKS.md", "a") as fh:
-            fh.write(text)
+    report(text, write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from machine import machine_info
+from machine import machine_info, report
 
 from ssmobs import config as cfg
 from ssmobs.convergence import ConvergenceSettings
@@ -101,10 +101,7 @@ def main() -> None:
     lines += ["", f"Total: {total_runs} Stan runs, about {total_h:.0f} CPU-hours "
               f"({total_h * 1000 / total_runs:.2f} CPU-h per 1000 runs on average).", ""]
     text = "\n".join(lines)
-    print(text)
-    if not args.no_write:
-        with open(REPO / "BENCHMARKS.md", "a") as fh:
-            fh.write(text)
+    report(text, write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -29,3 +29,11 @@ def machine_info() -> str:
     ram = f"{int(mem.split()[0]) / 1024**2:.1f} GiB RAM" if mem else "unknown RAM"
     return (f"{os.cpu_count()} CPUs (nproc), {cpu_model()}, {ram}; Python "
             f"{platform.python_version()}, NumPy {numpy.__version__}, SciPy {scipy.__version__}")
+
+
+def report(text: str, write: bool) -> None:
+    """Print a benchmark's Markdown section and, if ``write``, append it to BENCHMARKS.md."""
+    print(text)
+    if write:
+        with open(Path(__file__).resolve().parents[1] / "BENCHMARKS.md", "a") as fh:
+            fh.write(text)

@@ -17,20 +17,11 @@ from ssmobs.stan_backends import (SAMPLER_COLUMNS, BackendError, SamplerSettings
                                   SamplingError, get_backend, resolve_backend, stan_file)
 from ssmobs.stan_backends import native as native_mod
 from ssmobs.stan_backends.native import NativeBackend, columns_to_draws
+from test_backends import _data  # the same small data sets as the other backend tests
 
 pytestmark = pytest.mark.stan
 
 SMALL = SamplerSettings(chains=2, iter_warmup=150, iter_sampling=150, workers=1)
-
-
-def _data(slug: str, omega: dict, T: int = 8, seed: int = 0) -> dict:
-    model = get_model(slug)
-    rng = np.random.default_rng(seed)
-    x0 = np.full(model.state_dim, 8.0)
-    eta = rng.standard_normal((1, T, model.state_dim))
-    eps = rng.standard_normal((1, T, model.obs_dim))
-    _, z = model.simulate(model._omega_vector(omega), x0, eta, eps)
-    return model.stan_data(z[0], model.prior_bounds(omega))
 
 
 @pytest.fixture(scope="module")

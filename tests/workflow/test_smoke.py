@@ -50,6 +50,7 @@ def test_rerun_does_nothing(smoke_run):
 def test_lint_passes():
     proc = subprocess.run([sys.executable, "-m", "snakemake", "--lint", "--cores", "1"], cwd=REPO,
                           capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "Lints for" not in proc.stdout + proc.stderr, proc.stdout + proc.stderr
 
 
