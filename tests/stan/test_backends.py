@@ -281,9 +281,9 @@ def test_get_backend_errors(monkeypatch, tmp_path):
     with pytest.raises(ValueError) as err:
         get_backend("cmdstanpy")
     msg = str(err.value)
-    for needle in ("stan.backend", "'cmdstanpy'", "install_cmdstan", "'pystan'", "$CMDSTAN"):
+    for needle in ("stan.backend", "'cmdstanpy'", "install_cmdstan", "'native'", "$CMDSTAN"):
         assert needle in msg
-    assert get_backend("auto").name == "pystan"
+    assert get_backend("auto").name == "native"
     assert get_backend("pystan").name == "pystan"
     # a directory with a makefile satisfies cmdstanpy but not have_cmdstan without bin/stanc
     fake = tmp_path / "cmdstan-2.36.0"
