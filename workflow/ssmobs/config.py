@@ -209,7 +209,7 @@ def _backend_problems(config: dict) -> list[str]:
     if not have_cmdstan():
         return ["stan.backend = 'cmdstanpy': no CmdStan installation was found (set $CMDSTAN "
                 "or install CmdStan under ~/.cmdstan); allowed without CmdStan: 'auto' or "
-                "'pystan'"]
+                "'native' or 'pystan'"]
     return []
 
 
