@@ -140,12 +140,9 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
                             f"has no sign-consistent start; allowed: 'observations'")
     names = {sc["name"] for sc in config["scenarios"]}
-    ksel_seen: set[str] = set()
+    problems += _repeated_names(config.get("k_selection", []), "k_selection")
     for i, ks in enumerate(config.get("k_selection", [])):
         where = f"k_selection[{i}] ('{ks['name']}')"
-        if ks["name"] in ksel_seen:
-            problems.append(f"{where}.name = {ks['name']!r}: used twice; names must be unique")
-        ksel_seen.add(ks["name"])
         if ks["scenario"] not in names:
             problems.append(f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
                             f"configured: {sorted(names)}")
@@ -159,12 +156,10 @@ def _scenario_problems(config: dict) -> list[str]:
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
     models = {sc["name"]: sc["model"] for sc in config["scenarios"]}
-    study_seen: set[str] = set()
+    problems += _repeated_names(config.get("observability_studies", []),
+                                "observability_studies")
     for i, st in enumerate(config.get("observability_studies", [])):
         where = f"observability_studies[{i}] ('{st['name']}')"
-        if st["name"] in study_seen:
-            problems.append(f"{where}.name = {st['name']!r}: used twice; names must be unique")
-        study_seen.add(st["name"])
         unknown = [n for n in st["scenarios"] if n not in names]
         if unknown:
             problems.append(f"{where}.scenarios: no scenario(s) named {unknown}; configured: "
@@ -173,6 +168,18 @@ def _scenario_problems(config: dict) -> list[str]:
             problems.append(f"{where}.scenarios = {st['scenarios']}: must all use one model, "
                             f"got {sorted({models[n] for n in st['scenarios']})}")
     return problems + _keep_draws_problems(config) + _figure_problems(config)
+
+
+def _repeated_names(entries: list[dict], section: str) -> list[str]:
+    """One problem per entry of a config list whose ``name`` an earlier entry already has."""
+    seen: set[str] = set()
+    problems = []
+    for i, entry in enumerate(entries):
+        if entry["name"] in seen:
+            problems.append(f"{section}[{i}] ('{entry['name']}').name = {entry['name']!r}: "
+                            f"used twice; names must be unique")
+        seen.add(entry["name"])
+    return problems
 
 
 def _keep_draws_problems(config: dict) -> list[str]:
