@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run test smoke paper tables clean
+.PHONY: setup run test smoke paper tables section4 clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,18 @@ tables: setup
 	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete $(TABLES_TARGETS) --configfile config/tables.yaml && \
 	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) \
 		--started $$start --note "$(TABLES_NOTE)"
+
+# One Section IV row at the paper's settings (issue 10), with a provenance file (committed).
+SECTION4_CONFIG := config/section4_sep_d2_p1.yaml
+SECTION4_DIR := paper_figures/section4_sep_d2_p1_a_T50
+SECTION4_NOTE ?=
+
+section4: setup
+	$(PREFLIGHT) $(SECTION4_CONFIG)
+	start=$$(date +%s); \
+	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete --configfile $(SECTION4_CONFIG) && \
+	$(BIN)/python -m ssmobs.provenance --config $(SECTION4_CONFIG) --outputs-dir $(SECTION4_DIR) \
+		--started $$start --command "make section4" --note "$(SECTION4_NOTE)"
 
 clean:
 	rm -rf results .snakemake
