@@ -303,3 +303,28 @@ def test_stan_file():
         assert stan_file(slug).parent.name == "stan"
     with pytest.raises(FileNotFoundError, match="nope"):
         stan_file("nope")
+
+
+def test_pystan_gives_stanc_more_than_httpstans_one_second(monkeypatch):
+    """httpstan runs stanc with timeout=1 s, which a loaded machine exceeds (a clean-clone
+    `make run` failed so); the PyStan backend lengthens it for httpstan's module only."""
+    import subprocess
+
+    import httpstan.compile
+
+    seen = []
+    real_run = subprocess.run
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("timeout"))
+        return real_run(*args, **kwargs)
+
+    monkeypatch.setattr(httpstan.compile, "subprocess", subprocess)  # httpstan's own state
+    monkeypatch.setattr(subprocess, "run", spy)
+    pystan_mod._patient_stanc()
+    pystan_mod._patient_stanc()  # idempotent
+    cpp, _ = httpstan.compile.compile("parameters { real y; } model { y ~ std_normal(); }",
+                                      "model_timeout_check")
+    assert "model_timeout_check" in cpp
+    assert seen == [pystan_mod.STANC_TIMEOUT]
+    assert subprocess.run is spy  # the global module is untouched

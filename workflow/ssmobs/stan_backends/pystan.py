@@ -23,6 +23,11 @@ Sampling
     reason, direct PyStan use in a process that samples through this backend must go
     through :meth:`PyStanBackend.session`.
 
+    httpstan gives ``stanc`` one second (``subprocess.run(..., timeout=1)`` in
+    ``httpstan.compile``); on a loaded machine its start-up alone can take longer and the
+    build fails with ``TimeoutExpired``.  :func:`_patient_stanc` gives it
+    :data:`STANC_TIMEOUT` seconds instead, for httpstan's module only.
+
     The chains run in a process pool of ``settings.workers`` processes made for the call
     (``httpstan.services_stub.executor`` is replaced and restored; there is no public
     option, pystan issue #349).
@@ -67,6 +72,33 @@ _CALL_LOCK = threading.RLock()
 #: Unix socket paths must stay below ~107 bytes; private tmp dirs longer than this keep
 #: httpstan's socket files in the default temp dir
 _MAX_SOCKET_DIR_LEN = 70
+#: seconds stanc may take when httpstan translates a program (httpstan's own limit is 1 s)
+STANC_TIMEOUT = 120.0
+
+
+class _PatientSubprocess:
+    """The ``subprocess`` module as ``httpstan.compile`` sees it, with a longer timeout."""
+
+    def __getattr__(self, name: str) -> Any:
+        import subprocess
+
+        return getattr(subprocess, name)
+
+    @staticmethod
+    def run(*args: Any, timeout: float | None = None, **kwargs: Any) -> Any:
+        import subprocess
+
+        if timeout is not None:
+            timeout = max(timeout, STANC_TIMEOUT)
+        return subprocess.run(*args, timeout=timeout, **kwargs)
+
+
+def _patient_stanc() -> None:
+    """Give httpstan's stanc call :data:`STANC_TIMEOUT` seconds (idempotent)."""
+    import httpstan.compile
+
+    if not isinstance(httpstan.compile.subprocess, _PatientSubprocess):
+        httpstan.compile.subprocess = _PatientSubprocess()  # type: ignore[assignment]
 
 
 def program_sha256(code: str) -> str:
@@ -299,6 +331,7 @@ class PyStanBackend:
         import httpstan.models
         import stan
 
+        _patient_stanc()
         path = Path(stan_file).resolve()
         code = path.read_text()
         sha = program_sha256(code)
