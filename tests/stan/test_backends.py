@@ -328,3 +328,36 @@ def test_pystan_gives_stanc_more_than_httpstans_one_second(monkeypatch):
     assert "model_timeout_check" in cpp
     assert seen == [pystan_mod.STANC_TIMEOUT]
     assert subprocess.run is spy  # the global module is untouched
+
+
+def test_pystan_rebuilds_a_build_killed_after_its_module(tmp_path, monkeypatch):
+    """httpstan writes the extension module, then stderr.log; a build killed in between left
+    a module that httpstan loaded and then failed on (FileNotFoundError: stderr.log)."""
+    import httpstan.cache
+    import httpstan.models
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    code = "parameters { real y; } model { y ~ std_normal(); }  // killed-build check\n"
+    program = tmp_path / "killed.stan"
+    program.write_text(code)
+    model_dir = httpstan.cache.model_directory(httpstan.models.calculate_model_name(code))
+    model_dir.mkdir(parents=True)
+    suffix = pystan_mod.EXTENSION_SUFFIXES[0]
+    (model_dir / f"stan_services_leftover{suffix}").write_bytes(b"half a build")
+    assert not pystan_mod._build_complete(model_dir)
+
+    built = []
+
+    def fake_build(code_, path):  # what a finished httpstan build leaves
+        built.append(path)
+        model_dir.mkdir(parents=True, exist_ok=True)
+        (model_dir / f"stan_services_new{suffix}").write_bytes(b"module")
+        (model_dir / "stderr.log").write_text("")
+
+    monkeypatch.setattr(PyStanBackend, "_build_program", staticmethod(fake_build))
+    PyStanBackend().compile(program)
+    assert built == [program.resolve()]
+    assert not (model_dir / f"stan_services_leftover{suffix}").exists()  # leftovers removed
+    assert pystan_mod._build_complete(model_dir)
+    PyStanBackend().compile(program)  # complete now: not built again
+    assert len(built) == 1

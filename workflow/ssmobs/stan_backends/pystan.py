@@ -105,11 +105,16 @@ def program_sha256(code: str) -> str:
     return hashlib.sha256(code.encode()).hexdigest()
 
 
-def _has_extension(directory: Path) -> bool:
+def _build_complete(directory: Path) -> bool:
+    """True when httpstan finished building into ``directory``: the extension module and
+    the compiler log, which httpstan writes after the module (a build killed in between
+    leaves a module that httpstan loads and then fails on the missing log)."""
     try:
-        return any(p.suffix in EXTENSION_SUFFIXES for p in directory.iterdir())
+        names = [p for p in directory.iterdir()]
     except FileNotFoundError:
         return False
+    return (any(p.suffix in EXTENSION_SUFFIXES for p in names)
+            and any(p.name == "stderr.log" for p in names))
 
 
 @contextlib.contextmanager
@@ -343,9 +348,11 @@ class PyStanBackend:
         with _CALL_LOCK, _shared_cache_env():
             cache_dir = httpstan.cache.cache_directory()
             model_dir = httpstan.cache.model_directory(model_name)
-            if not _has_extension(model_dir):
+            if not _build_complete(model_dir):
                 with file_lock(cache_dir / "ssmobs-locks" / f"{model_id}.lock"):
-                    if not _has_extension(model_dir):  # another process may have built it
+                    if not _build_complete(model_dir):  # another process may have built it
+                        # a killed build's leftovers would be taken for a finished one
+                        shutil.rmtree(model_dir, ignore_errors=True)
                         LOG.info("compiling %s into %s (about a minute)", path.name,
                                  model_dir)
                         t0 = time.perf_counter()
