@@ -88,8 +88,8 @@ def arviz_stats(x: np.ndarray, energy: np.ndarray) -> dict[str, np.ndarray]:
 def compare(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, tuple[float, bool]]:
     """Per statistic: (max relative difference over non-NaN entries, same NaN pattern)."""
     out = {}
-    for key in b:
-        x, y = np.asarray(a[key], float), np.asarray(b[key], float)
+    for key, ref in b.items():
+        x, y = np.asarray(a[key], float), np.asarray(ref, float)
         same_nan = bool(np.array_equal(np.isnan(x), np.isnan(y)))
         ok = ~np.isnan(x) & ~np.isnan(y)
         rel = float(np.max(np.abs(x[ok] - y[ok]) / np.abs(y[ok]))) if ok.any() else 0.0
@@ -143,7 +143,7 @@ def main() -> None:
     args = ap.parse_args()
     T, n, rounds = (20, 1000, 2) if args.quick else (100, 6000, 5)
     rounds = args.rounds or rounds
-    started = _dt.datetime.now(_dt.timezone.utc)
+    started = _dt.datetime.now(_dt.UTC)
     load0 = os.getloadavg()
     import arviz_stats
 

@@ -38,7 +38,6 @@ import numpy as np
 from scipy import special
 
 
-
 def _z_scale_rows(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rank-normalise every row: Phi^-1((rank - 3/8) / (n + 1/4)) (ArviZ ``_z_scale``).
 
@@ -190,7 +189,7 @@ def _rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
         return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail}
     xv = x[idx]
     sp = _split(xv)
-    n_rows, m_chains, half = sp.shape
+    n_rows, _, half = sp.shape
     flat = sp.reshape(n_rows, -1)
     z_bulk, srt = _z_scale_rows(flat)
     z_bulk = z_bulk.reshape(sp.shape)
