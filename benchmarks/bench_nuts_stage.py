@@ -15,9 +15,9 @@ backend.  Measured:
 * our own overhead: data preparation, convergence diagnostics, KDE modes and quantiles
   (from the records' timings), and the rest of the loop (writing the record, progress);
   the ratio (everything but the sample call) / (sample call);
-* the alternatives we did not take, on the last trajectory's draws: ArviZ's
-  ``az.rhat``/``az.ess``/``az.bfmi`` on ``az.from_dict`` vs. our vectorised diagnostics,
-  and ``az.kde`` per component vs. our batched FFT KDE.
+* the alternatives we did not take, on the last trajectory's draws: ArviZ's array layer
+  (arviz-stats ``rhat``/``ess``/``bfmi``) vs. our vectorised diagnostics, and arviz-stats'
+  ``kde`` per component vs. our batched FFT KDE.
 
 Part 2, throughput on 2 cores (``--cores 2``): N trajectories of T = 100 with the paper's
 settings, wall time from process start to finish (imports included), as
@@ -161,7 +161,7 @@ def worker_bare(T: int, n: int, workers: int, warmup: int, sampling: int,
 
 
 def _alternatives(draws, model, T: int) -> dict:
-    """Time the roads not taken on real draws: ArviZ diagnostics and az.kde per component."""
+    """Time the roads not taken on real draws: ArviZ diagnostics and its KDE per component."""
     import warnings
 
     import numpy as np
@@ -172,7 +172,7 @@ def _alternatives(draws, model, T: int) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         t0 = time.perf_counter()
-        import arviz as az
+        from arviz_stats.base import array_stats
         t_import_arviz = time.perf_counter() - t0
         res = {"import_arviz": t_import_arviz}
         def best_of(fn, repeats=3):
@@ -195,7 +195,7 @@ def _alternatives(draws, model, T: int) -> dict:
         def arviz_modes():
             modes = []
             for row in th:
-                g, d = az.kde(row)
+                g, d, _ = array_stats.kde(row)
                 modes.append(g[np.argmax(d)])
             return modes
 
@@ -278,8 +278,8 @@ def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) 
            "*rest*: writing the record, logging, progress. *ours*: everything in the loop "
            "but the sample call, wall time (in brackets: CPU time of our per-trajectory "
            "code, which other load on the machine does not inflate). Last two columns, on the last trajectory's draws (best of 3 "
-           "calls each): ArviZ (`az.from_dict` + `az.rhat`/`az.ess`/`az.bfmi`) vs. our "
-           "vectorised diagnostics, and `az.kde` per component vs. our batched FFT KDE "
+           "calls each): ArviZ (arviz-stats' array layer: `rhat`/`ess`/`bfmi`) vs. our "
+           "vectorised diagnostics, and arviz-stats' `kde` per component vs. our batched FFT KDE "
            "(incl. quantiles and the copy of the draws).", "",
            "| case | n | sample call | parent / workers CPU | prepare | diagnostics | "
            "KDE + quantiles | rest | ours | ours / sample | diag ArviZ / ours | "
@@ -296,7 +296,7 @@ def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) 
                f" when it is).  Agreement on these draws: diagnostics max relative difference "
                f"{r0['alternatives']['diag_max_rel_diff']:.1e}; KDE modes differ by at most "
                f"{r0['alternatives']['kde_max_mode_diff_sd']:.3f} posterior sd (different "
-               f"bandwidths: Silverman vs. ArviZ's 'experimental').")
+               f"bandwidths: Silverman vs. ArviZ's default).")
     for r in over:
         conv = sum(r["converged"])
         out.append(f"T = {r['T']}: {conv}/{len(r['converged'])} converged.")

@@ -99,13 +99,9 @@ def test_pystan_draws_deterministic_and_no_files_left(backend):
 
 
 def test_pystan_p2_layout_matches_arviz(backend):
-    """Draws of matrix[T, 2] x agree with az.from_pystan (chain, draw, t, i)."""
-    import warnings
-
+    """Draws of matrix[T, 2] x agree with ArviZ's from_pystan (chain, draw, t, i)."""
+    import arviz_base as az
     import stan
-
-    warnings.filterwarnings("ignore", category=FutureWarning, module="arviz")
-    import arviz as az
 
     omega = {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6}
     data = _data("sep_d1_p2", omega, T=4)
