@@ -17,10 +17,10 @@ hundredths of a second.  The grid spacing is at most h / 8 (the grid covers the 
 a parabola through the three grid values around it; the binned density differs from the
 exact Gaussian KDE by O(spacing^2 / h^2) (tested against ``scipy.stats.gaussian_kde``).
 
-Why not ``az.kde``: it is binned too but convolves directly on a 512-point grid over
-[min, max], so its grid error grows with the range of the draws (heavy tails), it loops in
-Python per component, and its default bandwidth ("experimental": mean of Silverman's rule
-and ISJ) is not the paper's.  Both agree on the mode well within Monte Carlo error
+Why not ArviZ's KDE (``arviz_stats``' ``kde``, formerly ``az.kde``): it is binned too but
+convolves directly on a 512-point grid over [min, max], so its grid error grows with the
+range of the draws (heavy tails), it loops in Python per component, and its default
+bandwidth ("experimental": mean of Silverman's rule and ISJ) is not the paper's.  Both agree on the mode well within Monte Carlo error
 (``tests/unit/test_marginal_map.py``).
 
 Empirical quantiles are R's type 7 (NumPy's default ``linear``), as ``quantile()`` in R.
