@@ -132,7 +132,7 @@ def test_tridiagonal_eigenpair_matches_eigh():
     assert np.allclose(np.abs(np.einsum("ks,ks->k", y, vec[:, :, -1])), 1.0, atol=1e-8)
 
 
-# --------------------------------------------------------------------------- factorisation, spectrum
+# --------------------------------------------------------------------------- factor, spectrum
 @pytest.mark.parametrize("p", [1, 2])
 def test_arrow_factor_solve_diag_inverse_matvec(p):
     A, C, Dd, Dl = random_arrow(K=5, N=9, p=p, m=3, seed=p)
@@ -175,6 +175,6 @@ def test_lanczos_exact_when_steps_exceed_dimension():
     A, C, Dd, Dl = random_arrow(K=3, N=2, p=1, m=1, seed=2)
     H = arrow_to_dense(A, C, Dd, Dl)
     fac = ArrowFactor(A, C, Dd, Dl)
-    a, b, Q = lanczos(fac.matvec, np.ones((3, 3)), steps=40)
+    a, b, _ = lanczos(fac.matvec, np.ones((3, 3)), steps=40)
     assert a.shape == (3, 3)
     assert np.allclose(tridiagonal_max_eigenvalue(a, b), np.linalg.eigvalsh(H)[:, -1], rtol=1e-12)

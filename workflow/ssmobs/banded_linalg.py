@@ -22,7 +22,7 @@ Nothing here knows about models; the layout is the only contract.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

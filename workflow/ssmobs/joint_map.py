@@ -37,8 +37,9 @@ Hessian is an "arrow" matrix (block-tridiagonal in the states plus m dense rows/
 for Omega), so each system is solved in O(T (p^3 + p^2 m + m^2) + m^3) by a block
 Cholesky of the state part and an m x m Schur complement, vectorised over k with a loop
 over t (:mod:`ssmobs.banded_linalg`).  Where the Hessian is not positive definite a
-multiple of the identity is added (modified Newton, [26, Sec. 3.4]).  A trajectory stops early once it has run off to
-infinity (``divergence_limit``) or onto the boundary (slack < ``boundary_stop_tol``).
+multiple of the identity is added (modified Newton, [26, Sec. 3.4]).  A trajectory stops
+early once it has run off to infinity (``divergence_limit``) or onto the boundary
+(slack < ``boundary_stop_tol``).
 
 Numerical checks at the result Theta_hat (Sec. III.B), giving one status per k, checked in
 this order (the first that applies wins):

@@ -61,7 +61,7 @@ class ModelConstraints:
 
     @classmethod
     def compile(cls, w: list[sp.Symbol], cons: list[sp.Expr]) -> "ModelConstraints":
-        """Lambdify the expressions ``cons`` in the parameter symbols ``w`` and their derivatives."""
+        """Lambdify the expressions ``cons`` (in the symbols ``w``) and their derivatives."""
         if not cons:
             return cls(n_params=len(w), count=0, _values=None, _derivatives=None)
         derivs = []
