@@ -114,6 +114,7 @@ def test_constraint_derivatives_match_finite_differences():
     assert c.shape == (2, 1) and dc.shape == (2, 1, 4) and d2c.shape == (2, 1, 4, 4)
     assert np.allclose(c[:, 0], 1 - omega[:, 0] ** 2 - omega[:, 1] ** 2)
     assert cons.satisfied(omega).tolist() == [True, True]
+    assert cons.values(omega[1]).shape == (1,) and np.allclose(cons.values(omega[1]), c[1])
     assert cons.satisfied(np.array([[0.8, 0.7, 0.5, 0.6]])).tolist() == [False]
     h = 1e-6
     for j in range(4):

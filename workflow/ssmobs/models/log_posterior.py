@@ -73,18 +73,18 @@ class ModelConstraints:
                    _derivatives=sp.lambdify(w, derivs, modules="numpy", cse=True))
 
     def values(self, omega: np.ndarray) -> np.ndarray:
-        """(K, n_c) c(Omega) for Omega (K, m)."""
+        """(..., n_c) c(Omega) for Omega (..., m)."""
         omega = np.asarray(omega, dtype=float)
-        K = omega.shape[0]
+        lead = omega.shape[:-1]
         if self._values is None:
-            return np.zeros((K, 0))
+            return np.zeros(lead + (0,))
         with np.errstate(all="ignore"):
-            raw = self._values(*[omega[:, i] for i in range(self.n_params)])
-        return np.stack([np.broadcast_to(np.asarray(c, dtype=float), (K,)) for c in raw], axis=1)
+            raw = self._values(*[omega[..., i] for i in range(self.n_params)])
+        return np.stack([np.broadcast_to(np.asarray(c, dtype=float), lead) for c in raw], axis=-1)
 
     def satisfied(self, omega: np.ndarray) -> np.ndarray:
-        """(K,) True where every c_j(Omega) > 0 (False where a value is NaN)."""
-        return np.all(self.values(omega) > 0, axis=1)
+        """(...) True where every c_j(Omega) > 0 (False where a value is NaN)."""
+        return np.all(self.values(omega) > 0, axis=-1)
 
     def derivatives(self, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gradients (K, n_c, m) and Hessians (K, n_c, m, m) of c, symbolic, for Omega (K, m)."""
