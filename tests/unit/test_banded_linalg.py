@@ -168,6 +168,8 @@ def test_lanczos_extreme_eigenpairs(p):
     assert np.allclose(np.abs(np.einsum("kn,kn->k", v, vec[:, :, 0])), 1.0, atol=1e-8)
     dense = arrow_extreme_eigenpairs(fac, "dense")
     assert np.allclose(dense[0], lam[:, 0]) and np.allclose(dense[1], lam[:, -1])
+    with pytest.raises(ValueError, match="lanczos"):
+        arrow_extreme_eigenpairs(fac, "power")
 
 
 def test_lanczos_exact_when_steps_exceed_dimension():

@@ -351,7 +351,6 @@ def tridiagonal_top_eigenvector(a: np.ndarray, b: np.ndarray, lam: np.ndarray) -
     return y
 
 
-
 def arrow_extreme_eigenpairs(fac: ArrowFactor, method: str = "lanczos", steps: int = 24
                              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest and largest eigenvalue of each arrow matrix H and the unit eigenvector of the
@@ -362,6 +361,8 @@ def arrow_extreme_eigenpairs(fac: ArrowFactor, method: str = "lanczos", steps: i
     and its eigenvector accurately even when lambda_min << lambda_max.  ``method="dense"``:
     LAPACK eigh of the assembled matrix (O(n^3) per matrix; for checks).
     """
+    if method not in ("lanczos", "dense"):
+        raise ValueError(f"eigenvalue method {method!r} must be 'lanczos' or 'dense'")
     K, n = fac.K, fac.m + fac.N * fac.p
     lam_min, lam_max = np.full(K, np.nan), np.full(K, np.nan)
     v_min = np.full((K, n), np.nan)
