@@ -1,4 +1,7 @@
-"""Joint MAP (Sec. III.B): structured algebra, optimiser, checks, summaries, profile posterior."""
+"""Joint MAP (Sec. III.B): optimiser, checks, summaries, profile posterior.
+
+The arrow/banded linear algebra it uses is tested in test_banded_linalg.py.
+"""
 
 from __future__ import annotations
 
@@ -10,19 +13,15 @@ from scipy.optimize import minimize
 from ssmobs.joint_map import (
     STATUSES,
     JointMapSettings,
-    _ArrowFactor,
     _Barrier,
-    _lanczos,
     _ridge_check,
-    _spectrum,
-    _tridiag_max,
     initial_theta,
     joint_map,
     joint_map_summary,
 )
 from ssmobs.models import get_model
 from ssmobs.models.base import PriorBounds, StateSpaceModel
-from ssmobs.models.log_posterior import BlockHessian, log_posterior, neg2_log_posterior
+from ssmobs.models.log_posterior import log_posterior, neg2_log_posterior
 from ssmobs.profile_posterior import profile_posterior
 
 pytestmark = pytest.mark.unit
@@ -34,67 +33,6 @@ def design(slug, omega, x0, T, K, seed=0):
     matrix = rng.standard_normal(((model.obs_dim + model.state_dim) * T, K))
     x, z = model.design_trajectories(omega, x0, matrix, T)
     return model, x, z
-
-
-def random_arrow(K, N, p, m, seed, indefinite=False):
-    rng = np.random.default_rng(seed)
-    A = rng.normal(size=(K, m, m))
-    A = A @ np.swapaxes(A, 1, 2) + m * np.eye(m)
-    C = 0.3 * rng.normal(size=(K, N, p, m))
-    Dd = rng.normal(size=(K, N, p, p))
-    Dd = Dd @ np.swapaxes(Dd, 2, 3) + 3 * np.eye(p)
-    Dl = 0.5 * rng.normal(size=(K, N - 1, p, p))
-    if indefinite:
-        Dd[0, N // 2] -= 20 * np.eye(p)
-    return A, C, Dd, Dl
-
-
-# --------------------------------------------------------------------------- structured algebra
-@pytest.mark.parametrize("p", [1, 2])
-def test_arrow_factor_solve_diag_inverse_matvec(p):
-    A, C, Dd, Dl = random_arrow(K=5, N=9, p=p, m=3, seed=p)
-    H = BlockHessian(A, C, Dd, Dl).to_dense()
-    fac = _ArrowFactor(A, C, Dd, Dl)
-    assert fac.ok.all()
-    x = np.random.default_rng(0).normal(size=H.shape[:2])
-    Hx = np.einsum("kij,kj->ki", H, x)
-    assert np.allclose(fac.matvec(x), Hx, atol=1e-12)
-    assert np.allclose(fac.solve(Hx), x, atol=1e-10)
-    assert np.allclose(fac.diag_inverse(), np.diagonal(np.linalg.inv(H), axis1=1, axis2=2),
-                       rtol=1e-10)
-
-
-@pytest.mark.parametrize("p", [1, 2])
-def test_arrow_factor_detects_indefinite(p):
-    A, C, Dd, Dl = random_arrow(K=3, N=7, p=p, m=2, seed=5, indefinite=True)
-    H = BlockHessian(A, C, Dd, Dl).to_dense()
-    fac = _ArrowFactor(A, C, Dd, Dl)
-    assert fac.ok.tolist() == (np.linalg.eigvalsh(H)[:, 0] > 0).tolist() == [False, True, True]
-
-
-@pytest.mark.parametrize("p", [1, 2])
-def test_lanczos_extreme_eigenpairs(p):
-    A, C, Dd, Dl = random_arrow(K=4, N=15, p=p, m=2, seed=11)
-    Dd[:, 3] += 1e3 * np.eye(p)  # spread the spectrum
-    H = BlockHessian(A, C, Dd, Dl).to_dense()
-    lam, vec = np.linalg.eigh(H)
-    fac = _ArrowFactor(A, C, Dd, Dl)
-    lmin, lmax, v = _spectrum(fac, JointMapSettings())
-    assert np.allclose(lmin, lam[:, 0], rtol=1e-9)
-    assert np.allclose(lmax, lam[:, -1], rtol=1e-9)
-    assert np.allclose(np.abs(np.einsum("kn,kn->k", v, vec[:, :, 0])), 1.0, atol=1e-8)
-    dense = _spectrum(fac, JointMapSettings(eigen_method="dense"))
-    assert np.allclose(dense[0], lam[:, 0]) and np.allclose(dense[1], lam[:, -1])
-
-
-def test_lanczos_exact_when_steps_exceed_dimension():
-    """T = 1 gives |Theta| = 3 < lanczos_steps: the tridiagonal matrix has the full spectrum."""
-    A, C, Dd, Dl = random_arrow(K=3, N=2, p=1, m=1, seed=2)
-    H = BlockHessian(A, C, Dd, Dl).to_dense()
-    fac = _ArrowFactor(A, C, Dd, Dl)
-    a, b, Q = _lanczos(fac.matvec, np.ones((3, 3)), steps=40)
-    assert a.shape == (3, 3)
-    assert np.allclose(_tridiag_max(a, b), np.linalg.eigvalsh(H)[:, -1], rtol=1e-12)
 
 
 # --------------------------------------------------------------------------- optimiser and checks

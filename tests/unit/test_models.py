@@ -7,7 +7,7 @@ import pytest
 
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import (
-    constraint_derivatives,
+    compile_model,
     in_support,
     log_posterior,
     neg2_log_posterior,
@@ -106,20 +106,27 @@ def test_outside_support_is_infinite():
 
 
 def test_constraint_derivatives_match_finite_differences():
-    model = get_model("sep_d1_p2")
+    cons = compile_model(get_model("sep_d1_p2")).constraints
     omega = np.array([[0.3, 0.4, 0.5, 0.6], [0.1, 0.7, 0.2, 0.9]])
-    c, dc, d2c = constraint_derivatives(model, omega)
+    c = cons.values(omega)
+    dc, d2c = cons.derivatives(omega)
+    assert cons.count == 1
     assert c.shape == (2, 1) and dc.shape == (2, 1, 4) and d2c.shape == (2, 1, 4, 4)
     assert np.allclose(c[:, 0], 1 - omega[:, 0] ** 2 - omega[:, 1] ** 2)
+    assert cons.satisfied(omega).tolist() == [True, True]
+    assert cons.values(omega[1]).shape == (1,) and np.allclose(cons.values(omega[1]), c[1])
+    assert cons.satisfied(np.array([[0.8, 0.7, 0.5, 0.6]])).tolist() == [False]
     h = 1e-6
     for j in range(4):
         e = np.zeros(4)
         e[j] = h
-        cp, dp, _ = constraint_derivatives(model, omega + e)
-        cm, dm, _ = constraint_derivatives(model, omega - e)
-        assert np.allclose((cp - cm)[:, 0] / (2 * h), dc[:, 0, j], atol=1e-8)
+        (dp, _), (dm, _) = cons.derivatives(omega + e), cons.derivatives(omega - e)
+        assert np.allclose((cons.values(omega + e) - cons.values(omega - e))[:, 0] / (2 * h),
+                           dc[:, 0, j], atol=1e-8)
         assert np.allclose((dp - dm)[:, 0] / (2 * h), d2c[:, 0, :, j], atol=1e-6)
-    c0, dc0, d2c0 = constraint_derivatives(get_model("same"), omega[:, :1])
+    none = compile_model(get_model("same")).constraints
+    c0, (dc0, d2c0) = none.values(omega[:, :1]), none.derivatives(omega[:, :1])
+    assert none.count == 0 and none.satisfied(omega[:, :1]).all()
     assert c0.shape == (2, 0) and dc0.shape == (2, 0, 1) and d2c0.shape == (2, 0, 1, 1)
 
 

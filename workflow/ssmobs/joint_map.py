@@ -36,9 +36,10 @@ symbolic derivatives for the whole batch and solves the K Newton systems at once
 Hessian is an "arrow" matrix (block-tridiagonal in the states plus m dense rows/columns
 for Omega), so each system is solved in O(T (p^3 + p^2 m + m^2) + m^3) by a block
 Cholesky of the state part and an m x m Schur complement, vectorised over k with a loop
-over t.  Where the Hessian is not positive definite a multiple of the identity is added
-(modified Newton, [26, Sec. 3.4]).  A trajectory stops early once it has run off to
-infinity (``divergence_limit``) or onto the boundary (slack < ``boundary_stop_tol``).
+over t (:mod:`ssmobs.banded_linalg`).  Where the Hessian is not positive definite a
+multiple of the identity is added (modified Newton, [26, Sec. 3.4]).  A trajectory stops
+early once it has run off to infinity (``divergence_limit``) or onto the boundary
+(slack < ``boundary_stop_tol``).
 
 Numerical checks at the result Theta_hat (Sec. III.B), giving one status per k, checked in
 this order (the first that applies wins):
@@ -95,13 +96,9 @@ from typing import Any, Mapping, Protocol, Sequence
 import numpy as np
 import pandas as pd
 
+from .banded_linalg import ArrowFactor, arrow_extreme_eigenpairs
 from .models.base import PriorBounds, StateSpaceModel
-from .models.log_posterior import (
-    _compile_constraints,
-    constraint_derivatives,
-    neg2_log_posterior,
-    neg2_log_posterior_blocks,
-)
+from .models.log_posterior import compile_model, neg2_log_posterior, neg2_log_posterior_blocks
 
 #: the six statuses, in the order in which the checks assign them
 STATUSES: tuple[str, ...] = ("ok", "not-positive-definite", "gradient", "ridge", "boundary",
@@ -305,211 +302,7 @@ class _ProgressLike(Protocol):
     def update(self, n: int = 1) -> None: ...
 
 
-# =========================================================================== small dense algebra
-def _chol_inv(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse Cholesky factor of a batch of small SPD matrices.
-
-    S : (..., q, q).  Returns (Linv, ok) with Linv lower triangular, Linv S Linv^T = I where
-    ok; where S is not positive definite (or not finite) ok is False and Linv is finite junk.
-    """
-    q = S.shape[-1]
-    if q == 1:
-        d = S[..., 0, 0]
-        ok = np.isfinite(d) & (d > 0)
-        with np.errstate(all="ignore"):
-            inv = 1.0 / np.sqrt(np.where(ok, d, 1.0))
-        return inv[..., None, None], ok
-    ok = np.all(np.isfinite(S), axis=(-2, -1))
-    if q == 2:
-        a, b, c = S[..., 0, 0], S[..., 1, 0], S[..., 1, 1]
-        with np.errstate(all="ignore"):
-            good = ok & (a > 0)
-            l11 = np.sqrt(np.where(good, a, 1.0))
-            l21 = b / l11
-            r = c - l21 ** 2
-            good &= r > 0
-            l22 = np.sqrt(np.where(good, r, 1.0))
-            Linv = np.zeros_like(S)
-            Linv[..., 0, 0] = 1.0 / l11
-            Linv[..., 1, 1] = 1.0 / l22
-            Linv[..., 1, 0] = -l21 / (l11 * l22)
-        return Linv, good
-    L = np.zeros_like(S)
-    for j in range(q):
-        s = S[..., j, j] - np.sum(L[..., j, :j] ** 2, axis=-1)
-        good = s > 0
-        ok &= good
-        L[..., j, j] = np.sqrt(np.where(good, s, 1.0))
-        for i in range(j + 1, q):
-            off = S[..., i, j] - np.sum(L[..., i, :j] * L[..., j, :j], axis=-1)
-            L[..., i, j] = off / L[..., j, j]
-    Linv = np.zeros_like(S)
-    for i in range(q):
-        Linv[..., i, i] = 1.0 / L[..., i, i]
-        for j in range(i):
-            Linv[..., i, j] = -np.sum(L[..., i, j:i] * Linv[..., j:i, j], axis=-1) / L[..., i, i]
-    return Linv, ok
-
-
-class _StateFactor:
-    """Block Cholesky D = L L^T of a batch of block-tridiagonal SPD matrices.
-
-    ``diag`` (K, N, p, p) and ``lower`` (K, N-1, p, p) (block (t, t-1)).  Stores L_t^{-1}
-    and M_t = D_{t,t-1} L_{t-1}^{-T}, time-major for fast per-step access.
-    """
-
-    def __init__(self, diag: np.ndarray, lower: np.ndarray) -> None:
-        K, N, p, _ = diag.shape
-        self.p, self.N = p, N
-        dg = np.moveaxis(diag, 1, 0)
-        lo = np.moveaxis(lower, 1, 0)
-        self.ok = np.ones(K, dtype=bool)
-        if p == 1:
-            # scalar recursion: l_t = 1/sqrt(pivot_t), m_t = D_{t,t-1} l_{t-1}
-            dg = dg[..., 0, 0]
-            lo = lo[..., 0, 0]
-            linv = np.empty((N, K))
-            mm = np.empty((max(N - 1, 0), K))
-            piv = dg[0]
-            with np.errstate(all="ignore"):
-                for t in range(N):
-                    if t > 0:
-                        mm[t - 1] = lo[t - 1] * linv[t - 1]
-                        piv = dg[t] - mm[t - 1] ** 2
-                    good = piv > 0
-                    self.ok &= good
-                    linv[t] = 1.0 / np.sqrt(np.where(good, piv, 1.0))
-            self.ok &= np.all(np.isfinite(linv), axis=0) & np.all(np.isfinite(mm), axis=0)
-            self.linv, self.m = linv, mm
-            return
-        linv = np.empty((N, K, p, p))
-        mm = np.empty((max(N - 1, 0), K, p, p))
-        with np.errstate(all="ignore"):
-            for t in range(N):
-                S = dg[t]
-                if t > 0:
-                    mm[t - 1] = lo[t - 1] @ np.swapaxes(linv[t - 1], -1, -2)
-                    S = S - mm[t - 1] @ np.swapaxes(mm[t - 1], -1, -2)
-                linv[t], good = _chol_inv(S)
-                self.ok &= good
-        self.linv, self.m = linv, mm
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """D^{-1} rhs for rhs (K, N, p, r); returns (K, N, p, r)."""
-        N = self.N
-        R = np.moveaxis(rhs, 1, 0)
-        u = np.empty_like(R)
-        with np.errstate(all="ignore"):
-            if self.p == 1:
-                l, mm = self.linv[:, :, None], self.m[:, :, None]
-                R = R[:, :, 0, :]
-                u = np.empty_like(R)
-                u[0] = l[0] * R[0]
-                for t in range(1, N):
-                    u[t] = l[t] * (R[t] - mm[t - 1] * u[t - 1])
-                v = np.empty_like(u)
-                v[N - 1] = l[N - 1] * u[N - 1]
-                for t in range(N - 2, -1, -1):
-                    v[t] = l[t] * (u[t] - mm[t] * v[t + 1])
-                return np.moveaxis(v, 0, 1)[:, :, None, :]
-            Li, mm = self.linv, self.m
-            u[0] = Li[0] @ R[0]
-            for t in range(1, N):
-                u[t] = Li[t] @ (R[t] - mm[t - 1] @ u[t - 1])
-            v = np.empty_like(u)
-            v[N - 1] = np.swapaxes(Li[N - 1], -1, -2) @ u[N - 1]
-            for t in range(N - 2, -1, -1):
-                v[t] = np.swapaxes(Li[t], -1, -2) @ (u[t] - np.swapaxes(mm[t], -1, -2) @ v[t + 1])
-        return np.moveaxis(v, 0, 1)
-
-
-class _ArrowFactor:
-    """Factorisation of a batch of arrow matrices H = [[A, C^T], [C, D]] (+ tau I).
-
-    A (K, m, m) is the Omega block, C (K, N, p, m) couples state t with Omega and D is
-    block-tridiagonal with diagonal blocks Dd (K, N, p, p) and sub-diagonal blocks
-    Dl (K, N-1, p, p).  The states are eliminated by a block Cholesky of D, leaving the
-    m x m Schur complement S = A - C^T D^{-1} C; H is positive definite iff D and S are.
-    ``rhs`` (K, n), if given, is solved for together with D^{-1} C (one pass over t).
-    """
-
-    def __init__(self, A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray,
-                 tau: np.ndarray | None = None, rhs: np.ndarray | None = None) -> None:
-        K, N, p, m = C.shape
-        self.K, self.N, self.p, self.m = K, N, p, m
-        self.A, self.C, self.Dd, self.Dl = A, C, Dd, Dl
-        if tau is not None:
-            A = A + tau[:, None, None] * np.eye(m)
-            Dd = Dd + tau[:, None, None, None] * np.eye(p)
-        self.fac = _StateFactor(Dd, Dl)
-        cols = [C] if rhs is None else [C, rhs[:, m:].reshape(K, N, p, 1)]
-        Y = self.fac.solve(np.concatenate(cols, axis=-1))
-        self.Y = Y[..., :m]
-        self._rhs, self._y_rhs = rhs, (None if rhs is None else Y[..., m])
-        with np.errstate(all="ignore"):
-            S = A - np.einsum("ktpi,ktpj->kij", C, self.Y)
-            self.LSi, okS = _chol_inv(S)
-        self.ok = (self.fac.ok & okS & np.all(np.isfinite(self.Y), axis=(1, 2, 3))
-                   & np.all(np.isfinite(self.LSi), axis=(1, 2)))
-
-    def _finish(self, bw: np.ndarray, y: np.ndarray) -> np.ndarray:
-        with np.errstate(all="ignore"):
-            r = bw - np.einsum("ktpi,ktp->ki", self.C, y)
-            xw = np.einsum("kji,kj->ki", self.LSi, np.einsum("kij,kj->ki", self.LSi, r))
-            xx = y - np.einsum("ktpi,ki->ktp", self.Y, xw)
-        return np.concatenate([xw, xx.reshape(self.K, -1)], axis=1)
-
-    def solve_rhs(self) -> np.ndarray:
-        """H^{-1} rhs for the ``rhs`` given at construction."""
-        return self._finish(self._rhs[:, :self.m], self._y_rhs)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """H^{-1} b for b (K, n)."""
-        y = self.fac.solve(b[:, self.m:].reshape(self.K, self.N, self.p, 1))[..., 0]
-        return self._finish(b[:, :self.m], y)
-
-    def matvec(self, v: np.ndarray) -> np.ndarray:
-        """H v for v (K, n) (unshifted H)."""
-        m = self.m
-        vw, vx = v[:, :m], v[:, m:].reshape(self.K, self.N, self.p)
-        out_w = np.einsum("kij,kj->ki", self.A, vw) + np.einsum("ktpi,ktp->ki", self.C, vx)
-        out_x = np.einsum("ktpi,ki->ktp", self.C, vw) + np.einsum("ktpq,ktq->ktp", self.Dd, vx)
-        out_x[:, 1:] += np.einsum("ktpq,ktq->ktp", self.Dl, vx[:, :-1])
-        out_x[:, :-1] += np.einsum("ktqp,ktq->ktp", self.Dl, vx[:, 1:])
-        return np.concatenate([out_w, out_x.reshape(self.K, -1)], axis=1)
-
-    def diag_inverse(self) -> np.ndarray:
-        """(K, n) diagonal of H^{-1} (selected inversion, O(n) per matrix).
-
-        (H^{-1})_{Omega} = S^{-1};  (H^{-1})_{x} = D^{-1} + Y S^{-1} Y^T with Y = D^{-1} C,
-        and the diagonal blocks Z_t of D^{-1} follow from the block Cholesky factor by
-        Z_{N-1} = L_{N-1}^{-T} L_{N-1}^{-1},
-        Z_t = L_t^{-T} (I + M_{t+1}^T Z_{t+1} M_{t+1}) L_t^{-1}.
-        """
-        K, N, p = self.K, self.N, self.p
-        with np.errstate(all="ignore"):
-            Sinv = np.einsum("kji,kjl->kil", self.LSi, self.LSi)
-            zd = np.empty((N, K, p))
-            if p == 1:
-                l, mm = self.fac.linv, self.fac.m
-                z = l[N - 1] ** 2
-                zd[N - 1, :, 0] = z
-                for t in range(N - 2, -1, -1):
-                    z = l[t] ** 2 * (1.0 + mm[t] ** 2 * z)
-                    zd[t, :, 0] = z
-            else:
-                Li, mm = self.fac.linv, self.fac.m
-                tr = lambda a: np.swapaxes(a, -1, -2)  # noqa: E731
-                Z = tr(Li[N - 1]) @ Li[N - 1]
-                zd[N - 1] = np.diagonal(Z, axis1=-2, axis2=-1)
-                for t in range(N - 2, -1, -1):
-                    inner = np.eye(p) + tr(mm[t]) @ Z @ mm[t]
-                    Z = tr(Li[t]) @ inner @ Li[t]
-                    zd[t] = np.diagonal(Z, axis1=-2, axis2=-1)
-            dx = np.moveaxis(zd, 0, 1) + np.einsum("ktpa,kab,ktpb->ktp", self.Y, Sinv, self.Y)
-        return np.concatenate([np.diagonal(Sinv, axis1=1, axis2=2), dx.reshape(K, -1)], axis=1)
-
-
+# =========================================================================== Newton direction
 def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
                              tau_hint: np.ndarray | None = None
                              ) -> tuple[np.ndarray, np.ndarray]:
@@ -528,7 +321,7 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
     if tau_hint is not None:
         hint = np.where(np.isfinite(tau_hint), tau_hint, 0.0) / 10.0
         tau = np.where(hint >= first, hint, 0.0)
-    fac = _ArrowFactor(A, C, Dd, Dl, tau=tau if tau.any() else None, rhs=-g)
+    fac = ArrowFactor(A, C, Dd, Dl, tau=tau if tau.any() else None, rhs=-g)
     d = fac.solve_rhs()
     ok = fac.ok & np.all(np.isfinite(d), axis=1)
     if ok.all():
@@ -536,7 +329,7 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
     bad = np.flatnonzero(~ok)
     t_bad = np.maximum(first[bad], 10.0 * tau[bad])
     for _ in range(settings.max_damping_tries):
-        fac = _ArrowFactor(A[bad], C[bad], Dd[bad], Dl[bad], tau=t_bad, rhs=-g[bad])
+        fac = ArrowFactor(A[bad], C[bad], Dd[bad], Dl[bad], tau=t_bad, rhs=-g[bad])
         db = fac.solve_rhs()
         okb = fac.ok & np.all(np.isfinite(db), axis=1)
         d[bad[okb]] = db[okb]
@@ -547,105 +340,6 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
     d[bad] = -g[bad] / scale[bad, None]
     tau[bad] = np.inf
     return d, tau
-
-
-def _lanczos(apply, v0: np.ndarray, steps: int
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Batched Lanczos with full reorthogonalisation.
-
-    ``apply`` maps (K, n) -> (K, n) (a symmetric operator per k).  Returns the diagonal
-    alpha (K, s) and off-diagonal beta (K, s-1) of the Lanczos tridiagonal matrix and the
-    basis Q (K, s, n), s = min(steps, n); with s = n its eigenvalues are the exact spectrum.
-    An invariant subspace found early is continued with a fresh orthogonal direction
-    (beta = 0), which keeps the tridiagonal matrix's eigenvalues those of the operator.
-    """
-    K, n = v0.shape
-    s = min(steps, n)
-    Q = np.zeros((K, s, n))
-    alpha = np.zeros((K, s))
-    beta = np.zeros((K, max(s - 1, 0)))
-    fresh = np.random.default_rng(n)
-    q = v0 / np.linalg.norm(v0, axis=1, keepdims=True)
-
-    def orth(w, Qj):
-        for _ in range(2):  # "twice is enough"
-            w = w - (((w[:, None, :] @ np.swapaxes(Qj, 1, 2)) @ Qj)[:, 0])
-        return w
-
-    with np.errstate(all="ignore"):
-        for j in range(s):
-            Q[:, j] = q
-            w = apply(q)
-            alpha[:, j] = np.einsum("kn,kn->k", w, q)
-            if j == s - 1:
-                break
-            w = orth(w, Q[:, :j + 1])
-            b = np.linalg.norm(w, axis=1)
-            scale = np.abs(alpha[:, :j + 1]).max(axis=1) + 1e-300
-            dead = ~(b > 1e-10 * scale)
-            if dead.any():
-                r = np.broadcast_to(fresh.standard_normal(n), (int(dead.sum()), n)).copy()
-                w[dead] = orth(r, Q[dead, :j + 1])
-                b[dead] = 0.0
-            beta[:, j] = b
-            q = w / np.linalg.norm(w, axis=1, keepdims=True)
-    return alpha, beta, Q
-
-
-def _tridiag_max(a: np.ndarray, b: np.ndarray, iters: int = 60) -> np.ndarray:
-    """Largest eigenvalue of symmetric tridiagonal matrices (diag a (K, s), off b (K, s-1)).
-
-    Bisection on the Sturm sequence count inside the Gershgorin interval; vectorised over
-    K, no LAPACK (whose threaded batched calls are slow on small matrices).
-    """
-    K, s = a.shape
-    rad = np.zeros((K, s))
-    rad[:, :-1] += np.abs(b)
-    rad[:, 1:] += np.abs(b)
-    lo, hi = (a - rad).min(axis=1), (a + rad).max(axis=1)
-    b2 = b ** 2
-    tiny = np.finfo(float).tiny
-    with np.errstate(all="ignore"):
-        for _ in range(iters):
-            x = 0.5 * (lo + hi)
-            q = a[:, 0] - x
-            count = (q < 0).astype(int)
-            for i in range(1, s):
-                q = np.where(q == 0, tiny, q)
-                q = a[:, i] - x - b2[:, i - 1] / q
-                count += q < 0
-            all_below = count == s  # every eigenvalue < x: lambda_max < x
-            hi = np.where(all_below, x, hi)
-            lo = np.where(all_below, lo, x)
-    return hi
-
-
-def _tridiag_vector(a: np.ndarray, b: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """Unit eigenvector (K, s) for the largest eigenvalue ``lam`` (inverse iteration).
-
-    The shift sits just above lam, so T - sigma I is negative definite and its LDL^T
-    factorisation (no pivoting) is stable.
-    """
-    K, s = a.shape
-    sigma = lam + 1e-9 * (np.abs(lam) + np.abs(a).max(axis=1) + 1e-300)
-    d = a - sigma[:, None]
-    piv = np.empty((K, s))
-    ell = np.zeros((K, s))
-    y = np.ones((K, s))
-    with np.errstate(all="ignore"):
-        piv[:, 0] = d[:, 0]
-        for i in range(1, s):
-            ell[:, i] = b[:, i - 1] / piv[:, i - 1]
-            piv[:, i] = d[:, i] - ell[:, i] * b[:, i - 1]
-        for _ in range(3):
-            u = y.copy()
-            for i in range(1, s):
-                u[:, i] -= ell[:, i] * u[:, i - 1]
-            x = u / piv
-            for i in range(s - 2, -1, -1):
-                x[:, i] -= ell[:, i + 1] * x[:, i + 1]
-            y = x / np.linalg.norm(x, axis=1, keepdims=True)
-    return y
 
 
 # =========================================================================== barrier
@@ -659,14 +353,17 @@ class _Barrier:
         self.upper = np.asarray(bounds.upper, dtype=float)
         self.lo_idx = np.flatnonzero(np.isfinite(self.lower))
         self.up_idx = np.flatnonzero(np.isfinite(self.upper))
-        self.has_cons = _compile_constraints(model) is not None
+        self.constraints = compile_model(model).constraints
 
     def slacks(self, omega: np.ndarray) -> np.ndarray:
-        """(K, n_s) slacks (box lower, box upper, model constraints); all > 0 inside."""
+        """(K, n_s) slacks (box lower, box upper, model constraints); all > 0 inside.
+
+        Values only (no derivatives): this is what the line search evaluates.
+        """
         parts = [omega[:, self.lo_idx] - self.lower[self.lo_idx],
                  self.upper[self.up_idx] - omega[:, self.up_idx]]
-        if self.has_cons:
-            parts.append(constraint_derivatives(self.model, omega)[0])
+        if self.constraints.count:
+            parts.append(self.constraints.values(omega))
         return np.concatenate(parts, axis=1)
 
     def slack_gradients(self, omega: np.ndarray) -> np.ndarray:
@@ -674,8 +371,8 @@ class _Barrier:
         K, m = omega.shape
         parts = [np.broadcast_to(np.eye(m)[self.lo_idx], (K, self.lo_idx.size, m)),
                  np.broadcast_to(-np.eye(m)[self.up_idx], (K, self.up_idx.size, m))]
-        if self.has_cons:
-            parts.append(constraint_derivatives(self.model, omega)[1])
+        if self.constraints.count:
+            parts.append(self.constraints.derivatives(omega)[0])
         return np.concatenate(parts, axis=1)
 
     def value(self, omega: np.ndarray) -> np.ndarray:
@@ -701,8 +398,9 @@ class _Barrier:
             diag[:, self.lo_idx] += 1.0 / s_lo**2
             diag[:, self.up_idx] += 1.0 / s_up**2
             hess += diag[:, :, None] * np.eye(m)
-            if self.has_cons:
-                c, dc, d2c = constraint_derivatives(self.model, omega)
+            if self.constraints.count:
+                c = self.constraints.values(omega)
+                dc, d2c = self.constraints.derivatives(omega)
                 phi -= np.log(c).sum(axis=1)
                 grad -= np.einsum("kj,kji->ki", 1.0 / c, dc)
                 hess += (np.einsum("kj,kji,kjl->kil", 1.0 / c**2, dc, dc)
@@ -832,52 +530,6 @@ def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
-def _spectrum(fac: _ArrowFactor, settings: JointMapSettings
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Smallest and largest eigenvalue of H and the unit eigenvector of the smallest.
-
-    ``lanczos``: Lanczos on H gives lambda_max (and lambda_min where H is not PD); where H
-    is PD, Lanczos on H^{-1} (applied through the factorisation) gives lambda_min and its
-    eigenvector accurately even when lambda_min << lambda_max.  ``dense``: LAPACK eigh of
-    the assembled Hessian (O(n^3) per trajectory; for checks).
-    """
-    K, n = fac.K, fac.m + fac.N * fac.p
-    lam_min, lam_max = np.full(K, np.nan), np.full(K, np.nan)
-    v_min = np.full((K, n), np.nan)
-    if settings.eigen_method == "dense":
-        from .models.log_posterior import BlockHessian
-
-        H = BlockHessian(omega=fac.A, cross=fac.C, diag=fac.Dd, lower=fac.Dl).to_dense()
-        fin = np.all(np.isfinite(H), axis=(1, 2))
-        if fin.any():
-            lam, vec = np.linalg.eigh(H[fin])
-            lam_min[fin], lam_max[fin], v_min[fin] = lam[:, 0], lam[:, -1], vec[:, :, 0]
-        return lam_min, lam_max, v_min
-    v0 = np.broadcast_to(np.random.default_rng(n + 1).standard_normal(n), (K, n))
-    fin = np.flatnonzero(np.all(np.isfinite(fac.A), axis=(1, 2))
-                         & np.all(np.isfinite(fac.Dd.reshape(K, -1)), axis=1)
-                         & np.all(np.isfinite(fac.C.reshape(K, -1)), axis=1)
-                         & np.all(np.isfinite(fac.Dl.reshape(K, -1)), axis=1))
-    if fin.size:
-        sub = _ArrowFactor(fac.A[fin], fac.C[fin], fac.Dd[fin], fac.Dl[fin])
-        a, b, _ = _lanczos(sub.matvec, v0[fin], settings.lanczos_steps)
-        lam_max[fin] = _tridiag_max(a, b)
-        nonpd = ~fac.ok[fin]
-        if nonpd.any():  # H^{-1} is not available: the smallest Ritz value of H
-            lam_min[fin[nonpd]] = -_tridiag_max(-a[nonpd], b[nonpd])
-    pd_ = np.flatnonzero(fac.ok)
-    if pd_.size:
-        sub = _ArrowFactor(fac.A[pd_], fac.C[pd_], fac.Dd[pd_], fac.Dl[pd_])
-        a, b, Q = _lanczos(sub.solve, v0[pd_], settings.lanczos_steps)
-        top = _tridiag_max(a, b)
-        with np.errstate(all="ignore"):
-            lam_min[pd_] = 1.0 / top
-        y = _tridiag_vector(a, b, top)
-        v = np.einsum("ksn,ks->kn", Q, y)
-        v_min[pd_] = v / np.linalg.norm(v, axis=1, keepdims=True)
-    return lam_min, lam_max, v_min
-
-
 def _classify_chunk(model, z, theta, mu, stop, barrier, settings
                     ) -> dict[str, np.ndarray]:
     """Checks of Sec. III.B for one chunk (ridge re-optimisation included)."""
@@ -890,9 +542,10 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
         fin_h &= np.all(np.isfinite(a.reshape(K, -1)), axis=1)
     finite = (np.isfinite(f) & np.all(np.isfinite(g), axis=1) & fin_h
               & np.all(np.isfinite(theta), axis=1))
-    fac = _ArrowFactor(blk.omega, blk.cross, blk.diag, blk.lower)
+    fac = ArrowFactor(blk.omega, blk.cross, blk.diag, blk.lower)
     fac.ok &= finite
-    lam_min, lam_max, v_min = _spectrum(fac, settings)
+    lam_min, lam_max, v_min = arrow_extreme_eigenpairs(fac, settings.eigen_method,
+                                                       settings.lanczos_steps)
     with np.errstate(all="ignore"):
         ratio = lam_min / lam_max
         grad_max = np.abs(g).max(axis=1)

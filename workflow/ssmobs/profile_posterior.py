@@ -24,7 +24,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .joint_map import _StateFactor  # shared batched block-tridiagonal Cholesky
+from .banded_linalg import BlockTridiagonalCholesky
 from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import in_support, neg2_log_posterior, neg2_log_posterior_blocks
 
@@ -69,7 +69,8 @@ def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: 
         tau = np.zeros(go.size)
         todo = np.arange(go.size)
         for attempt in range(30):
-            fac = _StateFactor(diag[todo] + tau[todo, None, None, None] * np.eye(p), lower[todo])
+            fac = BlockTridiagonalCholesky(diag[todo] + tau[todo, None, None, None] * np.eye(p),
+                                           lower[todo])
             step = -fac.solve(g_go[todo])[..., 0].reshape(todo.size, -1)
             ok = fac.ok & np.all(np.isfinite(step), axis=1)
             d[todo[ok]] = step[ok]

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sps
 import sympy as sp
 
+from ..banded_linalg import arrow_to_dense
 from .base import PriorBounds, StateSpaceModel
 
 
@@ -45,19 +46,78 @@ def _compile(args: list[sp.Symbol], n_local: int, expr: sp.Expr) -> _Term:
 
 
 @dataclass(frozen=True)
+class ModelConstraints:
+    """The model constraints c_j(Omega) > 0 besides the prior box (``support_constraints``).
+
+    Values and derivatives are compiled apart, so that feasibility checks and barrier slacks
+    (the line search) evaluate only c, and the Newton step alone pays for dc and d^2 c.
+    ``count`` is n_c (0 when the model has none; then values are (K, 0) etc.).
+    """
+
+    n_params: int
+    count: int
+    _values: Callable | None
+    _derivatives: Callable | None
+
+    @classmethod
+    def compile(cls, w: list[sp.Symbol], cons: list[sp.Expr]) -> "ModelConstraints":
+        """Lambdify the expressions ``cons`` (in the symbols ``w``) and their derivatives."""
+        if not cons:
+            return cls(n_params=len(w), count=0, _values=None, _derivatives=None)
+        derivs = []
+        for c in cons:
+            derivs.extend(sp.diff(c, v) for v in w)
+            derivs.extend(sp.diff(c, v, u) for v in w for u in w)
+        return cls(n_params=len(w), count=len(cons),
+                   _values=sp.lambdify(w, cons, modules="numpy"),
+                   _derivatives=sp.lambdify(w, derivs, modules="numpy", cse=True))
+
+    def values(self, omega: np.ndarray) -> np.ndarray:
+        """(..., n_c) c(Omega) for Omega (..., m)."""
+        omega = np.asarray(omega, dtype=float)
+        lead = omega.shape[:-1]
+        if self._values is None:
+            return np.zeros(lead + (0,))
+        with np.errstate(all="ignore"):
+            raw = self._values(*[omega[..., i] for i in range(self.n_params)])
+        return np.stack([np.broadcast_to(np.asarray(c, dtype=float), lead) for c in raw], axis=-1)
+
+    def satisfied(self, omega: np.ndarray) -> np.ndarray:
+        """(...) True where every c_j(Omega) > 0 (False where a value is NaN)."""
+        return np.all(self.values(omega) > 0, axis=-1)
+
+    def derivatives(self, omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gradients (K, n_c, m) and Hessians (K, n_c, m, m) of c, symbolic, for Omega (K, m)."""
+        omega = np.asarray(omega, dtype=float)
+        K, m = omega.shape
+        grads = np.empty((K, self.count, m))
+        hess = np.empty((K, self.count, m, m))
+        if self._derivatives is None:
+            return grads, hess
+        with np.errstate(all="ignore"):
+            raw = self._derivatives(*[omega[:, i] for i in range(m)])
+        raw = [np.broadcast_to(np.asarray(v, dtype=float), (K,)) for v in raw]
+        per = m + m * m
+        for j in range(self.count):
+            chunk = raw[j * per:(j + 1) * per]
+            grads[:, j] = np.stack(chunk[:m], axis=1)
+            hess[:, j] = np.stack(chunk[m:], axis=1).reshape(K, m, m)
+        return grads, hess
+
+
+@dataclass(frozen=True)
 class CompiledModel:
-    """Symbolic derivatives of one model's per-step terms, ready for NumPy."""
+    """Symbolic derivatives of one model's per-step terms and constraints, ready for NumPy."""
 
     model: StateSpaceModel
     obs: _Term
     trans: _Term
-    constraints: Callable | None
-    n_constraints: int
+    constraints: ModelConstraints
 
 
 @lru_cache(maxsize=None)
 def compile_model(model: StateSpaceModel) -> CompiledModel:
-    """Differentiate the model's per-step terms symbolically (cached per model)."""
+    """Differentiate the model's per-step terms and constraints symbolically (cached per model)."""
     m, p, d = model.n_params, model.state_dim, model.obs_dim
     w = list(sp.symbols(f"w0:{m}", real=True))
     xp = list(sp.symbols(f"xp0:{p}", real=True))
@@ -65,10 +125,8 @@ def compile_model(model: StateSpaceModel) -> CompiledModel:
     z = list(sp.symbols(f"z0:{d}", real=True))
     obs = _compile(w + x + z, m + p, model.obs_term(w, x, z))
     trans = _compile(w + xp + x, m + 2 * p, model.trans_term(w, xp, x))
-    cons = model.support_constraints(w)
-    cfunc = sp.lambdify(w, cons, modules="numpy") if cons else None
-    return CompiledModel(model=model, obs=obs, trans=trans, constraints=cfunc,
-                         n_constraints=len(cons))
+    return CompiledModel(model=model, obs=obs, trans=trans,
+                         constraints=ModelConstraints.compile(w, model.support_constraints(w)))
 
 
 def _evaluate(term: _Term, arrays: list[np.ndarray], shape: tuple[int, ...]) -> list[np.ndarray]:
@@ -137,23 +195,7 @@ def _full_from_triu(vals: list[np.ndarray], term: _Term) -> np.ndarray:
 
 def in_support(model: StateSpaceModel, omega: np.ndarray, bounds: PriorBounds) -> np.ndarray:
     """(K,) True where Omega is inside the prior box and the model constraints."""
-    ok = bounds.contains(omega)
-    cm = compile_model(model)
-    if cm.constraints is not None:
-        with np.errstate(all="ignore"):
-            cons = cm.constraints(*[omega[:, i] for i in range(model.n_params)])
-        for c in cons:
-            ok &= np.asarray(c) > 0
-    return ok
-
-
-def constraint_values(model: StateSpaceModel, omega: np.ndarray) -> np.ndarray:
-    """(K, n_c) values of the model constraints c(Omega) > 0 (empty when none)."""
-    cm = compile_model(model)
-    if cm.constraints is None:
-        return np.zeros((omega.shape[0], 0))
-    cons = cm.constraints(*[omega[:, i] for i in range(model.n_params)])
-    return np.stack([np.broadcast_to(np.asarray(c, float), omega.shape[:1]) for c in cons], axis=1)
+    return bounds.contains(omega) & compile_model(model).constraints.satisfied(omega)
 
 
 def neg2_log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
@@ -246,21 +288,8 @@ class BlockHessian:
     lower: np.ndarray
 
     def to_dense(self) -> np.ndarray:
-        """(K, n, n) dense Hessian (for checks and the final eigen-decomposition)."""
-        K, N, p, m = self.cross.shape
-        n = m + N * p
-        H = np.zeros((K, n, n))
-        H[:, :m, :m] = self.omega
-        cross = self.cross.reshape(K, N * p, m)
-        H[:, m:, :m] = cross
-        H[:, :m, m:] = np.swapaxes(cross, 1, 2)
-        for t in range(N):
-            s = m + t * p
-            H[:, s:s + p, s:s + p] = self.diag[:, t]
-            if t >= 1:
-                H[:, s:s + p, s - p:s] = self.lower[:, t - 1]
-                H[:, s - p:s, s:s + p] = np.swapaxes(self.lower[:, t - 1], 1, 2)
-        return H
+        """(K, n, n) dense Hessian (for checks)."""
+        return arrow_to_dense(self.omega, self.cross, self.diag, self.lower)
 
 
 def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray
@@ -269,7 +298,8 @@ def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.n
 
     Same per-step symbolic derivatives as :func:`neg2_log_posterior`, but the Hessian is
     returned as a :class:`BlockHessian` (O(K T (m + p)^2) memory instead of O(K n^2)), which
-    is what the batched Newton solver of :mod:`ssmobs.joint_map` factorizes.
+    is what the batched Newton solver of :mod:`ssmobs.joint_map` factorizes
+    (:class:`ssmobs.banded_linalg.ArrowFactor`).
 
     Parameters: ``theta`` (K, n), ``z`` (K, T, d).  Returns value (K,), grad (K, n), blocks.
     """
@@ -327,48 +357,3 @@ def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.n
                 (_, c_prev), (_, c_now) = (ri, rj) if ri[0] == -1 else (rj, ri)
                 lower[:, :, c_now, c_prev] += v
     return value, grad, BlockHessian(omega=h_omega, cross=cross, diag=diag, lower=lower)
-
-
-# --------------------------------------------------------------------------- constraints
-@lru_cache(maxsize=None)
-def _compile_constraints(model: StateSpaceModel) -> Callable | None:
-    """Lambdified [c_j, dc_j/dw_i, d2c_j/dw_i dw_l] of the model constraints (cached)."""
-    m = model.n_params
-    w = list(sp.symbols(f"w0:{m}", real=True))
-    cons = model.support_constraints(w)
-    if not cons:
-        return None
-    out = []
-    for c in cons:
-        out.append(c)
-        out.extend(sp.diff(c, v) for v in w)
-        out.extend(sp.diff(c, v, u) for v in w for u in w)
-    return sp.lambdify(w, out, modules="numpy", cse=True)
-
-
-def constraint_derivatives(model: StateSpaceModel, omega: np.ndarray
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Model constraints c(Omega) > 0 with symbolic first and second derivatives.
-
-    Returns values (K, n_c), gradients (K, n_c, m) and Hessians (K, n_c, m, m); n_c = 0
-    when the model has no constraint besides the prior box.
-    """
-    omega = np.asarray(omega, dtype=float)
-    K, m = omega.shape
-    func = _compile_constraints(model)
-    if func is None:
-        return np.zeros((K, 0)), np.zeros((K, 0, m)), np.zeros((K, 0, m, m))
-    with np.errstate(all="ignore"):
-        raw = func(*[omega[:, i] for i in range(m)])
-    raw = [np.broadcast_to(np.asarray(v, dtype=float), (K,)) for v in raw]
-    per = 1 + m + m * m
-    nc = len(raw) // per
-    vals = np.empty((K, nc))
-    grads = np.empty((K, nc, m))
-    hess = np.empty((K, nc, m, m))
-    for j in range(nc):
-        chunk = raw[j * per:(j + 1) * per]
-        vals[:, j] = chunk[0]
-        grads[:, j] = np.stack(chunk[1:1 + m], axis=1)
-        hess[:, j] = np.stack(chunk[1 + m:], axis=1).reshape(K, m, m)
-    return vals, grads, hess
