@@ -23,7 +23,8 @@ Sampling
     reason, direct PyStan use in a process that samples through this backend must go
     through :meth:`PyStanBackend.session`.
 
-    httpstan gives ``stanc`` one second (``subprocess.run(..., timeout=1)`` in
+    Programs are built with httpstan's own functions, not through its HTTP server, whose
+    client (PyStan's) gives up after 300 s.  httpstan gives ``stanc`` one second (``subprocess.run(..., timeout=1)`` in
     ``httpstan.compile``); on a loaded machine its start-up alone can take longer and the
     build fails with ``TimeoutExpired``.  :func:`_patient_stanc` gives it
     :data:`STANC_TIMEOUT` seconds instead, for httpstan's module only.
@@ -373,27 +374,36 @@ class PyStanBackend:
 
     @staticmethod
     def _build_program(code: str, path: Path) -> None:
-        """POST the program to an in-process httpstan server (compiles; needs no data)."""
+        """Build the program into httpstan's cache with httpstan's own steps (those of its
+        ``POST /models`` handler: stanc, then the extension module, then the logs), called
+        directly: through HTTP, PyStan's client gives up after 300 s, which a build on a
+        loaded machine exceeds."""
         import asyncio
 
-        import stan.common
+        import httpstan.cache
+        import httpstan.compile
+        import httpstan.models
 
-        async def go() -> tuple[int, dict]:
-            async with stan.common.HttpstanClient() as client:
-                resp = await client.post("/models", json={"program_code": code})
-                return resp.status, resp.json()
-
+        model_name = httpstan.models.calculate_model_name(code)
+        httpstan.cache.delete_model_directory(model_name)
+        out = io.StringIO()
         # stderr stays the real one: httpstan then sends the compiler's messages (which
         # g++ writes to file descriptor 2) to a file instead, and returns them
-        out = io.StringIO()
         with contextlib.redirect_stdout(out), \
                 quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
-            status, body = asyncio.run(go())
+            try:
+                _, stanc_warnings = httpstan.compile.compile(
+                    code, f"model_{model_name.split('/')[1]}")
+            except ValueError as err:  # stanc's syntax or semantic error
+                raise RuntimeError(f"compiling {path} failed: {err}") from err
+            httpstan.cache.dump_stanc_warnings(stanc_warnings, model_name)
+            compiler_output = asyncio.run(
+                httpstan.models.build_services_extension_module(code))
+            httpstan.cache.dump_services_extension_module_compiler_output(compiler_output,
+                                                                          model_name)
         log_captured(f"httpstan build {path.name}", out.getvalue())
-        if status != 201:
-            raise RuntimeError(f"compiling {path} failed: {body.get('message', body)}")
-        log_captured(f"stanc warnings for {path.name}", body.get("stanc_warnings") or "")
-        log_captured(f"compiler for {path.name}", body.get("compiler_output") or "")
+        log_captured(f"stanc warnings for {path.name}", stanc_warnings or "")
+        log_captured(f"compiler for {path.name}", compiler_output or "")
 
     # ------------------------------------------------------------------ sessions
     @contextlib.contextmanager
