@@ -20,7 +20,7 @@ def scenario(T):
 
 def joint(k_max):
     return {"K": 4, "K_max": k_max, "ratio": k_max / 4, "n_ok": k_max, "n_boundary": 4 - k_max,
-            "mean_phi": 0.8 if k_max else float("nan"), "mean_sigma": 0.4}
+            "phi_mean": 0.8 if k_max else float("nan"), "sigma_mean": 0.4}
 
 
 def stan_frame(converged, failed):

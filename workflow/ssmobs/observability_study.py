@@ -45,7 +45,7 @@ def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
                                               if counts[c]) or "none"
     for n in model.param_names:
         row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
-        row[f"{n}_mean_joint"] = joint.get(f"mean_{n}", np.nan) if joint else np.nan
+        row[f"{n}_mean_joint"] = joint.get(f"{n}_mean", np.nan) if joint else np.nan
     if stan_table is not None:
         # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
         for n in model.param_names:

@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 
 from . import io
-from .config import x0_list
 from .log import Progress
 
 logger = logging.getLogger("ssmobs")
@@ -341,20 +340,14 @@ def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: di
 
 
 # ------------------------------------------------------------------ paper tables and figures
-def table_ii_scenarios(scenarios: list[dict]) -> list[dict]:
-    """Scenarios of Tables II/III and Figure 3: model Same, (a, x0) = (0.9, 8), both stages."""
-    return [sc for sc in scenarios
-            if sc["model"] == "same" and sc["omega"].get("a") == 0.9
-            and x0_list(sc) == [8.0]
-            and sc["joint_map"] and sc["stan"]]
-
-
-def profile_scenario(scenarios: list[dict]) -> dict | None:
-    """Scenario of Figure 4: the first ranWalk scenario with T = 4 and joint MAP enabled."""
-    for sc in scenarios:
-        if sc["model"] == "sep_ranwalk" and sc["T"] == 4:
-            return sc
-    return None
+def paper_output_scenarios(config: dict, key: str) -> list[dict]:
+    """The scenario entries the config names for one of the paper's outputs
+    (``paper_outputs.<key>``: ``tables_2_3``, ``figure3`` or ``figure4``), in config order
+    of the names; names were checked by :func:`ssmobs.config.validate`."""
+    value = config["paper_outputs"][key]
+    names = [value] if isinstance(value, str) else list(value or [])
+    by_name = {sc["name"]: sc for sc in config["scenarios"]}
+    return [by_name[n] for n in names]
 
 
 def _maybe_json(path: PathLike | None) -> dict | None:
@@ -465,7 +458,7 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
             "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
                                               if len(set(np.diff(ks))) == 1 else " (uneven)"),
             "K_max_grid": ks[-1],
-            "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "K_paper": ref.get("K"),
             "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })

@@ -84,8 +84,7 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                        "statistic": stat_name}
                 exact = r.get("exact") or {} if est_key == "marginal" else {}
                 for comp in ("a", "x0"):
-                    key = f"{stat}_{comp}" if est_key == "joint" else f"{comp}_{stat}"
-                    ours = _num(summ.get(key))
+                    ours = _num(summ.get(f"{comp}_{stat}"))
                     ref = _get(pv, est_key, stat, comp)
                     row[f"{comp}_ours"] = ours
                     row[f"{comp}_exact"] = _num(exact.get(f"{comp}_{stat}"))
@@ -155,7 +154,7 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         comps = joint.get("components") or list(sc["omega"]) + ["x0"]
         for c in comps:
             for stat in ("mean", "var", "mse"):
-                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{stat}_{c}"))
+                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{c}_{stat}"))
                 row[f"marginal_{stat}_{c}"] = _num(marg.get(f"{c}_{stat}"))
             row[f"cover90_{c}"] = _num(marg.get(f"{c}_cover90"))
         row["mean_cover90_states"] = _num(marg.get("x_cover90_mean"))
