@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ssmobs.binomial import clopper_pearson, format_fraction, interval_columns
+from ssmobs.binomial import clopper_pearson, format_fraction
 
 
 @pytest.mark.parametrize("x,n", [(0, 40), (1, 40), (20, 40), (34, 40), (40, 40), (2972, 4000)])
@@ -37,8 +37,3 @@ def test_impossible_counts_are_refused(x, n):
     with pytest.raises(ValueError, match="whole counts"):
         clopper_pearson(x, n)
 
-
-def test_interval_columns_match_single_calls():
-    lo, hi = interval_columns(np.array([0, 3, np.nan]), np.array([6, 6, 6]))
-    assert (lo[0], lo[1], hi[1]) == (0.0, *clopper_pearson(3, 6))
-    assert math.isnan(lo[2]) and math.isnan(hi[2])

@@ -5,8 +5,8 @@ from ssmobs.observability_study import run_observability_study
 
 log.setup(snakemake.log[0])
 p, inp = snakemake.params, snakemake.input
-run_observability_study(p.study, p.scenarios, dict(zip(p.joint_names, inp.joint)),
-                        dict(zip(p.stan_names, inp.stan)),
-                        dict(zip(p.stan_names, inp.stan_tables)), snakemake.output.csv,
+run_observability_study(p.study, p.scenarios, dict(zip(p.joint_names, inp.joint, strict=True)),
+                        dict(zip(p.stan_names, inp.stan, strict=True)),
+                        dict(zip(p.stan_names, inp.stan_tables, strict=True)), snakemake.output.csv,
                         snakemake.output.md, snakemake.output.png,
                         stan_settings=p.stan_settings)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from scipy import stats
 
 
@@ -46,12 +45,3 @@ def format_fraction(successes: float, trials: float, digits: int = 2) -> str:
     frac = float(successes) / float(trials)
     return f"{frac:.{digits}f} [{lower:.{digits}f}, {upper:.{digits}f}]"
 
-
-def interval_columns(successes: np.ndarray, trials: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper 95 % ends for arrays of counts (NaN where a count is missing)."""
-    pairs = [clopper_pearson(x, n) for x, n in zip(np.asarray(successes, dtype=float),
-                                                   np.asarray(trials, dtype=float))]
-    lower = np.array([p[0] for p in pairs], dtype=float)
-    upper = np.array([p[1] for p in pairs], dtype=float)
-    return lower, upper
