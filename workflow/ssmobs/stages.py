@@ -347,16 +347,6 @@ def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: di
 
 
 # ------------------------------------------------------------------ paper tables and figures
-def paper_output_scenarios(config: dict, key: str) -> list[dict]:
-    """The scenario entries the config names for one of the paper's outputs
-    (``paper_outputs.<key>``: ``tables_2_3``, ``figure3`` or ``figure4``), in config order
-    of the names; names were checked by :func:`ssmobs.config.validate`."""
-    value = config["paper_outputs"][key]
-    names = [value] if isinstance(value, str) else list(value or [])
-    by_name = {sc["name"]: sc for sc in config["scenarios"]}
-    return [by_name[n] for n in names]
-
-
 def _maybe_json(path: PathLike | None) -> dict | None:
     return io.read_json(path) if path else None
 
