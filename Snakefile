@@ -39,6 +39,7 @@ if not workflow.overwrite_configfiles:
 include: "workflow/rules/common.smk"
 include: "workflow/rules/design.smk"
 include: "workflow/rules/joint_map.smk"
+include: "workflow/rules/k_selection.smk"
 include: "workflow/rules/stan.smk"
 include: "workflow/rules/exact_marginal.smk"
 include: "workflow/rules/figures.smk"

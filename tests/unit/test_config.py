@@ -323,3 +323,54 @@ def test_schema_seed_bound_is_the_one_the_readers_check():
     assert props["scenarios"]["items"]["properties"]["seed"]["maximum"] == MAX_SEED
     assert props["k_selection"]["items"]["properties"]["seeds"]["items"]["maximum"] == MAX_SEED
     assert props["figure2"]["properties"]["seed"]["maximum"] == MAX_SEED
+
+
+# ---------------------------------------------------------------- paper_outputs (issue 13)
+def with_paper_outputs(**chosen) -> dict:
+    c = base()
+    c["scenarios"].append({"name": "walk", "model": "sep_ranwalk", "omega": {"a": 0.9},
+                           "x0": 8, "T": 4, "K": 10, "stan": False})
+    c["paper_outputs"] = chosen
+    return c
+
+
+@pytest.mark.parametrize("key,value", [("tables_2_3", ["s", "nope"]), ("figure3", ["nope"]),
+                                       ("figure4", "nope")])
+def test_paper_outputs_unknown_name_is_refused_naming_the_key(key, value):
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(with_paper_outputs(**{key: value}))
+    msg = str(err.value)
+    assert f"paper_outputs.{key}" in msg and "nope" in msg and "'s'" in msg
+
+
+def test_paper_outputs_need_what_the_table_or_figure_shows():
+    with pytest.raises(cfg.ConfigError, match=r"paper_outputs.tables_2_3.*\['walk'\].*both"):
+        cfg.validate(with_paper_outputs(tables_2_3=["walk"]))
+    with pytest.raises(cfg.ConfigError, match=r"paper_outputs.figure3.*one model"):
+        c = with_paper_outputs(figure3=["s", "s2"])
+        c["scenarios"].append({**c["scenarios"][0], "name": "s2", "omega": {"a": 0.7}})
+        cfg.validate(c)
+    c = with_paper_outputs(figure4="sv")
+    c["scenarios"].append({"name": "sv", "model": "stoch_vol", "x0": 0, "T": 5, "K": 4,
+                           "omega": {"phi": 0.9, "sigma": 0.5}})
+    with pytest.raises(cfg.ConfigError, match=r"paper_outputs.figure4.*2 parameter"):
+        cfg.validate(c)
+    ok = cfg.validate(with_paper_outputs(tables_2_3=["s"], figure3=["s"], figure4="walk"))
+    assert ok["paper_outputs"] == {"tables_2_3": ["s"], "figure3": ["s"], "figure4": "walk"}
+    assert cfg.validate(base())["paper_outputs"] == {"tables_2_3": [], "figure3": [],
+                                                     "figure4": None}
+
+
+@pytest.mark.parametrize("name", ["config.yaml", "smoke.yaml", "paper.yaml", "tables.yaml",
+                                  "section4_sep_d2_p1.yaml"])
+def test_profiles_name_the_scenarios_of_the_papers_outputs(name):
+    """Chosen by name: the rows of Tables II/III are the paper's Same (0.9, 8) scenarios."""
+    c = cfg.validate(load(name))
+    chosen = c["paper_outputs"]
+    by_name = {sc["name"]: sc for sc in c["scenarios"]}
+    for n in chosen["tables_2_3"] + chosen["figure3"]:
+        assert (by_name[n]["model"], by_name[n]["omega"], by_name[n]["x0"]) == ("same",
+                                                                                {"a": 0.9}, 8)
+    assert chosen["figure3"] == chosen["tables_2_3"]
+    assert (chosen["figure4"] is None) == ("sep_ranwalk" not in {sc["model"] for sc in
+                                                                 c["scenarios"]})

@@ -82,7 +82,8 @@ def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
                                                 "failed_checks": "rhat"}])
     io.write_parquet(tmp_path / "a.parquet", t)
     out = run_convergence_sensitivity({"a": tmp_path / "a.parquet"},
-                                      config_with()["convergence"], tmp_path / "sens")
+                                      config_with()["convergence"],
+                                      [tmp_path / f"sens.{ext}" for ext in ("csv", "md", "tex")])
     assert out["rhat1.05_treedepth_fails"].tolist() == [2]
     text = (tmp_path / "sens.md").read_text()
     assert "rhat1.01_treedepth_warns" in text and "| a " in text

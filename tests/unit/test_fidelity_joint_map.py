@@ -69,11 +69,17 @@ def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     traj = make_trajectories(sc, matrix)
     write_trajectories(tmp_path / "t.nc", traj)
     frame = run_joint_map_mu0_sweep({"sep_small": tmp_path / "t.nc"}, {"sep_small": sc}, {},
-                                    [0.5, 2.0], "config/paper_values.yaml", tmp_path / "sweep")
+                                    [0.5, 2.0], "config/paper_values.yaml",
+                                    [tmp_path / "sweep.csv", tmp_path / "sweep.md"])
     assert frame["mu0"].tolist() == ["gradient balance", "0.5 T", "2 T", "paper"]
     col = "sep_small K^max/K"
     assert frame[col].iloc[:3].between(0, 1).all()
     assert np.isclose(frame[col].iloc[3], 1956 / 4000)
+    # every fraction with its exact binomial 95 % interval (the paper's too, at its K)
+    lo, hi = frame[f"{col} lo95"], frame[f"{col} hi95"]
+    assert ((lo <= frame[col]) & (frame[col] <= hi)).all()
+    assert hi.iloc[3] - lo.iloc[3] < 0.035 < (hi.iloc[:3] - lo.iloc[:3]).min()  # K 4000 vs 5
+    assert (tmp_path / "sweep.md").read_text().count("lo95") == 1
     # the row "2 T" is the former default rule, recomputed here by hand
     direct = joint_map(model, traj.z, model.prior_bounds([0.9, 0.9], "restricted"),
                        [0.9, 0.9], [8.0], JointMapSettings(mu0_rule="per_step"))

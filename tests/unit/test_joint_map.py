@@ -197,7 +197,7 @@ def test_ridge_status_when_the_reoptimisation_moves(same_t20, monkeypatch):
     assert (out.status == "ridge").all()
     assert all("moved 0.5" in r and "changed by 0.25" in r for r in out.reason)
     assert np.allclose(out.ridge_value_change, 0.25)
-    assert np.isnan(joint_map_summary(out.to_frame(model, 20), model, [0.9], 8.0)["mean_a"])
+    assert np.isnan(joint_map_summary(out.to_frame(model, 20), model, [0.9], 8.0)["a_mean"])
 
 
 def test_maximum_on_the_prior_boundary():
@@ -296,13 +296,13 @@ def test_summary_on_a_hand_made_frame():
     s = joint_map_summary(frame, model, {"a": 0.9}, 8.0)
     assert s["K"] == 4 and s["K_max"] == 3 and s["ratio"] == 0.75
     assert s["n_ok"] == 3 and s["n_gradient"] == 1 and s["n_ridge"] == 0
-    assert np.isclose(s["mean_a"], 0.9) and np.isclose(s["mean_x0"], 8.0)
-    assert np.isclose(s["var_a"], 0.01)  # ddof = 1 (Table II)
-    assert np.isclose(s["var_x0"], 1.0)
-    assert np.isclose(s["mse_a"], 0.02 / 3) and np.isclose(s["mse_x0"], 2.0 / 3)
-    assert np.isclose(s["mean_lvar_a"], 0.2) and np.isclose(s["mean_lvar_x0"], 2.0)
+    assert np.isclose(s["a_mean"], 0.9) and np.isclose(s["x0_mean"], 8.0)
+    assert np.isclose(s["a_var"], 0.01)  # ddof = 1 (Table II)
+    assert np.isclose(s["x0_var"], 1.0)
+    assert np.isclose(s["a_mse"], 0.02 / 3) and np.isclose(s["x0_mse"], 2.0 / 3)
+    assert np.isclose(s["a_lvar_mean"], 0.2) and np.isclose(s["x0_lvar_mean"], 2.0)
     empty = joint_map_summary(frame.assign(status="ridge"), model, [0.9], [8.0])
-    assert empty["K_max"] == 0 and np.isnan(empty["mean_a"]) and np.isnan(empty["var_x0"])
+    assert empty["K_max"] == 0 and np.isnan(empty["a_mean"]) and np.isnan(empty["x0_var"])
 
 
 def test_settings_validation_and_mapping():

@@ -95,11 +95,11 @@ def summary_for(slug, omega, x0, seed):
 def test_v_vector_layout_same():
     model, s = summary_for("same", [0.9], 8.0, seed=0)
     v = v_vector(s, model)
-    assert v.labels == ("ratio", "mean_a", "mean_x0", "var_a", "var_x0", "mean_lvar_a",
-                        "mean_lvar_x0")  # the paper's V in R^7 (Sec. IV.A)
+    assert v.labels == ("ratio", "a_mean", "x0_mean", "a_var", "x0_var", "a_lvar_mean",
+                        "x0_lvar_mean")  # the paper's V in R^7 (Sec. IV.A)
     assert v.kinds == ("c1", "c1", "c1", "c2", "c2", "c2", "c2")
     assert np.isclose(v.values[0], 5 / 6)
-    assert np.isclose(v.values[1], s["mean_a"]) and np.isclose(v.values[4], s["var_x0"])
+    assert np.isclose(v.values[1], s["a_mean"]) and np.isclose(v.values[4], s["x0_var"])
     assert np.allclose(v.thresholds(0.01, 0.03), [0.01] * 3 + [0.03] * 4)
 
 
@@ -107,10 +107,10 @@ def test_v_vector_layout_multivariate_and_missing():
     model, s = summary_for("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0], seed=1)
     v = v_vector(s, model)
     assert len(v.values) == 1 + 3 * 6
-    assert v.labels[1:7] == tuple(f"mean_{c}" for c in ["a", "b", "c", "d", "x0_1", "x0_2"])
-    assert v.labels[-1] == "mean_lvar_x0_2"
-    del s["var_b"]
-    with pytest.raises(ValueError, match="var_b"):
+    assert v.labels[1:7] == tuple(f"{c}_mean" for c in ["a", "b", "c", "d", "x0_1", "x0_2"])
+    assert v.labels[-1] == "x0_2_lvar_mean"
+    del s["b_var"]
+    with pytest.raises(ValueError, match="b_var"):
         v_vector(s, model)
 
 
@@ -169,7 +169,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
             assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3,
                                                                       set_seed(3, K, sets))
             points.append(out)
-    ksel = {"name": "t", "c1": 0.5, "c2": 2.0, "paper_K": 300}
+    ksel = {"name": "t", "c1": 0.5, "c2": 2.0}
     res = run_select_k(ksel, sc, points, "config/paper_values.yaml", tmp_path / "sel.json",
                        tmp_path / "v.csv", [str(tmp_path / "f.png")])
     rows = {c["sets"]: c for c in res["choices"]}
@@ -179,7 +179,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
         assert c["K_paper_range"] == ""  # not the paper's (0.01, 0.03): no comparison
     v = pd.read_csv(tmp_path / "v.csv")
     # the two variants differ: at K = 40 the nested and independent sets are other draws
-    ratio = v[v["component"] == "mean_a"].pivot_table(index="K", columns="sets", values="value")
+    ratio = v[v["component"] == "a_mean"].pivot_table(index="K", columns="sets", values="value")
     assert not np.allclose(ratio["independent"], ratio["nested"])
 
 
@@ -189,16 +189,19 @@ def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     from ssmobs import config as cfg
 
     c = cfg.validate(yaml.safe_load(open("config/paper.yaml")))
+    paper = yaml.safe_load(open("config/paper_values.yaml"))
+    refs = {sc["name"]: sc["paper_ref"] for sc in c["scenarios"]}
     for ks in c["k_selection"]:
         grid = ks["K_grid"]
         assert grid == list(range(100, grid[-1] + 1, 100))
-        top = 4500 if "random" in ks["methods"] else ks["paper_K"]
+        top = (4500 if "random" in ks["methods"]
+               else paper[refs[ks["scenario"]]]["k_selection"]["design"]["K"])
         assert grid[-1] == -(-(top + 500) // 500) * 500, ks["name"]
         assert ks["sets"] == (["independent", "nested"] if ks["scenario"] == "same_a09_T4"
                               else ["independent"])
     names = {ks["name"]: ks for ks in c["k_selection"]}
     assert (names["same_a09_T4_random"]["c1"], names["same_a09_T4_random"]["c2"]) == (0.01, 0.03)
-    assert (names["same_a07_T100"]["c2"], names["same_a07_T100"]["paper_K"]) == (0.06, 3600)
+    assert names["same_a07_T100"]["c2"] == 0.06
 
 
 def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
@@ -212,7 +215,7 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     for K in (100, 200, 300):
         info = {"K_i": K, "method": "random", "seed": 1, "sets": "independent", "ratio": 1.0}
         for c in model.theta_names(0):
-            info.update({f"mean_{c}": 1.0, f"var_{c}": 1.0, f"mean_lvar_{c}": 1.0})
+            info.update({f"{c}_mean": 1.0, f"{c}_var": 1.0, f"{c}_lvar_mean": 1.0})
         io.write_json(tmp_path / f"K{K}.json", info)
         pts.append(tmp_path / f"K{K}.json")
     for (c1, c2), shown in (((0.01, 0.03), "2500-4500"), ((0.01, 0.01), "")):

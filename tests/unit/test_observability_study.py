@@ -20,7 +20,7 @@ def scenario(T):
 
 def joint(k_max):
     return {"K": 4, "K_max": k_max, "ratio": k_max / 4, "n_ok": k_max, "n_boundary": 4 - k_max,
-            "mean_phi": 0.8 if k_max else float("nan"), "mean_sigma": 0.4}
+            "phi_mean": 0.8 if k_max else float("nan"), "sigma_mean": 0.4}
 
 
 def stan_frame(converged, failed):
@@ -65,3 +65,12 @@ def test_run_writes_csv_md_png(tmp_path):
     assert back["K_max_ratio"].tolist() == [0.5] and back["K_stan_ratio"].tolist() == [0.25]
     assert "2 chains x (3 + 4) iterations" in out["md"].read_text()
     assert out["png"].stat().st_size > 1000
+
+
+def test_ratios_carry_their_binomial_interval():
+    from ssmobs.binomial import clopper_pearson
+
+    frame = study_table([scenario(20)], {"sv_T20": joint(1)}, {}, {})
+    assert (frame.loc[0, "K_max_ratio_lo95"], frame.loc[0, "K_max_ratio_hi95"]) == \
+        clopper_pearson(1, 4)
+    assert np.isnan(frame.loc[0, "K_stan_ratio_lo95"])  # no Stan stage

@@ -42,25 +42,3 @@ rule exact_marginal:
         "../../envs/ssmobs.yaml"
     script:
         "../scripts/exact_marginal.py"
-
-
-rule figure_exact_vs_stan:
-    """Stan + KDE marginal MAP against the exact one, trajectory by trajectory."""
-    input:
-        stan="results/{scenario}/gather_nuts/marginal_map.parquet",
-        exact=lambda wc: exact_table(wc.scenario, SCENARIOS[wc.scenario]["K"]),
-    output:
-        report(
-            multiext(f"{OUT}/fig_exact_vs_stan_{{scenario}}", ".pdf", ".png"),
-            caption="../report/exact_vs_stan.rst",
-            category="Figures",
-        ),
-    log:
-        "results/{scenario}/logs/figure_exact_vs_stan.log",
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-    localrule: True
-    conda:
-        "../../envs/ssmobs.yaml"
-    script:
-        "../scripts/figure_exact_vs_stan.py"

@@ -41,12 +41,8 @@ rule observability_study:
     params:
         study=lambda wc: STUDIES[wc.study],
         scenarios=lambda wc: study_scenarios(wc.study),
-        joint=lambda wc: {sc["name"]: joint_summary(sc["name"])
-                          for sc in study_scenarios(wc.study) if sc["joint_map"]},
-        stan=lambda wc: {sc["name"]: stan_summary(sc["name"])
-                         for sc in study_scenarios(wc.study) if sc["stan"]},
-        stan_tables=lambda wc: {sc["name"]: f"results/{sc['name']}/gather_nuts/marginal_map.parquet"
-                                for sc in study_scenarios(wc.study) if sc["stan"]},
+        joint_names=lambda wc: [sc["name"] for sc in study_scenarios(wc.study) if sc["joint_map"]],
+        stan_names=lambda wc: [sc["name"] for sc in study_scenarios(wc.study) if sc["stan"]],
         stan_settings=config["stan"],
     localrule: True
     conda:

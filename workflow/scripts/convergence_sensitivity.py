@@ -1,10 +1,9 @@
 """Rule convergence_sensitivity: |K^Stan| under R-hat 1.01/1.05, tree depth warned/counted."""
 
-from pathlib import Path
-
 from ssmobs import log
 from ssmobs.stages import run_convergence_sensitivity
 
 log.setup(snakemake.log[0])
-run_convergence_sensitivity(dict(snakemake.params.tables), snakemake.params.convergence,
-                            Path(snakemake.output[0]).with_suffix(""))
+p = snakemake.params
+run_convergence_sensitivity(dict(zip(p.scenarios, snakemake.input.tables, strict=True)), p.convergence,
+                            list(snakemake.output.table))

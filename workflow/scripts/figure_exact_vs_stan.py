@@ -5,5 +5,5 @@ from ssmobs.stages import run_figure_exact_vs_stan
 
 logger = log.setup(snakemake.log[0])
 stats = run_figure_exact_vs_stan(snakemake.params.scenario, snakemake.input.stan,
-                                 snakemake.input.exact, list(snakemake.output))
+                                 snakemake.input.exact, list(snakemake.output.figure))
 logger.info("Stan + KDE vs exact: %s", stats)

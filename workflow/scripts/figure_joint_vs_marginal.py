@@ -5,5 +5,8 @@ from ssmobs.stages import run_figure_joint_vs_marginal
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-p = snakemake.params
-run_figure_joint_vs_marginal(p.scenarios, p.joint, p.marginal, list(snakemake.output))
+scenarios = snakemake.params.scenarios
+names = [sc["name"] for sc in scenarios]
+run_figure_joint_vs_marginal(scenarios, dict(zip(names, snakemake.input.joint, strict=True)),
+                             dict(zip(names, snakemake.input.marginal, strict=True)),
+                             list(snakemake.output.figure))

@@ -5,4 +5,4 @@ from ssmobs.stages import run_figure_observability
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_figure_observability(snakemake.input[0], list(snakemake.output))
+run_figure_observability(snakemake.input.summary, list(snakemake.output.figure))

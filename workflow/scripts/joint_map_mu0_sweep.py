@@ -1,12 +1,12 @@
 """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts."""
 
-from pathlib import Path
-
 from ssmobs import log
 from ssmobs.stages import run_joint_map_mu0_sweep
 
 log.setup(snakemake.log[0])
 p = snakemake.params
-run_joint_map_mu0_sweep(dict(p.trajectories), dict(p.scenarios), dict(p.settings),
+names = [sc["name"] for sc in p.scenarios]
+run_joint_map_mu0_sweep(dict(zip(names, snakemake.input.trajectories, strict=True)),
+                        {sc["name"]: sc for sc in p.scenarios}, dict(p.settings),
                         list(p.mu0_per_T), snakemake.input.paper_values,
-                        Path(snakemake.output[0]).with_suffix(""))
+                        list(snakemake.output.table))

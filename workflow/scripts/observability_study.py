@@ -4,7 +4,9 @@ from ssmobs import log
 from ssmobs.observability_study import run_observability_study
 
 log.setup(snakemake.log[0])
-run_observability_study(snakemake.params.study, snakemake.params.scenarios,
-                        snakemake.params.joint, snakemake.params.stan,
-                        snakemake.params.stan_tables, snakemake.output.csv, snakemake.output.md,
-                        snakemake.output.png, stan_settings=snakemake.params.stan_settings)
+p, inp = snakemake.params, snakemake.input
+run_observability_study(p.study, p.scenarios, dict(zip(p.joint_names, inp.joint, strict=True)),
+                        dict(zip(p.stan_names, inp.stan, strict=True)),
+                        dict(zip(p.stan_names, inp.stan_tables, strict=True)), snakemake.output.csv,
+                        snakemake.output.md, snakemake.output.png,
+                        stan_settings=p.stan_settings)

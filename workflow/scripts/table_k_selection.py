@@ -1,10 +1,8 @@
 """Rule table_k_selection: chosen K per entry, method and seed."""
 
-from pathlib import Path
-
 from ssmobs import io, log
 from ssmobs.stages import run_table_k_selection
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_table_k_selection(list(snakemake.input), Path(snakemake.output[0]).with_suffix(""))
+run_table_k_selection(list(snakemake.input), list(snakemake.output.table))

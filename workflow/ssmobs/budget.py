@@ -151,13 +151,12 @@ def estimates(config: dict) -> list[JobEstimate]:
     f2 = config["figure2"]
     out.append(JobEstimate("figure2", "design_disturbances",
                            disturbance_bytes(2, f2["K"], "design"), f"K = {f2['K']}, q = 2"))
-    for sc in config["scenarios"]:  # Figure 4 uses the first ranWalk scenario with T = 4
-        if sc["model"] == "sep_ranwalk" and sc["T"] == 4:
-            n_grid = config["figure4"]["n"]
-            out.append(JobEstimate(f"scenario '{sc['name']}'", "figure_profile_posterior",
-                                   profile_posterior_bytes(MODELS[sc["model"]], 4, n_grid),
-                                   f"figure4.n = {n_grid}"))
-            break
+    sc = scenarios.get(config["paper_outputs"]["figure4"] or "")  # the scenario of Figure 4
+    if sc is not None:
+        n_grid = config["figure4"]["n"]
+        out.append(JobEstimate(f"scenario '{sc['name']}'", "figure_profile_posterior",
+                               profile_posterior_bytes(MODELS[sc["model"]], sc["T"], n_grid),
+                               f"figure4.n = {n_grid}"))
     return [JobEstimate(e.owner, e.job, MARGIN * (BASE_BYTES + e.bytes), e.sizes) for e in out]
 
 

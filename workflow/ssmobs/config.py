@@ -167,7 +167,8 @@ def _scenario_problems(config: dict) -> list[str]:
         elif len({models[n] for n in st["scenarios"]}) > 1:
             problems.append(f"{where}.scenarios = {st['scenarios']}: must all use one model, "
                             f"got {sorted({models[n] for n in st['scenarios']})}")
-    return problems + _keep_draws_problems(config) + _figure_problems(config)
+    return (problems + _keep_draws_problems(config) + _figure_problems(config)
+            + _paper_output_problems(config))
 
 
 def _repeated_names(entries: list[dict], section: str) -> list[str]:
@@ -204,6 +205,43 @@ def _figure_problems(config: dict) -> list[str]:
         if not f4[lo] < f4[hi]:
             problems.append(f"figure4.{lo} = {f4[lo]!r}, figure4.{hi} = {f4[hi]!r}: "
                             f"{lo} must be < {hi} (the grid of Figure 4 would be empty)")
+    return problems
+
+
+def _paper_output_problems(config: dict) -> list[str]:
+    """paper_outputs: every name is a scenario that can give that table or figure."""
+    scenarios = {sc["name"]: sc for sc in config["scenarios"]}
+    chosen = config["paper_outputs"]
+    problems = []
+    for key in ("tables_2_3", "figure3", "figure4"):
+        value = chosen[key]
+        names = [value] if isinstance(value, str) else list(value or [])
+        unknown = [n for n in names if n not in scenarios]
+        if unknown:
+            problems.append(f"paper_outputs.{key}: no scenario(s) named {unknown}; configured: "
+                            f"{sorted(scenarios)}")
+            continue
+        entries = [scenarios[n] for n in names]
+        if key != "figure4":
+            one_stage = [sc["name"] for sc in entries if not (sc["joint_map"] and sc["stan"])]
+            if one_stage:
+                problems.append(f"paper_outputs.{key}: scenario(s) {one_stage} do not run both "
+                                f"stages; allowed: scenarios with joint_map and stan true")
+        models = [MODELS.get(sc["model"]) for sc in entries]
+        if key == "figure3" and entries:
+            truths = {(sc["model"], repr(sc["omega"]), repr(x0_list(sc))) for sc in entries}
+            if len(truths) > 1:
+                problems.append(f"paper_outputs.figure3 = {names}: must share one model, omega "
+                                f"and x0 (one pair of true-value lines), got {sorted(truths)}")
+            elif models[0] is not None and models[0].state_dim != 1:
+                problems.append(f"paper_outputs.figure3: model {entries[0]['model']!r} has "
+                                f"p = {models[0].state_dim}; Figure 3 plots a scalar x0")
+        if key == "figure4" and entries and models[0] is not None:
+            if models[0].n_params != 1 or models[0].state_dim != 1:
+                problems.append(f"paper_outputs.figure4 = {value!r}: model "
+                                f"{entries[0]['model']!r} has {models[0].n_params} parameter(s) "
+                                f"and p = {models[0].state_dim}; Figure 4's (Omega, x0) grid "
+                                f"needs one parameter and p = 1")
     return problems
 
 

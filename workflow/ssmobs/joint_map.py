@@ -757,9 +757,10 @@ def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
     """Scenario summary of the joint MAP estimator over K^max (Sec. III.B, Table II).
 
     Keys: ``K``, ``K_max`` (= |K^max|), ``ratio`` (= |K^max| / K), ``components``, the count
-    per status ``n_<status>``, and per component c of Omega and x_0: ``mean_c``, ``var_c``
-    (ddof = 1, as in Table II), ``mse_c`` (mean squared error about the true value, divided
-    by |K^max|), ``bias_c`` and ``mean_lvar_c`` (mean local variance).  Values that are not
+    per status ``n_<status>``, and per component c of Omega and x_0 (``<component>_<stat>``,
+    as the Stan stage's :func:`ssmobs.stan_metrics.stan_summary`): ``c_mean``, ``c_var``
+    (ddof = 1, as in Table II), ``c_mse`` (mean squared error about the true value, divided
+    by |K^max|), ``c_bias`` and ``c_lvar_mean`` (mean local variance).  Values that are not
     defined (|K^max| = 0, or 1 for the variance) are NaN.
     """
     names = component_names(model)
@@ -784,9 +785,9 @@ def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
         est = frame.loc[ok, c].to_numpy(dtype=float)
         lv = frame.loc[ok, f"lvar_{c}"].to_numpy(dtype=float)
         mean = float(est.mean()) if k_max else float("nan")
-        out[f"mean_{c}"] = mean
-        out[f"var_{c}"] = float(est.var(ddof=1)) if k_max > 1 else float("nan")
-        out[f"mse_{c}"] = float(np.mean((est - true) ** 2)) if k_max else float("nan")
-        out[f"bias_{c}"] = mean - float(true)
-        out[f"mean_lvar_{c}"] = float(lv.mean()) if k_max else float("nan")
+        out[f"{c}_mean"] = mean
+        out[f"{c}_var"] = float(est.var(ddof=1)) if k_max > 1 else float("nan")
+        out[f"{c}_mse"] = float(np.mean((est - true) ** 2)) if k_max else float("nan")
+        out[f"{c}_bias"] = mean - float(true)
+        out[f"{c}_lvar_mean"] = float(lv.mean()) if k_max else float("nan")
     return out

@@ -79,13 +79,13 @@ class VVector:
 def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
     """V_{K_i} from :func:`ssmobs.joint_map.joint_map_summary` (Sec. IV.A).
 
-    Order (the paper's, generalised to any number of components): ``ratio``, ``mean_c`` for
-    every component c of Omega and x_0, then ``var_c``, then ``mean_lvar_c``.  Kinds: c1
+    Order (the paper's, generalised to any number of components): ``ratio``, ``c_mean`` for
+    every component c of Omega and x_0, then ``c_var``, then ``c_lvar_mean``.  Kinds: c1
     for the ratio and the means, c2 for the variances and the mean local variances.
     """
     comps = model.theta_names(0)
-    labels = (["ratio"] + [f"mean_{c}" for c in comps] + [f"var_{c}" for c in comps]
-              + [f"mean_lvar_{c}" for c in comps])
+    labels = (["ratio"] + [f"{c}_mean" for c in comps] + [f"{c}_var" for c in comps]
+              + [f"{c}_lvar_mean" for c in comps])
     kinds = ["c1"] * (1 + len(comps)) + ["c2"] * (2 * len(comps))
     missing = [lab for lab in labels if lab not in summary]
     if missing:

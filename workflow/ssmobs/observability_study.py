@@ -3,7 +3,7 @@
 For the scenarios of one ``observability_studies`` config entry (same model, different T),
 one table and one figure of the two observability measures of Sec. III: |K^max|/K (joint
 MAP found and passing the checks of Sec. III.B) and |K^Stan|/K (NUTS converged, Sec.
-III.C), with the reasons the others failed (joint-MAP status counts, failed convergence
+III.C), each with its exact binomial 95 % interval (``_lo95``, ``_hi95``), with the reasons the others failed (joint-MAP status counts, failed convergence
 checks), the marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the
 draws went, the median over all K of the KDE modes of Omega (converged or not).
 """
@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from . import io
+from .binomial import clopper_pearson
 from .convergence import CHECKS
 from .joint_map import STATUSES
 from .models import get_model
@@ -34,6 +35,8 @@ def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
     row["K_max_ratio"] = joint["ratio"] if joint else np.nan
     row["K_stan"] = stan["n_stan"] if stan else np.nan
     row["K_stan_ratio"] = stan["ratio"] if stan else np.nan
+    for ratio, count in (("K_max_ratio", "K_max"), ("K_stan_ratio", "K_stan")):
+        row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], row["K"])
     if joint:
         failed = {st: joint.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
         row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"
@@ -45,7 +48,7 @@ def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
                                               if counts[c]) or "none"
     for n in model.param_names:
         row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
-        row[f"{n}_mean_joint"] = joint.get(f"mean_{n}", np.nan) if joint else np.nan
+        row[f"{n}_mean_joint"] = joint.get(f"{n}_mean", np.nan) if joint else np.nan
     if stan_table is not None:
         # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
         for n in model.param_names:
@@ -66,7 +69,7 @@ def study_table(scenarios: Sequence[Mapping[str, Any]], joint: Mapping[str, Mapp
 
 
 def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> None:
-    """|K^max|/K and |K^Stan|/K against T."""
+    """|K^max|/K and |K^Stan|/K against T, each with its 95 % interval as a band."""
     from .figures import _plt, save_figure
 
     plt = _plt()
@@ -74,6 +77,9 @@ def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> No
     ax.plot(frame["T"], frame["K_max_ratio"], "o-", label=r"$|\mathcal{K}^{\max}|/K$ (joint MAP)")
     ax.plot(frame["T"], frame["K_stan_ratio"], "s--",
             label=r"$|\mathcal{K}^{\mathrm{Stan}}|/K$ (marginal MAP)")
+    for ratio, colour in (("K_max_ratio", "C0"), ("K_stan_ratio", "C1")):
+        ax.fill_between(frame["T"], frame[f"{ratio}_lo95"].astype(float),
+                        frame[f"{ratio}_hi95"].astype(float), color=colour, alpha=0.15, lw=0)
     ax.set_xlabel("T")
     ax.set_ylabel("fraction of the K trajectories")
     ax.set_ylim(-0.03, 1.03)

@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 
 from . import io
-from .config import x0_list
 from .log import Progress
 
 logger = logging.getLogger("ssmobs")
@@ -107,20 +106,24 @@ def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
     for label, extra in variants:
         result, frame, info, _ = _joint_map_of(traj, prior, {**settings, **extra})
         rows.append({"mu0": label, "mu0_over_T_median": float(np.median(result.mu_start)) / traj.T,
-                     "ratio": info["ratio"], "n_boundary": info["n_boundary"]})
+                     "ratio": info["ratio"], "K_max": info["K_max"], "K": info["K"],
+                     "n_boundary": info["n_boundary"]})
     return rows
 
 
 def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, dict],
                             settings: dict, mu0_per_T: list[float], paper_values: PathLike,
-                            stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+                            paths: list[PathLike]) -> "pandas.DataFrame":  # noqa: F821
     """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
 
     One row per mu_0 setting (the gradient-balance rule first, with its median mu_0 / T),
-    one column per scenario, and a last row with the paper's |K^max| / K where stated.
+    one column per scenario with its exact binomial 95 % interval (``lo95``, ``hi95``), and
+    a last row with the paper's |K^max| / K where stated; written to ``paths`` (.csv, .md,
+    .tex).
     """
     import pandas as pd
 
+    from .binomial import clopper_pearson
     from .tables import load_paper_values, write_table
     from .trajectories import read_trajectories
 
@@ -133,18 +136,21 @@ def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[s
         for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
             entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
             entry[f"{name} K^max/K"] = row["ratio"]
+            entry[f"{name} K^max/K lo95"], entry[f"{name} K^max/K hi95"] = clopper_pearson(
+                row["K_max"], row["K"])
             if row["mu0"] == "gradient balance":
                 entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
         ref = paper.get(sc.get("paper_ref", ""), {}) or {}
-        paper_row[f"{name} K^max/K"] = (ref["K_max"] / ref["K"]
-                                          if ref.get("K_max") is not None and ref.get("K")
-                                          else None)
+        stated = ref.get("K_max") is not None and ref.get("K")
+        paper_row[f"{name} K^max/K"] = ref["K_max"] / ref["K"] if stated else None
+        paper_row[f"{name} K^max/K lo95"], paper_row[f"{name} K^max/K hi95"] = (
+            clopper_pearson(ref["K_max"], ref["K"]) if stated else (None, None))
         logger.info("mu0 sweep: %s done", name)
     frame = pd.DataFrame([*table.values(), paper_row])
-    cols = ["mu0"] + [c for c in frame.columns if c.endswith("K^max/K")]
+    cols = ["mu0"] + [c for c in frame.columns if " K^max/K" in c]
     cols += [c for c in frame.columns if c.endswith("mu0/T")]
     frame = frame[cols]
-    write_table(frame, stem,
+    write_table(frame, paths,
                 "Joint MAP, |K^max|/K of the Sep models for barrier starts mu_0 = f T and for "
                 "the gradient-balance rule (mu0/T: its median over k), with the paper's")
     return frame
@@ -319,7 +325,7 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
 
 
 def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: dict,
-                                stem: PathLike) -> "pandas.DataFrame":  # noqa: F821
+                                paths: list[PathLike]) -> "pandas.DataFrame":  # noqa: F821
     """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
 
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
@@ -332,7 +338,7 @@ def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: di
               for name, path in tables.items()}
     base = ConvergenceSettings(**convergence_cfg)
     table = sensitivity_table(frames, base)
-    write_table(table, stem,
+    write_table(table, paths,
                 "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
                 f"or counted as a failure (other thresholds as configured: divergences <= "
                 f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
@@ -341,32 +347,22 @@ def run_convergence_sensitivity(tables: dict[str, PathLike], convergence_cfg: di
 
 
 # ------------------------------------------------------------------ paper tables and figures
-def table_ii_scenarios(scenarios: list[dict]) -> list[dict]:
-    """Scenarios of Tables II/III and Figure 3: model Same, (a, x0) = (0.9, 8), both stages."""
-    return [sc for sc in scenarios
-            if sc["model"] == "same" and sc["omega"].get("a") == 0.9
-            and x0_list(sc) == [8.0]
-            and sc["joint_map"] and sc["stan"]]
-
-
-def profile_scenario(scenarios: list[dict]) -> dict | None:
-    """Scenario of Figure 4: the first ranWalk scenario with T = 4 and joint MAP enabled."""
-    for sc in scenarios:
-        if sc["model"] == "sep_ranwalk" and sc["T"] == 4:
-            return sc
-    return None
-
-
 def _maybe_json(path: PathLike | None) -> dict | None:
     return io.read_json(path) if path else None
 
 
-def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dict[str, str],
-                     paper_values: PathLike, outdir: PathLike,
-                     exact: dict[str, str] | None = None) -> dict[str, Any]:
+def run_paper_tables(scenarios: list[dict], tables_2_3: list[str], joint: dict[str, str],
+                     marginal: dict[str, str], paper_values: PathLike,
+                     table2: list[PathLike], table3: list[PathLike], section4_csv: PathLike,
+                     section4: list[PathLike], exact: dict[str, str] | None = None
+                     ) -> dict[str, Any]:
     """Rule paper_tables: Table II, Table III and the Section IV summary, paper values beside.
 
+    ``tables_2_3``: names of the scenarios of Tables II and III (``paper_outputs``);
     ``joint`` / ``marginal`` / ``exact`` map scenario names to their summary JSON paths.
+    ``table2``, ``table3``, ``section4``: the paths to write (.csv, .md, .tex by suffix);
+    the Section IV summary goes whole to ``section4_csv`` and as the compact table a
+    person reads (:func:`ssmobs.tables.section_iv_compact`) to ``section4``.
     """
     exact = exact or {}
     from . import tables
@@ -380,45 +376,56 @@ def run_paper_tables(scenarios: list[dict], joint: dict[str, str], marginal: dic
                      "paper_ref": sc.get("paper_ref", ""), "joint": j, "marginal": m,
                      "exact": _maybe_json(exact.get(sc["name"])),
                      "prior": (j or {}).get("prior", sc.get("prior", ""))})
-    t2_names = {sc["name"] for sc in table_ii_scenarios(scenarios)}
-    t2_rows = [r for r in rows if r["scenario"] in t2_names]
-    out = Path(outdir)
+    by_name = {r["scenario"]: r for r in rows}
+    t2_rows = [by_name[n] for n in tables_2_3]
     frames = {
-        "table2_joint_vs_marginal": (tables.table_ii(t2_rows, paper),
+        "table2_joint_vs_marginal": (tables.table_ii(t2_rows, paper), table2,
                                      "Table II: empirical mean, variance and MSE of (a, x0), "
                                      "model Same, (a, x0) = (0.9, 8); ours (Stan + KDE), exact "
                                      "and the paper's"),
-        "table3_coverage": (tables.table_iii(t2_rows, paper),
+        "table3_coverage": (tables.table_iii(t2_rows, paper), table3,
                             "Table III: coverage of the 90% intervals, mean |bias| and MSE of "
                             "the states (marginal MAP); ours (Stan + KDE), exact and the "
                             "paper's"),
-        "section4_summary": (tables.section_iv(rows, paper),
-                             "Section IV: every scenario, |K^max| and |K^Stan| (ours and the "
-                             "paper's), the estimators' properties and the exact marginal "
-                             "posteriors (models linear in the states)"),
+        "section4_summary": (tables.section_iv(rows, paper), [section4_csv], ""),
+        "section4_compact": (tables.section_iv_compact(rows, paper), section4,
+                             "Section IV: every scenario, the observability fractions "
+                             "|K^max|/K (joint MAP) and |K^Stan|/K (Stan) with their exact "
+                             "binomial 95 % intervals, ours beside the paper's (at the paper's "
+                             "K), and the marginal MAP's mean and Cover90 over K^Stan; every "
+                             "other column is in section4_summary.csv"),
     }
-    for stem, (frame, caption) in frames.items():
-        tables.write_table(frame, out / stem, caption)
+    for frame, paths, caption in frames.values():
+        tables.write_table(frame, paths, caption)
     return {k: v[0] for k, v in frames.items()}
 
 
 def run_figure_joint_vs_marginal(scenarios: list[dict], joint_tables: dict[str, str],
                                  marginal_tables: dict[str, str], paths: list[str]) -> None:
-    """Rule figure_joint_vs_marginal: Figure 3 from the per-k tables of both stages."""
+    """Rule figure_joint_vs_marginal: Figure 3 from the per-k tables of both stages.
+
+    ``scenarios``: those of ``paper_outputs.figure3`` (one model, Omega and x0, checked by
+    the config); the first parameter of the model is plotted against x0, with the true
+    values as lines.  No scenarios: empty panels (and the paper's (a, x0) = (0.9, 8))."""
     import pandas as pd
 
     from .figures import figure_joint_vs_marginal
+    from .models import get_model
 
+    name, truth = "a", (0.9, 8.0)
+    if scenarios:
+        name = get_model(scenarios[0]["model"]).param_names[0]
+        truth = (float(scenarios[0]["omega"][name]), float(scenarios[0]["x0"]))
     panels = []
     for sc in sorted(scenarios, key=lambda s: s["T"]):
-        j = io.read_parquet(joint_tables[sc["name"]], ["status", "a", "x0"])
-        m = io.read_parquet(marginal_tables[sc["name"]], ["converged", "a_map", "x0_map"])
+        j = io.read_parquet(joint_tables[sc["name"]], ["status", name, "x0"])
+        m = io.read_parquet(marginal_tables[sc["name"]], ["converged", f"{name}_map", "x0_map"])
         panels.append({"T": sc["T"], "joint": j[j["status"] == "ok"],
                        "marginal": m[m["converged"].astype(bool)]})
     if not panels:
-        panels = [{"T": "-", "joint": pd.DataFrame({"a": [], "x0": []}),
-                   "marginal": pd.DataFrame({"a_map": [], "x0_map": []})}]
-    figure_joint_vs_marginal(panels, 0.9, 8.0, paths)
+        panels = [{"T": "-", "joint": pd.DataFrame({name: [], "x0": []}),
+                   "marginal": pd.DataFrame({f"{name}_map": [], "x0_map": []})}]
+    figure_joint_vs_marginal(panels, *truth, paths, name=name)
 
 
 def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
@@ -465,7 +472,7 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
             "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
                                               if len(set(np.diff(ks))) == 1 else " (uneven)"),
             "K_max_grid": ks[-1],
-            "K_paper": ref.get("K", ksel.get("paper_K") if method == "design" else None),
+            "K_paper": ref.get("K"),
             "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
             "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
         })
@@ -486,12 +493,12 @@ def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_value
     return {"choices": choices}
 
 
-def run_table_k_selection(selections: list[PathLike], stem: PathLike) -> None:
+def run_table_k_selection(selections: list[PathLike], paths: list[PathLike]) -> None:
     """Rule table_k_selection: chosen K per k_selection entry, method and seed."""
     from .tables import k_selection_table, write_table
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
-    write_table(k_selection_table(rows), stem,
+    write_table(k_selection_table(rows), paths,
                 "Choice of K by relative differences (Sec. IV.A): ours per method, set variant "
                 "(independent sets per K_i, or nested: one seed for all K_i) and seed, beside "
                 "the paper's")

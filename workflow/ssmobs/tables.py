@@ -11,13 +11,14 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 import yaml
 
 from . import io
+from .binomial import clopper_pearson, format_fraction
 
 
 def load_paper_values(path: str | os.PathLike) -> dict[str, Any]:
@@ -48,17 +49,25 @@ def _num(v: Any) -> float:
     return float(v) if v is not None else math.nan
 
 
-def write_table(frame: pd.DataFrame, stem: str | os.PathLike, caption: str = "") -> list[str]:
-    """Write ``stem``.csv, .md and .tex atomically; return the paths."""
-    stem = os.fspath(stem)
-    paths = [f"{stem}.csv", f"{stem}.md", f"{stem}.tex"]
-    io.write_text(paths[0], frame.to_csv(index=False, float_format="%.6g", na_rep=""))
-    shown = frame.astype(object).where(frame.notna(), None)
-    md = shown.to_markdown(index=False, floatfmt=".4g", missingval="")
-    io.write_text(paths[1], (f"{caption}\n\n" if caption else "") + md + "\n")
-    tex = frame.to_latex(index=False, float_format="%.4g", na_rep="", caption=caption or None,
-                         escape=True)
-    io.write_text(paths[2], tex)
+def write_table(frame: pd.DataFrame, paths: Sequence[str | os.PathLike],
+                caption: str = "") -> list[str]:
+    """Write ``frame`` atomically to every path in the format of its suffix (.csv, .md or
+    .tex; the caption goes above the Markdown and into the LaTeX table); return the paths."""
+    paths = [os.fspath(p) for p in paths]
+    unknown = [p for p in paths if Path(p).suffix not in (".csv", ".md", ".tex")]
+    if unknown:
+        raise ValueError(f"write_table: {unknown}: the suffix must be .csv, .md or .tex")
+    for path in paths:
+        suffix = Path(path).suffix
+        if suffix == ".csv":
+            io.write_text(path, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
+        elif suffix == ".md":
+            shown = frame.astype(object).where(frame.notna(), None)
+            md = shown.to_markdown(index=False, floatfmt=".4g", missingval="")
+            io.write_text(path, (f"{caption}\n\n" if caption else "") + md + "\n")
+        else:
+            io.write_text(path, frame.to_latex(index=False, float_format="%.4g", na_rep="",
+                                               caption=caption or None, escape=True))
     return paths
 
 
@@ -84,8 +93,7 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                        "statistic": stat_name}
                 exact = r.get("exact") or {} if est_key == "marginal" else {}
                 for comp in ("a", "x0"):
-                    key = f"{stat}_{comp}" if est_key == "joint" else f"{comp}_{stat}"
-                    ours = _num(summ.get(key))
+                    ours = _num(summ.get(f"{comp}_{stat}"))
                     ref = _get(pv, est_key, stat, comp)
                     row[f"{comp}_ours"] = ours
                     row[f"{comp}_exact"] = _num(exact.get(f"{comp}_{stat}"))
@@ -125,12 +133,18 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- Section IV summary
+#: (fraction column, count column, K column) of the Section IV summary
+FRACTIONS = (("K_max_frac", "K_max", "K"), ("K_max_frac_paper", "K_max_paper", "K_paper"),
+             ("K_stan_frac", "K_stan", "K"), ("K_stan_frac_paper", "K_stan_paper", "K_paper"))
+
+
 def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     """One row per scenario: settings, |K^max| and |K^Stan| (ours and the paper's, also as
     fractions of K, since our K may be smaller than the paper's) and the estimator
     properties of every Omega component and x0; ``exact_*`` columns: the exact marginal
     stage at its K (``K_exact``): Definition 3's counts (unique / several / none) and the
-    same statistics over the ``K_exact_used`` trajectories with a unique maximum."""
+    same statistics over the ``K_exact_used`` trajectories with a unique maximum.  Every
+    fraction ``<f>`` has its exact binomial 95 % interval in ``<f>_lo95`` / ``<f>_hi95``."""
     out = []
     for r in rows:
         sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
@@ -152,10 +166,12 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         row["K_stan_frac"] = row["K_stan"] / K if sc["stan"] else math.nan
         row["K_stan_frac_paper"] = row["K_stan_paper"] / kp if kp else math.nan
         row["K_stan_frac_rel_diff"] = rel_diff(row["K_stan_frac"], row["K_stan_frac_paper"])
+        for frac, count, total in FRACTIONS:  # exact binomial 95 % interval of every fraction
+            row[f"{frac}_lo95"], row[f"{frac}_hi95"] = clopper_pearson(row[count], row[total])
         comps = joint.get("components") or list(sc["omega"]) + ["x0"]
         for c in comps:
             for stat in ("mean", "var", "mse"):
-                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{stat}_{c}"))
+                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{c}_{stat}"))
                 row[f"marginal_{stat}_{c}"] = _num(marg.get(f"{c}_{stat}"))
             row[f"cover90_{c}"] = _num(marg.get(f"{c}_cover90"))
         row["mean_cover90_states"] = _num(marg.get("x_cover90_mean"))
@@ -166,6 +182,8 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         for kind in ("unique", "several", "none"):
             row[f"exact_{kind}"] = exact.get(f"n_{kind}", math.nan) if exact else math.nan
         row["exact_unique_frac"] = (row["exact_unique"] / row["K_exact"]) if exact else math.nan
+        row["exact_unique_frac_lo95"], row["exact_unique_frac_hi95"] = clopper_pearson(
+            row["exact_unique"], row["K_exact"])
         row["K_exact_used"] = exact.get("n_exact", math.nan) if exact else math.nan
         ex = exact or {}
         for c in comps:
@@ -176,6 +194,41 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         row["exact_mean_mse_states"] = _num(ex.get("x_mse_mean"))
         out.append(row)
     return pd.DataFrame(out)
+
+
+def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+    """The Section IV summary a person reads: one row per scenario with T, K, |K^max|/K and
+    |K^Stan|/K with their exact binomial 95 % intervals beside the paper's (at the paper's
+    K), and the marginal-MAP mean and Cover90 of every component of Omega and x0 (over
+    K^Stan).  The wide table (:func:`section_iv`) holds everything else."""
+    from .models import get_model
+
+    out = []
+    for r in rows:
+        sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
+        pv = paper.get(sc.get("paper_ref", ""), {}) or {}
+        comps = get_model(sc["model"]).theta_names(0)
+        K, K_paper = sc["K"], _num(pv.get("K"))
+        k_max = joint.get("K_max", math.nan) if sc["joint_map"] else math.nan
+        k_stan = marg.get("n_stan", math.nan) if sc["stan"] else math.nan
+        out.append({
+            "scenario": sc["name"], "T": sc["T"], "K": K,
+            "K^max/K (95 % CI)": format_fraction(k_max, K),
+            "paper K^max/K": format_fraction(_num(pv.get("K_max")), K_paper),
+            "K^Stan/K (95 % CI)": format_fraction(k_stan, K),
+            "paper K^Stan/K": format_fraction(_num(pv.get("K_stan")), K_paper),
+            "marginal MAP mean": _per_component(marg, comps, "mean"),
+            "Cover90": _per_component(marg, comps, "cover90"),
+        })
+    return pd.DataFrame(out)
+
+
+def _per_component(summary: Mapping, comps: Sequence[str], stat: str) -> str:
+    """``"a 0.897, x0 8.05"``: ``<c>_<stat>`` of every component c that has a value."""
+    cells = [f"{c} {summary[f'{c}_{stat}']:.3g}" for c in comps
+             if summary.get(f"{c}_{stat}") is not None
+             and math.isfinite(float(summary[f"{c}_{stat}"]))]
+    return ", ".join(cells)
 
 
 # ---------------------------------------------------------------- K selection
