@@ -109,11 +109,16 @@ def _numbers_from_command_line(config: dict) -> None:
                 limits[key] = parsed
 
 
-def _schema_problems(config: dict) -> list[str]:
-    schema = load_schema()
+def schema_problems(instance: Any, schema: dict) -> list[str]:
+    """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
+    the schema's defaults into ``instance`` (in place)."""
     Validator = _with_defaults(jsonschema.Draft202012Validator)
-    errors = sorted(Validator(schema).iter_errors(config), key=lambda e: list(e.absolute_path))
+    errors = sorted(Validator(schema).iter_errors(instance), key=lambda e: list(e.absolute_path))
     return [_describe(e) for e in errors]
+
+
+def _schema_problems(config: dict) -> list[str]:
+    return schema_problems(config, load_schema())
 
 
 def _scenario_problems(config: dict) -> list[str]:
@@ -241,20 +246,6 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     return config
 
 
-def scenario(config: dict, name: str) -> dict:
-    """The scenario entry called ``name``."""
-    for sc in config["scenarios"]:
-        if sc["name"] == name:
-            return sc
-    raise KeyError(name)
-
-
 def x0_list(sc: dict) -> list[float]:
     x0 = sc["x0"]
     return [float(v) for v in (x0 if isinstance(x0, list) else [x0])]
-
-
-def disturbance_dim(sc: dict) -> int:
-    """q = (d + p) T: the dimension of one design disturbance vector (Sec. III.A)."""
-    model = MODELS[sc["model"]]
-    return (model.obs_dim + model.state_dim) * sc["T"]
