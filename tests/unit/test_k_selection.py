@@ -9,6 +9,7 @@ import pytest
 from ssmobs.joint_map import joint_map_summary
 from ssmobs.k_selection import VVector, rd_matrix, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
+from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -156,8 +157,9 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs.k_selection import set_seed
     from ssmobs.stages import run_k_selection_point, run_select_k
 
-    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
-          "prior": "restricted", "paper_ref": "same_a09_T4"}
+    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
+                               "T": 4, "K": 40, "prior": "restricted",
+                               "paper_ref": "same_a09_T4"})
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
@@ -205,8 +207,8 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
     from ssmobs.stages import run_select_k
 
-    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
-          "paper_ref": "same_a09_T4"}
+    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
+                               "T": 4, "K": 100, "paper_ref": "same_a09_T4"})
     model = get_model("same")
     pts = []
     for K in (100, 200, 300):
