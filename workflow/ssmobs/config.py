@@ -8,6 +8,7 @@ expensive work and before anything is written to ``results/``.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -109,11 +110,16 @@ def _numbers_from_command_line(config: dict) -> None:
                 limits[key] = parsed
 
 
+@functools.lru_cache(maxsize=1)
+def _validator_class() -> type:
+    return _with_defaults(jsonschema.Draft202012Validator)
+
+
 def schema_problems(instance: Any, schema: dict) -> list[str]:
     """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
     the schema's defaults into ``instance`` (in place)."""
-    Validator = _with_defaults(jsonschema.Draft202012Validator)
-    errors = sorted(Validator(schema).iter_errors(instance), key=lambda e: list(e.absolute_path))
+    errors = sorted(_validator_class()(schema).iter_errors(instance),
+                    key=lambda e: list(e.absolute_path))
     return [_describe(e) for e in errors]
 
 
