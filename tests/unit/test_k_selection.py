@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from ssmobs.joint_map import joint_map_summary
-from ssmobs.k_selection import VVector, rd_matrix, relative_difference, select_k, v_vector
+from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
 from ssmobs.scenario import Scenario
 
@@ -72,14 +72,6 @@ def test_select_k_input_checks():
         select_k([100, 200], np.ones((3, 1)), np.ones(1))
     with pytest.raises(ValueError, match="thresholds"):
         select_k([100, 200], np.ones((2, 2)), np.ones(3))
-
-
-def test_rd_matrix_symmetric():
-    V = np.array([[1.0, 2.0], [1.5, 2.0], [0.0, 0.0]])
-    R = rd_matrix(V)
-    assert R.shape == (3, 3, 2)
-    assert np.allclose(R, np.swapaxes(R, 0, 1))
-    assert np.allclose(R[0, 1], [0.5 / 1.5, 0.0])
 
 
 def summary_for(slug, omega, x0, seed):

@@ -94,12 +94,6 @@ def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
     return VVector(values=values, labels=tuple(labels), kinds=tuple(kinds))
 
 
-def rd_matrix(vectors: np.ndarray) -> np.ndarray:
-    """(I, I, q) array of RD(V_{K_i}, V_{K_j}) for all pairs (for reports)."""
-    V = np.asarray(vectors, dtype=float)
-    return relative_difference(V[:, None, :], V[None, :, :])
-
-
 def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[float]],
              thresholds: np.ndarray | Sequence[float]) -> int | None:
     """Index i of the chosen K = K_i by the RD rule of Sec. IV.A, or None.

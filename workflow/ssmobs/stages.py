@@ -472,11 +472,12 @@ def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarra
     """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
     trajectories whose posterior is improper at each boundary."""
+    from .exact_marginal import MAXIMA_KINDS
     from .stan_metrics import stan_summary
 
     info = stan_summary(frame, model, omega, x0, x_true)
     info["n_exact"] = info["n_stan"]
-    for kind in ("unique", "several", "none"):
+    for kind in MAXIMA_KINDS:
         info[f"n_{kind}"] = int((frame["maxima"] == kind).sum())
     info["n_box_truncated"] = int(frame["box_truncated"].sum())
     info["n_spike_not_negligible"] = int((frame["converged"]
