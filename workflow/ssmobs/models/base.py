@@ -190,7 +190,7 @@ class StateSpaceModel:
                 names.extend(f"x{t}_{i + 1}" for i in range(self.state_dim))
         return names
 
-    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float],
+    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
                      prior: str | Mapping[str, str] | None = None) -> PriorBounds:
         """Bounds of the flat prior on Omega for the given variants (Eq. (3), Eq. (14)).
 
@@ -331,8 +331,8 @@ class StateSpaceModel:
         eps = matrix[p * T:].T.reshape(K, T, d)
         return eta, eps
 
-    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float],
-                            x0: Sequence[float] | float, matrix: np.ndarray,
+    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray,
+                            x0: Sequence[float] | float | np.ndarray, matrix: np.ndarray,
                             T: int) -> tuple[np.ndarray, np.ndarray]:
         """Design states and observations x~(k), z~(k) for every column k (Sec. III.A)."""
         eta, eps = self.split_disturbances(matrix, T)
