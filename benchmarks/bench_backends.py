@@ -50,7 +50,7 @@ def trajectory_data(slug: str, omega: dict, T: int) -> dict:
     x0 = np.full(model.state_dim, 8.0)
     eta = rng.standard_normal((1, T, model.state_dim))
     eps = rng.standard_normal((1, T, model.obs_dim))
-    _, z = model.simulate(model._omega_vector(omega), x0, eta, eps)
+    _, z = model.simulate(model.omega_array(omega), x0, eta, eps)
     return model.stan_data(z[0], model.prior_bounds(omega))
 
 

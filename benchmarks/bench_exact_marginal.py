@@ -57,13 +57,14 @@ SPEED_CASES = [
 
 def trajectories(slug, omega, x0, T, K, seed=0):
     from ssmobs.models import get_model
+    from ssmobs.scenario import Scenario
     from ssmobs.trajectories import make_trajectories
 
     model = get_model(slug)
-    sc = {"name": slug, "model": slug, "omega": dict(zip(model.param_names, omega)),
-          "x0": x0, "T": T}
-    q = (model.obs_dim + model.state_dim) * T
-    return make_trajectories(sc, np.random.default_rng(seed).standard_normal((q, K)))
+    sc = Scenario.from_config({"name": slug, "model": slug, "T": T, "K": K, "x0": x0,
+                               "omega": dict(zip(model.param_names, omega))})
+    return make_trajectories(sc, np.random.default_rng(seed).standard_normal(
+        (sc.disturbance_dim, K)))
 
 
 def _run(args):

@@ -26,6 +26,7 @@ from machine import machine_info, report
 from ssmobs import config as cfg
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.nuts_stage import run_trajectories
+from ssmobs.scenario import Scenario
 from ssmobs.stages import sampler_settings
 from ssmobs.stan_backends import get_backend, stan_file
 from ssmobs.trajectories import make_trajectories
@@ -49,28 +50,27 @@ def main() -> None:
     backend = get_backend(conf["stan"]["backend"])
     sampler = sampler_settings(conf["stan"], threads=1)
     rows = []
-    for sc in conf["scenarios"]:
-        if not sc["stan"]:
+    for sc in map(Scenario.from_config, conf["scenarios"]):
+        if not sc.stan:
             continue
-        q = cfg.disturbance_dim(sc)
-        matrix = np.random.default_rng(1).standard_normal((q, args.n))
-        traj = make_trajectories({**sc, "K": args.n}, matrix)
+        matrix = np.random.default_rng(1).standard_normal((sc.disturbance_dim, args.n))
+        traj = make_trajectories(sc.replace(K=args.n), matrix)
         model = traj.model
-        bounds = model.prior_bounds(traj.omega, sc.get("prior"))
+        bounds = sc.prior_bounds()
         backend.compile(stan_file(model.slug))
         with tempfile.TemporaryDirectory() as tmp:
             t0, c0 = time.perf_counter(), cpu_seconds()
             recs = run_trajectories(model, backend, stan_file(model.slug), traj.z, traj.x,
                                     list(range(args.n)), bounds, traj.omega, traj.x0,
-                                    sc["name"], sc["seed"], sampler=sampler,
+                                    sc.name, sc.seed, sampler=sampler,
                                     convergence=ConvergenceSettings(**conf["convergence"]),
-                                    init=sc["stan_init"], records_dir=tmp)
+                                    init=sc.stan_init, records_dir=tmp)
             wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
         per_cpu = cpu / args.n
-        rows.append({"scenario": sc["name"], "model": model.slug, "T": sc["T"], "K": sc["K"],
+        rows.append({"scenario": sc.name, "model": model.slug, "T": sc.T, "K": sc.K,
                      "wall_s": wall / args.n, "cpu_s": per_cpu,
                      "cpu_h_per_1000": per_cpu * 1000 / 3600,
-                     "cpu_h_total": per_cpu * sc["K"] / 3600,
+                     "cpu_h_total": per_cpu * sc.K / 3600,
                      "converged": sum(r["converged"] for r in recs)})
         print(rows[-1], flush=True)
     total_runs = sum(r["K"] for r in rows)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import record_path, run_trajectories
+from ssmobs.nuts_stage import run_trajectories
+from ssmobs.record_cache import record_path
 from ssmobs.stan_backends import (SAMPLER_COLUMNS, BackendError, SamplerSettings,
                                   SamplingError, get_backend, resolve_backend, stan_file)
 from ssmobs.stan_backends import native as native_mod
@@ -142,7 +143,7 @@ def test_missing_library_fails_the_job_not_the_trajectory(tmp_path):
     records = tmp_path / "records"
     with pytest.raises(BackendError):
         run_trajectories(model, backend, stan_file("same"), z, z, [0, 1],
-                         model.prior_bounds({"a": 0.9}), {"a": 0.9}, [8.0], "s", 1,
+                         model.prior_bounds([0.9]), [0.9], [8.0], "s", 1,
                          sampler=SMALL, records_dir=records)
     assert not record_path(records, 0).exists()
 

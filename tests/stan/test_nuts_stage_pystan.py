@@ -40,7 +40,8 @@ def _run(backend, slug, T, sampler, tmp_path, seed=7, keep=()):
     omega = {"a": 0.9}
     x, z = _trajectory(model, omega, 8.0, T, seed)
     recs = run_trajectories(model, backend, stan_file(slug), z, x, [0],
-                            model.prior_bounds(omega), omega, 8.0, f"{slug}_T{T}", 1, sampler,
+                            model.prior_bounds(omega), model.omega_array(omega), 8.0,
+                            f"{slug}_T{T}", 1, sampler,
                             ConvergenceSettings(), "random", tmp_path / "records", set(keep),
                             tmp_path / "draws", None)
     return model, x, recs[0]
@@ -65,7 +66,7 @@ def test_same_T20_converges_near_the_truth(backend, tmp_path):
     inside = np.mean((np.array(rec["q5"][2:]) < x[0, :, 0]) & (x[0, :, 0] < np.array(rec["q95"][2:])))
     assert inside >= 0.7
     frame = records_to_frame([rec], model, 20)
-    out = stan_summary(frame, model, {"a": 0.9}, 8.0, x)
+    out = stan_summary(frame, model, [0.9], 8.0, x)
     assert out["n_stan"] == 1 and out["a_mse"] < 0.08**2
     # draws kept for k = 0, readable by ArviZ with the Draws' shape
     import xarray as xr

@@ -88,7 +88,7 @@ def test_log_density_matches_python(backend, case):
     x0_true = np.full(model.state_dim, 8.0 if slug != "sep_mult" else 5.0)
     eta = rng.standard_normal((1, T, model.state_dim))
     eps = rng.standard_normal((1, T, model.obs_dim))
-    _, z = model.simulate(model._omega_vector(omega_true), x0_true, eta, eps)
+    _, z = model.simulate(model.omega_array(omega_true), x0_true, eta, eps)
     z = z[0]
     bounds = model.prior_bounds(omega_true, prior)
     data = model.stan_data(z, bounds)

@@ -11,6 +11,7 @@ from ssmobs import budget
 from ssmobs.design_disturbances import design_disturbances
 from ssmobs.joint_map import JointMapSettings, joint_map
 from ssmobs.models import get_model
+from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories
 
 pytestmark = pytest.mark.unit
@@ -43,8 +44,8 @@ def test_joint_map_estimate_bounds_the_measured_peak(slug, omega, x0):
     T, K = 60, 1500
     q = (model.obs_dim + model.state_dim) * T
     matrix = np.random.default_rng(0).standard_normal((q, K))
-    traj = make_trajectories({"name": "x", "model": slug, "omega": omega, "x0": x0, "T": T},
-                             matrix)
+    traj = make_trajectories(Scenario.from_config({"name": "x", "model": slug, "omega": omega,
+                                                   "x0": x0, "T": T, "K": K}), matrix)
     bounds = model.prior_bounds(traj.omega, "restricted")
     used = peak_bytes(lambda: joint_map(model, traj.z, bounds, traj.omega, traj.x0,
                                         JointMapSettings(max_newton_iter=2)))

@@ -263,7 +263,7 @@ def test_seed_checked_where_it_is_read():
 
     assert seeds.int_seed(2**32 - 1, "nuts", "s", 0) >= 0
     with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 4294967295\]"):
-        seeds.rng(2**70, "nuts", "s", 0)
+        seeds.int_seed(2**70, "nuts", "s", 0)
 
 
 def test_top_level_not_a_mapping():

@@ -10,6 +10,7 @@ from scipy import integrate, stats
 from ssmobs.exact_marginal import (ExactSettings, boundary_slopes, exact_marginal,
                                    improper, kalman_marginal, log_posterior_omega)
 from ssmobs.models import MODELS, get_model
+from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories
 
 pytestmark = pytest.mark.unit
@@ -27,10 +28,10 @@ def _traj(slug, T, K, seed=0, omega=None):
     model = get_model(slug)
     om, x0 = LINEAR[slug]
     om = om if omega is None else omega
-    sc = {"name": slug, "model": slug, "omega": dict(zip(model.param_names, om)), "x0": x0,
-          "T": T}
-    q = (model.obs_dim + model.state_dim) * T
-    return make_trajectories(sc, np.random.default_rng(seed).standard_normal((q, K)))
+    sc = Scenario.from_config({"name": slug, "model": slug, "x0": x0, "T": T, "K": K,
+                               "omega": dict(zip(model.param_names, om))})
+    return make_trajectories(sc, np.random.default_rng(seed).standard_normal(
+        (sc.disturbance_dim, K)))
 
 
 def test_linearity_flags():

@@ -10,6 +10,7 @@ from ssmobs import config as cfg
 from ssmobs.joint_map import (JointMapSettings, _Barrier, initial_mu_values, initial_theta,
                               joint_map)
 from ssmobs.models import get_model
+from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
@@ -63,8 +64,9 @@ def test_mu0_rule_changes_the_start_and_is_reported():
 def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     from ssmobs.stages import run_joint_map_mu0_sweep
 
-    sc = {"name": "sep_small", "model": "sep", "omega": {"a": 0.9, "b": 0.9}, "x0": 8.0,
-          "T": 30, "K": 5, "prior": "restricted", "paper_ref": "sep_ab_T75"}
+    sc = Scenario.from_config({"name": "sep_small", "model": "sep", "omega": {"a": 0.9, "b": 0.9},
+                               "x0": 8.0, "T": 30, "K": 5, "prior": "restricted",
+                               "paper_ref": "sep_ab_T75"})
     model, matrix, _, _ = design("sep", [0.9, 0.9], [8.0], T=30, K=5, seed=3)
     traj = make_trajectories(sc, matrix)
     write_trajectories(tmp_path / "t.nc", traj)

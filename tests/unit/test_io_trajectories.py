@@ -10,6 +10,7 @@ import pytest
 from ssmobs import io
 from ssmobs.design_disturbances import design_disturbances
 from ssmobs.models import get_model
+from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories, read_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
@@ -49,8 +50,8 @@ def test_disturbances_round_trip_and_checksum(tmp_path):
         io.read_disturbances(path)
 
 
-SCENARIO = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 3, "K": 4,
-            "method": "design", "seed": 1}
+SCENARIO = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8,
+                                 "T": 3, "K": 4, "method": "design", "seed": 1})
 
 
 def test_trajectories_follow_the_model_equations(tmp_path):

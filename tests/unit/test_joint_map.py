@@ -293,7 +293,7 @@ def test_summary_on_a_hand_made_frame():
         "lvar_a": [0.1, 0.2, 9.0, 0.3],
         "lvar_x0": [1.0, 1.0, 9.0, 4.0],
     })
-    s = joint_map_summary(frame, model, {"a": 0.9}, 8.0)
+    s = joint_map_summary(frame, model, [0.9], 8.0)
     assert s["K"] == 4 and s["K_max"] == 3 and s["ratio"] == 0.75
     assert s["n_ok"] == 3 and s["n_gradient"] == 1 and s["n_ridge"] == 0
     assert np.isclose(s["a_mean"], 0.9) and np.isclose(s["x0_mean"], 8.0)

@@ -7,8 +7,9 @@ import pandas as pd
 import pytest
 
 from ssmobs.joint_map import joint_map_summary
-from ssmobs.k_selection import VVector, rd_matrix, relative_difference, select_k, v_vector
+from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
+from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -71,14 +72,6 @@ def test_select_k_input_checks():
         select_k([100, 200], np.ones((3, 1)), np.ones(1))
     with pytest.raises(ValueError, match="thresholds"):
         select_k([100, 200], np.ones((2, 2)), np.ones(3))
-
-
-def test_rd_matrix_symmetric():
-    V = np.array([[1.0, 2.0], [1.5, 2.0], [0.0, 0.0]])
-    R = rd_matrix(V)
-    assert R.shape == (3, 3, 2)
-    assert np.allclose(R, np.swapaxes(R, 0, 1))
-    assert np.allclose(R[0, 1], [0.5 / 1.5, 0.0])
 
 
 def summary_for(slug, omega, x0, seed):
@@ -156,8 +149,9 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs.k_selection import set_seed
     from ssmobs.stages import run_k_selection_point, run_select_k
 
-    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
-          "prior": "restricted", "paper_ref": "same_a09_T4"}
+    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
+                               "T": 4, "K": 40, "prior": "restricted",
+                               "paper_ref": "same_a09_T4"})
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
@@ -208,8 +202,8 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
     from ssmobs.stages import run_select_k
 
-    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4,
-          "paper_ref": "same_a09_T4"}
+    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
+                               "T": 4, "K": 100, "paper_ref": "same_a09_T4"})
     model = get_model("same")
     pts = []
     for K in (100, 200, 300):

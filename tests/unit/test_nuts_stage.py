@@ -12,8 +12,8 @@ from ssmobs import seeds
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.log import Progress
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import (RECORD_KEYS, load_records, record_path, records_to_frame,
-                               run_trajectories)
+from ssmobs.nuts_stage import records_to_frame, run_trajectories
+from ssmobs.record_cache import RECORD_KEYS, load_records, record_path
 from ssmobs.stan_backends.base import Draws, SamplerSettings, SamplingError
 from ssmobs.stan_metrics import stan_summary
 
@@ -82,7 +82,7 @@ def scenario(tmp_path):
     stan_file.write_text("// fake program\n")
     return {
         "model": model, "stan_file": stan_file, "z": z, "x_true": x_true,
-        "bounds": model.prior_bounds({"a": 0.9}), "omega_true": {"a": 0.9}, "x0_true": 8.0,
+        "bounds": model.prior_bounds({"a": 0.9}), "omega_true": np.array([0.9]), "x0_true": 8.0,
         "scenario": "same_T5", "seed": 11, "sampler": SAMPLER,
         "convergence": ConvergenceSettings(), "records_dir": tmp_path / "records",
         "draws_dir": tmp_path / "draws",
@@ -234,7 +234,7 @@ def test_true_inits_for_two_states(tmp_path):
 
     model = get_model("sep_d1_p2")
     x = np.arange(6.0).reshape(3, 2)
-    inits = _inits(model, {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, [8, 7], x, 2)
+    inits = _inits(model, np.array([0.6, 0.5, 0.9, 0.9]), np.array([8, 7]), x, 2)
     assert inits[1] == {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9, "x0": [8.0, 7.0],
                         "x": [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]]}
 
@@ -265,7 +265,7 @@ def test_frame_and_summary_from_stage_records(scenario):
     assert len(frame) == K and frame["converged"].sum() == 4
     assert len(frame.columns) == 7 + 6 + 3 * (T + 2)
     assert frame.loc[1, "status"] == "error" and np.isnan(frame.loc[1, "a_map"])
-    out = stan_summary(frame, scenario["model"], {"a": 0.9}, 8.0, scenario["x_true"])
+    out = stan_summary(frame, scenario["model"], [0.9], 8.0, scenario["x_true"])
     assert out["n_stan"] == 4 and out["ratio"] == pytest.approx(4 / 6)
     assert out["a_mean"] == pytest.approx(0.9, abs=0.01)
     assert "timings" not in " ".join(frame.columns)

@@ -9,13 +9,14 @@ import pandas as pd
 import pytest
 
 from ssmobs.observability_study import run_observability_study, study_table
+from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
 
 def scenario(T):
-    return {"name": f"sv_T{T}", "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5},
-            "x0": 0, "T": T, "K": 4, "method": "design"}
+    return Scenario.from_config({"name": f"sv_T{T}", "model": "stoch_vol", "x0": 0, "T": T,
+                                 "K": 4, "omega": {"phi": 0.9, "sigma": 0.5}})
 
 
 def joint(k_max):

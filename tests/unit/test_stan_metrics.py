@@ -46,7 +46,7 @@ def same_case():
 def test_hand_computed_answers(same_case):
     model, records, x_true = same_case
     frame = records_to_frame(records[::-1], model, 2)  # order of records does not matter
-    out = stan_summary(frame, model, {"a": 0.9}, 8.0, x_true)
+    out = stan_summary(frame, model, [0.9], 8.0, x_true)
     assert (out["K"], out["n_stan"], out["ratio"]) == (4, 3, 0.75)
     # a: MAPs 0.88, 0.92, 0.91
     assert out["a_true"] == 0.9
@@ -75,7 +75,7 @@ def test_sequence_truth_and_frame_columns(same_case):
     assert list(frame.columns[:7]) == ["k", "scenario", "stan_seed", "status", "converged",
                                        "failed_checks", "reason"]
     assert "x2_q95" in frame.columns and frame.loc[2, "failed_checks"] == "rhat"
-    a = stan_summary(frame, model, {"a": 0.9}, 8.0, x_true)
+    a = stan_summary(frame, model, np.array([0.9]), 8.0, x_true)
     b = stan_summary(frame, model, [0.9], [8.0], x_true[:, :, 0])
     assert a == b
 
@@ -84,7 +84,7 @@ def test_no_converged_trajectory_gives_nan(same_case):
     model, records, x_true = same_case
     for r in records:
         r["converged"] = False
-    out = stan_summary(records_to_frame(records, model, 2), model, {"a": 0.9}, 8, x_true)
+    out = stan_summary(records_to_frame(records, model, 2), model, [0.9], 8, x_true)
     assert out["n_stan"] == 0 and out["ratio"] == 0.0
     assert all(math.isnan(out[k]) for k in ("a_mean", "a_var", "a_mse", "a_cover90",
                                              "x_mse_mean", "x_cover90_mean"))
@@ -92,7 +92,7 @@ def test_no_converged_trajectory_gives_nan(same_case):
 
 def test_single_converged_trajectory_has_nan_variance(same_case):
     model, records, x_true = same_case
-    out = stan_summary(records_to_frame(records[:1], model, 2), model, {"a": 0.9}, 8, x_true)
+    out = stan_summary(records_to_frame(records[:1], model, 2), model, [0.9], 8, x_true)
     assert out["n_stan"] == 1 and math.isnan(out["a_var"])
     assert out["a_mse"] == pytest.approx(0.0004)
 
@@ -102,7 +102,7 @@ def test_failed_runs_without_estimates_are_allowed(same_case):
     records[2].update(map=None, q5=None, q95=None, diagnostics=None, status="error")
     frame = records_to_frame(records, model, 2)
     assert math.isnan(frame.loc[2, "a_map"]) and math.isnan(frame.loc[2, "max_rhat"])
-    assert stan_summary(frame, model, {"a": 0.9}, 8, x_true)["n_stan"] == 3
+    assert stan_summary(frame, model, [0.9], 8, x_true)["n_stan"] == 3
 
 
 def test_two_state_components():
@@ -110,7 +110,7 @@ def test_two_state_components():
     model = get_model("sep_d1_p2")
     T = 1
     names = model.theta_names(T)  # a b c d x0_1 x0_2 x1_1 x1_2
-    omega = {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}
+    omega = [0.6, 0.5, 0.9, 0.9]  # a b c d
     base = [0.6, 0.5, 0.9, 0.9, 8.0, 8.0]
     lo = [v - 0.1 for v in base]
     hi = [v + 0.1 for v in base]
@@ -133,6 +133,6 @@ def test_mismatched_truth_is_rejected(same_case):
     model, records, x_true = same_case
     frame = records_to_frame(records, model, 2)
     with pytest.raises(ValueError):
-        stan_summary(frame, model, {"a": 0.9}, [8, 8], x_true)
+        stan_summary(frame, model, [0.9], [8, 8], x_true)
     with pytest.raises(IndexError):
-        stan_summary(frame, model, {"a": 0.9}, 8, x_true[:2])
+        stan_summary(frame, model, [0.9], 8, x_true[:2])

@@ -8,6 +8,7 @@ sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
 from ssmobs.models import ModelDefinitionError  # noqa: E402
+from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 
@@ -25,6 +26,8 @@ except ValueError as err:
 #: where the tables and figures go (config key outputs_dir)
 OUT = config["outputs_dir"]
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
+#: the same entries as typed objects (the rules pass the plain entries above as params)
+SCENARIO_OBJECTS = {name: Scenario.from_config(sc) for name, sc in SCENARIOS.items()}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 STUDIES = {st["name"]: st for st in config["observability_studies"]}
 REPO = Path(workflow.basedir)
@@ -36,7 +39,7 @@ MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
 TABLE_II_SCENARIOS = list(config["paper_outputs"]["tables_2_3"])
 FIGURE3_SCENARIOS = list(config["paper_outputs"]["figure3"])
 FIGURE4_SCENARIO = config["paper_outputs"]["figure4"]
-EXACT_SCENARIOS = [n for n, sc in SCENARIOS.items() if stages.exact_applies(sc)]
+EXACT_SCENARIOS = [n for n, sc in SCENARIO_OBJECTS.items() if sc.exact_applies]
 EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
@@ -54,7 +57,7 @@ def exact_table(name, K):
 
 def exact_summary_path(name):
     """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
-    return f"results/{name}/exact_marginal/K{stages.exact_K(SCENARIOS[name])}/summary.json"
+    return f"results/{name}/exact_marginal/K{SCENARIO_OBJECTS[name].exact_trajectories}/summary.json"
 
 
 def exact_trajectories(wildcards):
@@ -66,8 +69,8 @@ def exact_trajectories(wildcards):
 
 
 def exact_disturbances(wildcards):
-    sc = SCENARIOS[wildcards.scenario]
-    return disturbance_path(ssmobs_config.disturbance_dim(sc), wildcards.K, sc["method"], sc["seed"])
+    sc = SCENARIO_OBJECTS[wildcards.scenario]
+    return disturbance_path(sc.disturbance_dim, wildcards.K, sc.method, sc.seed)
 
 
 wildcard_constraints:
@@ -102,15 +105,14 @@ def study_scenarios(name):
 
 
 def scenario_disturbances(wildcards):
-    sc = SCENARIOS[wildcards.scenario]
-    return disturbance_path(ssmobs_config.disturbance_dim(sc), sc["K"], sc["method"], sc["seed"])
+    sc = SCENARIO_OBJECTS[wildcards.scenario]
+    return disturbance_path(sc.disturbance_dim, sc.K, sc.method, sc.seed)
 
 
 def k_selection_disturbances(wildcards):
     from ssmobs.k_selection import set_seed
 
-    sc = SCENARIOS[KSEL[wildcards.ksel]["scenario"]]
-    q = ssmobs_config.disturbance_dim(sc)
+    q = SCENARIO_OBJECTS[KSEL[wildcards.ksel]["scenario"]].disturbance_dim
     seed = set_seed(int(wildcards.seed), int(wildcards.K), wildcards.sets)
     return disturbance_path(q, wildcards.K, wildcards.method, seed)
 
@@ -131,10 +133,10 @@ def nuts_batches(wildcards):
     """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
     record was changed or deleted after its finished batch table was written (a stat per
     record: a damaged record must not go unnoticed until its batch reruns)."""
-    from ssmobs.stages import batches, changed_batch_records, stan_batch_size
+    from ssmobs.stages import batches, changed_batch_records
 
-    sc = SCENARIOS[wildcards.scenario]
-    ranges = batches(sc["K"], stan_batch_size(sc, config["stan"]))
+    sc = SCENARIO_OBJECTS[wildcards.scenario]
+    ranges = batches(sc.K, sc.batch_size(config["stan"]))
     tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
               for b in range(len(ranges))]
     for table in tables:

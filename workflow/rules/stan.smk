@@ -41,7 +41,7 @@ rule sample_nuts:
     threads: 1
     resources:
         mem_mb=3000,
-        runtime=lambda wc: 10 + 2 * stages.stan_batch_size(SCENARIOS[wc.scenario], config["stan"]),
+        runtime=lambda wc: 10 + 2 * SCENARIO_OBJECTS[wc.scenario].batch_size(config["stan"]),
     group:
         "nuts"
     conda:

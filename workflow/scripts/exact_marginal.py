@@ -1,8 +1,9 @@
 """Rule exact_marginal: exact marginal posteriors of one scenario's design trajectories."""
 
 from ssmobs import log
+from ssmobs.scenario import Scenario
 from ssmobs.stages import run_exact_marginal
 
 log.setup(snakemake.log[0])
-run_exact_marginal(snakemake.input.trajectories, snakemake.params.scenario,
+run_exact_marginal(snakemake.input.trajectories, Scenario.from_config(snakemake.params.scenario),
                    snakemake.output.table, snakemake.output.summary)

@@ -1,9 +1,10 @@
 """Rule figure_profile_posterior: Figure 4."""
 
 from ssmobs import io, log
+from ssmobs.scenario import Scenario
 from ssmobs.stages import run_figure_profile_posterior
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_figure_profile_posterior(snakemake.input[0], snakemake.params.scenario,
+run_figure_profile_posterior(snakemake.input[0], Scenario.from_config(snakemake.params.scenario),
                              snakemake.params.grid, list(snakemake.output.figure))

@@ -1,12 +1,14 @@
 """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts."""
 
 from ssmobs import log
+from ssmobs.scenario import Scenario
 from ssmobs.stages import run_joint_map_mu0_sweep
 
 log.setup(snakemake.log[0])
 p = snakemake.params
 names = [sc["name"] for sc in p.scenarios]
 run_joint_map_mu0_sweep(dict(zip(names, snakemake.input.trajectories, strict=True)),
-                        {sc["name"]: sc for sc in p.scenarios}, dict(p.settings),
+                        {sc["name"]: Scenario.from_config(sc) for sc in p.scenarios},
+                        dict(p.settings),
                         list(p.mu0_per_T), snakemake.input.paper_values,
                         list(snakemake.output.table))

@@ -1,10 +1,12 @@
 """Rule sample_nuts: NUTS + checks + marginal MAPs for one batch of trajectories."""
 
 from ssmobs import log
+from ssmobs.scenario import Scenario
 from ssmobs.stages import run_sample_batch
 
 log.setup(snakemake.log[0])
 p = snakemake.params
-run_sample_batch(snakemake.input.trajectories, snakemake.input.marker, p.scenario, p.stan,
+run_sample_batch(snakemake.input.trajectories, snakemake.input.marker,
+                 Scenario.from_config(p.scenario), p.stan,
                  p.convergence, int(snakemake.wildcards.batch), p.records, p.draws,
                  snakemake.output[0], threads=snakemake.threads)

@@ -1,10 +1,11 @@
 """Rule select_k: the choice of K by relative differences (Sec. IV.A)."""
 
 from ssmobs import io, log
+from ssmobs.scenario import Scenario
 from ssmobs.stages import run_select_k
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p, out = snakemake.params, snakemake.output
-run_select_k(p.ksel, p.scenario, list(snakemake.input.points), snakemake.input.paper_values,
+run_select_k(p.ksel, Scenario.from_config(p.scenario), list(snakemake.input.points), snakemake.input.paper_values,
              out.json, out.csv, list(out.figure))

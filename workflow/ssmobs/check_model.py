@@ -115,7 +115,7 @@ def _sample_theta(model: StateSpaceModel, case: CheckCase, T: int, n: int,
                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, Any]:
     """n random Theta inside the support and one simulated z (T, d) for the case."""
     bounds = model.prior_bounds(case.omega, case.prior)
-    omega_true = model._omega_vector(case.omega)
+    omega_true = model.omega_array(case.omega)
     x0 = np.asarray(case.x0, dtype=float)
     eta = rng.standard_normal((1, T, model.state_dim))
     eps = rng.standard_normal((1, T, model.obs_dim))
@@ -133,7 +133,7 @@ def python_problems(model: StateSpaceModel, case: CheckCase, T: int = 5, n_point
     problems: list[str] = []
     rng = np.random.default_rng(seed)
     K, p, d = 3, model.state_dim, model.obs_dim
-    omega = model._omega_vector(case.omega)
+    omega = model.omega_array(case.omega)
     x0 = np.asarray(case.x0, dtype=float)
     eta, eps = rng.standard_normal((K, T, p)), rng.standard_normal((K, T, d))
     try:

@@ -8,6 +8,7 @@ expensive work and before anything is written to ``results/``.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -109,11 +110,21 @@ def _numbers_from_command_line(config: dict) -> None:
                 limits[key] = parsed
 
 
-def _schema_problems(config: dict) -> list[str]:
-    schema = load_schema()
-    Validator = _with_defaults(jsonschema.Draft202012Validator)
-    errors = sorted(Validator(schema).iter_errors(config), key=lambda e: list(e.absolute_path))
+@functools.lru_cache(maxsize=1)
+def _validator_class() -> type:
+    return _with_defaults(jsonschema.Draft202012Validator)
+
+
+def schema_problems(instance: Any, schema: dict) -> list[str]:
+    """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
+    the schema's defaults into ``instance`` (in place)."""
+    errors = sorted(_validator_class()(schema).iter_errors(instance),
+                    key=lambda e: list(e.absolute_path))
     return [_describe(e) for e in errors]
+
+
+def _schema_problems(config: dict) -> list[str]:
+    return schema_problems(config, load_schema())
 
 
 def _scenario_problems(config: dict) -> list[str]:
@@ -279,20 +290,6 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     return config
 
 
-def scenario(config: dict, name: str) -> dict:
-    """The scenario entry called ``name``."""
-    for sc in config["scenarios"]:
-        if sc["name"] == name:
-            return sc
-    raise KeyError(name)
-
-
 def x0_list(sc: dict) -> list[float]:
     x0 = sc["x0"]
     return [float(v) for v in (x0 if isinstance(x0, list) else [x0])]
-
-
-def disturbance_dim(sc: dict) -> int:
-    """q = (d + p) T: the dimension of one design disturbance vector (Sec. III.A)."""
-    model = MODELS[sc["model"]]
-    return (model.obs_dim + model.state_dim) * sc["T"]

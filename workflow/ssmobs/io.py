@@ -211,6 +211,23 @@ def array_checksum(*arrays: np.ndarray) -> str:
     return h.hexdigest()
 
 
+# ---------------------------------------------------------------- joint MAP (Sec. III.B)
+def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> "xarray.Dataset":  # noqa: F821
+    """Full Theta_hat and local variances of every k of a
+    :class:`~ssmobs.joint_map.JointMapResult` as a labelled dataset (dims ``k``,
+    ``component`` = ``model.theta_names(T)``), for :func:`write_netcdf`."""
+    import xarray as xr
+
+    names = model.theta_names(T)
+    return xr.Dataset(
+        {"theta_hat": (("k", "component"), result.theta_hat),
+         "local_variance": (("k", "component"), result.local_variance),
+         "status": (("k",), np.asarray(result.status, dtype=str))},
+        coords={"k": np.arange(result.theta_hat.shape[0]), "component": names},
+        attrs=attrs,
+    )
+
+
 # ---------------------------------------------------------------- design disturbances
 def write_disturbances(path: str | os.PathLike, result: Any) -> None:
     """Store a :class:`~ssmobs.design_disturbances.DesignResult` as the paper's (q x K) matrix."""

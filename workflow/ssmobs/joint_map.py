@@ -91,7 +91,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 import pandas as pd
@@ -686,8 +686,7 @@ def initial_mu_values(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray,
 
 
 def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
-              omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
-              x0_true: Sequence[float] | float | np.ndarray,
+              omega_true: np.ndarray, x0_true: np.ndarray,
               settings: JointMapSettings | None = None,
               progress: _ProgressLike | None = None) -> JointMapResult:
     """Joint MAP estimate and numerical checks for every design trajectory (Sec. III.B).
@@ -713,8 +712,11 @@ def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
         raise ValueError(f"z must have shape (K, T, {model.obs_dim}) for model '{model.slug}', "
                          f"got {z.shape}")
     K, T, _ = z.shape
-    omega = model._omega_vector(omega_true)
+    omega = np.asarray(omega_true, dtype=float)
     x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
+    if omega.shape != (model.n_params,):
+        raise ValueError(f"omega_true must have {model.n_params} value(s) in the order "
+                         f"{list(model.param_names)}, got {omega.tolist()}")
     if x0.shape != (model.state_dim,):
         raise ValueError(f"x0_true must have {model.state_dim} component(s), got {x0.tolist()}")
     barrier = _Barrier(model, bounds)
@@ -752,8 +754,7 @@ def component_names(model: StateSpaceModel) -> list[str]:
 
 
 def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
-                      omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
-                      x0_true: Sequence[float] | float | np.ndarray) -> dict[str, Any]:
+                      omega_true: np.ndarray, x0_true: np.ndarray) -> dict[str, Any]:
     """Scenario summary of the joint MAP estimator over K^max (Sec. III.B, Table II).
 
     Keys: ``K``, ``K_max`` (= |K^max|), ``ratio`` (= |K^max| / K), ``components``, the count
@@ -764,7 +765,7 @@ def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
     defined (|K^max| = 0, or 1 for the variance) are NaN.
     """
     names = component_names(model)
-    truth = np.concatenate([model._omega_vector(omega_true),
+    truth = np.concatenate([np.atleast_1d(np.asarray(omega_true, dtype=float)),
                             np.atleast_1d(np.asarray(x0_true, dtype=float))])
     if truth.size != len(names):
         raise ValueError(f"true values {truth.tolist()} do not match components {names}")

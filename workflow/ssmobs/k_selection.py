@@ -94,12 +94,6 @@ def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
     return VVector(values=values, labels=tuple(labels), kinds=tuple(kinds))
 
 
-def rd_matrix(vectors: np.ndarray) -> np.ndarray:
-    """(I, I, q) array of RD(V_{K_i}, V_{K_j}) for all pairs (for reports)."""
-    V = np.asarray(vectors, dtype=float)
-    return relative_difference(V[:, None, :], V[None, :, :])
-
-
 def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[float]],
              thresholds: np.ndarray | Sequence[float]) -> int | None:
     """Index i of the chosen K = K_i by the RD rule of Sec. IV.A, or None.
@@ -133,3 +127,59 @@ def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[fl
         if np.all(rd < thr):  # NaN compares False
             return i
     return None
+
+
+def choose_k(summaries: Sequence[Mapping[str, Any]], model: StateSpaceModel,
+             ksel: Mapping[str, Any], scenario: str, paper: Mapping[str, Any]
+             ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The RD rule (:func:`select_k`) for every (method, set variant, seed) of one
+    ``k_selection`` entry, from the joint-MAP summaries of its K_i (Sec. IV.A).
+
+    Parameters
+    ----------
+    summaries : one :func:`ssmobs.joint_map.joint_map_summary` per run and K_i, with the
+        keys ``K_i``, ``method``, ``seed`` and ``sets`` (``nested`` when absent).
+    model : the scenario's model (names of the V components).
+    ksel : the config's ``k_selection`` entry (``name``, ``c1``, ``c2``).
+    scenario : the scenario's name (copied into every choice).
+    paper : the scenario's entry of ``paper_values.yaml`` (its ``k_selection`` per method:
+        ``K``, and the thresholds ``c1``/``c2`` and range ``K_min``/``K_max`` where stated).
+
+    Returns
+    -------
+    ``long_rows`` (one per run, K_i and V component: ``K``, ``method``, ``sets``, ``seed``,
+    ``component``, ``value``) and ``choices`` (one per run: the chosen ``K_chosen``, None
+    when the rule chooses none, the grid, and the paper's K where it is comparable: the
+    paper's K of other thresholds is left out).
+    """
+    long_rows: list[dict[str, Any]] = []
+    choices: list[dict[str, Any]] = []
+    runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
+    for method, sets, seed in runs:
+        sel = sorted((s for s in summaries if s["method"] == method
+                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
+                     key=lambda s: s["K_i"])
+        ks = [int(s["K_i"]) for s in sel]
+        vecs = [v_vector(s, model) for s in sel]
+        V = np.array([v.values for v in vecs])
+        thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
+        idx = select_k(ks, V, thresholds)
+        ref = (paper.get("k_selection") or {}).get(method) or {}
+        if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
+            ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
+        choices.append({
+            "name": ksel["name"], "scenario": scenario, "method": method, "sets": sets,
+            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
+            "K_chosen": ks[idx] if idx is not None else None,
+            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
+                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
+            "K_max_grid": ks[-1],
+            "K_paper": ref.get("K"),
+            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
+            "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
+        })
+        for K, v in zip(ks, vecs):
+            for label, value in zip(v.labels, v.values):
+                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
+                                  "component": label, "value": float(value)})
+    return long_rows, choices

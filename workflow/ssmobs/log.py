@@ -47,10 +47,11 @@ class Progress:
         self.last = -float("inf")
         self.done = 0
 
-    def update(self, n: int = 1, force: bool = False) -> None:
+    def update(self, n: int = 1) -> None:
+        """Count ``n`` more done; log when the last line is ``every`` seconds old or all are done."""
         self.done += n
         now = time.monotonic()
-        if force or self.done >= self.total or now - self.last >= self.every:
+        if self.done >= self.total or now - self.last >= self.every:
             self.last = now
             elapsed = now - self.start
             rate = self.done / elapsed if elapsed > 0 else float("inf")

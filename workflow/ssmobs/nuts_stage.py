@@ -3,7 +3,7 @@
 :func:`run_trajectories` is the loop one batch job runs: for every k of its batch it
 
 1. skips k if ``records_dir/k{k:05d}.json`` exists and validates (same key: scenario, k,
-   seed, Stan program hash, settings hash, data hash; see :func:`record_key`), else
+   seed, Stan program hash, settings hash, data hash; see :mod:`ssmobs.record_cache`), else
 2. samples pi(Theta | z~(k)) with the backend, seed ``seeds.int_seed(seed, "nuts",
    scenario, k)``, random or true initial values,
 3. checks convergence (:func:`ssmobs.convergence.check_convergence`),
@@ -19,7 +19,7 @@ driver) fails the job without a record, so a broken installation never yields a 
 run with |K^Stan| = 0.  Only the per-trajectory records (and draws where asked) are
 written, so an interrupted batch resumes where it stopped.
 
-Record format (JSON, one file per k; ``RECORD_VERSION``)::
+Record format (JSON, one file per k; ``record_cache.RECORD_VERSION``)::
 
     record_version   int
     key              {scenario, k, seed, stan_seed, program_hash, settings_hash, backend
@@ -48,137 +48,36 @@ them out, so tables built from records are byte-identical across reruns.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import math
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from . import io, seeds
+from . import io
 from .convergence import ConvergenceSettings, check_convergence, to_inference_data
 from .log import Progress
-from .marginal_map import GRID_PER_BW, KDEError, marginal_summary
+from .marginal_map import KDEError, marginal_summary
+from .record_cache import (RECORD_VERSION, backend_identity, draws_path, load_record,
+                           program_hash, record_key, record_path, settings_hash)
 from .stan_backends.base import Draws, SamplerSettings, SamplingError
 
 LOG = logging.getLogger("ssmobs.nuts")
 
-RECORD_VERSION = 1
 INIT_MODES = ("random", "true")
-#: keys every record has (checked when a record is read back)
-RECORD_KEYS = ("record_version", "key", "k", "status", "converged", "failed_checks", "reason",
-               "diagnostics", "theta_names", "map", "q5", "q95")
 #: diagnostics columns copied into the per-k table
 DIAGNOSTIC_COLUMNS = ("max_rhat", "min_ess_bulk", "min_ess_tail", "n_divergent",
                       "n_treedepth_hits", "min_ebfmi")
-#: the KDE/quantile method, part of the settings hash (change it when the estimator changes)
-ESTIMATOR = {"kde": "gaussian, silverman bw, linear binning + fft", "grid_per_bw": GRID_PER_BW,
-             "quantile": "type 7", "mode": "argmax + parabolic refinement"}
-
-
-# --------------------------------------------------------------------------- keys
-def _sha(obj: Any) -> str:
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=io.json_default)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def program_hash(stan_file: str | Path) -> str:
-    """SHA-256 (16 hex digits) of the Stan program's text."""
-    return hashlib.sha256(Path(stan_file).read_bytes()).hexdigest()[:16]
-
-
-def _as_list(v: Any) -> list[float]:
-    if isinstance(v, dict):
-        return [float(x) for x in v.values()]
-    return [float(x) for x in np.atleast_1d(np.asarray(v, dtype=float)).ravel()]
-
-
-def settings_hash(model: Any, T: int, sampler: SamplerSettings,
-                  convergence: ConvergenceSettings, init: str, bounds: Any,
-                  omega_true: Any, x0_true: Any) -> str:
-    """Hash of everything besides (scenario, k, seed, program, data) that determines a record.
-
-    ``sampler.workers`` is left out: it changes how chains are scheduled, not the draws.
-    """
-    sampler_d = {k: v for k, v in asdict(sampler).items() if k != "workers"}
-    payload = {
-        "record_version": RECORD_VERSION, "model": model.slug, "T": int(T),
-        "sampler": sampler_d, "convergence": asdict(convergence), "init": init,
-        "bounds": {"lower": np.asarray(bounds.lower, float).tolist(),
-                   "upper": np.asarray(bounds.upper, float).tolist()},
-        "omega_true": _omega_vector(model, omega_true), "x0_true": _as_list(x0_true),
-        "estimator": ESTIMATOR,
-    }
-    return _sha(payload)
-
-
-def _omega_vector(model: Any, omega_true: Any) -> list[float]:
-    if isinstance(omega_true, dict):
-        return [float(omega_true[n]) for n in model.param_names]
-    return _as_list(omega_true)
-
-
-def backend_identity(backend: Any) -> str:
-    """``"<backend> <Stan version>"``: records of another backend or Stan are not reused."""
-    ident = backend.identity() if hasattr(backend, "identity") else {
-        "backend": getattr(backend, "name", type(backend).__name__)}
-    return " ".join(str(ident[k]) for k in sorted(ident))
-
-
-def record_key(scenario: str, k: int, seed: int, prog_hash: str, set_hash: str,
-               z_k: np.ndarray, x_k: np.ndarray, backend: str = "") -> dict[str, Any]:
-    """The key a stored record must match to be reused."""
-    return {"scenario": scenario, "k": int(k), "seed": int(seed),
-            "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
-            "program_hash": prog_hash, "settings_hash": set_hash, "backend": backend,
-            "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16]}
-
-
-def record_path(records_dir: str | Path, k: int) -> Path:
-    return Path(records_dir) / f"k{int(k):05d}.json"
-
-
-def draws_path(draws_dir: str | Path, k: int) -> Path:
-    return Path(draws_dir) / f"k{int(k):05d}.nc"
-
-
-def load_record(path: str | Path, key: dict[str, Any] | None = None,
-                n_theta: int | None = None) -> dict[str, Any] | None:
-    """The record at ``path`` if it exists, parses, and matches ``key`` (else None)."""
-    path = Path(path)
-    if not path.exists():
-        return None
-    try:
-        rec = io.read_json(path, required=RECORD_KEYS)
-    except io.CorruptFileError as err:
-        LOG.warning("recomputing: %s", err)
-        return None
-    if rec.get("record_version") != RECORD_VERSION:
-        LOG.debug("recomputing %s: record version %s != %s", path, rec.get("record_version"),
-                  RECORD_VERSION)
-        return None
-    if key is not None and rec.get("key") != key:
-        old = rec["key"] if isinstance(rec.get("key"), dict) else {}
-        changed = sorted(k for k in set(key) | set(old) if old.get(k) != key.get(k))
-        LOG.debug("recomputing %s: key changed (%s)", path, ", ".join(changed))
-        return None
-    if n_theta is not None and rec["map"] is not None and not (
-            len(rec["map"]) == len(rec["q5"]) == len(rec["q95"]) == n_theta):
-        LOG.warning("recomputing %s: Theta arrays have the wrong length", path)
-        return None
-    return rec
 
 
 # --------------------------------------------------------------------------- one trajectory
-def _inits(model: Any, omega_true: Any, x0_true: Any, x_k: np.ndarray, chains: int
-           ) -> list[dict[str, Any]]:
+def _inits(model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_k: np.ndarray,
+           chains: int) -> list[dict[str, Any]]:
     """Initial values at the true (Omega, x0) and the design states x~(k), one dict per chain."""
-    init: dict[str, Any] = dict(zip(model.param_names, _omega_vector(model, omega_true)))
-    x0 = _as_list(x0_true)
+    init: dict[str, Any] = dict(zip(model.param_names, _floats(omega_true)))
+    x0 = _floats(np.atleast_1d(x0_true))
     x = np.asarray(x_k, dtype=float)
     if model.state_dim == 1:
         init["x0"] = x0[0]
@@ -294,8 +193,8 @@ def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- the loop
 def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndarray,
-                     x_true: np.ndarray, ks: Sequence[int], bounds: Any, omega_true: Any,
-                     x0_true: Any, scenario: str, seed: int,
+                     x_true: np.ndarray, ks: Sequence[int], bounds: Any,
+                     omega_true: np.ndarray, x0_true: np.ndarray, scenario: str, seed: int,
                      sampler: SamplerSettings | None = None,
                      convergence: ConvergenceSettings | None = None, init: str = "random",
                      records_dir: str | Path = ".", keep_draws_for: Iterable[int] = (),
@@ -312,7 +211,8 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
     x_true : (K, T, p) design states (used for the key and, with ``init="true"``, inits).
     ks : trajectory indices (0-based rows of ``z``) to process, in order.
     bounds : the prior's :class:`~ssmobs.models.base.PriorBounds`.
-    omega_true, x0_true : true parameters (mapping or sequence) and initial state.
+    omega_true, x0_true : true parameters (array in ``model.param_names`` order) and
+        initial state (array of p values), e.g. a :class:`~ssmobs.scenario.Scenario`'s.
     scenario, seed : scenario name and seed; Stan's seed is
         ``seeds.int_seed(seed, "nuts", scenario, k)``.
     sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
@@ -341,6 +241,12 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
         x_true = x_true[:, :, None]
     if z.shape[:2] != x_true.shape[:2]:
         raise ValueError(f"z {z.shape} and x_true {x_true.shape} disagree in (K, T)")
+    omega_true = np.asarray(omega_true, dtype=float)
+    x0_true = np.atleast_1d(np.asarray(x0_true, dtype=float))
+    if omega_true.shape != (model.n_params,) or x0_true.shape != (model.state_dim,):
+        raise ValueError(f"need Omega as {model.n_params} value(s) in the order "
+                         f"{list(model.param_names)} and x0 as {model.state_dim} value(s), got "
+                         f"{omega_true.tolist()} and {x0_true.tolist()}")
     T = z.shape[1]
     keep = {int(k) for k in keep_draws_for}
     if keep and draws_dir is None:
@@ -393,24 +299,7 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
     return [records[int(k)] for k in ks]
 
 
-def load_records(records_dir: str | Path, ks: Iterable[int]) -> list[dict[str, Any]]:
-    """Read the records of ``ks`` (CorruptFileError naming the file if one is missing/bad)."""
-    out = []
-    for k in ks:
-        path = record_path(records_dir, k)
-        if not path.exists():
-            raise io.CorruptFileError(f"{path}: missing record of trajectory k={k}")
-        rec = io.read_json(path, required=RECORD_KEYS)
-        out.append(rec)
-    return out
-
-
 # --------------------------------------------------------------------------- table
-def theta_columns(model: Any, T: int) -> list[str]:
-    """Column names of the per-k table for Theta: ``<name>_map``, ``<name>_q5``, ``<name>_q95``."""
-    return [f"{n}_{s}" for n in model.theta_names(T) for s in ("map", "q5", "q95")]
-
-
 def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> "pandas.DataFrame":  # noqa: F821
     """One row per trajectory k (sorted by k): wide table of status, diagnostics and Theta.
 

@@ -21,16 +21,16 @@ from . import io
 from .binomial import clopper_pearson
 from .convergence import CHECKS
 from .joint_map import STATUSES
-from .models import get_model
+from .scenario import Scenario
 
 
-def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
+def study_row(scenario: Scenario, joint: Mapping[str, Any] | None,
               stan: Mapping[str, Any] | None, stan_table: pd.DataFrame | None) -> dict[str, Any]:
     """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega."""
-    model = get_model(scenario["model"])
-    row: dict[str, Any] = {"scenario": scenario["name"], "model": model.slug, "T": scenario["T"],
-                           "K": scenario["K"], "method": scenario.get("method", "design")}
-    row.update({f"{n}_true": float(scenario["omega"][n]) for n in model.param_names})
+    model = scenario.model
+    row: dict[str, Any] = {"scenario": scenario.name, "model": model.slug, "T": scenario.T,
+                           "K": scenario.K, "method": scenario.method}
+    row.update({f"{n}_true": float(v) for n, v in zip(model.param_names, scenario.omega)})
     row["K_max"] = joint["K_max"] if joint else np.nan
     row["K_max_ratio"] = joint["ratio"] if joint else np.nan
     row["K_stan"] = stan["n_stan"] if stan else np.nan
@@ -59,12 +59,12 @@ def study_row(scenario: Mapping[str, Any], joint: Mapping[str, Any] | None,
     return row
 
 
-def study_table(scenarios: Sequence[Mapping[str, Any]], joint: Mapping[str, Mapping],
+def study_table(scenarios: Sequence[Scenario], joint: Mapping[str, Mapping],
                 stan: Mapping[str, Mapping], stan_tables: Mapping[str, pd.DataFrame]
                 ) -> pd.DataFrame:
     """Rows of :func:`study_row` sorted by T (a stage not run gives NaN)."""
-    rows = [study_row(sc, joint.get(sc["name"]), stan.get(sc["name"]),
-                      stan_tables.get(sc["name"])) for sc in scenarios]
+    rows = [study_row(sc, joint.get(sc.name), stan.get(sc.name), stan_tables.get(sc.name))
+            for sc in scenarios]
     return pd.DataFrame(rows).sort_values("T", kind="stable").reset_index(drop=True)
 
 
@@ -90,7 +90,7 @@ def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> No
     plt.close(fig)
 
 
-def run_observability_study(study: Mapping[str, Any], scenarios: Sequence[Mapping[str, Any]],
+def run_observability_study(study: Mapping[str, Any], scenarios: Sequence[Scenario],
                             joint: Mapping[str, str], stan: Mapping[str, str],
                             stan_tables: Mapping[str, str], csv: str | os.PathLike,
                             md: str | os.PathLike, png: str | os.PathLike,
@@ -104,7 +104,7 @@ def run_observability_study(study: Mapping[str, Any], scenarios: Sequence[Mappin
         {n: io.read_parquet(p, required_columns=["converged", "failed_checks"])
          for n, p in stan_tables.items()})
     io.write_text(csv, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
-    model = get_model(scenarios[0]["model"])
+    model = scenarios[0].model
     caption = (f"Observability of {model.title} ({study['name']}, ours): |K^max|/K (joint MAP, "
                f"Sec. III.B) and |K^Stan|/K (NUTS, Sec. III.C) over T.")
     if stan_settings:

@@ -15,7 +15,7 @@ import numpy as np
 MAX_SEED = 2**32 - 1
 
 #: fixed stage tags, so that different stages never share a stream
-STAGES = {"disturbances": 1, "nuts": 2, "ridge": 3}
+STAGES = {"disturbances": 1, "nuts": 2}
 
 
 def _tag(text: str) -> int:
@@ -35,10 +35,6 @@ def seed_sequence(seed: int, stage: str, *keys: int | str) -> np.random.SeedSequ
     check_seed(seed)
     spawn = [STAGES[stage]] + [k if isinstance(k, int) else _tag(k) for k in keys]
     return np.random.SeedSequence(entropy=int(seed), spawn_key=tuple(spawn))
-
-
-def rng(seed: int, stage: str, *keys: int | str) -> np.random.Generator:
-    return np.random.default_rng(seed_sequence(seed, stage, *keys))
 
 
 def int_seed(seed: int, stage: str, *keys: int | str, bits: int = 31) -> int:

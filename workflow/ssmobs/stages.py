@@ -16,6 +16,7 @@ import numpy as np
 
 from . import io
 from .log import Progress
+from .scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -23,20 +24,6 @@ PathLike = str | os.PathLike
 
 
 # ------------------------------------------------------------------ joint MAP (Sec. III.B)
-def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> "xarray.Dataset":  # noqa: F821
-    """Full Theta_hat and local variances of every k as a labelled NetCDF dataset."""
-    import xarray as xr
-
-    names = model.theta_names(T)
-    return xr.Dataset(
-        {"theta_hat": (("k", "component"), result.theta_hat),
-         "local_variance": (("k", "component"), result.local_variance),
-         "status": (("k",), np.asarray(result.status, dtype=str))},
-        coords={"k": np.arange(result.theta_hat.shape[0]), "component": names},
-        attrs=attrs,
-    )
-
-
 def _joint_map_of(traj: Any, prior: Any, settings: dict, progress: Progress | None = None
                   ) -> tuple[Any, Any, dict, Any]:
     """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
@@ -50,30 +37,30 @@ def _joint_map_of(traj: Any, prior: Any, settings: dict, progress: Progress | No
     return result, frame, joint_map_summary(frame, model, traj.omega, traj.x0), bounds
 
 
-def run_joint_map(trajectories: PathLike, scenario: dict, settings: dict,
+def run_joint_map(trajectories: PathLike, scenario: Scenario, settings: dict,
                   table: PathLike, summary: PathLike, theta: PathLike | None = None) -> dict:
     """Rule joint_map: joint MAP + checks for every design trajectory of a scenario."""
     from .trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    progress = Progress(f"joint MAP {scenario['name']}", traj.K, logger)
-    settings = {**settings, "start_states": scenario.get("joint_map_start", "observations")}
-    result, frame, info, bounds = _joint_map_of(traj, scenario.get("prior"), settings, progress)
-    info.update(scenario=scenario["name"], model=model.slug, T=traj.T,
-                method=scenario.get("method", "design"), seed=scenario.get("seed"),
-                prior=list(bounds.variants), start_states=settings["start_states"],
+    progress = Progress(f"joint MAP {scenario.name}", traj.K, logger)
+    settings = {**settings, "start_states": scenario.joint_map_start}
+    result, frame, info, bounds = _joint_map_of(traj, scenario.prior, settings, progress)
+    info.update(scenario=scenario.name, model=model.slug, T=traj.T, method=scenario.method,
+                seed=scenario.seed, prior=list(bounds.variants),
+                start_states=settings["start_states"],
                 mu0_median=float(np.nanmedian(frame["mu0"])))
-    logger.info("scenario %s: |K^max| = %d of %d", scenario["name"], info["K_max"], info["K"])
+    logger.info("scenario %s: |K^max| = %d of %d", scenario.name, info["K_max"], info["K"])
     io.write_parquet(table, frame)
     if theta is not None:
-        io.write_netcdf(theta, joint_map_dataset(result, model, traj.T,
-                                                 {"scenario": scenario["name"]}))
+        io.write_netcdf(theta, io.joint_map_dataset(result, model, traj.T,
+                                                    {"scenario": scenario.name}))
     io.write_json(summary, info)
     return info
 
 
-def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method: str,
+def run_k_selection_point(disturbances: PathLike, scenario: Scenario, K: int, method: str,
                           seed: int, settings: dict, out: PathLike,
                           sets: str = "independent") -> dict:
     """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A).
@@ -81,16 +68,15 @@ def run_k_selection_point(disturbances: PathLike, scenario: dict, K: int, method
     ``seed`` is the run's seed; the set itself was drawn with
     :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
     """
-    from .config import disturbance_dim
     from .k_selection import set_seed
     from .trajectories import make_trajectories
 
-    sc = {**scenario, "K": K, "method": method, "seed": set_seed(seed, K, sets)}
-    matrix, attrs = io.read_disturbances(disturbances, q=disturbance_dim(sc), K=K)
+    sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
+    matrix, attrs = io.read_disturbances(disturbances, q=sc.disturbance_dim, K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
-    _, _, info, _ = _joint_map_of(traj, sc.get("prior"), settings)
-    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc["seed"],
-                scenario=scenario["name"])
+    _, _, info, _ = _joint_map_of(traj, sc.prior, settings)
+    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed,
+                scenario=scenario.name)
     io.write_json(out, info)
     return info
 
@@ -111,7 +97,7 @@ def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
     return rows
 
 
-def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, dict],
+def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[str, Scenario],
                             settings: dict, mu0_per_T: list[float], paper_values: PathLike,
                             paths: list[PathLike]) -> "pandas.DataFrame":  # noqa: F821
     """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
@@ -133,14 +119,14 @@ def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[s
     for name, path in trajectories.items():
         sc = scenarios[name]
         traj = read_trajectories(path)
-        for row in mu0_sweep_rows(traj, sc.get("prior"), settings, mu0_per_T):
+        for row in mu0_sweep_rows(traj, sc.prior, settings, mu0_per_T):
             entry = table.setdefault(row["mu0"], {"mu0": row["mu0"]})
             entry[f"{name} K^max/K"] = row["ratio"]
             entry[f"{name} K^max/K lo95"], entry[f"{name} K^max/K hi95"] = clopper_pearson(
                 row["K_max"], row["K"])
             if row["mu0"] == "gradient balance":
                 entry[f"{name} mu0/T"] = row["mu0_over_T_median"]
-        ref = paper.get(sc.get("paper_ref", ""), {}) or {}
+        ref = paper.get(sc.paper_ref, {}) or {}
         stated = ref.get("K_max") is not None and ref.get("K")
         paper_row[f"{name} K^max/K"] = ref["K_max"] / ref["K"] if stated else None
         paper_row[f"{name} K^max/K lo95"], paper_row[f"{name} K^max/K hi95"] = (
@@ -157,11 +143,6 @@ def run_joint_map_mu0_sweep(trajectories: dict[str, PathLike], scenarios: dict[s
 
 
 # ------------------------------------------------------------------ Stan stage (Sec. III.C)
-def stan_batch_size(scenario: dict, stan_cfg: dict) -> int:
-    """Trajectories per Stan job: the scenario's ``stan_batch_size``, else ``stan.batch_size``."""
-    return int(scenario.get("stan_batch_size") or stan_cfg["batch_size"])
-
-
 def batches(K: int, batch_size: int) -> list[range]:
     """Contiguous trajectory ranges of the Stan jobs: a pure function of (K, batch_size)."""
     return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
@@ -185,7 +166,7 @@ def run_build_stan_model(model: str, backend: str, out: PathLike) -> dict:
     return marker
 
 
-def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, stan_cfg: dict,
+def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: Scenario, stan_cfg: dict,
                      convergence_cfg: dict, batch: int, records_dir: PathLike,
                      draws_dir: PathLike, out: PathLike, threads: int = 1) -> None:
     """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories.
@@ -201,14 +182,14 @@ def run_sample_batch(trajectories: PathLike, marker: PathLike, scenario: dict, s
     traj = read_trajectories(trajectories)
     model = traj.model
     backend_name = io.read_json(marker, required=["backend"])["backend"]
-    ks = list(batches(traj.K, stan_batch_size(scenario, stan_cfg))[batch])
-    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
-    progress = Progress(f"NUTS {scenario['name']} batch {batch}", len(ks), logger)
+    ks = list(batches(traj.K, scenario.batch_size(stan_cfg))[batch])
+    bounds = model.prior_bounds(traj.omega, scenario.prior)
+    progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
     records = run_trajectories(
         model, get_backend(backend_name), stan_file(model.slug), traj.z, traj.x, ks, bounds,
-        traj.omega, traj.x0, scenario["name"], scenario["seed"],
+        traj.omega, traj.x0, scenario.name, scenario.seed,
         sampler=sampler_settings(stan_cfg, threads),
-        convergence=ConvergenceSettings(**convergence_cfg), init=scenario["stan_init"],
+        convergence=ConvergenceSettings(**convergence_cfg), init=scenario.stan_init,
         records_dir=records_dir, keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
         draws_dir=draws_dir, progress=progress)
     io.write_parquet(out, records_to_frame(records, model, traj.T))
@@ -234,7 +215,7 @@ def changed_batch_records(batch_table: PathLike) -> str | None:
     """
     import pyarrow.parquet as pq
 
-    from .nuts_stage import record_path
+    from .record_cache import record_path
 
     table = Path(batch_table)
     try:
@@ -266,7 +247,8 @@ def check_batch_records(batch_table: PathLike, frame: "pandas.DataFrame",  # noq
     :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
     batch recomputes the damaged records only and reuses every valid one.
     """
-    from .nuts_stage import RECORD_KEYS, record_path, records_to_frame
+    from .nuts_stage import records_to_frame
+    from .record_cache import RECORD_KEYS, record_path
 
     def damaged(what: str) -> io.CorruptFileError:
         return _damaged_batch(batch_table, what)
@@ -297,7 +279,7 @@ def check_batch_records(batch_table: PathLike, frame: "pandas.DataFrame",  # noq
         raise damaged(f"the records of trajectories k={bad} ({records_dir}) differ from it")
 
 
-def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenario: dict,
+def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenario: Scenario,
                     table: PathLike, summary: PathLike) -> dict:
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary."""
     import pandas as pd
@@ -312,12 +294,12 @@ def run_gather_nuts(trajectories: PathLike, batch_tables: list[PathLike], scenar
     frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
     if frame["k"].tolist() != list(range(traj.K)):
-        raise io.CorruptFileError(f"batch tables of scenario {scenario['name']} do not cover "
+        raise io.CorruptFileError(f"batch tables of scenario {scenario.name} do not cover "
                                   f"k = 0..{traj.K - 1} exactly once")
     info = stan_summary(frame, traj.model, traj.omega, traj.x0, traj.x)
-    info.update(scenario=scenario["name"], model=traj.model.slug, T=traj.T,
-                stan_init=scenario["stan_init"])
-    logger.info("scenario %s: |K^Stan| = %s of %d", scenario["name"],
+    info.update(scenario=scenario.name, model=traj.model.slug, T=traj.T,
+                stan_init=scenario.stan_init)
+    logger.info("scenario %s: |K^Stan| = %s of %d", scenario.name,
                 info["n_stan"], traj.K)
     io.write_parquet(table, frame)
     io.write_json(summary, info)
@@ -438,48 +420,19 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
 
 
 # ------------------------------------------------------------------ choice of K (Sec. IV.A)
-def run_select_k(ksel: dict, scenario: dict, points: list[PathLike], paper_values: PathLike,
+def run_select_k(ksel: dict, scenario: Scenario, points: list[PathLike], paper_values: PathLike,
                  out_json: PathLike, out_csv: PathLike, figure_paths: list[str]) -> dict:
-    """Rule select_k: the RD rule over K_grid for every method, set variant and seed; figure."""
+    """Rule select_k: the RD rule over K_grid for every method, set variant and seed
+    (:func:`ssmobs.k_selection.choose_k`); the V components as CSV and the figure."""
     import pandas as pd
 
     from .figures import figure_k_convergence
-    from .k_selection import select_k, v_vector
-    from .models import get_model
+    from .k_selection import choose_k
     from .tables import load_paper_values
 
-    model = get_model(scenario["model"])
     summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
-    long_rows, choices = [], []
-    runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
-    paper = load_paper_values(paper_values).get(scenario.get("paper_ref", ""), {}) or {}
-    for method, sets, seed in runs:
-        sel = sorted((s for s in summaries if s["method"] == method
-                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
-                     key=lambda s: s["K_i"])
-        ks = [int(s["K_i"]) for s in sel]
-        vecs = [v_vector(s, model) for s in sel]
-        V = np.array([v.values for v in vecs])
-        thresholds = vecs[0].thresholds(ksel["c1"], ksel["c2"])
-        idx = select_k(ks, V, thresholds)
-        ref = (paper.get("k_selection") or {}).get(method) or {}
-        if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
-            ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
-        choices.append({
-            "name": ksel["name"], "scenario": scenario["name"], "method": method, "sets": sets,
-            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
-            "K_chosen": ks[idx] if idx is not None else None,
-            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
-                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
-            "K_max_grid": ks[-1],
-            "K_paper": ref.get("K"),
-            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
-            "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
-        })
-        for K, v in zip(ks, vecs):
-            for label, value in zip(v.labels, v.values):
-                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
-                                  "component": label, "value": float(value)})
+    paper = load_paper_values(paper_values).get(scenario.paper_ref, {}) or {}
+    long_rows, choices = choose_k(summaries, scenario.model, ksel, scenario.name, paper)
     frame = pd.DataFrame(long_rows)
     io.write_text(out_csv, frame.to_csv(index=False, float_format="%.10g"))
     chosen = pd.DataFrame(choices)
@@ -504,7 +457,7 @@ def run_table_k_selection(selections: list[PathLike], paths: list[PathLike]) -> 
                 "the paper's")
 
 
-def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: dict,
+def run_figure_profile_posterior(trajectories: PathLike, scenario: Scenario, grid: dict,
                                  paths: list[str]) -> None:
     """Rule figure_profile_posterior: Figure 4 for trajectory k = 0 of a ranWalk scenario."""
     from .figures import figure_profile_posterior
@@ -513,7 +466,7 @@ def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: d
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
+    bounds = model.prior_bounds(traj.omega, scenario.prior)
     a = np.linspace(grid["a_min"], grid["a_max"], grid["n"])
     x0 = np.linspace(grid["x0_min"], grid["x0_max"], grid["n"])
     values = profile_posterior(model, traj.z[0], bounds, model.param_names[0], a, x0)
@@ -522,27 +475,16 @@ def run_figure_profile_posterior(trajectories: PathLike, scenario: dict, grid: d
 
 
 # ------------------------------------------------------------------ exact marginal (issue 11)
-def exact_applies(sc: dict) -> bool:
-    """The exact stage runs for a scenario when enabled and its model is linear in the states."""
-    from .models import get_model
-
-    return bool(sc.get("exact", True)) and get_model(sc["model"]).linear_in_states
-
-
-def exact_K(sc: dict) -> int:
-    """K of the design trajectories of the exact stage (``exact_K``, else the scenario's K)."""
-    return int(sc.get("exact_K") or sc["K"])
-
-
 def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarray) -> dict:
     """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
     trajectories whose posterior is improper at each boundary."""
+    from .exact_marginal import MAXIMA_KINDS
     from .stan_metrics import stan_summary
 
     info = stan_summary(frame, model, omega, x0, x_true)
     info["n_exact"] = info["n_stan"]
-    for kind in ("unique", "several", "none"):
+    for kind in MAXIMA_KINDS:
         info[f"n_{kind}"] = int((frame["maxima"] == kind).sum())
     info["n_box_truncated"] = int(frame["box_truncated"].sum())
     info["n_spike_not_negligible"] = int((frame["converged"]
@@ -557,7 +499,7 @@ def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarra
     return info
 
 
-def run_exact_marginal(trajectories: PathLike, scenario: dict, table: PathLike,
+def run_exact_marginal(trajectories: PathLike, scenario: Scenario, table: PathLike,
                        summary: PathLike) -> dict:
     """Rule exact_marginal: exact marginal posteriors of every design trajectory."""
     import time
@@ -568,37 +510,36 @@ def run_exact_marginal(trajectories: PathLike, scenario: dict, table: PathLike,
     traj = read_trajectories(trajectories)
     model = traj.model
     if not model.linear_in_states:
-        raise ValueError(f"scenario {scenario['name']}: model '{model.slug}' is not linear "
+        raise ValueError(f"scenario {scenario.name}: model '{model.slug}' is not linear "
                          f"in the states; the exact stage does not apply")
-    bounds = model.prior_bounds(traj.omega, scenario.get("prior"))
+    bounds = model.prior_bounds(traj.omega, scenario.prior)
     start = time.perf_counter()
     result = exact_marginal(model, traj.z, bounds)
     seconds = time.perf_counter() - start
     frame = result.to_frame(model)
     info = exact_summary(frame, model, traj.omega, traj.x0, traj.x)
-    info.update(scenario=scenario["name"], model=model.slug, T=traj.T, seconds=seconds,
+    info.update(scenario=scenario.name, model=model.slug, T=traj.T, seconds=seconds,
                 grid=result.info, prior=list(bounds.variants))
     logger.info("scenario %s (exact): %d of %d with a unique interior maximum, %.1f s",
-                scenario["name"], info["n_exact"], traj.K, seconds)
+                scenario.name, info["n_exact"], traj.K, seconds)
     io.write_parquet(table, frame)
     io.write_json(summary, info)
     return info
 
 
-def run_figure_exact_vs_stan(scenario: dict, stan_table: PathLike, exact_table: PathLike,
+def run_figure_exact_vs_stan(scenario: Scenario, stan_table: PathLike, exact_table: PathLike,
                              paths: list[str]) -> dict:
     """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k."""
     from .figures import figure_exact_vs_stan
-    from .models import get_model
 
-    model = get_model(scenario["model"])
+    model = scenario.model
     names = list(model.param_names) + (["x0"] if model.state_dim == 1 else
                                        [f"x0_{i + 1}" for i in range(model.state_dim)])
     cols = ["k", "converged"] + [f"{n}_{s}" for n in names for s in ("map", "q5", "q95")]
     stan = io.read_parquet(stan_table, cols)
     exact = io.read_parquet(exact_table, cols)
     if stan["k"].tolist() != exact["k"].tolist():
-        raise ValueError(f"scenario {scenario['name']}: the Stan and exact tables hold "
+        raise ValueError(f"scenario {scenario.name}: the Stan and exact tables hold "
                          f"different trajectories (K = {len(stan)} and {len(exact)})")
     both = stan["converged"].to_numpy(bool) & exact["converged"].to_numpy(bool)
-    return figure_exact_vs_stan(stan[both], exact[both], names, scenario["name"], paths)
+    return figure_exact_vs_stan(stan[both], exact[both], names, scenario.name, paths)

@@ -23,15 +23,9 @@ are NaN.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
-
-
-def _true_vector(model: Any, omega_true: Mapping[str, float] | Sequence[float]) -> np.ndarray:
-    if isinstance(omega_true, Mapping):
-        return np.array([float(omega_true[n]) for n in model.param_names])
-    return np.atleast_1d(np.asarray(omega_true, dtype=float)).ravel()
 
 
 def _col(frame: Any, name: str) -> np.ndarray:
@@ -44,8 +38,8 @@ def _mean(v: np.ndarray) -> float:
     return float(np.mean(v)) if v.size else math.nan
 
 
-def stan_summary(frame: Any, model: Any, omega_true: Mapping[str, float] | Sequence[float],
-                 x0_true: Sequence[float] | float, x_true: np.ndarray) -> dict[str, Any]:
+def stan_summary(frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.ndarray,
+                 x_true: np.ndarray) -> dict[str, Any]:
     """|K^Stan| and the properties of the marginal MAP estimator over K^Stan.
 
     Parameters
@@ -53,7 +47,8 @@ def stan_summary(frame: Any, model: Any, omega_true: Mapping[str, float] | Seque
     frame : per-k table (:func:`ssmobs.nuts_stage.records_to_frame`): columns ``k``,
         ``converged`` and ``<name>_map``/``_q5``/``_q95`` for every Theta component.
     model : the state space model (for parameter and Theta names).
-    omega_true, x0_true : true Omega (mapping or sequence) and x0.
+    omega_true, x0_true : true Omega (array in ``model.param_names`` order) and x0 (array
+        of p values), e.g. a :class:`~ssmobs.scenario.Scenario`'s.
     x_true : (K, T, p) design states; row ``k`` of the table is compared with ``x_true[k]``.
 
     Returns
@@ -69,7 +64,7 @@ def stan_summary(frame: Any, model: Any, omega_true: Mapping[str, float] | Seque
                          f"{model.state_dim}")
     names = model.theta_names(T)
     m = model.n_params
-    omega = _true_vector(model, omega_true)
+    omega = np.atleast_1d(np.asarray(omega_true, dtype=float)).ravel()
     x0 = np.atleast_1d(np.asarray(x0_true, dtype=float)).ravel()
     if omega.size != m or x0.size != p:
         raise ValueError(f"need {m} true parameter(s) and {p} x0 component(s), got "

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import io
 from .models import StateSpaceModel, get_model
+from .scenario import Scenario
 
 
 @dataclass(frozen=True)
@@ -36,25 +37,23 @@ class Trajectories:
         return self.x.shape[1]
 
 
-def make_trajectories(scenario: dict, matrix: np.ndarray, provenance: dict | None = None) -> Trajectories:
-    """Turn a disturbance matrix into design trajectories for a scenario entry of the config."""
-    model = get_model(scenario["model"])
-    omega = model._omega_vector(scenario["omega"])
-    x0v = scenario["x0"]
-    x0 = np.atleast_1d(np.asarray(x0v, dtype=float))
-    x, z = model.design_trajectories(omega, x0, matrix, scenario["T"])
+def make_trajectories(scenario: Scenario, matrix: np.ndarray,
+                      provenance: dict | None = None) -> Trajectories:
+    """Turn a (q x K) disturbance matrix into the scenario's design trajectories (Sec. III.A)."""
+    model = scenario.model
+    x, z = model.design_trajectories(scenario.omega, scenario.x0, matrix, scenario.T)
     attrs = {
-        "scenario": scenario["name"], "model": model.slug, "T": int(scenario["T"]),
-        "K": int(matrix.shape[1]), "method": scenario.get("method", "design"),
-        "seed": int(scenario.get("seed", 0)),
-        "omega": json.dumps(dict(zip(model.param_names, omega.tolist()))),
-        "x0": json.dumps(x0.tolist()),
-        "prior": json.dumps(scenario.get("prior")),
+        "scenario": scenario.name, "model": model.slug, "T": scenario.T,
+        "K": int(matrix.shape[1]), "method": scenario.method, "seed": scenario.seed,
+        "omega": json.dumps(dict(zip(model.param_names, scenario.omega.tolist()))),
+        "x0": json.dumps(scenario.x0.tolist()),
+        "prior": json.dumps(scenario.prior_config),
     }
     if provenance:
         attrs.update({f"disturbances_{k}": v for k, v in provenance.items()
                       if isinstance(v, (int, float, str))})
-    return Trajectories(model=model, omega=omega, x0=x0, x=x, z=z, attrs=attrs)
+    return Trajectories(model=model, omega=np.array(scenario.omega), x0=np.array(scenario.x0),
+                        x=x, z=z, attrs=attrs)
 
 
 def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:

@@ -176,11 +176,6 @@ class StateSpaceModel:
     def n_params(self) -> int:
         return len(self.param_names)
 
-    @property
-    def disturbance_dim_per_step(self) -> int:
-        """d + p: entries of the design disturbance vector per time step."""
-        return self.obs_dim + self.state_dim
-
     def n_theta(self, T: int) -> int:
         """|Theta| = |Omega| + p (T + 1)."""
         return self.n_params + self.state_dim * (T + 1)
@@ -195,7 +190,7 @@ class StateSpaceModel:
                 names.extend(f"x{t}_{i + 1}" for i in range(self.state_dim))
         return names
 
-    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float],
+    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
                      prior: str | Mapping[str, str] | None = None) -> PriorBounds:
         """Bounds of the flat prior on Omega for the given variants (Eq. (3), Eq. (14)).
 
@@ -204,7 +199,7 @@ class StateSpaceModel:
         Raises ValueError naming the parameter and value when a variant is unknown,
         not allowed for the model, or undefined for the true value (sign 0).
         """
-        omega = self._omega_vector(omega_true)
+        omega = self.omega_array(omega_true)
         variants = self.resolve_prior(prior)
         lower = np.empty(self.n_params)
         upper = np.empty(self.n_params)
@@ -257,7 +252,7 @@ class StateSpaceModel:
         """Problems with true values (empty list when valid): each names key, value and range."""
         problems: list[str] = []
         try:
-            omega = self._omega_vector(omega_true)
+            omega = self.omega_array(omega_true)
         except ValueError as err:
             return [str(err)]
         x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
@@ -296,7 +291,14 @@ class StateSpaceModel:
                     f"({bounds.lower[i]}, {bounds.upper[i]}) of its prior '{bounds.variants[i]}'")
         return problems
 
-    def _omega_vector(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+    def omega_array(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+        """Omega as a float array in :attr:`param_names` order, from the config's mapping
+        ``{name: value}`` (exactly the model's parameters) or from a sequence of m values.
+
+        The one conversion of the config's form: :meth:`ssmobs.scenario.Scenario.from_config`
+        calls it, and everything downstream takes the array.  ValueError names what is
+        missing, unknown or of the wrong length.
+        """
         if isinstance(omega, Mapping):
             missing = [n for n in self.param_names if n not in omega]
             extra = sorted(set(omega) - set(self.param_names))
@@ -329,12 +331,12 @@ class StateSpaceModel:
         eps = matrix[p * T:].T.reshape(K, T, d)
         return eta, eps
 
-    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float],
-                            x0: Sequence[float] | float, matrix: np.ndarray,
+    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray,
+                            x0: Sequence[float] | float | np.ndarray, matrix: np.ndarray,
                             T: int) -> tuple[np.ndarray, np.ndarray]:
         """Design states and observations x~(k), z~(k) for every column k (Sec. III.A)."""
         eta, eps = self.split_disturbances(matrix, T)
-        omega_v = self._omega_vector(omega)
+        omega_v = self.omega_array(omega)
         x0_v = np.atleast_1d(np.asarray(x0, dtype=float))
         return self.simulate(omega_v, x0_v, eta, eps)
 

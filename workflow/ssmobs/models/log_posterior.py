@@ -176,12 +176,6 @@ def split_theta(theta: np.ndarray, model: StateSpaceModel, T: int) -> tuple[np.n
     return theta[:, :m], theta[:, m:].reshape(K, T + 1, model.state_dim)
 
 
-def join_theta(omega: np.ndarray, states: np.ndarray) -> np.ndarray:
-    """Omega (K, m) and states (K, T+1, p) -> Theta (K, n)."""
-    K = omega.shape[0]
-    return np.concatenate([omega, states.reshape(K, -1)], axis=1)
-
-
 def _full_from_triu(vals: list[np.ndarray], term: _Term) -> np.ndarray:
     """Stack upper-triangle entries (each (K, T)) into full (K, T, L, L) blocks."""
     L = term.n_local
