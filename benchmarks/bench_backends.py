@@ -27,15 +27,17 @@ import time
 
 import numpy as np
 from machine import machine_info, report
-
 from ssmobs.models import get_model
 from ssmobs.stan_backends import SamplerSettings, get_backend, stan_file
 from ssmobs.stan_backends.native import NativeBackend, stan_version
 
 PAPER = SamplerSettings(chains=4, iter_warmup=4000, iter_sampling=6000, workers=1)
-CASES = [("same", {"a": 0.9}, 20, False), ("same", {"a": 0.9}, 50, False),
-         ("same", {"a": 0.9}, 100, False),
-         ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, 50, True)]
+CASES = [
+    ("same", {"a": 0.9}, 20, False),
+    ("same", {"a": 0.9}, 50, False),
+    ("same", {"a": 0.9}, 100, False),
+    ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, 50, True),
+]
 
 
 def cpu_seconds() -> float:
@@ -83,10 +85,14 @@ def main() -> None:
             b.compile(stan_file(slug))
         data = trajectory_data(slug, omega, T)
         reps = args.reps_slow if slow else args.reps
-        res = {name: timed(b, slug, data, reps) for name, b in
-               (("floor", floor), ("native", native), ("pystan", pystan))}
-        same = all(np.array_equal(res["native"][2].params[k], res["pystan"][2].params[k])
-                   for k in res["native"][2].params)
+        res = {
+            name: timed(b, slug, data, reps)
+            for name, b in (("floor", floor), ("native", native), ("pystan", pystan))
+        }
+        same = all(
+            np.array_equal(res["native"][2].params[k], res["pystan"][2].params[k])
+            for k in res["native"][2].params
+        )
         med = {k: (statistics.median(v[0]), statistics.median(v[1])) for k, v in res.items()}
         rows.append((f"{slug} T={T}", reps, med, same))
         print(rows[-1], flush=True)
@@ -117,9 +123,11 @@ def main() -> None:
     ]
     for case, reps, med, same in rows:
         f, n, p = med["floor"], med["native"], med["pystan"]
-        lines.append(f"| {case} | {reps} | {f[0]:.2f} | {n[0]:.2f} | {p[0]:.2f} | {f[1]:.2f} | "
-                     f"{n[1]:.2f} | {p[1]:.2f} | **{n[0] / f[0]:.3f}** | **{n[0] / p[0]:.3f}** | "
-                     f"{'yes' if same else 'NO'} |")
+        lines.append(
+            f"| {case} | {reps} | {f[0]:.2f} | {n[0]:.2f} | {p[0]:.2f} | {f[1]:.2f} | "
+            f"{n[1]:.2f} | {p[1]:.2f} | **{n[0] / f[0]:.3f}** | **{n[0] / p[0]:.3f}** | "
+            f"{'yes' if same else 'NO'} |"
+        )
     text = "\n".join(lines) + "\n"
     report(text, write=not args.no_write)
 

@@ -43,7 +43,6 @@ MEM_TARGET_MIB = 4096.0
 def run_case(q: int, K: int, seed: int) -> dict:
     """Run one case in this process and return the measurements."""
     import numpy as np
-
     from ssmobs.design_disturbances import design_disturbances
 
     messages: list[str] = []
@@ -129,11 +128,11 @@ def section_text(rows: list[dict], command: str, total_s: float, load: str) -> s
         f"case (whole Python process incl. imports and the antithetic comparison); target "
         f"< {MEM_TARGET_MIB:.0f} MiB.\n"
         f"- D: the modified CvM distance with pi^(-q/2) normalisation (doc's \\hat D); "
-        f"\"antithetic\": random +/- pairs from the same seed, whitened the same way.\n"
+        f'"antithetic": random +/- pairs from the same seed, whitened the same way.\n'
         f"- Targets from the issue: (100, 3100) < 180 s, (200, 4000) < 300 s.\n"
         f"- Threads: `design_disturbances` runs with one OpenBLAS thread (`blas_threads=1`); the "
         f"element-wise NumPy work is single-threaded anyway.  A load average above the CPU count "
-        f"means other jobs shared the cores, so the times are pessimistic.  \"s / evaluation\" is "
+        f'means other jobs shared the cores, so the times are pessimistic.  "s / evaluation" is '
         f"wall time / number of value+gradient evaluations (incl. optimiser overhead).\n\n"
         f"{markdown_table(rows)}\n"
         f"Stopping: the relative test (|f_(k-1) - f_k| <= 1e-6 f_k) is the toolbox's rule, a "

@@ -60,12 +60,17 @@ def sample_draws(T: int, draws: int, seed: int = 1):
 
     model = get_model("same")
     rng = np.random.default_rng(seed)
-    _, z = model.simulate(np.array([0.9]), np.array([8.0]), rng.standard_normal((1, T, 1)),
-                          rng.standard_normal((1, T, 1)))
+    _, z = model.simulate(
+        np.array([0.9]),
+        np.array([8.0]),
+        rng.standard_normal((1, T, 1)),
+        rng.standard_normal((1, T, 1)),
+    )
     backend = get_backend("native")
     settings = SamplerSettings(chains=4, iter_warmup=1000, iter_sampling=draws, workers=2)
-    return backend.sample(stan_file("same"), model.stan_data(z[0], model.prior_bounds({"a": 0.9})),
-                          seed, settings)
+    return backend.sample(
+        stan_file("same"), model.stan_data(z[0], model.prior_bounds({"a": 0.9})), seed, settings
+    )
 
 
 def ours(x: np.ndarray, energy: np.ndarray) -> dict[str, np.ndarray]:
@@ -79,10 +84,12 @@ def arviz_stats(x: np.ndarray, energy: np.ndarray) -> dict[str, np.ndarray]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return {"rhat": array_stats.rhat(x, method="rank"),
-                "ess_bulk": array_stats.ess(x, method="bulk"),
-                "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95)),
-                "ebfmi": array_stats.bfmi(energy)}
+        return {
+            "rhat": array_stats.rhat(x, method="rank"),
+            "ess_bulk": array_stats.ess(x, method="bulk"),
+            "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95)),
+            "ebfmi": array_stats.bfmi(energy),
+        }
 
 
 def compare(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, tuple[float, bool]]:
@@ -109,12 +116,17 @@ def measure(x: np.ndarray, energy: np.ndarray, rounds: int) -> dict:
         r_az = arviz_stats(x, energy)
         t_az.append(time.perf_counter() - t0)
         c_az.append(time.process_time() - c0)
-    return {"ours": statistics.median(t_ours), "arviz_stats": statistics.median(t_az),
-            "cpu_ours": statistics.median(c_ours), "cpu_arviz_stats": statistics.median(c_az),
-            "cpu_ratio": statistics.median(a / o for a, o in zip(c_az, c_ours)),
-            "ratio": statistics.median(a / o for a, o in zip(t_az, t_ours)),
-            "ratios": [a / o for a, o in zip(t_az, t_ours)], "diff": compare(r_ours, r_az),
-            "nan_rows": int(np.isnan(r_ours["rhat"]).sum())}
+    return {
+        "ours": statistics.median(t_ours),
+        "arviz_stats": statistics.median(t_az),
+        "cpu_ours": statistics.median(c_ours),
+        "cpu_arviz_stats": statistics.median(c_az),
+        "cpu_ratio": statistics.median(a / o for a, o in zip(c_az, c_ours)),
+        "ratio": statistics.median(a / o for a, o in zip(t_az, t_ours)),
+        "ratios": [a / o for a, o in zip(t_az, t_ours)],
+        "diff": compare(r_ours, r_az),
+        "nan_rows": int(np.isnan(r_ours["rhat"]).sum()),
+    }
 
 
 def cases(draws, n_short: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
@@ -129,9 +141,14 @@ def cases(draws, n_short: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
     n = x.shape[2]
     out = [(f"{n} draws", x, energy), (f"{n} draws, stuck chain + constant column", defect, energy)]
     if n_short < n:
-        out += [(f"{n_short} draws", x[:, :, :n_short], energy[:, :n_short]),
-                (f"{n_short} draws, stuck chain + constant column", defect[:, :, :n_short],
-                 energy[:, :n_short])]
+        out += [
+            (f"{n_short} draws", x[:, :, :n_short], energy[:, :n_short]),
+            (
+                f"{n_short} draws, stuck chain + constant column",
+                defect[:, :, :n_short],
+                energy[:, :n_short],
+            ),
+        ]
     return out
 
 
@@ -154,24 +171,28 @@ def main() -> None:
     for label, x, energy in cases(draws, 1000):
         res = measure(x, energy, rounds)
         rows.append((label, x.shape, res))
-        print(f"{label}: {res['ours']:.3f} s vs {res['arviz_stats']:.3f} s, ratio "
-              f"{res['ratio']:.2f} ({', '.join(f'{r:.2f}' for r in res['ratios'])}), CPU "
-              f"{res['cpu_ours']:.3f} s vs {res['cpu_arviz_stats']:.3f} s",
-              file=sys.stderr)
+        print(
+            f"{label}: {res['ours']:.3f} s vs {res['arviz_stats']:.3f} s, ratio "
+            f"{res['ratio']:.2f} ({', '.join(f'{r:.2f}' for r in res['ratios'])}), CPU "
+            f"{res['cpu_ours']:.3f} s vs {res['cpu_arviz_stats']:.3f} s",
+            file=sys.stderr,
+        )
     load1 = os.getloadavg()
-    lines = [f"\n{SECTION}\n",
-             f"\nRun {started:%Y-%m-%d %H:%M} UTC on {machine_info()}; arviz-stats "
-             f"{arviz_stats.__version__}. Load average (1 min) {load0[0]:.1f} at the start, "
-             f"{load1[0]:.1f} at the end (other jobs shared the 2 cores; this one ran "
-             f"under `nice -n 19`, so absolute times are inflated: read the same-run ratio). "
-             f"Draws: model `same`, a = 0.9, x0 = 8, T = {T}, native backend, 4 chains x "
-             f"(1 000 warmup + {n} kept) draws, sampled in {t_sample:.0f} s. Per trajectory "
-             f"(all {rows[0][1][0]} parameters): R-hat (rank), bulk-ESS, tail-ESS, E-BFMI; "
-             f"median of {rounds} rounds, ours and arviz-stats alternating "
-             f"(`benchmarks/bench_diagnostics.py`).\n",
-             "\n| draws (chain x draw) | case | ours wall (CPU) [s] | arviz-stats wall (CPU) [s] "
-             "| ratio wall (CPU) | max rel. diff R-hat / bulk / tail / E-BFMI | same NaNs |",
-             "\n|---|---|---|---|---|---|---|"]
+    lines = [
+        f"\n{SECTION}\n",
+        f"\nRun {started:%Y-%m-%d %H:%M} UTC on {machine_info()}; arviz-stats "
+        f"{arviz_stats.__version__}. Load average (1 min) {load0[0]:.1f} at the start, "
+        f"{load1[0]:.1f} at the end (other jobs shared the 2 cores; this one ran "
+        f"under `nice -n 19`, so absolute times are inflated: read the same-run ratio). "
+        f"Draws: model `same`, a = 0.9, x0 = 8, T = {T}, native backend, 4 chains x "
+        f"(1 000 warmup + {n} kept) draws, sampled in {t_sample:.0f} s. Per trajectory "
+        f"(all {rows[0][1][0]} parameters): R-hat (rank), bulk-ESS, tail-ESS, E-BFMI; "
+        f"median of {rounds} rounds, ours and arviz-stats alternating "
+        f"(`benchmarks/bench_diagnostics.py`).\n",
+        "\n| draws (chain x draw) | case | ours wall (CPU) [s] | arviz-stats wall (CPU) [s] "
+        "| ratio wall (CPU) | max rel. diff R-hat / bulk / tail / E-BFMI | same NaNs |",
+        "\n|---|---|---|---|---|---|---|",
+    ]
     for label, shape, res in rows:
         d = res["diff"]
         lines.append(
@@ -179,10 +200,14 @@ def main() -> None:
             f"| {res['ours']:.3f} ({res['cpu_ours']:.3f}) | {res['arviz_stats']:.3f} "
             f"({res['cpu_arviz_stats']:.3f}) | {res['ratio']:.2f} ({res['cpu_ratio']:.2f}) | "
             f"{' / '.join(f'{d[k][0]:.1e}' for k in ('rhat', 'ess_bulk', 'ess_tail', 'ebfmi'))} | "
-            f"{'yes' if all(v[1] for v in d.values()) else 'no'} ({res['nan_rows']} NaN R-hat) |")
+            f"{'yes' if all(v[1] for v in d.values()) else 'no'} ({res['nan_rows']} NaN R-hat) |"
+        )
     worst = min(min(res["ratio"], res["cpu_ratio"]) for _, _, res in rows)
-    verdict = ("within 1.5x: use arviz-stats" if worst <= 1.5
-               else "more than 1.5x slower in every case: keep ours (`ssmobs.diagnostics`)")
+    verdict = (
+        "within 1.5x: use arviz-stats"
+        if worst <= 1.5
+        else "more than 1.5x slower in every case: keep ours (`ssmobs.diagnostics`)"
+    )
     lines.append(f"\n\nSmallest ratio arviz-stats / ours (wall or CPU): {worst:.2f}; {verdict}.\n")
     report("".join(lines), write=not args.no_write)
 

@@ -37,7 +37,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-
 from machine import machine_info  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -61,10 +60,19 @@ def trajectories(slug, omega, x0, T, K, seed=0):
     from ssmobs.trajectories import make_trajectories
 
     model = get_model(slug)
-    sc = Scenario.from_config({"name": slug, "model": slug, "T": T, "K": K, "x0": x0,
-                               "omega": dict(zip(model.param_names, omega))})
-    return make_trajectories(sc, np.random.default_rng(seed).standard_normal(
-        (sc.disturbance_dim, K)))
+    sc = Scenario.from_config(
+        {
+            "name": slug,
+            "model": slug,
+            "T": T,
+            "K": K,
+            "x0": x0,
+            "omega": dict(zip(model.param_names, omega)),
+        }
+    )
+    return make_trajectories(
+        sc, np.random.default_rng(seed).standard_normal((sc.disturbance_dim, K))
+    )
 
 
 def _run(args):
@@ -104,24 +112,37 @@ def accuracy(slug, omega, x0, T, K):
     traj = trajectories(slug, omega, x0, T, K, seed=1)
     bounds = traj.model.prior_bounds(traj.omega, None)
     base = exact_marginal(traj.model, traj.z, bounds)
-    fine = ExactSettings(coarse_nodes={1: 800, 2: 72, 3: 24, 4: 12},
-                         state_nodes={1: 61, 2: 31, 3: 16, 4: 9},
-                         state_thin={1: 10, 2: 3, 3: 2, 4: 2}, box_sd=9.0, spline_refine=24)
+    fine = ExactSettings(
+        coarse_nodes={1: 800, 2: 72, 3: 24, 4: 12},
+        state_nodes={1: 61, 2: 31, 3: 16, 4: 9},
+        state_thin={1: 10, 2: 3, 3: 2, 4: 2},
+        box_sd=9.0,
+        spline_refine=24,
+    )
     ref = exact_marginal(traj.model, traj.z, bounds, fine)
     ok = (base.maxima == "unique") & (ref.maxima == "unique")
     m = traj.model.n_params
     width = ref.theta_q95 - ref.theta_q5
     out = {"K": int(ok.sum()), "same_class": float(np.mean(base.maxima == ref.maxima))}
     for part, sl in (("omega", slice(0, m)), ("states", slice(m, None))):
-        for stat, a, b in (("map", base.theta_map, ref.theta_map),
-                           ("q", np.concatenate([base.theta_q5, base.theta_q95], 1),
-                            np.concatenate([ref.theta_q5, ref.theta_q95], 1))):
+        for stat, a, b in (
+            ("map", base.theta_map, ref.theta_map),
+            (
+                "q",
+                np.concatenate([base.theta_q5, base.theta_q95], 1),
+                np.concatenate([ref.theta_q5, ref.theta_q95], 1),
+            ),
+        ):
             w = np.concatenate([width, width], 1) if stat == "q" else width
-            cols = sl if stat == "map" else np.r_[np.arange(width.shape[1])[sl],
-                                                  width.shape[1] + np.arange(width.shape[1])[sl]]
+            cols = (
+                sl
+                if stat == "map"
+                else np.r_[
+                    np.arange(width.shape[1])[sl], width.shape[1] + np.arange(width.shape[1])[sl]
+                ]
+            )
             d = np.abs(a[ok][:, cols] - b[ok][:, cols]) / w[ok][:, cols]
-            out[f"{part}_{stat}"] = (f"{np.nanmedian(d):.1e} / {np.nanmax(d):.1e}"
-                                     if d.size else "-")
+            out[f"{part}_{stat}"] = f"{np.nanmedian(d):.1e} / {np.nanmax(d):.1e}" if d.size else "-"
     return out
 
 
@@ -148,13 +169,14 @@ def main() -> None:
         _run((slug, omega, x0, T, 4, 0, 4))  # warm-up (symbolic compilation of the model)
         seconds, frame, cpu = time_case(slug, omega, x0, T, K, workers)
         counts = frame["maxima"].value_counts().to_dict()
-        rows.append((label, K, workers, seconds, max(cpu), target, counts,
-                     int(frame["converged"].sum())))
+        rows.append(
+            (label, K, workers, seconds, max(cpu), target, counts, int(frame["converged"].sum()))
+        )
         print(rows[-1], flush=True)
     acc_rows = []
     for label, slug, omega, x0, T, K, _, _ in SPEED_CASES:
         if (slug == "same" and T == 50) or slug == "sep_d1_p2":
-            continue   # Same T=50 as T=20; d=1 p=2 has no unique maximum to compare
+            continue  # Same T=50 as T=20; d=1 p=2 has no unique maximum to compare
         acc = accuracy(slug, omega, x0, T, args.accuracy_K)
         acc_rows.append((label, acc))
         print(label, acc, flush=True)
@@ -162,7 +184,8 @@ def main() -> None:
     load1 = load_avg()
 
     lines = [
-        SECTION, "",
+        SECTION,
+        "",
         "`ssmobs.exact_marginal.exact_marginal` (issue 11): information-form Kalman filter with a "
         "diffuse x0, vectorised over Omega grid nodes and trajectories; coarse grid + Newton for "
         "the modes, a fine tensor grid on mode ± 7 Laplace sd for the marginals of Omega, "
@@ -185,8 +208,10 @@ def main() -> None:
     for label, K, workers, seconds, cpu, target, counts, conv in rows:
         tgt = f"{target:.0f}" if target else "-"
         cls = " / ".join(str(counts.get(k, 0)) for k in ("unique", "several", "none"))
-        lines.append(f"| {label} | {K} | {workers} | {seconds:.1f} | {cpu:.1f} | {tgt} | "
-                     f"{1000 * seconds / K:.1f} | {cls} | {conv} |")
+        lines.append(
+            f"| {label} | {K} | {workers} | {seconds:.1f} | {cpu:.1f} | {tgt} | "
+            f"{1000 * seconds / K:.1f} | {cls} | {conv} |"
+        )
     lines += [
         "",
         f"Grid accuracy ({args.accuracy_K} trajectories per model, seed 1): median / largest "
@@ -200,17 +225,22 @@ def main() -> None:
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for label, acc in acc_rows:
-        lines.append(f"| {label} | {acc['K']} | {acc['same_class']:.2f} | "
-                     f"{acc['omega_map']} | {acc['omega_q']} | {acc['states_map']} "
-                     f"| {acc['states_q']} |")
+        lines.append(
+            f"| {label} | {acc['K']} | {acc['same_class']:.2f} | "
+            f"{acc['omega_map']} | {acc['omega_q']} | {acc['states_map']} "
+            f"| {acc['states_q']} |"
+        )
     text = "\n".join(lines) + "\n"
     print(text)
     if not args.no_write:
         path = REPO / "BENCHMARKS.md"
         old = path.read_text() if path.exists() else "# Benchmarks\n"
         pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-        new = pattern.sub(lambda _: text + "\n", old) if pattern.search(old) else \
-            old.rstrip("\n") + "\n\n" + text
+        new = (
+            pattern.sub(lambda _: text + "\n", old)
+            if pattern.search(old)
+            else old.rstrip("\n") + "\n\n" + text
+        )
         path.write_text(new)
 
 

@@ -47,7 +47,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from machine import machine_info
 
 REPO = Path(__file__).resolve().parents[1]
@@ -101,7 +100,6 @@ def time_ours(model, z, omega, x0, repeat=1):
 
 def time_scipy(model, z, omega, x0, method):
     from scipy.optimize import Bounds, minimize
-
     from ssmobs.joint_map import initial_theta
     from ssmobs.models.log_posterior import neg2_log_posterior
 
@@ -123,23 +121,40 @@ def time_scipy(model, z, omega, x0, method):
             return neg2_log_posterior(model, t, zk, None, 2)[2]
 
         if method == "L-BFGS-B":  # closed box: keep 1e-8 off the prior's open bounds
-            r = minimize(fun, theta0[k], jac=True, method="L-BFGS-B",
-                         bounds=Bounds(lb + 1e-8 * (1 + np.abs(lb)), ub - 1e-8 * (1 + np.abs(ub))),
-                         options={"maxiter": 20000, "maxfun": 50000, "gtol": 1e-7,
-                                  "ftol": 1e-15})
+            r = minimize(
+                fun,
+                theta0[k],
+                jac=True,
+                method="L-BFGS-B",
+                bounds=Bounds(lb + 1e-8 * (1 + np.abs(lb)), ub - 1e-8 * (1 + np.abs(ub))),
+                options={"maxiter": 20000, "maxfun": 50000, "gtol": 1e-7, "ftol": 1e-15},
+            )
         elif method == "trust-exact":
+
             def fun_b(t):
                 v, g = neg2_log_posterior(model, t, zk, bounds, 1)
                 return v, g
 
             with np.errstate(all="ignore"):
-                r = minimize(fun_b, theta0[k], jac=True, hess=hess, method="trust-exact",
-                             options={"maxiter": 500, "gtol": 1e-8})
+                r = minimize(
+                    fun_b,
+                    theta0[k],
+                    jac=True,
+                    hess=hess,
+                    method="trust-exact",
+                    options={"maxiter": 500, "gtol": 1e-8},
+                )
         else:
             with np.errstate(all="ignore"):
-                r = minimize(fun, theta0[k], jac=True, hess=hess, method="trust-constr",
-                             bounds=Bounds(lb, ub),
-                             options={"maxiter": 3000, "gtol": 1e-8, "xtol": 1e-12})
+                r = minimize(
+                    fun,
+                    theta0[k],
+                    jac=True,
+                    hess=hess,
+                    method="trust-constr",
+                    bounds=Bounds(lb, ub),
+                    options={"maxiter": 3000, "gtol": 1e-8, "xtol": 1e-12},
+                )
         out[k] = r.x
     return time.perf_counter() - t0, out
 
@@ -167,8 +182,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from ssmobs.models.log_posterior import neg2_log_posterior
 
-    command = "python benchmarks/bench_joint_map.py" + (" " + " ".join(argv or sys.argv[1:])
-                                                        if (argv or sys.argv[1:]) else "")
+    command = "python benchmarks/bench_joint_map.py" + (
+        " " + " ".join(argv or sys.argv[1:]) if (argv or sys.argv[1:]) else ""
+    )
     load0 = load_avg()
     t_start = time.perf_counter()
     lines = []
@@ -178,52 +194,90 @@ def main(argv: list[str] | None = None) -> int:
         t_ours, res = time_ours(model, z, omega, x0, args.repeat)
         per_ours = t_ours / args.K
         status, counts = np.unique(res.status, return_counts=True)
-        print(f"ours: K={args.K} T={T}: {t_ours:.2f} s, {1e3 * per_ours:.3f} ms/trajectory, "
-              f"status {dict(zip(status.tolist(), counts.tolist()))}", flush=True)
-        rows = [("ssmobs.joint_map (batched barrier-Newton + all checks)", args.K, t_ours,
-                 per_ours, 1.0, "-", "-")]
-        zs = z[:args.scipy_K]
+        print(
+            f"ours: K={args.K} T={T}: {t_ours:.2f} s, {1e3 * per_ours:.3f} ms/trajectory, "
+            f"status {dict(zip(status.tolist(), counts.tolist()))}",
+            flush=True,
+        )
+        rows = [
+            (
+                "ssmobs.joint_map (batched barrier-Newton + all checks)",
+                args.K,
+                t_ours,
+                per_ours,
+                1.0,
+                "-",
+                "-",
+            )
+        ]
+        zs = z[: args.scipy_K]
         for method in ("L-BFGS-B", "trust-exact", "trust-constr"):
             t_sp, x_sp = time_scipy(model, zs, omega, x0, method)
             per_sp = t_sp / args.scipy_K
-            dist = np.abs(x_sp - res.theta_hat[:args.scipy_K]).max(axis=1)
+            dist = np.abs(x_sp - res.theta_hat[: args.scipy_K]).max(axis=1)
             g = neg2_log_posterior(model, x_sp, zs, None, 1)[1]
             grad_ok = np.abs(g).max(axis=1) < 1e-5
-            print(f"scipy {method}: K={args.scipy_K}: {t_sp:.2f} s, {1e3 * per_sp:.2f} "
-                  f"ms/trajectory, ratio {per_sp / per_ours:.1f}", flush=True)
-            rows.append((f"scipy.optimize.minimize {method}, one call per trajectory",
-                         args.scipy_K, t_sp, per_sp, per_sp / per_ours,
-                         f"{np.mean(dist < 1e-4):.2f} (median {np.median(dist):.1e})",
-                         f"{grad_ok.mean():.2f}"))
-        lines.append("| optimiser | K timed | wall [s] | ms / trajectory | SciPy / ours "
-                     "| share within 1e-4 of ours (sup norm) | share with max abs(grad) < 1e-5 |")
+            print(
+                f"scipy {method}: K={args.scipy_K}: {t_sp:.2f} s, {1e3 * per_sp:.2f} "
+                f"ms/trajectory, ratio {per_sp / per_ours:.1f}",
+                flush=True,
+            )
+            rows.append(
+                (
+                    f"scipy.optimize.minimize {method}, one call per trajectory",
+                    args.scipy_K,
+                    t_sp,
+                    per_sp,
+                    per_sp / per_ours,
+                    f"{np.mean(dist < 1e-4):.2f} (median {np.median(dist):.1e})",
+                    f"{grad_ok.mean():.2f}",
+                )
+            )
+        lines.append(
+            "| optimiser | K timed | wall [s] | ms / trajectory | SciPy / ours "
+            "| share within 1e-4 of ours (sup norm) | share with max abs(grad) < 1e-5 |"
+        )
         lines.append("|---|---:|---:|---:|---:|---|---:|")
         for r in rows:
-            lines.append(f"| {r[0]} | {r[1]} | {r[2]:.2f} | {1e3 * r[3]:.3f} | "
-                         f"{r[4]:.1f} | {r[5]} | {r[6]} |")
+            lines.append(
+                f"| {r[0]} | {r[1]} | {r[2]:.2f} | {1e3 * r[3]:.3f} | "
+                f"{r[4]:.1f} | {r[5]} | {r[6]} |"
+            )
         main_table = "\n".join(lines)
 
         model_lines = []
         if not args.quick:
-            model_lines.append("| case | n = abs(Theta) | K | wall [s] | ms / trajectory "
-                               "| mean Newton iterations | status counts |")
+            model_lines.append(
+                "| case | n = abs(Theta) | K | wall [s] | ms / trajectory "
+                "| mean Newton iterations | status counts |"
+            )
             model_lines.append("|---|---:|---:|---:|---:|---:|---|")
             for label, slug, om, x0m, Tm, _prior in MODEL_CASES:
                 mdl, zm = trajectories(slug, om, x0m, Tm, args.K_models, seed=1)
                 t_m, r_m = time_ours(mdl, zm, om, x0m, 1)
                 st, ct = np.unique(r_m.status, return_counts=True)
                 counts_txt = ", ".join(f"{s} {c}" for s, c in zip(st, ct))
-                print(f"{label}: {t_m:.2f} s, {1e3 * t_m / args.K_models:.2f} ms/traj, "
-                      f"{counts_txt}", flush=True)
+                print(
+                    f"{label}: {t_m:.2f} s, {1e3 * t_m / args.K_models:.2f} ms/traj, {counts_txt}",
+                    flush=True,
+                )
                 model_lines.append(
                     f"| {label} | {mdl.n_theta(Tm)} | {args.K_models} | {t_m:.2f} | "
                     f"{1e3 * t_m / args.K_models:.2f} | {r_m.iterations.mean():.1f} | "
-                    f"{counts_txt} |")
+                    f"{counts_txt} |"
+                )
     total = time.perf_counter() - t_start
     load1 = load_avg()
-    text = section_text(main_table, "\n".join(model_lines), command, total,
-                        f"{load0:.2f} / {load1:.2f} on {os.cpu_count()} CPUs", T, per_ours,
-                        rows)
+    text = section_text(
+        main_table,
+        "\n".join(model_lines),
+        command,
+        total,
+        f"{load0:.2f} / {load1:.2f} on {os.cpu_count()} CPUs",
+        T,
+        per_ours,
+        rows,
+    )
     print(text)
     if not args.no_write:
         write_section(args.output, text)
@@ -263,11 +317,13 @@ def section_text(main_table, model_table, command, total, load, T, per_ours, row
         f"ratio is not comparable.\n"
     )
     if model_table:
-        out += (f"\nAll models at paper-like T (same code, K trajectories in one call, "
-                f"random disturbances, seed 1):\n\n{model_table}\n\n"
-                f"Trajectories that end at the boundary or keep climbing a ridge run up to "
-                f"`max_newton_iter` (200) iterations, which dominates the cost of (Sep, d=1, "
-                f"p=2) and ranWalk; p = 2 is also slower per iteration (2 x 2 blocks).\n")
+        out += (
+            f"\nAll models at paper-like T (same code, K trajectories in one call, "
+            f"random disturbances, seed 1):\n\n{model_table}\n\n"
+            f"Trajectories that end at the boundary or keep climbing a ridge run up to "
+            f"`max_newton_iter` (200) iterations, which dominates the cost of (Sep, d=1, "
+            f"p=2) and ranWalk; p = 2 is also slower per iteration (2 x 2 blocks).\n"
+        )
     return out
 
 

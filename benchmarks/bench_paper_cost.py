@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 from machine import machine_info, report
-
 from ssmobs import config as cfg
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.nuts_stage import run_trajectories
@@ -60,18 +59,38 @@ def main() -> None:
         backend.compile(stan_file(model.slug))
         with tempfile.TemporaryDirectory() as tmp:
             t0, c0 = time.perf_counter(), cpu_seconds()
-            recs = run_trajectories(model, backend, stan_file(model.slug), traj.z, traj.x,
-                                    list(range(args.n)), bounds, traj.omega, traj.x0,
-                                    sc.name, sc.seed, sampler=sampler,
-                                    convergence=ConvergenceSettings(**conf["convergence"]),
-                                    init=sc.stan_init, records_dir=tmp)
+            recs = run_trajectories(
+                model,
+                backend,
+                stan_file(model.slug),
+                traj.z,
+                traj.x,
+                list(range(args.n)),
+                bounds,
+                traj.omega,
+                traj.x0,
+                sc.name,
+                sc.seed,
+                sampler=sampler,
+                convergence=ConvergenceSettings(**conf["convergence"]),
+                init=sc.stan_init,
+                records_dir=tmp,
+            )
             wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
         per_cpu = cpu / args.n
-        rows.append({"scenario": sc.name, "model": model.slug, "T": sc.T, "K": sc.K,
-                     "wall_s": wall / args.n, "cpu_s": per_cpu,
-                     "cpu_h_per_1000": per_cpu * 1000 / 3600,
-                     "cpu_h_total": per_cpu * sc.K / 3600,
-                     "converged": sum(r["converged"] for r in recs)})
+        rows.append(
+            {
+                "scenario": sc.name,
+                "model": model.slug,
+                "T": sc.T,
+                "K": sc.K,
+                "wall_s": wall / args.n,
+                "cpu_s": per_cpu,
+                "cpu_h_per_1000": per_cpu * 1000 / 3600,
+                "cpu_h_total": per_cpu * sc.K / 3600,
+                "converged": sum(r["converged"] for r in recs),
+            }
+        )
         print(rows[-1], flush=True)
     total_runs = sum(r["K"] for r in rows)
     total_h = sum(r["cpu_h_total"] for r in rows)
@@ -95,11 +114,17 @@ def main() -> None:
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
-        lines.append(f"| {r['scenario']} | {r['model']} | {r['T']} | {r['wall_s']:.1f} | "
-                     f"{r['cpu_s']:.1f} | {r['cpu_h_per_1000']:.2f} | {r['K']} | "
-                     f"{r['cpu_h_total']:.1f} | {r['converged']}/{args.n} |")
-    lines += ["", f"Total: {total_runs} Stan runs, about {total_h:.0f} CPU-hours "
-              f"({total_h * 1000 / total_runs:.2f} CPU-h per 1000 runs on average).", ""]
+        lines.append(
+            f"| {r['scenario']} | {r['model']} | {r['T']} | {r['wall_s']:.1f} | "
+            f"{r['cpu_s']:.1f} | {r['cpu_h_per_1000']:.2f} | {r['K']} | "
+            f"{r['cpu_h_total']:.1f} | {r['converged']}/{args.n} |"
+        )
+    lines += [
+        "",
+        f"Total: {total_runs} Stan runs, about {total_h:.0f} CPU-hours "
+        f"({total_h * 1000 / total_runs:.2f} CPU-h per 1000 runs on average).",
+        "",
+    ]
     text = "\n".join(lines)
     report(text, write=not args.no_write)
 

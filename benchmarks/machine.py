@@ -27,8 +27,10 @@ def machine_info() -> str:
 
     mem = _proc_field("/proc/meminfo", "MemTotal")
     ram = f"{int(mem.split()[0]) / 1024**2:.1f} GiB RAM" if mem else "unknown RAM"
-    return (f"{os.cpu_count()} CPUs (nproc), {cpu_model()}, {ram}; Python "
-            f"{platform.python_version()}, NumPy {numpy.__version__}, SciPy {scipy.__version__}")
+    return (
+        f"{os.cpu_count()} CPUs (nproc), {cpu_model()}, {ram}; Python "
+        f"{platform.python_version()}, NumPy {numpy.__version__}, SciPy {scipy.__version__}"
+    )
 
 
 def report(text: str, write: bool) -> None:

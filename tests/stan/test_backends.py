@@ -16,10 +16,16 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from ssmobs.models import get_model
-from ssmobs.stan_backends import (SAMPLER_COLUMNS, Draws, SamplerSettings, SamplingError,
-                                  get_backend, have_cmdstan, stan_file)
+from ssmobs.stan_backends import (
+    SAMPLER_COLUMNS,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    get_backend,
+    have_cmdstan,
+    stan_file,
+)
 from ssmobs.stan_backends import pystan as pystan_mod
 from ssmobs.stan_backends.pystan import PyStanBackend
 
@@ -51,7 +57,8 @@ def _fit_files(model_dir: Path) -> list[Path]:
 def _check_draws(draws: Draws, settings: SamplerSettings, shapes: dict[str, tuple]) -> None:
     C, S = settings.chains, settings.iter_sampling
     assert {k: v.shape for k, v in draws.params.items()} == {
-        k: (C, S) + shape for k, shape in shapes.items()}
+        k: (C, S) + shape for k, shape in shapes.items()
+    }
     assert set(draws.sample_stats) == set(SAMPLER_COLUMNS)
     for name, arr in draws.sample_stats.items():
         assert arr.shape == (C, S), name
@@ -101,6 +108,7 @@ def test_pystan_draws_deterministic_and_no_files_left(backend):
 def test_pystan_p2_layout_matches_arviz(backend):
     """Draws of matrix[T, 2] x agree with ArviZ's from_pystan (chain, draw, t, i)."""
     import arviz_base as az
+
     import stan
 
     omega = {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6}
@@ -114,8 +122,9 @@ def test_pystan_p2_layout_matches_arviz(backend):
     for name in ("a", "b", "x0", "x"):
         np.testing.assert_array_equal(draws.params[name], idata.posterior[name].values)
     assert draws.params["x"].shape == (3, 50, 4, 2)
-    np.testing.assert_array_equal(draws.sample_stats["energy__"],
-                                  idata.sample_stats["energy"].values)
+    np.testing.assert_array_equal(
+        draws.sample_stats["energy__"], idata.sample_stats["energy"].values
+    )
 
 
 def test_pystan_pool_cap(backend, monkeypatch):
@@ -166,8 +175,9 @@ def test_pystan_sampling_error_leaves_nothing(backend):
     """An init outside the support makes Stan fail: SamplingError, and no files left."""
     data = _data("same", {"a": 0.9})
     with pytest.raises(SamplingError, match="same.stan"):
-        backend.sample(stan_file("same"), data, seed=5, settings=SMALL,
-                       inits=[{"a": 1.5}, {"a": 1.5}])
+        backend.sample(
+            stan_file("same"), data, seed=5, settings=SMALL, inits=[{"a": 1.5}, {"a": 1.5}]
+        )
     private = pystan_mod.private_cache().root
     assert list(private.glob("httpstan/*/models/*/fits/*")) == []
     assert list(private.glob("httpstan_*.sock")) == []
@@ -178,8 +188,9 @@ def test_pystan_sampling_error_leaves_nothing(backend):
 def test_pystan_bad_data_is_valueerror(backend):
     data = _data("same", {"a": 0.9})
     with pytest.raises(ValueError, match="data rejected"):
-        backend.sample(stan_file("same"), {**data, "a_lower": 2.0, "a_upper": 3.0}, seed=1,
-                       settings=SMALL)
+        backend.sample(
+            stan_file("same"), {**data, "a_lower": 2.0, "a_upper": 3.0}, seed=1, settings=SMALL
+        )
     bad = dict(data)
     del bad["z"]
     with pytest.raises(ValueError, match="data rejected"):
@@ -188,20 +199,29 @@ def test_pystan_bad_data_is_valueerror(backend):
         backend.sample(stan_file("same"), data, seed=-1, settings=SMALL)
 
 
-@pytest.mark.parametrize("slug,omega,shapes", [
-    ("sep_d2_p1", {"a": 0.8, "b": 0.6, "c": 0.7},
-     {"a": (), "b": (), "c": (), "x0": (), "x": (T,)}),
-    ("sep_ranwalk", {"a": 0.5}, {"a": (), "x0": (), "x": (T,)}),  # a in (0, inf)
-    ("sep_mult", {"a": 0.5}, {"a": (), "x0": (), "x": (T,)}),
-    ("sep_d1_p2", {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6},
-     {"a": (), "b": (), "c": (), "d": (), "x0": (2,), "x": (T, 2)}),
-])
+@pytest.mark.parametrize(
+    "slug,omega,shapes",
+    [
+        (
+            "sep_d2_p1",
+            {"a": 0.8, "b": 0.6, "c": 0.7},
+            {"a": (), "b": (), "c": (), "x0": (), "x": (T,)},
+        ),
+        ("sep_ranwalk", {"a": 0.5}, {"a": (), "x0": (), "x": (T,)}),  # a in (0, inf)
+        ("sep_mult", {"a": 0.5}, {"a": (), "x0": (), "x": (T,)}),
+        (
+            "sep_d1_p2",
+            {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6},
+            {"a": (), "b": (), "c": (), "d": (), "x0": (2,), "x": (T, 2)},
+        ),
+    ],
+)
 def test_pystan_other_models_run(backend, slug, omega, shapes):
     draws = backend.sample(stan_file(slug), _data(slug, omega), seed=11, settings=SMALL)
     _check_draws(draws, SMALL, shapes)
     if slug == "sep_d1_p2":
         a, b = draws.params["a"], draws.params["b"]
-        assert np.all(a ** 2 + b ** 2 < 1) and np.all(a > 0) and np.all(b > 0)
+        assert np.all(a**2 + b**2 < 1) and np.all(a > 0) and np.all(b > 0)
     if slug in ("sep_ranwalk", "sep_mult"):
         assert np.all(draws.params["a"] > 0)
 
@@ -209,8 +229,10 @@ def test_pystan_other_models_run(backend, slug, omega, shapes):
 # ----------------------------------------------------------------------------- cmdstanpy
 def _require_cmdstan() -> None:
     if not have_cmdstan():
-        reason = ("CmdStan is not installed (cmdstanpy finds no installation with bin/stanc;"
-                  " set $CMDSTAN or run `python -m cmdstanpy.install_cmdstan`)")
+        reason = (
+            "CmdStan is not installed (cmdstanpy finds no installation with bin/stanc;"
+            " set $CMDSTAN or run `python -m cmdstanpy.install_cmdstan`)"
+        )
         if os.environ.get("SSMOBS_REQUIRE_CMDSTAN") == "1":
             pytest.fail(f"SSMOBS_REQUIRE_CMDSTAN=1 but {reason}")
         pytest.skip(reason)
@@ -233,31 +255,41 @@ def test_cmdstanpy_run():
     assert after <= before
     with pytest.raises(SamplingError):
         backend.sample(sf, data, seed=5, settings=SMALL, inits=[{"a": 1.5}, {"a": 1.5}])
-    p2 = backend.sample(stan_file("sep_d1_p2"),
-                        _data("sep_d1_p2", {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6}),
-                        seed=3, settings=SMALL)
+    p2 = backend.sample(
+        stan_file("sep_d1_p2"),
+        _data("sep_d1_p2", {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6}),
+        seed=3,
+        settings=SMALL,
+    )
     _check_draws(p2, SMALL, {"a": (), "b": (), "c": (), "d": (), "x0": (2,), "x": (T, 2)})
 
 
 def test_cmdstanpy_conversion_layout():
     """Draws from CmdStan's column layout (draws, chains, columns), no CmdStan needed."""
+    from ssmobs.stan_backends.cmdstanpy import fit_to_draws
     from stanio import parse_header
 
-    from ssmobs.stan_backends.cmdstanpy import fit_to_draws
-
     S, C, T2 = 5, 3, 4
-    cols = list(SAMPLER_COLUMNS) + ["a", "x0.1", "x0.2"] + [
-        f"x.{t}.{i}" for i in (1, 2) for t in range(1, T2 + 1)]  # CmdStan: column-major
+    cols = (
+        list(SAMPLER_COLUMNS)
+        + ["a", "x0.1", "x0.2"]
+        + [f"x.{t}.{i}" for i in (1, 2) for t in range(1, T2 + 1)]
+    )  # CmdStan: column-major
     # value encodes (draw, chain, column) so every position can be checked
-    arr = np.array([[[1000 * s + 100 * c + j for j in range(len(cols))] for c in range(C)]
-                    for s in range(S)], dtype=float)
+    arr = np.array(
+        [[[1000 * s + 100 * c + j for j in range(len(cols))] for c in range(C)] for s in range(S)],
+        dtype=float,
+    )
     all_vars = parse_header(",".join(cols))
     fake = SimpleNamespace(
         draws=lambda concat_chains=False: arr,
-        metadata=SimpleNamespace(stan_vars={k: v for k, v in all_vars.items()
-                                            if not k.endswith("__")}),
-        method_variables=lambda: {k: v.extract_reshape(arr) for k, v in all_vars.items()
-                                  if k.endswith("__")})
+        metadata=SimpleNamespace(
+            stan_vars={k: v for k, v in all_vars.items() if not k.endswith("__")}
+        ),
+        method_variables=lambda: {
+            k: v.extract_reshape(arr) for k, v in all_vars.items() if k.endswith("__")
+        },
+    )
     draws = fit_to_draws(fake)
     assert draws.params["x"].shape == (C, S, T2, 2)
     assert draws.params["x0"].shape == (C, S, 2)
@@ -319,8 +351,9 @@ def test_pystan_gives_stanc_more_than_httpstans_one_second(monkeypatch):
     monkeypatch.setattr(subprocess, "run", spy)
     pystan_mod._patient_stanc()
     pystan_mod._patient_stanc()  # idempotent
-    cpp, _ = httpstan.compile.compile("parameters { real y; } model { y ~ std_normal(); }",
-                                      "model_timeout_check")
+    cpp, _ = httpstan.compile.compile(
+        "parameters { real y; } model { y ~ std_normal(); }", "model_timeout_check"
+    )
     assert "model_timeout_check" in cpp
     assert seen == [pystan_mod.STANC_TIMEOUT]
     assert subprocess.run is spy  # the global module is untouched

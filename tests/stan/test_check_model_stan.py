@@ -8,7 +8,6 @@ program on first use; cached afterwards).
 from __future__ import annotations
 
 import pytest
-
 from ssmobs.check_model import CheckCase, check_model, stan_problems
 from ssmobs.models import MODELS, get_model
 from ssmobs.stan_backends import stan_file
@@ -33,8 +32,9 @@ def _broken(tmp_path, old: str, new: str):
 
 def test_prior_bound_stan_does_not_share(tmp_path):
     # sigma bounded below only: the Python prior U(0, 1) ('restricted') is not Stan's
-    path = _broken(tmp_path, "real<lower=sigma_lo, upper=sigma_upper> sigma;",
-                   "real<lower=sigma_lo> sigma;")
+    path = _broken(
+        tmp_path, "real<lower=sigma_lo, upper=sigma_upper> sigma;", "real<lower=sigma_lo> sigma;"
+    )
     case = CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], {"sigma": "restricted"})
     problems = stan_problems(get_model("stoch_vol"), path, case)
     assert len(problems) == 1
@@ -45,15 +45,20 @@ def test_prior_bound_stan_does_not_share(tmp_path):
 
 def test_log_density_that_differs_is_named(tmp_path):
     # exp(x) instead of exp(x / 2): the observation standard deviation is wrong
-    path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));",
-                   "z ~ normal(0, exp(x));  // wrong scale")
-    problems = stan_problems(get_model("stoch_vol"), path,
-                             CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0]))
+    path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));", "z ~ normal(0, exp(x));  // wrong scale")
+    problems = stan_problems(
+        get_model("stoch_vol"), path, CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0])
+    )
     assert len(problems) == 1
     assert "differs from the Python log posterior by more than a constant" in problems[0]
 
 
 def test_agreeing_program_gives_no_problem_for_configured_case():
-    problems = stan_problems(get_model("stoch_vol"), stan_file("stoch_vol"),
-                             CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0]), T=9, seed=3)
+    problems = stan_problems(
+        get_model("stoch_vol"),
+        stan_file("stoch_vol"),
+        CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0]),
+        T=9,
+        seed=3,
+    )
     assert problems == []

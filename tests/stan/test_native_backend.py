@@ -10,12 +10,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ssmobs.models import get_model
 from ssmobs.nuts_stage import run_trajectories
 from ssmobs.record_cache import record_path
-from ssmobs.stan_backends import (SAMPLER_COLUMNS, BackendError, SamplerSettings,
-                                  SamplingError, get_backend, resolve_backend, stan_file)
+from ssmobs.stan_backends import (
+    SAMPLER_COLUMNS,
+    BackendError,
+    SamplerSettings,
+    SamplingError,
+    get_backend,
+    resolve_backend,
+    stan_file,
+)
 from ssmobs.stan_backends import native as native_mod
 from ssmobs.stan_backends.native import NativeBackend, columns_to_draws
 from test_backends import _data  # the same small data sets as the other backend tests
@@ -36,11 +42,14 @@ def test_auto_is_native_without_cmdstan(monkeypatch):
     assert get_backend("auto").name == "native"
 
 
-@pytest.mark.parametrize("slug, omega, inits", [
-    ("same", {"a": 0.9}, False),
-    ("same", {"a": 0.9}, True),
-    ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, False),
-])
+@pytest.mark.parametrize(
+    "slug, omega, inits",
+    [
+        ("same", {"a": 0.9}, False),
+        ("same", {"a": 0.9}, True),
+        ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, False),
+    ],
+)
 def test_same_draws_as_pystan(native, slug, omega, inits):
     """Bit-identical draws and sampler columns for the same seed (chain ids 1..C)."""
     pystan = get_backend("pystan")
@@ -61,8 +70,12 @@ def test_same_draws_as_pystan(native, slug, omega, inits):
 def test_threads_do_not_change_draws(native):
     data = _data("same", {"a": 0.9})
     one = native.sample(stan_file("same"), data, 7, SMALL)
-    two = native.sample(stan_file("same"), data, 7,
-                        SamplerSettings(chains=2, iter_warmup=150, iter_sampling=150, workers=2))
+    two = native.sample(
+        stan_file("same"),
+        data,
+        7,
+        SamplerSettings(chains=2, iter_warmup=150, iter_sampling=150, workers=2),
+    )
     np.testing.assert_array_equal(one.params["x"], two.params["x"])
     assert one.params["x"].shape == (2, 150, 8)
     assert one.timings["sample_cpu"] > 0
@@ -123,8 +136,10 @@ def test_data_rejected_is_a_value_error(native):
 
 def _broken_driver(tmp_path: Path) -> Path:
     script = tmp_path / "driver"
-    script.write_text("#!/bin/sh\necho 'driver: error while loading shared libraries: "
-                      "libtbb.so.2: cannot open shared object file' >&2\nexit 127\n")
+    script.write_text(
+        "#!/bin/sh\necho 'driver: error while loading shared libraries: "
+        "libtbb.so.2: cannot open shared object file' >&2\nexit 127\n"
+    )
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return script
 
@@ -133,8 +148,9 @@ def test_missing_library_fails_the_job_not_the_trajectory(tmp_path):
     """A driver that cannot start raises BackendError and no record is written."""
     backend = NativeBackend()
     marker = backend.compile(stan_file("same"))
-    backend._markers = {k: dict(v, exe_file=str(_broken_driver(tmp_path)))
-                        for k, v in backend._markers.items()}
+    backend._markers = {
+        k: dict(v, exe_file=str(_broken_driver(tmp_path))) for k, v in backend._markers.items()
+    }
     assert marker["backend"] == "native"
     with pytest.raises(BackendError, match="libtbb.so.2"):
         backend.sample(stan_file("same"), _data("same", {"a": 0.9}), 1, SMALL)
@@ -142,9 +158,21 @@ def test_missing_library_fails_the_job_not_the_trajectory(tmp_path):
     z = np.random.default_rng(0).standard_normal((2, 5, 1))
     records = tmp_path / "records"
     with pytest.raises(BackendError):
-        run_trajectories(model, backend, stan_file("same"), z, z, [0, 1],
-                         model.prior_bounds([0.9]), [0.9], [8.0], "s", 1,
-                         sampler=SMALL, records_dir=records)
+        run_trajectories(
+            model,
+            backend,
+            stan_file("same"),
+            z,
+            z,
+            [0, 1],
+            model.prior_bounds([0.9]),
+            [0.9],
+            [8.0],
+            "s",
+            1,
+            sampler=SMALL,
+            records_dir=records,
+        )
     assert not record_path(records, 0).exists()
 
 

@@ -6,10 +6,8 @@ run compiles them, about a minute each; later runs find them in the httpstan cac
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
-
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.models import get_model
 from ssmobs.nuts_stage import records_to_frame, run_trajectories
@@ -30,8 +28,12 @@ def _trajectory(model, omega, x0, T, seed):
     """One observation trajectory of the model with standard normal disturbances."""
     rng = np.random.default_rng(seed)
     p, d = model.state_dim, model.obs_dim
-    x, z = model.simulate(np.array(list(omega.values())), np.atleast_1d(float(x0)),
-                          rng.standard_normal((1, T, p)), rng.standard_normal((1, T, d)))
+    x, z = model.simulate(
+        np.array(list(omega.values())),
+        np.atleast_1d(float(x0)),
+        rng.standard_normal((1, T, p)),
+        rng.standard_normal((1, T, d)),
+    )
     return x, z
 
 
@@ -39,11 +41,26 @@ def _run(backend, slug, T, sampler, tmp_path, seed=7, keep=()):
     model = get_model(slug)
     omega = {"a": 0.9}
     x, z = _trajectory(model, omega, 8.0, T, seed)
-    recs = run_trajectories(model, backend, stan_file(slug), z, x, [0],
-                            model.prior_bounds(omega), model.omega_array(omega), 8.0,
-                            f"{slug}_T{T}", 1, sampler,
-                            ConvergenceSettings(), "random", tmp_path / "records", set(keep),
-                            tmp_path / "draws", None)
+    recs = run_trajectories(
+        model,
+        backend,
+        stan_file(slug),
+        z,
+        x,
+        [0],
+        model.prior_bounds(omega),
+        model.omega_array(omega),
+        8.0,
+        f"{slug}_T{T}",
+        1,
+        sampler,
+        ConvergenceSettings(),
+        "random",
+        tmp_path / "records",
+        set(keep),
+        tmp_path / "draws",
+        None,
+    )
     return model, x, recs[0]
 
 
@@ -63,7 +80,9 @@ def test_same_T20_converges_near_the_truth(backend, tmp_path):
     assert abs(x0_map - 8.0) < 2.5
     assert rec["q5"][0] < a_map < rec["q95"][0]
     # the design states are estimated too: most lie in their 90 % intervals
-    inside = np.mean((np.array(rec["q5"][2:]) < x[0, :, 0]) & (x[0, :, 0] < np.array(rec["q95"][2:])))
+    inside = np.mean(
+        (np.array(rec["q5"][2:]) < x[0, :, 0]) & (x[0, :, 0] < np.array(rec["q95"][2:]))
+    )
     assert inside >= 0.7
     frame = records_to_frame([rec], model, 20)
     out = stan_summary(frame, model, [0.9], 8.0, x)

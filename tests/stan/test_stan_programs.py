@@ -13,7 +13,6 @@ import zlib
 
 import numpy as np
 import pytest
-
 from ssmobs.models import get_model
 from ssmobs.models.log_posterior import log_posterior
 from ssmobs.stan_backends import stan_file
@@ -35,10 +34,10 @@ CASES = [
     ("sep_d1_p2", {"a": 0.5, "b": 0.6, "c": 0.8, "d": 0.6}, None),
     ("sep_d1_p2", {"a": -0.5, "b": 0.4, "c": 0.8, "d": -0.6}, "unrestricted"),
     ("sep_d1_p2", {"a": 0.3, "b": -0.6, "c": 0.5, "d": 0.6}, {"a": "unrestricted"}),
-    ("sep_ranwalk", {"a": 0.5}, None),                 # half line (0, inf)
-    ("sep_ranwalk", {"a": -0.5}, None),                # half line (-inf, 0)
+    ("sep_ranwalk", {"a": 0.5}, None),  # half line (0, inf)
+    ("sep_ranwalk", {"a": -0.5}, None),  # half line (-inf, 0)
     ("sep_ranwalk", {"a": 0.5}, "unrestricted"),
-    ("sep_mult", {"a": 0.5}, None),                    # half line (0, inf)
+    ("sep_mult", {"a": 0.5}, None),  # half line (0, inf)
     ("sep_mult", {"a": 0.5}, "restricted"),
 ]
 
@@ -104,7 +103,7 @@ def test_log_density_matches_python(backend, case):
             upars = post.unconstrain_pars(_stan_point(model, theta, T))
             # the unconstrained point maps back to the same Omega
             back = np.asarray(post.constrain_pars(upars))
-            assert back[:model.n_params] == pytest.approx(omega, rel=1e-10, abs=1e-12)
+            assert back[: model.n_params] == pytest.approx(omega, rel=1e-10, abs=1e-12)
             py.append(float(log_posterior(model, theta, z, bounds)))
             st.append(post.log_prob(upars, adjust_transform=False))
     py, st = np.array(py), np.array(st)
@@ -124,8 +123,14 @@ def test_p2_state_layout(backend):
     data = model.stan_data(np.zeros((3, 1)), bounds)
     with backend.session(stan_file("sep_d1_p2")):
         post = stan.build(stan_file("sep_d1_p2").read_text(), data=data)
-        point = {"a": 0.1, "b": 0.2, "c": 0.3, "d": 0.4, "x0": [10.0, 20.0],
-                 "x": [[11.0, 21.0], [12.0, 22.0], [13.0, 23.0]]}
+        point = {
+            "a": 0.1,
+            "b": 0.2,
+            "c": 0.3,
+            "d": 0.4,
+            "x0": [10.0, 20.0],
+            "x": [[11.0, 21.0], [12.0, 22.0], [13.0, 23.0]],
+        }
         flat = post.constrain_pars(post.unconstrain_pars(point))
     names = post.constrained_param_names
     values = dict(zip(names, flat))
@@ -151,11 +156,14 @@ def test_sep_d1_p2_support_is_the_disk(backend):
             post.unconstrain_pars({**base, "a": 0.7, "b": 0.72})  # 1.0084 > 1
 
 
-@pytest.mark.parametrize("slug,bad", [
-    ("same", {"a_lower": 1.0, "a_upper": 2.0}),            # prior misses (-1, 1)
-    ("sep_mult", {"a_lower": -2.0, "a_upper": -1.0}),      # prior misses a > 0
-    ("sep_d1_p2", {"a_lower": 0.9, "a_upper": 1.0, "b_lower": 0.5, "b_upper": 1.0}),
-])
+@pytest.mark.parametrize(
+    "slug,bad",
+    [
+        ("same", {"a_lower": 1.0, "a_upper": 2.0}),  # prior misses (-1, 1)
+        ("sep_mult", {"a_lower": -2.0, "a_upper": -1.0}),  # prior misses a > 0
+        ("sep_d1_p2", {"a_lower": 0.9, "a_upper": 1.0, "b_lower": 0.5, "b_upper": 1.0}),
+    ],
+)
 def test_empty_support_is_rejected_at_data_time(backend, slug, bad):
     import stan
 
@@ -174,8 +182,9 @@ def test_sep_d1_p2_jacobian_keeps_prior_flat(backend):
 
     model = get_model("sep_d1_p2")
     omega = {"a": 0.5, "b": -0.6, "c": 0.8, "d": 0.6}
-    data = model.stan_data(np.array([[0.3], [-0.2]]), model.prior_bounds(omega,
-                                                                         {"a": "unrestricted"}))
+    data = model.stan_data(
+        np.array([[0.3], [-0.2]]), model.prior_bounds(omega, {"a": "unrestricted"})
+    )
     rng = np.random.default_rng(7)
     with backend.session(stan_file("sep_d1_p2")):
         post = stan.build(stan_file("sep_d1_p2").read_text(), data=data)
@@ -187,10 +196,11 @@ def test_sep_d1_p2_jacobian_keeps_prior_flat(backend):
                 up, dn = list(u), list(u)
                 up[k] += h
                 dn[k] -= h
-                jac[:, k] = (np.array(post.constrain_pars(up)[:4])
-                             - np.array(post.constrain_pars(dn)[:4])) / (2 * h)
+                jac[:, k] = (
+                    np.array(post.constrain_pars(up)[:4]) - np.array(post.constrain_pars(dn)[:4])
+                ) / (2 * h)
             a, b = post.constrain_pars(u)[:2]
-            assert a ** 2 + b ** 2 < 1 and b < 0
+            assert a**2 + b**2 < 1 and b < 0
             log_det = np.log(abs(np.linalg.det(jac)))
             adjusted = post.log_prob(u, adjust_transform=True)
             plain = post.log_prob(u, adjust_transform=False)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from ssmobs.banded_linalg import (
     ArrowFactor,
     BlockTridiagonalCholesky,
@@ -47,29 +46,32 @@ def random_spd_arrow(K, N, p, m, seed):
         Lx = np.zeros((nx, nx))
         for t in range(N):
             s = t * p
-            Lx[s:s + p, s:s + p] = np.tril(rng.normal(size=(p, p)), -1) + np.diag(
-                1.0 + np.abs(rng.normal(size=p)))
+            Lx[s : s + p, s : s + p] = np.tril(rng.normal(size=(p, p)), -1) + np.diag(
+                1.0 + np.abs(rng.normal(size=p))
+            )
             if t:
-                Lx[s:s + p, s - p:s] = 0.7 * rng.normal(size=(p, p))
+                Lx[s : s + p, s - p : s] = 0.7 * rng.normal(size=(p, p))
         G = rng.normal(size=(m, nx))
         Lw = np.tril(rng.normal(size=(m, m)), -1) + np.diag(0.5 + np.abs(rng.normal(size=m)))
         L = np.block([[Lx, np.zeros((nx, m))], [G, Lw]])
         M = L @ L.T
-        order = np.r_[nx:nx + m, 0:nx]
+        order = np.r_[nx : nx + m, 0:nx]
         H[k] = M[np.ix_(order, order)]
     A = H[:, :m, :m].copy()
     C = H[:, m:, :m].reshape(K, N, p, m).copy()
-    Dd = np.stack([H[:, m + t * p:m + (t + 1) * p, m + t * p:m + (t + 1) * p]
-                   for t in range(N)], axis=1)
+    Dd = np.stack(
+        [H[:, m + t * p : m + (t + 1) * p, m + t * p : m + (t + 1) * p] for t in range(N)], axis=1
+    )
     Dl = np.zeros((K, N - 1, p, p))
     for t in range(1, N):
-        Dl[:, t - 1] = H[:, m + t * p:m + (t + 1) * p, m + (t - 1) * p:m + t * p]
+        Dl[:, t - 1] = H[:, m + t * p : m + (t + 1) * p, m + (t - 1) * p : m + t * p]
     return (A, C, Dd, Dl), H
 
 
 # --------------------------------------------------------------------------- against dense NumPy
-@pytest.mark.parametrize("N, p, m", [(1, 1, 1), (2, 1, 2), (12, 1, 2), (9, 2, 3), (6, 3, 4),
-                                     (10, 2, 1)])
+@pytest.mark.parametrize(
+    "N, p, m", [(1, 1, 1), (2, 1, 2), (12, 1, 2), (9, 2, 3), (6, 3, 4), (10, 2, 1)]
+)
 def test_arrow_solver_matches_dense_solve_on_random_spd_arrows(N, p, m):
     blocks, H = random_spd_arrow(K=6, N=N, p=p, m=m, seed=10 * N + p + m)
     n = H.shape[1]
@@ -81,8 +83,7 @@ def test_arrow_solver_matches_dense_solve_on_random_spd_arrows(N, p, m):
     fac = ArrowFactor(*blocks)
     assert fac.ok.all()
     assert np.allclose(fac.solve(b), expect, rtol=0, atol=1e-9 * scale)
-    assert np.allclose(ArrowFactor(*blocks, rhs=b).solve_rhs(), expect, rtol=0,
-                       atol=1e-9 * scale)
+    assert np.allclose(ArrowFactor(*blocks, rhs=b).solve_rhs(), expect, rtol=0, atol=1e-9 * scale)
     assert np.allclose(fac.matvec(b), np.einsum("kij,kj->ki", H, b), rtol=1e-13, atol=1e-12)
     inv = np.linalg.inv(H)
     assert np.allclose(fac.diag_inverse(), np.diagonal(inv, axis1=1, axis2=2), rtol=1e-9)
@@ -90,8 +91,9 @@ def test_arrow_solver_matches_dense_solve_on_random_spd_arrows(N, p, m):
     tau = np.linspace(0.0, 2.0, 6)
     shifted = H + tau[:, None, None] * np.eye(n)
     got = ArrowFactor(*blocks, tau=tau, rhs=b).solve_rhs()
-    assert np.allclose(got, np.linalg.solve(shifted, b[..., None])[..., 0], rtol=0,
-                       atol=1e-9 * scale)
+    assert np.allclose(
+        got, np.linalg.solve(shifted, b[..., None])[..., 0], rtol=0, atol=1e-9 * scale
+    )
 
 
 @pytest.mark.parametrize("p", [1, 2, 3])
@@ -143,8 +145,9 @@ def test_arrow_factor_solve_diag_inverse_matvec(p):
     Hx = np.einsum("kij,kj->ki", H, x)
     assert np.allclose(fac.matvec(x), Hx, atol=1e-12)
     assert np.allclose(fac.solve(Hx), x, atol=1e-10)
-    assert np.allclose(fac.diag_inverse(), np.diagonal(np.linalg.inv(H), axis1=1, axis2=2),
-                       rtol=1e-10)
+    assert np.allclose(
+        fac.diag_inverse(), np.diagonal(np.linalg.inv(H), axis1=1, axis2=2), rtol=1e-10
+    )
 
 
 @pytest.mark.parametrize("p", [1, 2])

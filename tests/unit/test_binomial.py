@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 from scipy import stats
-
 from ssmobs.binomial import clopper_pearson, format_fraction
 
 
@@ -36,4 +35,3 @@ def test_ends_and_missing_counts():
 def test_impossible_counts_are_refused(x, n):
     with pytest.raises(ValueError, match="whole counts"):
         clopper_pearson(x, n)
-

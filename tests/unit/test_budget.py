@@ -6,7 +6,6 @@ import tracemalloc
 
 import numpy as np
 import pytest
-
 from ssmobs import budget
 from ssmobs.design_disturbances import design_disturbances
 from ssmobs.joint_map import JointMapSettings, joint_map
@@ -36,17 +35,28 @@ def test_disturbance_estimate_bounds_the_measured_peak(method):
         assert budget.disturbance_bytes(q, K, method) < 5 * used
 
 
-@pytest.mark.parametrize("slug,omega,x0", [("same", {"a": 0.9}, 8.0),
-                                           ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9,
-                                                          "d": 0.9}, [8.0, 8.0])])
+@pytest.mark.parametrize(
+    "slug,omega,x0",
+    [
+        ("same", {"a": 0.9}, 8.0),
+        ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, [8.0, 8.0]),
+    ],
+)
 def test_joint_map_estimate_bounds_the_measured_peak(slug, omega, x0):
     model = get_model(slug)
     T, K = 60, 1500
     q = (model.obs_dim + model.state_dim) * T
     matrix = np.random.default_rng(0).standard_normal((q, K))
-    traj = make_trajectories(Scenario.from_config({"name": "x", "model": slug, "omega": omega,
-                                                   "x0": x0, "T": T, "K": K}), matrix)
+    traj = make_trajectories(
+        Scenario.from_config(
+            {"name": "x", "model": slug, "omega": omega, "x0": x0, "T": T, "K": K}
+        ),
+        matrix,
+    )
     bounds = model.prior_bounds(traj.omega, "restricted")
-    used = peak_bytes(lambda: joint_map(model, traj.z, bounds, traj.omega, traj.x0,
-                                        JointMapSettings(max_newton_iter=2)))
+    used = peak_bytes(
+        lambda: joint_map(
+            model, traj.z, bounds, traj.omega, traj.x0, JointMapSettings(max_newton_iter=2)
+        )
+    )
     assert used <= budget.joint_map_bytes(model, T, K)

@@ -6,9 +6,15 @@ import re
 
 import numpy as np
 import pytest
-
-from ssmobs.check_model import (CheckCase, cases_from_scenarios, declared_names, default_cases,
-                                python_problems, stan_block, stan_source_problems)
+from ssmobs.check_model import (
+    CheckCase,
+    cases_from_scenarios,
+    declared_names,
+    default_cases,
+    python_problems,
+    stan_block,
+    stan_source_problems,
+)
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.base import StateSpaceModel
 from ssmobs.stan_backends import stan_file
@@ -100,12 +106,17 @@ class WrongShape(StateSpaceModel):
 def test_simulator_with_wrong_shape_is_named():
     problems = python_problems(WrongShape(), CheckCase({"a": 0.5}, [0.0]), T=5)
     assert len(problems) == 2
-    assert re.search(r"simulate returned x of shape \(3, 5\) for K=3, T=5; expected .* = "
-                     r"\(3, 5, 1\)", problems[0])
+    assert re.search(
+        r"simulate returned x of shape \(3, 5\) for K=3, T=5; expected .* = "
+        r"\(3, 5, 1\)",
+        problems[0],
+    )
 
 
 def test_cases_from_scenarios_deduplicate():
-    scs = [{"model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0, "prior": None,
-            "T": T} for T in (20, 50)] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
+    scs = [
+        {"model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0, "prior": None, "T": T}
+        for T in (20, 50)
+    ] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
     cases = cases_from_scenarios(scs, "stoch_vol")
     assert cases == [CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], None)]

@@ -33,8 +33,9 @@ def test_profiles_validate_and_get_defaults(name):
 
 
 def base() -> dict:
-    return {"scenarios": [{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8,
-                           "T": 4, "K": 10}]}
+    return {
+        "scenarios": [{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 10}]
+    }
 
 
 def with_(path, value):
@@ -47,7 +48,11 @@ def with_(path, value):
 
 
 BAD = [
-    ("unknown model", with_(["scenarios", 0, "model"], "nope"), ["scenarios[0]", "model", "nope", "same"]),
+    (
+        "unknown model",
+        with_(["scenarios", 0, "model"], "nope"),
+        ["scenarios[0]", "model", "nope", "same"],
+    ),
     ("unknown prior", with_(["scenarios", 0, "prior"], "flat"), ["flat", "restricted"]),
     ("prior not allowed", with_(["scenarios", 0, "prior"], "half_line"), ["half_line", "allowed"]),
     ("K zero", with_(["scenarios", 0, "K"], 0), ["scenarios[0].K", "0", ">= 1"]),
@@ -56,9 +61,21 @@ BAD = [
     ("T zero", with_(["scenarios", 0, "T"], 0), ["scenarios[0].T", "0", ">= 1"]),
     ("|a| >= 1", with_(["scenarios", 0, "omega"], {"a": 1.2}), ["a=1.2", "|a| < 1"]),
     ("a outside restricted prior", with_(["scenarios", 0, "omega"], {"a": 0.0}), ["a", "0"]),
-    ("seed not integer", with_(["scenarios", 0, "seed"], "abc"), ["scenarios[0].seed", "abc", "integer"]),
-    ("negative threshold", {**base(), "joint_map": {"grad_tol": -1.0}}, ["joint_map.grad_tol", "-1.0", "> 0"]),
-    ("negative ess", {**base(), "convergence": {"ess_bulk_min": -5}}, ["convergence.ess_bulk_min", "-5", ">= 0"]),
+    (
+        "seed not integer",
+        with_(["scenarios", 0, "seed"], "abc"),
+        ["scenarios[0].seed", "abc", "integer"],
+    ),
+    (
+        "negative threshold",
+        {**base(), "joint_map": {"grad_tol": -1.0}},
+        ["joint_map.grad_tol", "-1.0", "> 0"],
+    ),
+    (
+        "negative ess",
+        {**base(), "convergence": {"ess_bulk_min": -5}},
+        ["convergence.ess_bulk_min", "-5", ">= 0"],
+    ),
     ("unknown key", with_(["scenarios", 0, "colour"], "red"), ["colour"]),
     ("missing x0 entry", with_(["scenarios", 0, "omega"], {"b": 0.5}), ["'a'", "missing"]),
 ]
@@ -75,8 +92,9 @@ def test_bad_values_named(label, conf, needles):
 
 def test_sep_d1_p2_needs_a2_plus_b2_below_one():
     c = base()
-    c["scenarios"][0].update(model="sep_d1_p2", omega={"a": 0.8, "b": 0.7, "c": 0.9, "d": 0.9},
-                             x0=[8, 8])
+    c["scenarios"][0].update(
+        model="sep_d1_p2", omega={"a": 0.8, "b": 0.7, "c": 0.9, "d": 0.9}, x0=[8, 8]
+    )
     with pytest.raises(cfg.ConfigError, match=r"a\^2 \+ b\^2 < 1"):
         cfg.validate(c)
 
@@ -149,8 +167,7 @@ def full_config() -> dict:
     """base() with every optional section present, so each number key has a place to go."""
     c = base()
     c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20]}]
-    for section in ("figure2", "figure4", "design", "joint_map", "stan", "convergence",
-                    "limits"):
+    for section in ("figure2", "figure4", "design", "joint_map", "stan", "convergence", "limits"):
         c[section] = {}
     return c
 
@@ -160,13 +177,21 @@ NUMBER_KEYS = number_keys(cfg.load_schema())
 
 def test_schema_has_the_numbers_of_the_issue():
     names = {".".join(map(str, p)) for p in NUMBER_KEYS}
-    for key in ("convergence.ess_bulk_min", "stan.adapt_delta", "convergence.rhat_max",
-                "k_selection.0.c1", "joint_map.grad_tol", "figure2.a", "limits.job_memory_gib"):
+    for key in (
+        "convergence.ess_bulk_min",
+        "stan.adapt_delta",
+        "convergence.rhat_max",
+        "k_selection.0.c1",
+        "joint_map.grad_tol",
+        "figure2.a",
+        "limits.job_memory_gib",
+    ):
         assert key in names
 
 
-@pytest.mark.parametrize("value", [float("nan"), float("inf"), float("-inf")],
-                         ids=["nan", "inf", "-inf"])
+@pytest.mark.parametrize(
+    "value", [float("nan"), float("inf"), float("-inf")], ids=["nan", "inf", "-inf"]
+)
 @pytest.mark.parametrize("path", NUMBER_KEYS, ids=[".".join(map(str, p)) for p in NUMBER_KEYS])
 def test_every_number_key_must_be_finite(path, value):
     c = full_config()
@@ -247,8 +272,9 @@ def test_seeds_bounded_to_32_bits(section):
         if section == "scenario":
             c["scenarios"][0]["seed"] = seed
         elif section == "k_selection":
-            c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20],
-                                 "seeds": [1, seed]}]
+            c["k_selection"] = [
+                {"name": "k", "scenario": "s", "K_grid": [10, 20], "seeds": [1, seed]}
+            ]
         else:
             c["figure2"] = {"seed": seed}
         return c
@@ -273,8 +299,10 @@ def test_top_level_not_a_mapping():
 
 # ----------------------------------------------------------------- issue 14: runaway sizes
 def huge() -> dict:
-    return with_(["scenarios", 0], {"name": "huge", "model": "same", "omega": {"a": 0.9},
-                                    "x0": 8, "T": 1000, "K": 10_000_000})
+    return with_(
+        ["scenarios", 0],
+        {"name": "huge", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 1000, "K": 10_000_000},
+    )
 
 
 def test_runaway_size_refused_naming_scenario_estimate_and_limit():
@@ -328,14 +356,24 @@ def test_schema_seed_bound_is_the_one_the_readers_check():
 # ---------------------------------------------------------------- paper_outputs (issue 13)
 def with_paper_outputs(**chosen) -> dict:
     c = base()
-    c["scenarios"].append({"name": "walk", "model": "sep_ranwalk", "omega": {"a": 0.9},
-                           "x0": 8, "T": 4, "K": 10, "stan": False})
+    c["scenarios"].append(
+        {
+            "name": "walk",
+            "model": "sep_ranwalk",
+            "omega": {"a": 0.9},
+            "x0": 8,
+            "T": 4,
+            "K": 10,
+            "stan": False,
+        }
+    )
     c["paper_outputs"] = chosen
     return c
 
 
-@pytest.mark.parametrize("key,value", [("tables_2_3", ["s", "nope"]), ("figure3", ["nope"]),
-                                       ("figure4", "nope")])
+@pytest.mark.parametrize(
+    "key,value", [("tables_2_3", ["s", "nope"]), ("figure3", ["nope"]), ("figure4", "nope")]
+)
 def test_paper_outputs_unknown_name_is_refused_naming_the_key(key, value):
     with pytest.raises(cfg.ConfigError) as err:
         cfg.validate(with_paper_outputs(**{key: value}))
@@ -351,26 +389,42 @@ def test_paper_outputs_need_what_the_table_or_figure_shows():
         c["scenarios"].append({**c["scenarios"][0], "name": "s2", "omega": {"a": 0.7}})
         cfg.validate(c)
     c = with_paper_outputs(figure4="sv")
-    c["scenarios"].append({"name": "sv", "model": "stoch_vol", "x0": 0, "T": 5, "K": 4,
-                           "omega": {"phi": 0.9, "sigma": 0.5}})
+    c["scenarios"].append(
+        {
+            "name": "sv",
+            "model": "stoch_vol",
+            "x0": 0,
+            "T": 5,
+            "K": 4,
+            "omega": {"phi": 0.9, "sigma": 0.5},
+        }
+    )
     with pytest.raises(cfg.ConfigError, match=r"paper_outputs.figure4.*2 parameter"):
         cfg.validate(c)
     ok = cfg.validate(with_paper_outputs(tables_2_3=["s"], figure3=["s"], figure4="walk"))
     assert ok["paper_outputs"] == {"tables_2_3": ["s"], "figure3": ["s"], "figure4": "walk"}
-    assert cfg.validate(base())["paper_outputs"] == {"tables_2_3": [], "figure3": [],
-                                                     "figure4": None}
+    assert cfg.validate(base())["paper_outputs"] == {
+        "tables_2_3": [],
+        "figure3": [],
+        "figure4": None,
+    }
 
 
-@pytest.mark.parametrize("name", ["config.yaml", "smoke.yaml", "paper.yaml", "tables.yaml",
-                                  "section4_sep_d2_p1.yaml"])
+@pytest.mark.parametrize(
+    "name", ["config.yaml", "smoke.yaml", "paper.yaml", "tables.yaml", "section4_sep_d2_p1.yaml"]
+)
 def test_profiles_name_the_scenarios_of_the_papers_outputs(name):
     """Chosen by name: the rows of Tables II/III are the paper's Same (0.9, 8) scenarios."""
     c = cfg.validate(load(name))
     chosen = c["paper_outputs"]
     by_name = {sc["name"]: sc for sc in c["scenarios"]}
     for n in chosen["tables_2_3"] + chosen["figure3"]:
-        assert (by_name[n]["model"], by_name[n]["omega"], by_name[n]["x0"]) == ("same",
-                                                                                {"a": 0.9}, 8)
+        assert (by_name[n]["model"], by_name[n]["omega"], by_name[n]["x0"]) == (
+            "same",
+            {"a": 0.9},
+            8,
+        )
     assert chosen["figure3"] == chosen["tables_2_3"]
-    assert (chosen["figure4"] is None) == ("sep_ranwalk" not in {sc["model"] for sc in
-                                                                 c["scenarios"]})
+    assert (chosen["figure4"] is None) == (
+        "sep_ranwalk" not in {sc["model"] for sc in c["scenarios"]}
+    )

@@ -1,4 +1,5 @@
-"""Convergence checks on synthetic draws: thresholds, each failure, ArviZ (arviz-stats) equivalence."""
+"""Convergence checks on synthetic draws: thresholds, each failure, and equivalence with
+ArviZ (arviz-stats)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,14 @@ import warnings
 
 import numpy as np
 import pytest
-
-from ssmobs.convergence import (CHECKS, ConvergenceSettings, check_convergence, ebfmi,
-                                rank_diagnostics, stack_params)
+from ssmobs.convergence import (
+    CHECKS,
+    ConvergenceSettings,
+    check_convergence,
+    ebfmi,
+    rank_diagnostics,
+    stack_params,
+)
 from ssmobs.stan_backends.base import Draws
 
 pytestmark = pytest.mark.unit
@@ -42,8 +48,14 @@ def make_draws(seed=0, chains=4, n=1000, T=5, phi=0.3, energy_phi=0.2, shift=0.0
 
 def test_defaults_are_the_facts_sheet_decisions():
     s = ConvergenceSettings()
-    assert (s.max_divergences, s.rhat_max, s.ess_bulk_min, s.ess_tail_min, s.ebfmi_min,
-            s.treedepth_fails) == (0, 1.01, 400, 400, 0.3, False)
+    assert (
+        s.max_divergences,
+        s.rhat_max,
+        s.ess_bulk_min,
+        s.ess_tail_min,
+        s.ebfmi_min,
+        s.treedepth_fails,
+    ) == (0, 1.01, 400, 400, 0.3, False)
     with pytest.raises(ValueError):
         ConvergenceSettings(implementation="stan")
 
@@ -144,9 +156,11 @@ def arviz_stats_reference(x):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return {"rhat": array_stats.rhat(x, method="rank"),
-                "ess_bulk": array_stats.ess(x, method="bulk"),
-                "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95))}
+        return {
+            "rhat": array_stats.rhat(x, method="rank"),
+            "ess_bulk": array_stats.ess(x, method="bulk"),
+            "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95)),
+        }
 
 
 @pytest.mark.parametrize("chains,n,odd", [(4, 1000, False), (4, 301, True), (2, 50, False)])

@@ -5,22 +5,30 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-
 from ssmobs import config as cfg
 from ssmobs import io
-from ssmobs.convergence import (ConvergenceSettings, check_convergence, converged_under,
-                                sensitivity_table, threshold_failures)
+from ssmobs.convergence import (
+    ConvergenceSettings,
+    check_convergence,
+    converged_under,
+    sensitivity_table,
+    threshold_failures,
+)
 from ssmobs.stages import run_convergence_sensitivity
-
 from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
 
 pytestmark = pytest.mark.unit
 
 
 def config_with(**convergence) -> dict:
-    return cfg.validate({"scenarios": [{"name": "s", "model": "same", "omega": {"a": 0.9},
-                                        "x0": 8, "T": 4, "K": 10}],
-                         "convergence": convergence})
+    return cfg.validate(
+        {
+            "scenarios": [
+                {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 10}
+            ],
+            "convergence": convergence,
+        }
+    )
 
 
 def saturated_draws():
@@ -52,19 +60,35 @@ def test_rhat_threshold_from_config_reaches_the_check():
 
 
 def table(rows):
-    base = {"status": "ok", "converged": True, "failed_checks": "", "max_rhat": 1.001,
-            "min_ess_bulk": 900.0, "min_ess_tail": 800.0, "n_divergent": 0.0,
-            "n_treedepth_hits": 0.0, "min_ebfmi": 0.7}
+    base = {
+        "status": "ok",
+        "converged": True,
+        "failed_checks": "",
+        "max_rhat": 1.001,
+        "min_ess_bulk": 900.0,
+        "min_ess_tail": 800.0,
+        "n_divergent": 0.0,
+        "n_treedepth_hits": 0.0,
+        "min_ebfmi": 0.7,
+    }
     return pd.DataFrame([{**base, "k": k, **r} for k, r in enumerate(rows)])
 
 
 def test_converged_under_reclassifies_records_and_keeps_other_failures():
-    t = table([{},                                                   # passes everywhere
-               {"n_treedepth_hits": 12.0},                           # only tree depth
-               {"max_rhat": 1.03, "converged": False, "failed_checks": "rhat"},
-               {"converged": False, "failed_checks": "kde"},          # not a threshold
-               {"status": "error", "converged": False, "failed_checks": "sampling_error",
-                "max_rhat": np.nan}])
+    t = table(
+        [
+            {},  # passes everywhere
+            {"n_treedepth_hits": 12.0},  # only tree depth
+            {"max_rhat": 1.03, "converged": False, "failed_checks": "rhat"},
+            {"converged": False, "failed_checks": "kde"},  # not a threshold
+            {
+                "status": "error",
+                "converged": False,
+                "failed_checks": "sampling_error",
+                "max_rhat": np.nan,
+            },
+        ]
+    )
     warn = ConvergenceSettings()
     assert converged_under(t, warn).tolist() == [True, True, False, False, False]
     counted = ConvergenceSettings(treedepth_fails=True)
@@ -73,17 +97,28 @@ def test_converged_under_reclassifies_records_and_keeps_other_failures():
     assert converged_under(t, loose).tolist() == [True, True, True, False, False]
     s = sensitivity_table({"x": t}, warn).iloc[0]
     assert (s["K"], s["K_stan_run"]) == (5, 2)
-    assert (s["rhat1.01_treedepth_warns"], s["rhat1.01_treedepth_fails"],
-            s["rhat1.05_treedepth_warns"], s["rhat1.05_treedepth_fails"]) == (2, 1, 3, 2)
+    assert (
+        s["rhat1.01_treedepth_warns"],
+        s["rhat1.01_treedepth_fails"],
+        s["rhat1.05_treedepth_warns"],
+        s["rhat1.05_treedepth_fails"],
+    ) == (2, 1, 3, 2)
 
 
 def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
-    t = table([{}, {"n_treedepth_hits": 3.0}, {"max_rhat": 1.02, "converged": False,
-                                                "failed_checks": "rhat"}])
+    t = table(
+        [
+            {},
+            {"n_treedepth_hits": 3.0},
+            {"max_rhat": 1.02, "converged": False, "failed_checks": "rhat"},
+        ]
+    )
     io.write_parquet(tmp_path / "a.parquet", t)
-    out = run_convergence_sensitivity({"a": tmp_path / "a.parquet"},
-                                      config_with()["convergence"],
-                                      [tmp_path / f"sens.{ext}" for ext in ("csv", "md", "tex")])
+    out = run_convergence_sensitivity(
+        {"a": tmp_path / "a.parquet"},
+        config_with()["convergence"],
+        [tmp_path / f"sens.{ext}" for ext in ("csv", "md", "tex")],
+    )
     assert out["rhat1.05_treedepth_fails"].tolist() == [2]
     text = (tmp_path / "sens.md").read_text()
     assert "rhat1.01_treedepth_warns" in text and "| a " in text

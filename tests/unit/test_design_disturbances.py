@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, special
-
 from ssmobs import design_disturbances as ddm
 from ssmobs.design_disturbances import (
     METHODS,
@@ -52,8 +51,17 @@ def _random_orthogonal(q: int, rng: np.random.Generator) -> np.ndarray:
 
 @pytest.mark.unit
 @pytest.mark.parametrize(
-    "q, b", [(1, 5.0), (2, 10.0), (10, 10.0), (11, 50.0), (100, 50.0), (101, 100.0),
-             (1000, 100.0), (1001, 200.0)]
+    "q, b",
+    [
+        (1, 5.0),
+        (2, 10.0),
+        (10, 10.0),
+        (11, 50.0),
+        (100, 50.0),
+        (101, 100.0),
+        (1000, 100.0),
+        (1001, 200.0),
+    ],
 )
 def test_b_max_rule(q, b):
     assert b_max_rule(q) == b
@@ -72,7 +80,12 @@ def test_q2_closed_forms_against_quadrature(B):
     j_exact = np.concatenate(
         [
             [0.25 * (tau - 1.0 - math.log(tau))],
-            0.25 * (tau * np.exp(-a / tau) - np.exp(-a) - (a + 1.0) * (special.exp1(a / tau) - special.exp1(a))),
+            0.25
+            * (
+                tau * np.exp(-a / tau)
+                - np.exp(-a)
+                - (a + 1.0) * (special.exp1(a / tau) - special.exp1(a))
+            ),
         ]
     )
     jp, m = quad.j_prime_and_m(n)
@@ -83,7 +96,11 @@ def test_q2_closed_forms_against_quadrature(B):
     # M(n) = -2 dJ/dn: closed-form derivative of the q = 2 oracle, by Richardson differences
     def j_closed(nn):
         aa = nn / 2.0
-        return 0.25 * (tau * np.exp(-aa / tau) - np.exp(-aa) - (aa + 1.0) * (special.exp1(aa / tau) - special.exp1(aa)))
+        return 0.25 * (
+            tau * np.exp(-aa / tau)
+            - np.exp(-aa)
+            - (aa + 1.0) * (special.exp1(aa / tau) - special.exp1(aa))
+        )
 
     for k, nk in enumerate(n[2:], start=2):
         h = 1e-3 * max(nk, 1.0)
@@ -161,7 +178,12 @@ def test_distance_against_direct_integration(q, B):
         return (b * b / (1.0 + b * b)) ** (q / 2.0) * b
 
     def p2(b):
-        return (2 * b * b / (1 + 2 * b * b)) ** (q / 2.0) * b * w * np.sum(np.exp(-n / (2 * (1 + 2 * b * b))))
+        return (
+            (2 * b * b / (1 + 2 * b * b)) ** (q / 2.0)
+            * b
+            * w
+            * np.sum(np.exp(-n / (2 * (1 + 2 * b * b))))
+        )
 
     def p3(b):
         return b * w * w * np.sum(np.exp(-t / (4 * b * b)))
@@ -207,8 +229,18 @@ def test_random_set_distance_nonnegative_and_single_point():
 
 
 @pytest.mark.unit
-@pytest.mark.parametrize("q, K, rtol", [(1, 2, 1e-8), (1, 3, 1e-8), (2, 6, 1e-8), (3, 9, 1e-8),
-                                        (4, 12, 1e-8), (5, 7, 1e-8), (40, 81, 1e-5)])
+@pytest.mark.parametrize(
+    "q, K, rtol",
+    [
+        (1, 2, 1e-8),
+        (1, 3, 1e-8),
+        (2, 6, 1e-8),
+        (3, 9, 1e-8),
+        (4, 12, 1e-8),
+        (5, 7, 1e-8),
+        (40, 81, 1e-5),
+    ],
+)
 def test_gradient_matches_finite_differences(q, K, rtol):
     """Central differences with one Richardson step (doc 9.2); odd and even K.
 
@@ -249,8 +281,14 @@ KNOWN_OPTIMA = [
     (1, 2, 3.0076188e-2, [0.789836] * 2, 4.8375806e-2, [1.0] * 2),
     (1, 3, 1.1373319e-2, [0.0] + [1.074509] * 2, 1.6434290e-2, [0.0] + [math.sqrt(1.5)] * 2),
     (1, 4, 5.7309527e-3, [0.316542] * 2 + [1.253559] * 2, None, [0.346242] * 2 + [1.371174] * 2),
-    (1, 5, 3.3773491e-3, [0.0] + [0.522618] * 2 + [1.381884] * 2, None,
-     [0.0] + [0.559312] * 2 + [1.478908] * 2),
+    (
+        1,
+        5,
+        3.3773491e-3,
+        [0.0] + [0.522618] * 2 + [1.381884] * 2,
+        None,
+        [0.0] + [0.559312] * 2 + [1.478908] * 2,
+    ),
     (2, 5, 1.9842376e-2, [0.0] + [1.434603] * 4, 2.5148086e-2, [0.0] + [math.sqrt(2.5)] * 4),
     (3, 6, 3.2203643e-2, [1.554598] * 6, None, [math.sqrt(3.0)] * 6),
 ]
@@ -281,8 +319,8 @@ def test_known_optima(q, K, d_star, radii, d_white, radii_white):
 
 @pytest.mark.unit
 @pytest.mark.parametrize(
-    "K, r_star, d_star, r_white", [(10, 2.076536, 3.6207195e-2, math.sqrt(5.0)),
-                                   (11, 2.218586, 3.2284538e-2, math.sqrt(5.5))]
+    "K, r_star, d_star, r_white",
+    [(10, 2.076536, 3.6207195e-2, math.sqrt(5.0)), (11, 2.218586, 3.2284538e-2, math.sqrt(5.5))],
 )
 def test_cross_polytope_law_q5(K, r_star, d_star, r_white):
     """Doc Section 8: for K = 2q and 2q + 1 the optimum is the scaled cross-polytope."""
@@ -327,8 +365,14 @@ def test_design_beats_whitened_antithetic(q, K, factor):
 
 @pytest.mark.unit
 @pytest.mark.parametrize(
-    "q, K, method", [(3, 7, "design"), (4, 8, "design"), (6, 13, "antithetic"), (5, 10, "antithetic"),
-                     (12, 40, "design")]
+    "q, K, method",
+    [
+        (3, 7, "design"),
+        (4, 8, "design"),
+        (6, 13, "antithetic"),
+        (5, 10, "antithetic"),
+        (12, 40, "design"),
+    ],
 )
 def test_symmetry_mean_and_whitening(q, K, method):
     res = design_disturbances(q, K, method, seed=3)
@@ -337,11 +381,11 @@ def test_symmetry_mean_and_whitening(q, K, method):
     assert x.shape == (q, K)
     assert res.covariance_correction == "whitened"
     # point symmetry, column order s_1..s_N, -s_1..-s_N, 0
-    assert np.array_equal(x[:, n:2 * n], -x[:, :n])
+    assert np.array_equal(x[:, n : 2 * n], -x[:, :n])
     if K % 2:
         assert np.array_equal(x[:, -1], np.zeros(q))
     # the mean is exactly zero: sum of the s_i plus sum of the -s_i cancels bit for bit
-    assert np.array_equal(x[:, :n].sum(axis=1) + x[:, n:2 * n].sum(axis=1), np.zeros(q))
+    assert np.array_equal(x[:, :n].sum(axis=1) + x[:, n : 2 * n].sum(axis=1), np.zeros(q))
     assert np.max(np.abs(x.mean(axis=1))) < 1e-14
     # sample covariance with divisor K is I to 1e-12 (round-off of the eigen-whitening)
     cov = x @ x.T / K
@@ -352,8 +396,10 @@ def test_symmetry_mean_and_whitening(q, K, method):
 
 
 @pytest.mark.unit
-@pytest.mark.parametrize("q, K, method", [(5, 7, "design"), (5, 9, "design"), (10, 9, "antithetic"),
-                                          (30, 40, "antithetic")])
+@pytest.mark.parametrize(
+    "q, K, method",
+    [(5, 7, "design"), (5, 9, "design"), (10, 9, "antithetic"), (30, 40, "antithetic")],
+)
 def test_trace_scaling_when_K_below_2q(q, K, method):
     """K < 2q: covariance cannot be I (rank <= K // 2); trace(C) = q to 1e-12 relative."""
     res = design_disturbances(q, K, method, seed=1)
@@ -362,12 +408,12 @@ def test_trace_scaling_when_K_below_2q(q, K, method):
     cov = x @ x.T / K
     assert np.trace(cov) == pytest.approx(q, rel=1e-12)
     assert np.linalg.matrix_rank(cov) <= K // 2
-    assert np.array_equal(x[:, K // 2:2 * (K // 2)], -x[:, :K // 2])
+    assert np.array_equal(x[:, K // 2 : 2 * (K // 2)], -x[:, : K // 2])
 
 
 @pytest.mark.unit
 def test_random_method_moments_and_layout():
-    """i.i.d. N(0,1): each entry of C - I has sd <= sqrt(2/K); bound 6 sd (seeded, deterministic)."""
+    """i.i.d. N(0,1): each entry of C - I has sd <= sqrt(2/K); bound 6 sd (seeded)."""
     q, K, seed = 3, 5000, 11
     res = design_disturbances(q, K, "random", seed=seed)
     assert res.b_max is None and res.iterations == 0 and res.covariance_correction == "none"
@@ -446,7 +492,10 @@ def test_explicit_b_max():
         (dict(q=2.5, K=5), r"q must be a positive integer.*got 2\.5"),
         (dict(q=2, K=0), r"K must be a positive integer.*got 0"),
         (dict(q=2, K=True), r"K must be a positive integer.*got True"),
-        (dict(q=2, K=5, method="sobol"), r"method must be one of \('design', 'random', 'antithetic'\); got 'sobol'"),
+        (
+            dict(q=2, K=5, method="sobol"),
+            r"method must be one of \('design', 'random', 'antithetic'\); got 'sobol'",
+        ),
         (dict(q=2, K=5, seed=-1), r"seed must be an integer in \[0, 4294967295\]; got -1"),
         (dict(q=2, K=5, seed=2**70), r"seed must be an integer in \[0, 4294967295\]; got 1180"),
         (dict(q=2, K=5, b_max=0.0), r"b_max must be a positive finite number; got 0\.0"),

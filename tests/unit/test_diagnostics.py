@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from ssmobs.diagnostics import ebfmi, rank_diagnostics
 
 pytestmark = pytest.mark.unit
@@ -73,7 +72,7 @@ def test_too_few_draws_or_one_chain():
 def test_chunking_does_not_change_results():
     x = np.random.default_rng(6).standard_normal((40, 4, 200)).cumsum(axis=2)
     together = rank_diagnostics(x)
-    one_by_one = [rank_diagnostics(x[i:i + 1]) for i in range(40)]
+    one_by_one = [rank_diagnostics(x[i : i + 1]) for i in range(40)]
     for k in together:
         np.testing.assert_allclose(together[k], [r[k][0] for r in one_by_one], rtol=1e-12)
 

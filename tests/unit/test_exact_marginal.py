@@ -6,9 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import integrate, stats
-
-from ssmobs.exact_marginal import (ExactSettings, boundary_slopes, exact_marginal,
-                                   improper, kalman_marginal, log_posterior_omega)
+from ssmobs.exact_marginal import (
+    ExactSettings,
+    boundary_slopes,
+    exact_marginal,
+    improper,
+    kalman_marginal,
+    log_posterior_omega,
+)
 from ssmobs.models import MODELS, get_model
 from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories
@@ -28,10 +33,19 @@ def _traj(slug, T, K, seed=0, omega=None):
     model = get_model(slug)
     om, x0 = LINEAR[slug]
     om = om if omega is None else omega
-    sc = Scenario.from_config({"name": slug, "model": slug, "x0": x0, "T": T, "K": K,
-                               "omega": dict(zip(model.param_names, om))})
-    return make_trajectories(sc, np.random.default_rng(seed).standard_normal(
-        (sc.disturbance_dim, K)))
+    sc = Scenario.from_config(
+        {
+            "name": slug,
+            "model": slug,
+            "x0": x0,
+            "T": T,
+            "K": K,
+            "omega": dict(zip(model.param_names, om)),
+        }
+    )
+    return make_trajectories(
+        sc, np.random.default_rng(seed).standard_normal((sc.disturbance_dim, K))
+    )
 
 
 def test_linearity_flags():
@@ -72,8 +86,7 @@ def test_log_marginal_likelihood_matches_statsmodels(slug):
         # the same function of Omega: only an Omega-independent constant apart
         np.testing.assert_allclose(diff, diff[0], atol=1e-8)
         # and that constant is (p/2) log(2 pi): statsmodels leaves out the flat prior's
-        np.testing.assert_allclose(diff[0], 0.5 * model.state_dim * np.log(2 * np.pi),
-                                   atol=1e-8)
+        np.testing.assert_allclose(diff[0], 0.5 * model.state_dim * np.log(2 * np.pi), atol=1e-8)
 
 
 def _brute_force_neg2(model, omega, z):
@@ -88,7 +101,7 @@ def _brute_force_neg2(model, omega, z):
     for s in range(1, T + 1):
         for t in range(1, T + 1):
             cov_st = sum(Fp[s - u] @ np.diag(Q) @ Fp[t - u].T for u in range(1, min(s, t) + 1))
-            C[(s - 1) * d:s * d, (t - 1) * d:t * d] = H @ cov_st @ H.T
+            C[(s - 1) * d : s * d, (t - 1) * d : t * d] = H @ cov_st @ H.T
     C += np.kron(np.eye(T), np.diag(R))
     zf = z.reshape(-1)
 
@@ -101,11 +114,13 @@ def _brute_force_neg2(model, omega, z):
     L = np.linalg.cholesky(np.linalg.inv(A.T @ Ci @ A))
     jac = np.linalg.det(L)
     if p == 1:
-        val, _ = integrate.quad(lambda v: dens(*(centre + L @ [v])), -12, 12,
-                                epsabs=0, epsrel=1e-11, limit=200)
+        val, _ = integrate.quad(
+            lambda v: dens(*(centre + L @ [v])), -12, 12, epsabs=0, epsrel=1e-11, limit=200
+        )
     else:
-        val, _ = integrate.dblquad(lambda v2, v1: dens(*(centre + L @ [v1, v2])), -12, 12,
-                                   -12, 12, epsabs=0, epsrel=1e-10)
+        val, _ = integrate.dblquad(
+            lambda v2, v1: dens(*(centre + L @ [v1, v2])), -12, 12, -12, 12, epsabs=0, epsrel=1e-10
+        )
     return -2 * np.log(val * jac)
 
 
@@ -145,8 +160,9 @@ def test_smoothed_states_match_dense_gaussian_posterior():
 def test_vectorised_over_omega_and_trajectories():
     model = get_model("sep")
     traj = _traj("sep", T=10, K=3)
-    grid = np.stack(np.meshgrid(np.linspace(0.5, 0.95, 4), np.linspace(0.5, 0.95, 5),
-                                indexing="ij"), -1).reshape(-1, 2)
+    grid = np.stack(
+        np.meshgrid(np.linspace(0.5, 0.95, 4), np.linspace(0.5, 0.95, 5), indexing="ij"), -1
+    ).reshape(-1, 2)
     batch = kalman_marginal(model, grid[None], traj.z[:, None]).neg2_loglik
     assert batch.shape == (3, 20)
     one = [kalman_marginal(model, grid[i], traj.z[k]).neg2_loglik for k, i in [(2, 7), (0, 19)]]
@@ -179,8 +195,10 @@ def test_marginal_map_matches_dense_grid_sep_two_parameters():
     res = exact_marginal(model, traj.z, bounds)
     sd = res.laplace_sd[0]
     mode = res.joint_mode[0]
-    axes = [np.linspace(max(mode[j] - 8 * sd[j], 1e-3), min(mode[j] + 8 * sd[j], 1 - 1e-9), 801)
-            for j in range(2)]
+    axes = [
+        np.linspace(max(mode[j] - 8 * sd[j], 1e-3), min(mode[j] + 8 * sd[j], 1 - 1e-9), 801)
+        for j in range(2)
+    ]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
     lp = log_posterior_omega(model, grid, traj.z[0], bounds)
     dens = np.exp(lp - lp.max())
@@ -206,7 +224,7 @@ def test_state_quantiles_match_monte_carlo_over_omega():
     draws_a = rng.choice(a, size=400_000, p=w)
     km = kalman_marginal(model, draws_a[:, None], traj.z[0], smooth=True)
     x0 = km.mean[:, 0, 0] + np.sqrt(km.var[:, 0, 0]) * rng.standard_normal(draws_a.size)
-    j = model.n_params   # x0 is the first state
+    j = model.n_params  # x0 is the first state
     assert res.theta_q5[0, j] == pytest.approx(np.quantile(x0, 0.05), abs=0.02)
     assert res.theta_q95[0, j] == pytest.approx(np.quantile(x0, 0.95), abs=0.02)
 
@@ -225,7 +243,7 @@ def test_same_is_improper_at_zero_like_minus_two_log_a():
     lower, upper = boundary_slopes(model, traj.z, bounds, np.full((4, 1), 0.9))
     np.testing.assert_allclose(lower, -2.0, atol=0.02)
     assert improper(lower, finite=True).all()
-    assert not improper(upper, finite=True).any()      # a -> 1: the density vanishes
+    assert not improper(upper, finite=True).any()  # a -> 1: the density vanishes
     res = exact_marginal(model, traj.z, bounds)
     frame = res.to_frame(model)
     assert frame["improper_lower_a"].all() and not frame["improper_upper_a"].any()
@@ -252,8 +270,10 @@ def test_ranwalk_improper_at_zero_and_classified():
     mode = frame.loc[uniq, "mode_a"].to_numpy()
     z = traj.z[uniq.to_numpy()]
     for f in (0.98, 1.02):
-        assert (log_posterior_omega(model, (mode * f)[:, None, None], z[:, None], bounds)[:, 0]
-                < log_posterior_omega(model, mode[:, None, None], z[:, None], bounds)[:, 0]).all()
+        assert (
+            log_posterior_omega(model, (mode * f)[:, None, None], z[:, None], bounds)[:, 0]
+            < log_posterior_omega(model, mode[:, None, None], z[:, None], bounds)[:, 0]
+        ).all()
 
 
 def test_sep_d1_p2_is_not_uniquely_identified():
@@ -265,11 +285,14 @@ def test_sep_d1_p2_is_not_uniquely_identified():
     om = np.array([0.6, 0.5, 0.9, 0.8])
     swapped = om[[1, 0, 3, 2]]
     assert kalman_marginal(model, om, z).neg2_loglik == pytest.approx(
-        kalman_marginal(model, swapped, z).neg2_loglik, rel=1e-12)
+        kalman_marginal(model, swapped, z).neg2_loglik, rel=1e-12
+    )
     bounds = model.prior_bounds(traj.omega, "restricted")
-    settings = ExactSettings(coarse_nodes={1: 400, 2: 48, 3: 16, 4: 7},
-                             state_nodes={1: 41, 2: 21, 3: 11, 4: 4},
-                             state_thin={1: 10, 2: 3, 3: 2, 4: 2})
+    settings = ExactSettings(
+        coarse_nodes={1: 400, 2: 48, 3: 16, 4: 7},
+        state_nodes={1: 41, 2: 21, 3: 11, 4: 4},
+        state_thin={1: 10, 2: 3, 3: 2, 4: 2},
+    )
     res = exact_marginal(model, traj.z, bounds, settings)
     assert not (res.maxima == "unique").any()
 
@@ -286,8 +309,9 @@ def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
         a = np.asarray(omega)[..., 0]
         val = np.logaddexp(-0.5 * ((a - 0.3) / 0.02) ** 2, -0.5 * ((a - 0.8) / 0.03) ** 2)
         ok = (a > 0) & (a < 1)
-        return np.where(ok, np.broadcast_to(val, np.broadcast_shapes(
-            val.shape, np.shape(z)[:-2])), -np.inf)
+        return np.where(
+            ok, np.broadcast_to(val, np.broadcast_shapes(val.shape, np.shape(z)[:-2])), -np.inf
+        )
 
     monkeypatch.setattr(em, "log_posterior_omega", two_bumps)
     res = em.exact_marginal(model, traj.z, bounds)
@@ -297,7 +321,6 @@ def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
 
 def test_summary_has_the_stan_stage_keys():
     import pandas as pd
-
     from ssmobs.stages import exact_summary
     from ssmobs.stan_metrics import stan_summary
 

@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-
 from ssmobs import config as cfg
-from ssmobs.joint_map import (JointMapSettings, _Barrier, initial_mu_values, initial_theta,
-                              joint_map)
+from ssmobs.joint_map import JointMapSettings, _Barrier, initial_mu_values, initial_theta, joint_map
 from ssmobs.models import get_model
 from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories, write_trajectories
@@ -36,13 +34,14 @@ def test_gradient_balance_mu0_equals_the_hand_computed_ratio_for_sep():
     g = neg2_log_posterior(model, theta0, z, None, order=1)[1]
     S = (z[:, :, 0] ** 2).sum(axis=1)
     b, T = 0.9, 30
-    assert np.allclose(g[:, 1], -2 * S / (1 + b) ** 2 - 2 * T * b / (1 - b ** 2))
+    assert np.allclose(g[:, 1], -2 * S / (1 + b) ** 2 - 2 * T * b / (1 - b**2))
     gb = np.array([-1 / 0.9 + 1 / 0.1] * 2)  # a and b both restricted to (0, 1)
     expect = np.linalg.norm(g[:, :2], axis=1) / np.linalg.norm(gb)
     assert np.allclose(mu0, expect)
     assert np.all(mu0 > T)  # here the balance lands above the singular term's order T
-    per_step = initial_mu_values(model, z, theta0, _Barrier(model, bounds),
-                                 JointMapSettings(mu0_rule="per_step"))
+    per_step = initial_mu_values(
+        model, z, theta0, _Barrier(model, bounds), JointMapSettings(mu0_rule="per_step")
+    )
     assert np.all(per_step == 60.0)
 
 
@@ -52,8 +51,14 @@ def test_mu0_rule_changes_the_start_and_is_reported():
     res = joint_map(model, z, bounds, [0.9, 0.9], [8.0])
     frame = res.to_frame(model, 40)
     assert np.all(frame["mu0"] > 0) and frame["mu0"].nunique() == 6  # one per trajectory
-    low = joint_map(model, z, bounds, [0.9, 0.9], [8.0],
-                    JointMapSettings(mu0_rule="per_step", mu0=0.1, mu0_per_step=0.0))
+    low = joint_map(
+        model,
+        z,
+        bounds,
+        [0.9, 0.9],
+        [8.0],
+        JointMapSettings(mu0_rule="per_step", mu0=0.1, mu0_per_step=0.0),
+    )
     assert np.all(low.mu_start == 0.1)
     # a start far below T lets the first Newton steps fall into the singular edge b -> 1
     assert (low.status == "ok").sum() <= (res.status == "ok").sum()
@@ -64,15 +69,29 @@ def test_mu0_rule_changes_the_start_and_is_reported():
 def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     from ssmobs.stages import run_joint_map_mu0_sweep
 
-    sc = Scenario.from_config({"name": "sep_small", "model": "sep", "omega": {"a": 0.9, "b": 0.9},
-                               "x0": 8.0, "T": 30, "K": 5, "prior": "restricted",
-                               "paper_ref": "sep_ab_T75"})
+    sc = Scenario.from_config(
+        {
+            "name": "sep_small",
+            "model": "sep",
+            "omega": {"a": 0.9, "b": 0.9},
+            "x0": 8.0,
+            "T": 30,
+            "K": 5,
+            "prior": "restricted",
+            "paper_ref": "sep_ab_T75",
+        }
+    )
     model, matrix, _, _ = design("sep", [0.9, 0.9], [8.0], T=30, K=5, seed=3)
     traj = make_trajectories(sc, matrix)
     write_trajectories(tmp_path / "t.nc", traj)
-    frame = run_joint_map_mu0_sweep({"sep_small": tmp_path / "t.nc"}, {"sep_small": sc}, {},
-                                    [0.5, 2.0], "config/paper_values.yaml",
-                                    [tmp_path / "sweep.csv", tmp_path / "sweep.md"])
+    frame = run_joint_map_mu0_sweep(
+        {"sep_small": tmp_path / "t.nc"},
+        {"sep_small": sc},
+        {},
+        [0.5, 2.0],
+        "config/paper_values.yaml",
+        [tmp_path / "sweep.csv", tmp_path / "sweep.md"],
+    )
     assert frame["mu0"].tolist() == ["gradient balance", "0.5 T", "2 T", "paper"]
     col = "sep_small K^max/K"
     assert frame[col].iloc[:3].between(0, 1).all()
@@ -83,8 +102,14 @@ def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     assert hi.iloc[3] - lo.iloc[3] < 0.035 < (hi.iloc[:3] - lo.iloc[:3]).min()  # K 4000 vs 5
     assert (tmp_path / "sweep.md").read_text().count("lo95") == 1
     # the row "2 T" is the former default rule, recomputed here by hand
-    direct = joint_map(model, traj.z, model.prior_bounds([0.9, 0.9], "restricted"),
-                       [0.9, 0.9], [8.0], JointMapSettings(mu0_rule="per_step"))
+    direct = joint_map(
+        model,
+        traj.z,
+        model.prior_bounds([0.9, 0.9], "restricted"),
+        [0.9, 0.9],
+        [8.0],
+        JointMapSettings(mu0_rule="per_step"),
+    )
     assert np.isclose(frame[col].iloc[2], (direct.status == "ok").mean())
     text = (tmp_path / "sweep.md").read_text()
     assert "gradient balance" in text and "paper" in text
@@ -104,10 +129,21 @@ def test_sign_consistent_start_for_sep_mult():
 
 
 def test_config_accepts_joint_map_start_only_where_defined_and_the_mu0_settings():
-    base = {"name": "m", "model": "sep_mult", "omega": {"a": 0.9}, "x0": 8, "T": 5, "K": 4,
-            "joint_map_start": "sign_of_x0"}
-    c = cfg.validate({"scenarios": [base], "joint_map": {"mu0_rule": "per_step",
-                                                         "mu0_per_step": 2.0, "mu0": 1.0}})
+    base = {
+        "name": "m",
+        "model": "sep_mult",
+        "omega": {"a": 0.9},
+        "x0": 8,
+        "T": 5,
+        "K": 4,
+        "joint_map_start": "sign_of_x0",
+    }
+    c = cfg.validate(
+        {
+            "scenarios": [base],
+            "joint_map": {"mu0_rule": "per_step", "mu0_per_step": 2.0, "mu0": 1.0},
+        }
+    )
     assert JointMapSettings.from_mapping(c["joint_map"]).initial_mu(50) == 100.0
     with pytest.raises(cfg.ConfigError, match="joint_map_start"):
         cfg.validate({"scenarios": [{**base, "model": "same"}]})

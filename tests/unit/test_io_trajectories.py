@@ -6,7 +6,6 @@ import os
 
 import numpy as np
 import pytest
-
 from ssmobs import io
 from ssmobs.design_disturbances import design_disturbances
 from ssmobs.models import get_model
@@ -50,8 +49,18 @@ def test_disturbances_round_trip_and_checksum(tmp_path):
         io.read_disturbances(path)
 
 
-SCENARIO = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8,
-                                 "T": 3, "K": 4, "method": "design", "seed": 1})
+SCENARIO = Scenario.from_config(
+    {
+        "name": "s",
+        "model": "same",
+        "omega": {"a": 0.9},
+        "x0": 8,
+        "T": 3,
+        "K": 4,
+        "method": "design",
+        "seed": 1,
+    }
+)
 
 
 def test_trajectories_follow_the_model_equations(tmp_path):
@@ -86,10 +95,13 @@ def test_damaged_trajectories_detected(tmp_path):
         read_trajectories(path)
 
 
-@pytest.mark.parametrize("slug,omega,x0", [
-    ("sep_d2_p1", {"a": 0.9, "b": 0.8, "c": 0.7}, 8.0),
-    ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.8}, [8.0, 7.0]),
-])
+@pytest.mark.parametrize(
+    "slug,omega,x0",
+    [
+        ("sep_d2_p1", {"a": 0.9, "b": 0.8, "c": 0.7}, 8.0),
+        ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.8}, [8.0, 7.0]),
+    ],
+)
 def test_disturbance_layout_state_first(slug, omega, x0):
     """Rows: eta_1..eta_T (p each) first, then eps_1..eps_T (d each), Sec. III.A."""
     model = get_model(slug)
@@ -99,7 +111,9 @@ def test_disturbance_layout_state_first(slug, omega, x0):
     eta, eps = model.split_disturbances(matrix, T)
     assert eta.shape == (K, T, model.state_dim) and eps.shape == (K, T, model.obs_dim)
     np.testing.assert_array_equal(eta[1, 0], matrix[: model.state_dim, 1])
-    np.testing.assert_array_equal(eps[0, 0], matrix[model.state_dim * T: model.state_dim * T + model.obs_dim, 0])
+    np.testing.assert_array_equal(
+        eps[0, 0], matrix[model.state_dim * T : model.state_dim * T + model.obs_dim, 0]
+    )
 
 
 def test_two_state_simulation_follows_eq_1():
@@ -114,8 +128,9 @@ def test_two_state_simulation_follows_eq_1():
     for t in range(4):
         prev = coef * prev + np.sqrt(1 - coef**2) * eta[:, t]
         np.testing.assert_allclose(x[:, t], prev)
-    np.testing.assert_allclose(z[..., 0], a * x[..., 0] + b * x[..., 1]
-                               + np.sqrt(1 - a * a - b * b) * eps[..., 0])
+    np.testing.assert_allclose(
+        z[..., 0], a * x[..., 0] + b * x[..., 1] + np.sqrt(1 - a * a - b * b) * eps[..., 0]
+    )
 
 
 # ------------------------------------------------- issue 14: modes and stale temporaries
@@ -132,7 +147,6 @@ def umask():
 def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
     import pandas as pd
     import xarray as xr
-
     from ssmobs.figures import _plt, save_figure
 
     umask(mask)
@@ -145,16 +159,21 @@ def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
     save_figure(fig, [tmp_path / "e.png", tmp_path / "e.pdf"])
     plt.close(fig)
     modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir()}
-    assert modes == {name: 0o666 & ~mask for name in
-                     ["a.json", "b.md", "c.parquet", "d.nc", "e.png", "e.pdf"]}
+    assert modes == {
+        name: 0o666 & ~mask for name in ["a.json", "b.md", "c.parquet", "d.nc", "e.png", "e.pdf"]
+    }
 
 
 def test_sweep_removes_only_our_stale_temporaries(tmp_path):
     target = tmp_path / "fig_x.png"
     stale = [tmp_path / ".fig_x.png.ab_cd123.png", tmp_path / ".fig_x.png.0123abcd.png"]
-    keep = [tmp_path / ".fig_x.png.short.png", tmp_path / ".fig_y.png.ab_cd123.png",
-            tmp_path / "fig_x.png.ab_cd123.png", tmp_path / ".fig_x.png.ab_cd123.pdf",
-            tmp_path / ".fig_x.png.ab_cd123.png.keep"]
+    keep = [
+        tmp_path / ".fig_x.png.short.png",
+        tmp_path / ".fig_y.png.ab_cd123.png",
+        tmp_path / "fig_x.png.ab_cd123.png",
+        tmp_path / ".fig_x.png.ab_cd123.pdf",
+        tmp_path / ".fig_x.png.ab_cd123.png.keep",
+    ]
     for p in stale + keep:
         p.write_bytes(b"")
     assert io.temporaries(target) == sorted(stale)

@@ -9,7 +9,6 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.optimize import minimize
-
 from ssmobs.joint_map import (
     STATUSES,
     JointMapSettings,
@@ -64,6 +63,7 @@ def test_same_matches_scipy_from_the_paper_start(same_t20):
     model, z, bounds, res = same_t20
     theta0 = initial_theta(model, z, np.array([0.9]), np.array([8.0]))
     for k in range(3):
+
         def f(t):
             return neg2_log_posterior(model, t, z[k], bounds, 0)[0]
 
@@ -73,16 +73,25 @@ def test_same_matches_scipy_from_the_paper_start(same_t20):
         def hess(t):
             return neg2_log_posterior(model, t, z[k], None, 2)[2]
 
-        ref = minimize(f, theta0[k], jac=jac, hess=hess, method="trust-exact",
-                       options={"gtol": 1e-10, "maxiter": 500})
+        ref = minimize(
+            f,
+            theta0[k],
+            jac=jac,
+            hess=hess,
+            method="trust-exact",
+            options={"gtol": 1e-10, "maxiter": 500},
+        )
         assert np.abs(ref.x - res.theta_hat[k]).max() < 1e-6
 
 
-@pytest.mark.parametrize("slug, omega, x0, T", [
-    ("sep", [0.9, 0.9], [8.0], 30),
-    ("sep_d2_p1", [0.9, 0.9, 0.9], [8.0], 20),
-    ("sep_mult", [0.9], [8.0], 10),
-])
+@pytest.mark.parametrize(
+    "slug, omega, x0, T",
+    [
+        ("sep", [0.9, 0.9], [8.0], 30),
+        ("sep_d2_p1", [0.9, 0.9, 0.9], [8.0], 20),
+        ("sep_mult", [0.9], [8.0], 10),
+    ],
+)
 def test_local_maxima_match_scipy_bfgs(slug, omega, x0, T):
     """Where the joint posterior has several local maxima, SciPy's BFGS (gradient only)
     started next to our optimum converges to the same point, to 1e-6."""
@@ -92,6 +101,7 @@ def test_local_maxima_match_scipy_bfgs(slug, omega, x0, T):
     ok = np.flatnonzero(res.status == "ok")
     assert ok.size >= 2
     for k in ok[:2]:
+
         def f(t):
             return neg2_log_posterior(model, t, z[k], bounds, 0)[0]
 
@@ -99,7 +109,8 @@ def test_local_maxima_match_scipy_bfgs(slug, omega, x0, T):
             return neg2_log_posterior(model, t, z[k], None, 1)[1]
 
         start = res.theta_hat[k] + 1e-3 * np.random.default_rng(int(k)).standard_normal(
-            res.theta_hat.shape[1])
+            res.theta_hat.shape[1]
+        )
         ref = minimize(f, start, jac=jac, method="BFGS", options={"gtol": 1e-9, "maxiter": 2000})
         assert np.abs(ref.x - res.theta_hat[k]).max() < 1e-6
 
@@ -107,8 +118,9 @@ def test_local_maxima_match_scipy_bfgs(slug, omega, x0, T):
 def test_ranwalk_t4_ridge_is_never_ok():
     """(Sep, d=p=1, ranWalk), T = 4: a ridge of variable height (Fig. 4), |K^max| = 0."""
     model, x, z = design("sep_ranwalk", [0.9], [8.0], T=4, K=20, seed=2)
-    res = joint_map(model, z, model.prior_bounds([0.9]), [0.9], [8.0],
-                    JointMapSettings(max_newton_iter=60))
+    res = joint_map(
+        model, z, model.prior_bounds([0.9]), [0.9], [8.0], JointMapSettings(max_newton_iter=60)
+    )
     assert not (res.status == "ok").any()
     assert set(res.status) <= set(STATUSES) - {"ok", "failed"}
     assert all(r for r in res.reason)
@@ -157,15 +169,23 @@ def test_constant_height_ridge_is_detected():
     v[:, 0], v[:, 1] = res.theta_hat[:, 0], -res.theta_hat[:, 1]  # tangent of a b = const
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     f_hat = res.neg2_log_post
-    moved, dist, dval = _ridge_check(model, z, res.theta_hat, f_hat, v,
-                                     _Barrier(model, bounds), JointMapSettings())
+    moved, dist, dval = _ridge_check(
+        model, z, res.theta_hat, f_hat, v, _Barrier(model, bounds), JointMapSettings()
+    )
     assert moved.all() and np.all(dist > 1e-2)
     # why the location test (issue 12): on a ridge of constant height the re-optimisation
     # ends elsewhere at the same value of -2 pi, so the paper's "different value", read as
     # the objective value, would call this ridge a unique maximum
     assert np.all(dval <= 1e-8 * (1 + np.abs(f_hat)))
-    by_value, _, _ = _ridge_check(model, z, res.theta_hat, f_hat, v, _Barrier(model, bounds),
-                                  JointMapSettings(ridge_test="value"))
+    by_value, _, _ = _ridge_check(
+        model,
+        z,
+        res.theta_hat,
+        f_hat,
+        v,
+        _Barrier(model, bounds),
+        JointMapSettings(ridge_test="value"),
+    )
     assert not by_value.any()
 
 
@@ -221,9 +241,14 @@ def test_sep_singular_edge_is_boundary():
     assert edge.sum() >= 5
     assert np.all(res.theta_hat[edge, :2].max(axis=1) > 0.9999)
     # stopped before reaching boundary_tol: the descent towards the edge identifies it
-    res2 = joint_map(model, z, bounds, [0.9, 0.9], [8.0],
-                     JointMapSettings(boundary_tol=1e-12, boundary_stop_tol=1e-12,
-                                      max_newton_iter=30))
+    res2 = joint_map(
+        model,
+        z,
+        bounds,
+        [0.9, 0.9],
+        [8.0],
+        JointMapSettings(boundary_tol=1e-12, boundary_stop_tol=1e-12, max_newton_iter=30),
+    )
     assert any("still decreases towards the boundary" in r for r in res2.reason)
     assert not (res2.status[edge] == "ok").any()
 
@@ -246,24 +271,29 @@ def test_chunking_does_not_change_results_and_progress_counts(same_t20):
         def update(self, n=1):
             Counter.done += n
 
-    chunked = joint_map(model, z, bounds, [0.9], [8.0], JointMapSettings(chunk_size=5),
-                        progress=Counter())
+    chunked = joint_map(
+        model, z, bounds, [0.9], [8.0], JointMapSettings(chunk_size=5), progress=Counter()
+    )
     assert Counter.done == z.shape[0]
     assert np.allclose(chunked.theta_hat, res.theta_hat, rtol=1e-12, atol=1e-12)
     assert (chunked.status == res.status).all()
 
 
 def test_d2_p1_and_d1_p2_run():
-    for slug, omega, x0 in [("sep_d2_p1", [0.9, 0.9, 0.9], [8.0]),
-                            ("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0])]:
+    for slug, omega, x0 in [
+        ("sep_d2_p1", [0.9, 0.9, 0.9], [8.0]),
+        ("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0]),
+    ]:
         model, x, z = design(slug, omega, x0, T=10, K=3, seed=7)
-        res = joint_map(model, z, model.prior_bounds(omega), omega, x0,
-                        JointMapSettings(max_newton_iter=50))
+        res = joint_map(
+            model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(max_newton_iter=50)
+        )
         assert res.theta_hat.shape == (3, model.n_theta(10))
         assert set(res.status) <= set(STATUSES)
         frame = res.to_frame(model, 10)
-        assert list(frame.columns[-2 * (model.n_params + model.state_dim):]) == (
-            model.theta_names(0) + [f"lvar_{c}" for c in model.theta_names(0)])
+        assert list(frame.columns[-2 * (model.n_params + model.state_dim) :]) == (
+            model.theta_names(0) + [f"lvar_{c}" for c in model.theta_names(0)]
+        )
 
 
 def test_start_outside_support_raises():
@@ -276,9 +306,21 @@ def test_start_outside_support_raises():
 def test_to_frame_columns(same_t20):
     model, z, bounds, res = same_t20
     frame = res.to_frame(model, 20)
-    assert list(frame.columns) == ["k", "status", "reason", "neg2_log_post", "eig_ratio",
-                                   "grad_max", "iterations", "mu0", "ridge_value_change", "a", "x0",
-                                   "lvar_a", "lvar_x0"]
+    assert list(frame.columns) == [
+        "k",
+        "status",
+        "reason",
+        "neg2_log_post",
+        "eig_ratio",
+        "grad_max",
+        "iterations",
+        "mu0",
+        "ridge_value_change",
+        "a",
+        "x0",
+        "lvar_a",
+        "lvar_x0",
+    ]
     assert frame["k"].tolist() == list(range(12))
     assert np.allclose(frame["x0"], res.theta_hat[:, 1])
     assert np.allclose(frame["lvar_a"], res.local_variance[:, 0])
@@ -286,13 +328,15 @@ def test_to_frame_columns(same_t20):
 
 def test_summary_on_a_hand_made_frame():
     model = get_model("same")
-    frame = pd.DataFrame({
-        "status": ["ok", "ok", "gradient", "ok"],
-        "a": [0.8, 1.0, 5.0, 0.9],
-        "x0": [7.0, 9.0, 100.0, 8.0],
-        "lvar_a": [0.1, 0.2, 9.0, 0.3],
-        "lvar_x0": [1.0, 1.0, 9.0, 4.0],
-    })
+    frame = pd.DataFrame(
+        {
+            "status": ["ok", "ok", "gradient", "ok"],
+            "a": [0.8, 1.0, 5.0, 0.9],
+            "x0": [7.0, 9.0, 100.0, 8.0],
+            "lvar_a": [0.1, 0.2, 9.0, 0.3],
+            "lvar_x0": [1.0, 1.0, 9.0, 4.0],
+        }
+    )
     s = joint_map_summary(frame, model, [0.9], 8.0)
     assert s["K"] == 4 and s["K_max"] == 3 and s["ratio"] == 0.75
     assert s["n_ok"] == 3 and s["n_gradient"] == 1 and s["n_ridge"] == 0
@@ -330,6 +374,7 @@ def test_profile_posterior_ranwalk_matches_inner_scipy():
     assert np.all(np.isneginf(P[0]))  # a <= 0 is outside the half-line prior (Eq. (14))
     for i in range(1, 4):
         for j in range(3):
+
             def f(xs):
                 return -log_posterior(model, np.concatenate([[a_vals[i], x0_vals[j]], xs]), z[0])
 
@@ -353,6 +398,13 @@ def test_profile_posterior_nonquadratic_and_fixed_parameters():
     model2, x2, z2 = design("sep", [0.9, 0.9], [8.0], T=6, K=1, seed=3)
     with pytest.raises(ValueError, match="omega_fixed"):
         profile_posterior(model2, z2[0], model2.prior_bounds([0.9, 0.9]), "a", [0.5], [8.0])
-    P2 = profile_posterior(model2, z2[0], model2.prior_bounds([0.9, 0.9]), "a", [0.5, 1.2],
-                           [8.0], omega_fixed={"b": 0.9})
+    P2 = profile_posterior(
+        model2,
+        z2[0],
+        model2.prior_bounds([0.9, 0.9]),
+        "a",
+        [0.5, 1.2],
+        [8.0],
+        omega_fixed={"b": 0.9},
+    )
     assert np.isfinite(P2[0, 0]) and np.isneginf(P2[1, 0])

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-
 from ssmobs.joint_map import joint_map_summary
 from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
@@ -30,14 +29,16 @@ def test_relative_difference_values():
 def test_select_k_on_a_hand_made_sequence():
     k_values = [100, 200, 300, 400, 500, 600]
     # component 0 (c1 = 0.01) settles from K = 300 on, component 1 (c2 = 0.05) from K = 200
-    V = np.array([
-        [0.50, 1.00],
-        [0.90, 2.00],
-        [1.000, 2.02],
-        [1.005, 2.05],
-        [1.002, 2.01],
-        [0.998, 2.04],
-    ])
+    V = np.array(
+        [
+            [0.50, 1.00],
+            [0.90, 2.00],
+            [1.000, 2.02],
+            [1.005, 2.05],
+            [1.002, 2.01],
+            [0.998, 2.04],
+        ]
+    )
     thr = np.array([0.01, 0.05])
     assert select_k(k_values, V, thr) == 2
     # a looser c1 moves the choice earlier; component 0 then allows i = 1 too
@@ -88,8 +89,15 @@ def summary_for(slug, omega, x0, seed):
 def test_v_vector_layout_same():
     model, s = summary_for("same", [0.9], 8.0, seed=0)
     v = v_vector(s, model)
-    assert v.labels == ("ratio", "a_mean", "x0_mean", "a_var", "x0_var", "a_lvar_mean",
-                        "x0_lvar_mean")  # the paper's V in R^7 (Sec. IV.A)
+    assert v.labels == (
+        "ratio",
+        "a_mean",
+        "x0_mean",
+        "a_var",
+        "x0_var",
+        "a_lvar_mean",
+        "x0_lvar_mean",
+    )  # the paper's V in R^7 (Sec. IV.A)
     assert v.kinds == ("c1", "c1", "c1", "c2", "c2", "c2", "c2")
     assert np.isclose(v.values[0], 5 / 6)
     assert np.isclose(v.values[1], s["a_mean"]) and np.isclose(v.values[4], s["x0_var"])
@@ -112,9 +120,15 @@ def test_selection_from_summaries_end_to_end():
     model = get_model("same")
     vs = []
     for K, shift in [(100, 0.05), (200, 0.001), (300, 0.0), (400, 0.0005)]:
-        frame = pd.DataFrame({"status": ["ok"] * 4, "a": [0.9 + shift, 0.92, 0.94, 0.96],
-                              "x0": [7.0 + shift, 7.5, 8.0, 8.5], "lvar_a": [0.1] * 4,
-                              "lvar_x0": [1.0] * 4})
+        frame = pd.DataFrame(
+            {
+                "status": ["ok"] * 4,
+                "a": [0.9 + shift, 0.92, 0.94, 0.96],
+                "x0": [7.0 + shift, 7.5, 8.0, 8.5],
+                "lvar_a": [0.1] * 4,
+                "lvar_x0": [1.0] * 4,
+            }
+        )
         vs.append(v_vector(joint_map_summary(frame, model, [0.9], 8.0), model))
     V = np.stack([v.values for v in vs])
     assert isinstance(vs[0], VVector)
@@ -127,10 +141,14 @@ def test_nested_random_sets_share_points_and_independent_sets_do_not():
     from ssmobs.k_selection import set_seed
 
     q = 8
-    small = {s: design_disturbances(q, 100, "random", set_seed(1, 100, s)).points
-             for s in ("nested", "independent")}
-    large = {s: design_disturbances(q, 200, "random", set_seed(1, 200, s)).points
-             for s in ("nested", "independent")}
+    small = {
+        s: design_disturbances(q, 100, "random", set_seed(1, 100, s)).points
+        for s in ("nested", "independent")
+    }
+    large = {
+        s: design_disturbances(q, 200, "random", set_seed(1, 200, s)).points
+        for s in ("nested", "independent")
+    }
     assert set_seed(1, 100, "nested") == set_seed(1, 200, "nested") == 1
     assert np.array_equal(large["nested"][:100], small["nested"])  # the K=100 set is a prefix
     assert set_seed(1, 100, "independent") != set_seed(1, 200, "independent")
@@ -149,9 +167,18 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs.k_selection import set_seed
     from ssmobs.stages import run_k_selection_point, run_select_k
 
-    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
-                               "T": 4, "K": 40, "prior": "restricted",
-                               "paper_ref": "same_a09_T4"})
+    sc = Scenario.from_config(
+        {
+            "name": "s",
+            "model": "same",
+            "omega": {"a": 0.9},
+            "x0": 8.0,
+            "T": 4,
+            "K": 40,
+            "prior": "restricted",
+            "paper_ref": "same_a09_T4",
+        }
+    )
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
@@ -160,12 +187,18 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
             io.write_disturbances(path, d)
             out = tmp_path / f"{sets}_K{K}.json"
             info = run_k_selection_point(path, sc, K, "random", 3, {}, out, sets=sets)
-            assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3,
-                                                                      set_seed(3, K, sets))
+            assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3, set_seed(3, K, sets))
             points.append(out)
     ksel = {"name": "t", "c1": 0.5, "c2": 2.0}
-    res = run_select_k(ksel, sc, points, "config/paper_values.yaml", tmp_path / "sel.json",
-                       tmp_path / "v.csv", [str(tmp_path / "f.png")])
+    res = run_select_k(
+        ksel,
+        sc,
+        points,
+        "config/paper_values.yaml",
+        tmp_path / "sel.json",
+        tmp_path / "v.csv",
+        [str(tmp_path / "f.png")],
+    )
     rows = {c["sets"]: c for c in res["choices"]}
     assert set(rows) == {"independent", "nested"}
     for c in rows.values():  # loose thresholds: the first K_i is chosen in both variants
@@ -179,7 +212,6 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
 
 def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     import yaml
-
     from ssmobs import config as cfg
 
     c = cfg.validate(yaml.safe_load(open("config/paper.yaml")))
@@ -188,11 +220,15 @@ def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     for ks in c["k_selection"]:
         grid = ks["K_grid"]
         assert grid == list(range(100, grid[-1] + 1, 100))
-        top = (4500 if "random" in ks["methods"]
-               else paper[refs[ks["scenario"]]]["k_selection"]["design"]["K"])
+        top = (
+            4500
+            if "random" in ks["methods"]
+            else paper[refs[ks["scenario"]]]["k_selection"]["design"]["K"]
+        )
         assert grid[-1] == -(-(top + 500) // 500) * 500, ks["name"]
-        assert ks["sets"] == (["independent", "nested"] if ks["scenario"] == "same_a09_T4"
-                              else ["independent"])
+        assert ks["sets"] == (
+            ["independent", "nested"] if ks["scenario"] == "same_a09_T4" else ["independent"]
+        )
     names = {ks["name"]: ks for ks in c["k_selection"]}
     assert (names["same_a09_T4_random"]["c1"], names["same_a09_T4_random"]["c2"]) == (0.01, 0.03)
     assert names["same_a07_T100"]["c2"] == 0.06
@@ -202,8 +238,17 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
     from ssmobs.stages import run_select_k
 
-    sc = Scenario.from_config({"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0,
-                               "T": 4, "K": 100, "paper_ref": "same_a09_T4"})
+    sc = Scenario.from_config(
+        {
+            "name": "s",
+            "model": "same",
+            "omega": {"a": 0.9},
+            "x0": 8.0,
+            "T": 4,
+            "K": 100,
+            "paper_ref": "same_a09_T4",
+        }
+    )
     model = get_model("same")
     pts = []
     for K in (100, 200, 300):
@@ -213,9 +258,15 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
         io.write_json(tmp_path / f"K{K}.json", info)
         pts.append(tmp_path / f"K{K}.json")
     for (c1, c2), shown in (((0.01, 0.03), "2500-4500"), ((0.01, 0.01), "")):
-        res = run_select_k({"name": "t", "c1": c1, "c2": c2}, sc, pts,
-                           "config/paper_values.yaml", tmp_path / "s.json", tmp_path / "v.csv",
-                           [str(tmp_path / "f.png")])
+        res = run_select_k(
+            {"name": "t", "c1": c1, "c2": c2},
+            sc,
+            pts,
+            "config/paper_values.yaml",
+            tmp_path / "s.json",
+            tmp_path / "v.csv",
+            [str(tmp_path / "f.png")],
+        )
         row = res["choices"][0]
         assert row["K_paper_range"] == shown and row["K_chosen"] == 100
         assert row["c_paper"] == ("(0.01, 0.03)" if shown else "")

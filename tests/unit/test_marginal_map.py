@@ -5,9 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import stats
-
-from ssmobs.marginal_map import (KDEError, binned_kde, kde_mode, kde_modes, marginal_summary,
-                                 silverman_bandwidth, theta_draws)
+from ssmobs.marginal_map import (
+    KDEError,
+    binned_kde,
+    kde_mode,
+    kde_modes,
+    marginal_summary,
+    silverman_bandwidth,
+    theta_draws,
+)
 from ssmobs.models import get_model
 from ssmobs.stan_backends.base import Draws
 
@@ -70,12 +76,15 @@ def test_heavy_tails_keep_a_fine_grid():
     assert abs(kde_mode(x)) < 0.1
 
 
-@pytest.mark.parametrize("bad,match", [
-    (np.full(100, 3.0), "zero spread"),
-    (np.r_[np.ones(50), np.nan], "non-finite"),
-    (np.r_[np.ones(50), np.inf, 2.0], "non-finite"),
-    (np.array([1.0]), "at least 2"),
-])
+@pytest.mark.parametrize(
+    "bad,match",
+    [
+        (np.full(100, 3.0), "zero spread"),
+        (np.r_[np.ones(50), np.nan], "non-finite"),
+        (np.r_[np.ones(50), np.inf, 2.0], "non-finite"),
+        (np.array([1.0]), "at least 2"),
+    ],
+)
 def test_bad_draws_raise_kde_error(bad, match):
     with pytest.raises(KDEError, match=match):
         kde_mode(bad)
@@ -121,9 +130,13 @@ def test_theta_draws_accept_x_with_x0_inside_and_reject_wrong_shapes():
     T = 4
     d = _draws_for(model, T, np.random.default_rng(1))
     ref = theta_draws(d, model, T)
-    joined = Draws(params={"a": d.params["a"],
-                           "x": np.concatenate([d.params["x0"][..., None], d.params["x"]], -1)},
-                   sample_stats=d.sample_stats)
+    joined = Draws(
+        params={
+            "a": d.params["a"],
+            "x": np.concatenate([d.params["x0"][..., None], d.params["x"]], -1),
+        },
+        sample_stats=d.sample_stats,
+    )
     assert np.array_equal(theta_draws(joined, model, T), ref)
     with pytest.raises(ValueError, match="shape"):
         theta_draws(d, model, T + 1)

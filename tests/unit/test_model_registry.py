@@ -6,12 +6,11 @@ import textwrap
 from pathlib import Path
 
 import pytest
-
 from ssmobs.models import MODELS, ModelDefinitionError, discover_models, model_files
 
 pytestmark = pytest.mark.unit
 
-GOOD = '''
+GOOD = """
 import numpy as np
 from ssmobs.models.base import StateSpaceModel
 
@@ -34,7 +33,7 @@ class {cls}(StateSpaceModel):
     def simulate(self, omega, x0, eta, eps):
         x = np.cumsum(eta, axis=1) + x0[0]
         return x, x + eps
-'''
+"""
 
 
 def write(directory: Path, stem: str, text: str) -> None:
@@ -44,8 +43,9 @@ def write(directory: Path, stem: str, text: str) -> None:
 def test_package_models_are_found_by_file_name():
     stems = {p.stem for p in model_files()}
     assert stems == set(MODELS)
-    assert {"same", "sep", "sep_d2_p1", "sep_d1_p2", "sep_ranwalk", "sep_mult",
-            "stoch_vol"} <= set(MODELS)
+    assert {"same", "sep", "sep_d2_p1", "sep_d1_p2", "sep_ranwalk", "sep_mult", "stoch_vol"} <= set(
+        MODELS
+    )
     for slug, model in MODELS.items():
         assert model.slug == slug
 
@@ -68,7 +68,7 @@ def test_missing_attribute_names_file_and_attribute(tmp_path):
 
 def test_missing_method(tmp_path):
     text = GOOD.format(cls="Toy", slug="toy")
-    text = text[:text.index("    def simulate")]
+    text = text[: text.index("    def simulate")]
     write(tmp_path, "toy", text)
     with pytest.raises(ModelDefinitionError, match=r"missing required method\(s\) \['simulate'\]"):
         discover_models(tmp_path)
@@ -102,14 +102,23 @@ def test_import_error_names_the_file(tmp_path):
         discover_models(tmp_path)
 
 
-@pytest.mark.parametrize("old, new, words", [
-    ('param_names = ("a",)', 'param_names = ("x0",)', ["param_names ['x0'] are not allowed"]),
-    ('default_prior = {"a": "restricted"}', 'default_prior = {"b": "restricted"}',
-     ["default_prior must have exactly one entry per parameter ['a']"]),
-    ('allowed_priors = {"a": ("restricted",)}', 'allowed_priors = {"a": ("half_line",)}',
-     ["default_prior['a'] = 'restricted' is not in allowed_priors['a']"]),
-    ("obs_dim = 1", "obs_dim = 0", ["obs_dim = 0 must be an integer >= 1"]),
-])
+@pytest.mark.parametrize(
+    "old, new, words",
+    [
+        ('param_names = ("a",)', 'param_names = ("x0",)', ["param_names ['x0'] are not allowed"]),
+        (
+            'default_prior = {"a": "restricted"}',
+            'default_prior = {"b": "restricted"}',
+            ["default_prior must have exactly one entry per parameter ['a']"],
+        ),
+        (
+            'allowed_priors = {"a": ("restricted",)}',
+            'allowed_priors = {"a": ("half_line",)}',
+            ["default_prior['a'] = 'restricted' is not in allowed_priors['a']"],
+        ),
+        ("obs_dim = 1", "obs_dim = 0", ["obs_dim = 0 must be an integer >= 1"]),
+    ],
+)
 def test_contract_problems(tmp_path, old, new, words):
     text = GOOD.format(cls="Toy", slug="toy")
     assert old in text

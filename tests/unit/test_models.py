@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import (
     compile_model,
@@ -89,9 +88,10 @@ def test_log_posterior_of_same_matches_paper_formula():
     theta, z = random_inside(model, T=6, K=2, seed=3)
     a, x = theta[:, 0], theta[:, 1:]
     zz = z[:, :, 0]
-    paper = (-0.5 / (1 - a**2) * (((zz - a[:, None] * x[:, 1:]) ** 2).sum(1)
-                                  + ((x[:, 1:] - a[:, None] * x[:, :-1]) ** 2).sum(1))
-             - 6 * np.log(1 - a**2))
+    paper = -0.5 / (1 - a**2) * (
+        ((zz - a[:, None] * x[:, 1:]) ** 2).sum(1)
+        + ((x[:, 1:] - a[:, None] * x[:, :-1]) ** 2).sum(1)
+    ) - 6 * np.log(1 - a**2)
     ours = log_posterior(model, theta, z)
     assert np.allclose(ours - paper, 0.0, atol=1e-10)
 
@@ -121,8 +121,11 @@ def test_constraint_derivatives_match_finite_differences():
         e = np.zeros(4)
         e[j] = h
         (dp, _), (dm, _) = cons.derivatives(omega + e), cons.derivatives(omega - e)
-        assert np.allclose((cons.values(omega + e) - cons.values(omega - e))[:, 0] / (2 * h),
-                           dc[:, 0, j], atol=1e-8)
+        assert np.allclose(
+            (cons.values(omega + e) - cons.values(omega - e))[:, 0] / (2 * h),
+            dc[:, 0, j],
+            atol=1e-8,
+        )
         assert np.allclose((dp - dm)[:, 0] / (2 * h), d2c[:, 0, :, j], atol=1e-6)
     none = compile_model(get_model("same")).constraints
     c0, (dc0, d2c0) = none.values(omega[:, :1]), none.derivatives(omega[:, :1])
@@ -177,8 +180,11 @@ def test_initial_states_for_d_not_p():
     assert np.allclose(x[..., 0], z.mean(axis=2))
     z1 = np.arange(6, dtype=float).reshape(2, 3, 1)
     x2 = get_model("sep_d1_p2").initial_states(np.array([0.6, 0.5, 0.9, 0.9]), z1)
-    assert x2.shape == (2, 3, 2) and np.allclose(x2[..., 0], z1[..., 0]) and np.allclose(
-        x2[..., 1], z1[..., 0])
+    assert (
+        x2.shape == (2, 3, 2)
+        and np.allclose(x2[..., 0], z1[..., 0])
+        and np.allclose(x2[..., 1], z1[..., 0])
+    )
     z3 = np.ones((2, 3, 1))
     assert np.allclose(get_model("same").initial_states(np.array([0.9]), z3), z3)
 
@@ -197,11 +203,14 @@ def test_prior_bounds_follow_the_paper():
     assert sep.lower.tolist() == [-1.0, 0.0] and sep.variants == ("unrestricted", "restricted")
 
 
-@pytest.mark.parametrize("prior, words", [
-    ("flat", ["unknown prior variant 'flat'", "'a'"]),
-    ("half_line", ["'half_line' is not allowed", "'a'", "same"]),
-    ({"q": "restricted"}, ["['q']", "parameters are ['a']"]),
-])
+@pytest.mark.parametrize(
+    "prior, words",
+    [
+        ("flat", ["unknown prior variant 'flat'", "'a'"]),
+        ("half_line", ["'half_line' is not allowed", "'a'", "same"]),
+        ({"q": "restricted"}, ["['q']", "parameters are ['a']"]),
+    ],
+)
 def test_prior_errors_name_the_problem(prior, words):
     with pytest.raises(ValueError) as err:
         get_model("same").prior_bounds([0.9], prior)
@@ -214,14 +223,17 @@ def test_prior_sign_of_zero_true_value_is_an_error():
         get_model("same").prior_bounds([0.0])
 
 
-@pytest.mark.parametrize("slug, omega, x0, words", [
-    ("same", [1.2], 8, ["a=1.2", "|a| < 1"]),
-    ("sep_mult", [-0.5], 8, ["a=-0.5", "> 0"]),
-    ("sep_d1_p2", [0.8, 0.7, 0.9, 0.9], [8, 8], ["violate the constraint", "sep_d1_p2"]),
-    ("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], 8, ["x0 must have 2 component(s)"]),
-    ("sep", {"a": 0.9}, 8, ["missing ['b']"]),
-    ("same", [float("nan")], 8, ["finite"]),
-])
+@pytest.mark.parametrize(
+    "slug, omega, x0, words",
+    [
+        ("same", [1.2], 8, ["a=1.2", "|a| < 1"]),
+        ("sep_mult", [-0.5], 8, ["a=-0.5", "> 0"]),
+        ("sep_d1_p2", [0.8, 0.7, 0.9, 0.9], [8, 8], ["violate the constraint", "sep_d1_p2"]),
+        ("sep_d1_p2", [0.6, 0.5, 0.9, 0.9], 8, ["x0 must have 2 component(s)"]),
+        ("sep", {"a": 0.9}, 8, ["missing ['b']"]),
+        ("same", [float("nan")], 8, ["finite"]),
+    ],
+)
 def test_check_true_values_messages(slug, omega, x0, words):
     problems = get_model(slug).check_true_values(omega, x0)
     assert problems, "expected a problem"

@@ -7,7 +7,6 @@ import logging
 
 import numpy as np
 import pytest
-
 from ssmobs import seeds
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.log import Progress
@@ -63,12 +62,20 @@ class FakeBackend:
             x0 = np.full((c, n), 8.0)
         if mode == "nan":
             x[1, 5, 0] = np.nan
-        stats = {"divergent__": np.zeros((c, n)), "treedepth__": np.full((c, n), 3.0),
-                 "energy__": rng.standard_normal((c, n)), "lp__": np.zeros((c, n)),
-                 "accept_stat__": np.full((c, n), 0.9), "stepsize__": np.full((c, n), 0.5),
-                 "n_leapfrog__": np.full((c, n), 7.0)}
-        return Draws(params={"a": a, "x0": x0, "x": x}, sample_stats=stats,
-                     timings={"sample": 0.01, "transfer": 0.002})
+        stats = {
+            "divergent__": np.zeros((c, n)),
+            "treedepth__": np.full((c, n), 3.0),
+            "energy__": rng.standard_normal((c, n)),
+            "lp__": np.zeros((c, n)),
+            "accept_stat__": np.full((c, n), 0.9),
+            "stepsize__": np.full((c, n), 0.5),
+            "n_leapfrog__": np.full((c, n), 7.0),
+        }
+        return Draws(
+            params={"a": a, "x0": x0, "x": x},
+            sample_stats=stats,
+            timings={"sample": 0.01, "transfer": 0.002},
+        )
 
 
 @pytest.fixture()
@@ -81,10 +88,18 @@ def scenario(tmp_path):
     stan_file = tmp_path / "same.stan"
     stan_file.write_text("// fake program\n")
     return {
-        "model": model, "stan_file": stan_file, "z": z, "x_true": x_true,
-        "bounds": model.prior_bounds({"a": 0.9}), "omega_true": np.array([0.9]), "x0_true": 8.0,
-        "scenario": "same_T5", "seed": 11, "sampler": SAMPLER,
-        "convergence": ConvergenceSettings(), "records_dir": tmp_path / "records",
+        "model": model,
+        "stan_file": stan_file,
+        "z": z,
+        "x_true": x_true,
+        "bounds": model.prior_bounds({"a": 0.9}),
+        "omega_true": np.array([0.9]),
+        "x0_true": 8.0,
+        "scenario": "same_T5",
+        "seed": 11,
+        "sampler": SAMPLER,
+        "convergence": ConvergenceSettings(),
+        "records_dir": tmp_path / "records",
         "draws_dir": tmp_path / "draws",
     }
 
@@ -92,12 +107,27 @@ def scenario(tmp_path):
 def run(sc, backend, ks=range(K), **kw):
     args = {k: v for k, v in sc.items()}
     args.update(kw)
-    return run_trajectories(args["model"], backend, args["stan_file"], args["z"],
-                            args["x_true"], list(ks), args["bounds"], args["omega_true"],
-                            args["x0_true"], args["scenario"], args["seed"], args["sampler"],
-                            args["convergence"], kw.get("init", "random"), args["records_dir"],
-                            kw.get("keep_draws_for", set()), args["draws_dir"],
-                            kw.get("progress"), kw.get("retry_errors", False))
+    return run_trajectories(
+        args["model"],
+        backend,
+        args["stan_file"],
+        args["z"],
+        args["x_true"],
+        list(ks),
+        args["bounds"],
+        args["omega_true"],
+        args["x0_true"],
+        args["scenario"],
+        args["seed"],
+        args["sampler"],
+        args["convergence"],
+        kw.get("init", "random"),
+        args["records_dir"],
+        kw.get("keep_draws_for", set()),
+        args["draws_dir"],
+        kw.get("progress"),
+        kw.get("retry_errors", False),
+    )
 
 
 MODES = {1: "raise", 2: "bad", 3: "const", 4: "nan", 5: "reject"}
@@ -109,7 +139,8 @@ def test_records_for_good_and_failing_trajectories(scenario):
     assert [r["k"] for r in recs] == list(range(K))
     assert len(backend.compiled) == 1
     assert [c["seed"] for c in backend.calls] == [
-        seeds.int_seed(11, "nuts", "same_T5", k) for k in range(K)]
+        seeds.int_seed(11, "nuts", "same_T5", k) for k in range(K)
+    ]
     for k in range(K):
         on_disk = json.loads(record_path(scenario["records_dir"], k).read_text())
         assert set(RECORD_KEYS) <= set(on_disk)
@@ -160,11 +191,15 @@ def test_resume_skips_valid_records(scenario):
     assert backend.calls == [] and backend.compiled == []
     assert progress.done == K
     assert [r["converged"] for r in recs] == [True, False, False, False, False, False]
-    assert mtimes == {k: record_path(scenario["records_dir"], k).stat().st_mtime_ns
-                      for k in range(K)}
+    assert mtimes == {
+        k: record_path(scenario["records_dir"], k).stat().st_mtime_ns for k in range(K)
+    }
     # changing only the number of workers keeps the records
-    run(scenario, backend, sampler=SamplerSettings(chains=4, iter_warmup=100,
-                                                   iter_sampling=400, workers=2))
+    run(
+        scenario,
+        backend,
+        sampler=SamplerSettings(chains=4, iter_warmup=100, iter_sampling=400, workers=2),
+    )
     assert backend.calls == []
 
 
@@ -235,8 +270,14 @@ def test_true_inits_for_two_states(tmp_path):
     model = get_model("sep_d1_p2")
     x = np.arange(6.0).reshape(3, 2)
     inits = _inits(model, np.array([0.6, 0.5, 0.9, 0.9]), np.array([8, 7]), x, 2)
-    assert inits[1] == {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9, "x0": [8.0, 7.0],
-                        "x": [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]]}
+    assert inits[1] == {
+        "a": 0.6,
+        "b": 0.5,
+        "c": 0.9,
+        "d": 0.9,
+        "x0": [8.0, 7.0],
+        "x": [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]],
+    }
 
 
 def test_keep_draws_only_for_chosen_k(scenario):
@@ -286,8 +327,14 @@ def test_realistic_size_record(scenario):
     model = scenario["model"]
     z = np.random.default_rng(1).normal(0, 1, (1, 100, 1))
     z[0, 0, 0] = 0
-    recs = run(scenario, FakeBackend(), ks=[0], z=z, x_true=z,
-               sampler=SamplerSettings(chains=4, iter_warmup=10, iter_sampling=6000))
+    recs = run(
+        scenario,
+        FakeBackend(),
+        ks=[0],
+        z=z,
+        x_true=z,
+        sampler=SamplerSettings(chains=4, iter_warmup=10, iter_sampling=6000),
+    )
     assert recs[0]["converged"]
     assert len(recs[0]["map"]) == len(model.theta_names(100))
     t = recs[0]["timings"]
@@ -347,12 +394,15 @@ def test_intact_records_pass_the_check(batch, scenario):
     check(batch, scenario)
 
 
-@pytest.mark.parametrize("damage,needle", [
-    ("truncate", r"record of trajectory k=2 is damaged .*k00002.json: not valid JSON"),
-    ("delete", r"record of trajectory k=2 .*k00002.json\) is missing"),
-    ("edit", r"records of trajectories k=\[2\] .* differ from it"),
-    ("other_k", r"k00002.json is of trajectory k=3, not k=2"),
-])
+@pytest.mark.parametrize(
+    "damage,needle",
+    [
+        ("truncate", r"record of trajectory k=2 is damaged .*k00002.json: not valid JSON"),
+        ("delete", r"record of trajectory k=2 .*k00002.json\) is missing"),
+        ("edit", r"records of trajectories k=\[2\] .* differ from it"),
+        ("other_k", r"k00002.json is of trajectory k=3, not k=2"),
+    ],
+)
 def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle):
     from ssmobs import io
 

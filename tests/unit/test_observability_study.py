@@ -7,7 +7,6 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
 from ssmobs.observability_study import run_observability_study, study_table
 from ssmobs.scenario import Scenario
 
@@ -15,28 +14,56 @@ pytestmark = pytest.mark.unit
 
 
 def scenario(T):
-    return Scenario.from_config({"name": f"sv_T{T}", "model": "stoch_vol", "x0": 0, "T": T,
-                                 "K": 4, "omega": {"phi": 0.9, "sigma": 0.5}})
+    return Scenario.from_config(
+        {
+            "name": f"sv_T{T}",
+            "model": "stoch_vol",
+            "x0": 0,
+            "T": T,
+            "K": 4,
+            "omega": {"phi": 0.9, "sigma": 0.5},
+        }
+    )
 
 
 def joint(k_max):
-    return {"K": 4, "K_max": k_max, "ratio": k_max / 4, "n_ok": k_max, "n_boundary": 4 - k_max,
-            "phi_mean": 0.8 if k_max else float("nan"), "sigma_mean": 0.4}
+    return {
+        "K": 4,
+        "K_max": k_max,
+        "ratio": k_max / 4,
+        "n_ok": k_max,
+        "n_boundary": 4 - k_max,
+        "phi_mean": 0.8 if k_max else float("nan"),
+        "sigma_mean": 0.4,
+    }
 
 
 def stan_frame(converged, failed):
-    return pd.DataFrame({"k": range(4), "converged": converged, "failed_checks": failed,
-                         "phi_map": [0.1, 0.2, 0.3, 0.9], "sigma_map": [0.5] * 4})
+    return pd.DataFrame(
+        {
+            "k": range(4),
+            "converged": converged,
+            "failed_checks": failed,
+            "phi_map": [0.1, 0.2, 0.3, 0.9],
+            "sigma_map": [0.5] * 4,
+        }
+    )
 
 
 def test_rows_sorted_by_T_with_ratios_and_reasons():
     scs = [scenario(50), scenario(20)]
     frame = study_table(
-        scs, {"sv_T50": joint(1), "sv_T20": joint(0)},
-        {"sv_T50": {"n_stan": 3, "ratio": 0.75, "phi_mean": 0.85},
-         "sv_T20": {"n_stan": 0, "ratio": 0.0}},
-        {"sv_T50": stan_frame([True, True, True, False], ["", "", "", "rhat"]),
-         "sv_T20": stan_frame([False] * 4, ["divergences,rhat", "rhat", "rhat,ebfmi", "rhat"])})
+        scs,
+        {"sv_T50": joint(1), "sv_T20": joint(0)},
+        {
+            "sv_T50": {"n_stan": 3, "ratio": 0.75, "phi_mean": 0.85},
+            "sv_T20": {"n_stan": 0, "ratio": 0.0},
+        },
+        {
+            "sv_T50": stan_frame([True, True, True, False], ["", "", "", "rhat"]),
+            "sv_T20": stan_frame([False] * 4, ["divergences,rhat", "rhat", "rhat,ebfmi", "rhat"]),
+        },
+    )
     assert frame["T"].tolist() == [20, 50]
     assert frame["K_max_ratio"].tolist() == [0.0, 0.25]
     assert frame["K_stan_ratio"].tolist() == [0.0, 0.75]
@@ -56,12 +83,20 @@ def test_run_writes_csv_md_png(tmp_path):
     (tmp_path / "j.json").write_text(json.dumps(joint(2)))
     (tmp_path / "s.json").write_text(json.dumps({"n_stan": 1, "ratio": 0.25}))
     stan_frame([True, False, False, False], ["", "rhat", "rhat", "rhat"]).to_parquet(
-        tmp_path / "m.parquet")
+        tmp_path / "m.parquet"
+    )
     out = {ext: tmp_path / f"ours_x_observability.{ext}" for ext in ("csv", "md", "png")}
-    run_observability_study({"name": "x"}, [scenario(20)], {"sv_T20": tmp_path / "j.json"},
-                            {"sv_T20": tmp_path / "s.json"}, {"sv_T20": tmp_path / "m.parquet"},
-                            out["csv"], out["md"], out["png"],
-                            stan_settings={"chains": 2, "iter_warmup": 3, "iter_sampling": 4})
+    run_observability_study(
+        {"name": "x"},
+        [scenario(20)],
+        {"sv_T20": tmp_path / "j.json"},
+        {"sv_T20": tmp_path / "s.json"},
+        {"sv_T20": tmp_path / "m.parquet"},
+        out["csv"],
+        out["md"],
+        out["png"],
+        stan_settings={"chains": 2, "iter_warmup": 3, "iter_sampling": 4},
+    )
     back = pd.read_csv(out["csv"])
     assert back["K_max_ratio"].tolist() == [0.5] and back["K_stan_ratio"].tolist() == [0.25]
     assert "2 chains x (3 + 4) iterations" in out["md"].read_text()
@@ -72,6 +107,7 @@ def test_ratios_carry_their_binomial_interval():
     from ssmobs.binomial import clopper_pearson
 
     frame = study_table([scenario(20)], {"sv_T20": joint(1)}, {}, {})
-    assert (frame.loc[0, "K_max_ratio_lo95"], frame.loc[0, "K_max_ratio_hi95"]) == \
-        clopper_pearson(1, 4)
+    assert (frame.loc[0, "K_max_ratio_lo95"], frame.loc[0, "K_max_ratio_hi95"]) == clopper_pearson(
+        1, 4
+    )
     assert np.isnan(frame.loc[0, "K_stan_ratio_lo95"])  # no Stan stage

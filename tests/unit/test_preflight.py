@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from ssmobs import preflight
 from ssmobs.config import ConfigError
 
@@ -48,8 +47,10 @@ def test_empty_file_names_file_and_required_key(tmp_path, text):
     path = tmp_path / "empty.yaml"
     path.write_text(text)
     msg = message(path)
-    assert msg == (f"config file {path} is empty; it needs at least the key 'scenarios' "
-                   f"(a list of scenarios; see config/README.md)")
+    assert msg == (
+        f"config file {path} is empty; it needs at least the key 'scenarios' "
+        f"(a list of scenarios; see config/README.md)"
+    )
 
 
 def test_file_without_scenarios_or_not_a_mapping(tmp_path):
@@ -62,8 +63,10 @@ def test_file_without_scenarios_or_not_a_mapping(tmp_path):
 
 def test_invalid_values_name_the_file(tmp_path):
     path = tmp_path / "c.yaml"
-    path.write_text("scenarios:\n  - {name: s, model: same, omega: {a: 0.9}, x0: 8, T: 4, "
-                    "K: 10}\nconvergence: {ess_bulk_min: .nan}\n")
+    path.write_text(
+        "scenarios:\n  - {name: s, model: same, omega: {a: 0.9}, x0: 8, T: 4, "
+        "K: 10}\nconvergence: {ess_bulk_min: .nan}\n"
+    )
     msg = message(path)
     assert msg.startswith(f"config file {path}: invalid configuration")
     assert "convergence.ess_bulk_min = nan: must be a finite number" in msg
@@ -75,9 +78,13 @@ def test_profiles_pass(name):
 
 
 def test_command_line_prints_one_line_and_fails(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "ssmobs.preflight", str(tmp_path / "x.yaml")],
-                          capture_output=True, text=True, cwd=tmp_path,
-                          env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"})
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", str(tmp_path / "x.yaml")],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+    )
     assert proc.returncode == 1
     assert proc.stderr == f"error: config file {tmp_path / 'x.yaml'} does not exist\n"
 
@@ -91,8 +98,9 @@ def make_lock(workdir: Path) -> None:
 
 def fake_snakemake(cwd: Path) -> subprocess.Popen:
     """A process whose command line mentions snakemake, running in ``cwd``."""
-    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)", "snakemake"],
-                            cwd=cwd)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import time; time.sleep(60)", "snakemake"], cwd=cwd
+    )
     time.sleep(0.2)
     return proc
 

@@ -8,15 +8,20 @@ import json
 import numpy as np
 import pytest
 import yaml
-
 from ssmobs import config as cfg
 from ssmobs.models import get_model
 from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
-ENTRY = {"name": "s", "model": "sep_d1_p2", "omega": {"d": 0.9, "c": 0.8, "b": 0.5, "a": 0.6},
-         "x0": [8, 7], "T": 3, "K": 5}
+ENTRY = {
+    "name": "s",
+    "model": "sep_d1_p2",
+    "omega": {"d": 0.9, "c": 0.8, "b": 0.5, "a": 0.6},
+    "x0": [8, 7],
+    "T": 3,
+    "K": 5,
+}
 
 
 def test_omega_follows_the_models_order_not_the_entrys():
@@ -36,16 +41,19 @@ def test_defaults_are_the_schemas():
     sc = Scenario.from_config(ENTRY)
     assert sc.seed == items["seed"]["default"] == 1
     assert (sc.method, sc.stan_init, sc.joint_map_start) == (
-        items["method"]["default"], items["stan_init"]["default"],
-        items["joint_map_start"]["default"])
+        items["method"]["default"],
+        items["stan_init"]["default"],
+        items["joint_map_start"]["default"],
+    )
     assert sc.joint_map is sc.stan is True
     assert (sc.prior, sc.stan_batch_size, sc.exact_K, sc.paper_ref) == (None, None, None, "")
     assert sc.exact  # absent means enabled (config/README.md)
     # a validated config gives the same Scenario as the raw entry
     conf = cfg.validate({"scenarios": [dict(ENTRY)]})
     validated = Scenario.from_config(conf["scenarios"][0])
-    assert dataclasses.astuple(validated.replace(model=None, omega=0, x0=0)) == \
-        dataclasses.astuple(sc.replace(model=None, omega=0, x0=0))
+    assert dataclasses.astuple(validated.replace(model=None, omega=0, x0=0)) == dataclasses.astuple(
+        sc.replace(model=None, omega=0, x0=0)
+    )
 
 
 def test_every_configured_scenario_converts():
@@ -54,8 +62,12 @@ def test_every_configured_scenario_converts():
         for entry in conf["scenarios"]:
             sc = Scenario.from_config(entry)
             assert dict(zip(sc.model.param_names, sc.omega)) == entry["omega"]
-            assert (sc.name, sc.T, sc.K, sc.seed) == (entry["name"], entry["T"], entry["K"],
-                                                      entry["seed"])
+            assert (sc.name, sc.T, sc.K, sc.seed) == (
+                entry["name"],
+                entry["T"],
+                entry["K"],
+                entry["seed"],
+            )
 
 
 def test_frozen_and_read_only():
@@ -72,29 +84,41 @@ def test_frozen_and_read_only():
 
 
 def test_helpers_for_the_stages():
-    sc = Scenario.from_config({**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8,
-                               "exact_K": 300, "stan_batch_size": 7})
+    sc = Scenario.from_config(
+        {
+            **ENTRY,
+            "model": "same",
+            "omega": {"a": 0.9},
+            "x0": 8,
+            "exact_K": 300,
+            "stan_batch_size": 7,
+        }
+    )
     assert sc.exact_applies and sc.exact_trajectories == 300
     assert sc.batch_size({"batch_size": 20}) == 7
     plain = Scenario.from_config({**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8})
     assert plain.exact_trajectories == plain.K and plain.batch_size({"batch_size": 20}) == 20
     assert not plain.replace(exact=False).exact_applies
-    assert not Scenario.from_config({**ENTRY, "model": "sep_mult", "omega": {"a": 0.9},
-                                     "x0": 8}).exact_applies  # not linear in the states
+    assert not Scenario.from_config(
+        {**ENTRY, "model": "sep_mult", "omega": {"a": 0.9}, "x0": 8}
+    ).exact_applies  # not linear in the states
     bounds = plain.prior_bounds()
     assert (bounds.lower[0], bounds.upper[0]) == (0.0, 1.0)
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"seed": -1}, r"seed = -1: must be >= 0"),
-    ({"T": "4"}, r"T = '4': must be of type integer"),
-    ({"method": "lcd"}, r"method = 'lcd': allowed values are"),
-    ({"colour": 1}, r"colour.*(unexpected|not allowed)"),
-    ({"model": "nope"}, r"model = 'nope': unknown model; allowed: \[.*'same'"),
-    ({"omega": {"a": 0.6, "b": 0.5, "c": 0.8}}, r"missing \['d'\]"),
-    ({"x0": 8}, r"x0 must have 2 component"),
-    ({"omega": {"a": 0.6, "b": 0.5, "c": 0.8, "d": 1.5}}, r"d=1.5 must satisfy \|d\| < 1"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"seed": -1}, r"seed = -1: must be >= 0"),
+        ({"T": "4"}, r"T = '4': must be of type integer"),
+        ({"method": "lcd"}, r"method = 'lcd': allowed values are"),
+        ({"colour": 1}, r"colour.*(unexpected|not allowed)"),
+        ({"model": "nope"}, r"model = 'nope': unknown model; allowed: \[.*'same'"),
+        ({"omega": {"a": 0.6, "b": 0.5, "c": 0.8}}, r"missing \['d'\]"),
+        ({"x0": 8}, r"x0 must have 2 component"),
+        ({"omega": {"a": 0.6, "b": 0.5, "c": 0.8, "d": 1.5}}, r"d=1.5 must satisfy \|d\| < 1"),
+    ],
+)
 def test_bad_entries_fail_naming_scenario_key_and_value(change, message):
     with pytest.raises(cfg.ConfigError, match=r"(?s)invalid scenario 's'.*" + message):
         Scenario.from_config({**ENTRY, **change})

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-
 from ssmobs.models import get_model
 from ssmobs.nuts_stage import records_to_frame
 from ssmobs.stan_metrics import stan_summary
@@ -15,13 +14,28 @@ pytestmark = pytest.mark.unit
 
 
 def rec(k, converged, map_, q5, q95, names):
-    return {"record_version": 1, "key": {"scenario": "s", "k": k, "stan_seed": 100 + k},
-            "k": k, "scenario": "s", "status": "ok", "converged": converged,
-            "failed_checks": [] if converged else ["rhat"],
-            "reason": None if converged else "rhat: ...",
-            "diagnostics": {"max_rhat": 1.001, "min_ess_bulk": 900.0, "min_ess_tail": 800.0,
-                            "n_divergent": 0, "n_treedepth_hits": 0, "min_ebfmi": 0.7},
-            "theta_names": names, "map": map_, "q5": q5, "q95": q95}
+    return {
+        "record_version": 1,
+        "key": {"scenario": "s", "k": k, "stan_seed": 100 + k},
+        "k": k,
+        "scenario": "s",
+        "status": "ok",
+        "converged": converged,
+        "failed_checks": [] if converged else ["rhat"],
+        "reason": None if converged else "rhat: ...",
+        "diagnostics": {
+            "max_rhat": 1.001,
+            "min_ess_bulk": 900.0,
+            "min_ess_tail": 800.0,
+            "n_divergent": 0,
+            "n_treedepth_hits": 0,
+            "min_ebfmi": 0.7,
+        },
+        "theta_names": names,
+        "map": map_,
+        "q5": q5,
+        "q95": q95,
+    }
 
 
 @pytest.fixture()
@@ -36,7 +50,7 @@ def same_case():
         #   k  conv   map (a, x0, x1, x2)     q5                      q95
         rec(0, True, [0.88, 7.5, 1.5, 2.0], [0.85, 7.0, 1.0, 1.5], [0.95, 9.0, 2.0, 2.5], names),
         rec(1, True, [0.92, 8.5, 3.0, 3.0], [0.90, 8.1, 2.0, 2.0], [0.95, 9.0, 4.0, 4.5], names),
-        rec(2, False, [0.50, 0.0, 9.0, 9.0], [0.10, -5, 0.0, 0.0], [0.99, 5.0, 99., 99.], names),
+        rec(2, False, [0.50, 0.0, 9.0, 9.0], [0.10, -5, 0.0, 0.0], [0.99, 5.0, 99.0, 99.0], names),
         rec(3, True, [0.91, 8.0, 5.0, 7.0], [0.80, 7.9, 4.0, 6.5], [0.89, 8.1, 6.0, 7.5], names),
     ]
     x_true = np.array([[1.0, 2.0], [3.0, 4.0], [0.0, 0.0], [5.0, 6.0]])[:, :, None]
@@ -72,8 +86,15 @@ def test_sequence_truth_and_frame_columns(same_case):
     model, records, x_true = same_case
     frame = records_to_frame(records, model, 2)
     assert list(frame["k"]) == [0, 1, 2, 3]
-    assert list(frame.columns[:7]) == ["k", "scenario", "stan_seed", "status", "converged",
-                                       "failed_checks", "reason"]
+    assert list(frame.columns[:7]) == [
+        "k",
+        "scenario",
+        "stan_seed",
+        "status",
+        "converged",
+        "failed_checks",
+        "reason",
+    ]
     assert "x2_q95" in frame.columns and frame.loc[2, "failed_checks"] == "rhat"
     a = stan_summary(frame, model, np.array([0.9]), 8.0, x_true)
     b = stan_summary(frame, model, [0.9], [8.0], x_true[:, :, 0])
@@ -86,8 +107,10 @@ def test_no_converged_trajectory_gives_nan(same_case):
         r["converged"] = False
     out = stan_summary(records_to_frame(records, model, 2), model, [0.9], 8, x_true)
     assert out["n_stan"] == 0 and out["ratio"] == 0.0
-    assert all(math.isnan(out[k]) for k in ("a_mean", "a_var", "a_mse", "a_cover90",
-                                             "x_mse_mean", "x_cover90_mean"))
+    assert all(
+        math.isnan(out[k])
+        for k in ("a_mean", "a_var", "a_mse", "a_cover90", "x_mse_mean", "x_cover90_mean")
+    )
 
 
 def test_single_converged_trajectory_has_nan_variance(same_case):

@@ -6,28 +6,86 @@ import math
 
 import pandas as pd
 import pytest
-
 from ssmobs.binomial import clopper_pearson
 from ssmobs.tables import section_iv, section_iv_compact, table_ii, write_table
 
-PAPER = {"ref": {"K": 4000, "K_max": 1956, "K_stan": 3680,
-                 "joint": {"mean": {"a": 0.95}}, "marginal": {"mean": {"a": 0.90}}}}
+PAPER = {
+    "ref": {
+        "K": 4000,
+        "K_max": 1956,
+        "K_stan": 3680,
+        "joint": {"mean": {"a": 0.95}},
+        "marginal": {"mean": {"a": 0.90}},
+    }
+}
 
 
 def rows() -> list[dict]:
-    sc = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 40,
-          "method": "design", "stan_init": "random", "joint_map": True, "stan": True,
-          "paper_ref": "ref"}
-    joint = {"K": 40, "K_max": 20, "ratio": 0.5, "components": ["a", "x0"], "a_mean": 0.94,
-             "x0_mean": 7.1, "a_var": 0.01, "x0_var": 0.5, "a_mse": 0.02, "x0_mse": 1.2}
-    marginal = {"K": 40, "n_stan": 34, "ratio": 0.85, "a_mean": 0.897, "x0_mean": 8.05,
-                "a_cover90": 0.87, "x0_cover90": 0.9, "a_var": 0.001, "x0_var": 0.7}
-    own = {**sc, "name": "own", "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5},
-           "x0": 0, "stan": False, "paper_ref": ""}
-    return [{"config": sc, "scenario": "s", "T": 20, "paper_ref": "ref", "joint": joint,
-             "marginal": marginal, "exact": None},
-            {"config": own, "scenario": "own", "T": 20, "paper_ref": "", "joint": None,
-             "marginal": None, "exact": None}]
+    sc = {
+        "name": "s",
+        "model": "same",
+        "omega": {"a": 0.9},
+        "x0": 8,
+        "T": 20,
+        "K": 40,
+        "method": "design",
+        "stan_init": "random",
+        "joint_map": True,
+        "stan": True,
+        "paper_ref": "ref",
+    }
+    joint = {
+        "K": 40,
+        "K_max": 20,
+        "ratio": 0.5,
+        "components": ["a", "x0"],
+        "a_mean": 0.94,
+        "x0_mean": 7.1,
+        "a_var": 0.01,
+        "x0_var": 0.5,
+        "a_mse": 0.02,
+        "x0_mse": 1.2,
+    }
+    marginal = {
+        "K": 40,
+        "n_stan": 34,
+        "ratio": 0.85,
+        "a_mean": 0.897,
+        "x0_mean": 8.05,
+        "a_cover90": 0.87,
+        "x0_cover90": 0.9,
+        "a_var": 0.001,
+        "x0_var": 0.7,
+    }
+    own = {
+        **sc,
+        "name": "own",
+        "model": "stoch_vol",
+        "omega": {"phi": 0.9, "sigma": 0.5},
+        "x0": 0,
+        "stan": False,
+        "paper_ref": "",
+    }
+    return [
+        {
+            "config": sc,
+            "scenario": "s",
+            "T": 20,
+            "paper_ref": "ref",
+            "joint": joint,
+            "marginal": marginal,
+            "exact": None,
+        },
+        {
+            "config": own,
+            "scenario": "own",
+            "T": 20,
+            "paper_ref": "",
+            "joint": None,
+            "marginal": None,
+            "exact": None,
+        },
+    ]
 
 
 def test_both_stages_read_with_component_stat_keys():
@@ -41,17 +99,26 @@ def test_wide_summary_keeps_its_columns_and_adds_intervals():
     wide = section_iv(rows(), PAPER).set_index("scenario")
     assert {"joint_mean_a", "marginal_mean_a", "cover90_a", "K_max_frac"} <= set(wide.columns)
     assert wide.loc["s", "joint_mean_a"] == 0.94
-    assert (wide.loc["s", "K_max_frac_lo95"], wide.loc["s", "K_max_frac_hi95"]) == \
-        clopper_pearson(20, 40)
+    assert (wide.loc["s", "K_max_frac_lo95"], wide.loc["s", "K_max_frac_hi95"]) == clopper_pearson(
+        20, 40
+    )
     assert wide.loc["s", "K_stan_frac_paper_hi95"] - wide.loc["s", "K_stan_frac_paper_lo95"] < 0.03
     assert math.isnan(wide.loc["own", "K_stan_frac_lo95"])
 
 
 def test_compact_summary_is_one_short_row_per_scenario(tmp_path):
     compact = section_iv_compact(rows(), PAPER)
-    assert list(compact.columns) == ["scenario", "T", "K", "K^max/K (95 % CI)", "paper K^max/K",
-                                     "K^Stan/K (95 % CI)", "paper K^Stan/K",
-                                     "marginal MAP mean", "Cover90"]
+    assert list(compact.columns) == [
+        "scenario",
+        "T",
+        "K",
+        "K^max/K (95 % CI)",
+        "paper K^max/K",
+        "K^Stan/K (95 % CI)",
+        "paper K^Stan/K",
+        "marginal MAP mean",
+        "Cover90",
+    ]
     s = compact.set_index("scenario").loc["s"]
     assert s["K^max/K (95 % CI)"] == "0.50 [0.34, 0.66]"  # K = 40: about +-0.15
     assert s["paper K^max/K"] == "0.49 [0.47, 0.50]"

@@ -16,7 +16,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from helpers import REPO, SMOKE, make_workdir, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -30,23 +29,31 @@ def cluster_unavailable() -> str | None:
     if shutil.which("sinfo") is None:
         return "no SLURM client on PATH (sinfo); start one with .ci/start_slurm.sh"
     try:
-        proc = subprocess.run(["sinfo", "--noheader", "--format=%P %a %T"], capture_output=True,
-                              text=True, timeout=30)
+        proc = subprocess.run(
+            ["sinfo", "--noheader", "--format=%P %a %T"], capture_output=True, text=True, timeout=30
+        )
     except subprocess.TimeoutExpired:
         return "sinfo did not answer within 30 s"
     if proc.returncode != 0:
         return f"sinfo failed: {proc.stderr.strip()[:300]}"
-    ready = [line.split() for line in proc.stdout.splitlines()
-             if len(line.split()) == 3 and line.split()[1] == "up"
-             and line.split()[2].rstrip("*~#!%$@^-") in READY_STATES]
+    ready = [
+        line.split()
+        for line in proc.stdout.splitlines()
+        if len(line.split()) == 3
+        and line.split()[1] == "up"
+        and line.split()[2].rstrip("*~#!%$@^-") in READY_STATES
+    ]
     if not ready:
         return f"no partition with a node ready for jobs: {proc.stdout.strip()[:300]!r}"
     return None
 
 
 def tables(workdir: Path) -> dict[str, bytes]:
-    return {f.name: f.read_bytes() for f in sorted((workdir / "paper_figures").iterdir())
-            if f.suffix in TABLE_SUFFIXES}
+    return {
+        f.name: f.read_bytes()
+        for f in sorted((workdir / "paper_figures").iterdir())
+        if f.suffix in TABLE_SUFFIXES
+    }
 
 
 @pytest.fixture(scope="module")
@@ -61,14 +68,24 @@ def cluster_run(tmp_path_factory) -> tuple[Path, str]:
     # and the package under test importable even where it is not installed.
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
     env["PYTHONPATH"] = os.pathsep.join(
-        p for p in [str(workdir / "workflow"), env.get("PYTHONPATH", "")] if p)
-    proc = snakemake(workdir, "--workflow-profile", "config/profiles/slurm", *SMOKE,
-                     # no accounting database on the CI cluster: job states from squeue
-                     "--slurm-status-command", "squeue",
-                     "--slurm-init-seconds-before-status-checks", "5",
-                     "--seconds-between-status-checks", "5",
-                     "--slurm-keep-successful-logs",
-                     timeout=3600, env=env)
+        p for p in [str(workdir / "workflow"), env.get("PYTHONPATH", "")] if p
+    )
+    proc = snakemake(
+        workdir,
+        "--workflow-profile",
+        "config/profiles/slurm",
+        *SMOKE,
+        # no accounting database on the CI cluster: job states from squeue
+        "--slurm-status-command",
+        "squeue",
+        "--slurm-init-seconds-before-status-checks",
+        "5",
+        "--seconds-between-status-checks",
+        "5",
+        "--slurm-keep-successful-logs",
+        timeout=3600,
+        env=env,
+    )
     return workdir, proc.stdout + proc.stderr
 
 
@@ -76,9 +93,23 @@ def test_profile_sets_runtime_and_memory_of_every_job():
     """Account and partition on the command line replace the profile's default-resources
     whole; every submitted job must still get a time limit and a memory request."""
     proc = subprocess.run(
-        [sys.executable, "-m", "snakemake", "-n", "--workflow-profile", "config/profiles/slurm",
-         *SMOKE, "--default-resources", "slurm_account=acct", "slurm_partition=part"],
-        cwd=REPO, capture_output=True, text=True, timeout=600)
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-n",
+            "--workflow-profile",
+            "config/profiles/slurm",
+            *SMOKE,
+            "--default-resources",
+            "slurm_account=acct",
+            "slurm_partition=part",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     jobs = re.findall(r"rule (\w+):\n(?:.*\n)*?\s+resources: (.*)", proc.stdout + proc.stderr)
     rules = {rule for rule, _ in jobs} - {"all"}

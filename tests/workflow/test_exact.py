@@ -9,7 +9,6 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-
 from helpers import REPO
 
 pytestmark = pytest.mark.workflow
@@ -44,8 +43,9 @@ def test_exact_column_in_the_tables(smoke_run):
     t2 = pd.read_csv(figs / "table2_joint_vs_marginal.csv")
     marg = t2[t2["estimator"] == "marginal MAP"]
     assert {"a_exact", "x0_exact"} <= set(t2.columns)
-    summ = json.loads((smoke_run / "results" / "same_T4" / "exact_marginal" / "K12"
-                       / "summary.json").read_text())
+    summ = json.loads(
+        (smoke_run / "results" / "same_T4" / "exact_marginal" / "K12" / "summary.json").read_text()
+    )
     mean_row = marg[marg["statistic"] == "mean"].iloc[0]
     assert mean_row["a_exact"] == pytest.approx(summ["a_mean"])
     assert t2.loc[t2["estimator"] == "joint MAP", "a_exact"].isna().all()
@@ -53,7 +53,7 @@ def test_exact_column_in_the_tables(smoke_run):
     assert "exact" in t3.columns and np.isfinite(t3["exact"]).all()
     s4 = pd.read_csv(figs / "section4_summary.csv").set_index("scenario")
     assert np.isfinite(s4.loc["same_T4", "exact_mean_a"])
-    assert s4.loc["sep_d1_p2_T3", "exact_unique"] == 0      # unobservable (Sec. IV.D)
+    assert s4.loc["sep_d1_p2_T3", "exact_unique"] == 0  # unobservable (Sec. IV.D)
     assert s4.loc["ranwalk_T4", "K_exact"] == 6
 
 
@@ -63,5 +63,6 @@ def test_exact_vs_stan_figure(smoke_run):
     for sc in _smoke()["scenarios"]:
         if sc.get("stan", True) and get_model(sc["model"]).linear_in_states:
             for ext in ("pdf", "png"):
-                assert (smoke_run / "paper_figures"
-                        / f"fig_exact_vs_stan_{sc['name']}.{ext}").stat().st_size > 2000
+                assert (
+                    smoke_run / "paper_figures" / f"fig_exact_vs_stan_{sc['name']}.{ext}"
+                ).stat().st_size > 2000

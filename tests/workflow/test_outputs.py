@@ -11,7 +11,6 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-
 from helpers import REPO, SMOKE, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -20,8 +19,13 @@ pytestmark = pytest.mark.workflow
 PAPER_MODELS = {"same", "sep", "sep_d2_p1", "sep_d1_p2", "sep_ranwalk", "sep_mult"}
 
 TABLES = ["table2_joint_vs_marginal", "table3_coverage", "section4_summary", "table_k_selection"]
-FIGURES = ["fig2_design_points", "fig3_joint_vs_marginal", "fig4_profile_posterior_ranwalk_T4",
-           "fig_k_convergence_same_T4", "fig_observability_ratios"]
+FIGURES = [
+    "fig2_design_points",
+    "fig3_joint_vs_marginal",
+    "fig4_profile_posterior_ranwalk_T4",
+    "fig_k_convergence_same_T4",
+    "fig_observability_ratios",
+]
 
 
 @pytest.mark.parametrize("stem", TABLES)
@@ -60,8 +64,9 @@ def test_table_values_finite_where_they_must(smoke_run):
     # the smoke's (c1, c2) = (0.05, 0.2) are not the paper's: no paper K beside them
     assert ks["K_paper"].isna().all() and ks["K_paper_range"].isna().all()
     sens = pd.read_csv(smoke_run / "paper_figures" / "table_convergence_sensitivity.csv")
-    assert list(sens["scenario"]) == [sc["name"] for sc in smoke["scenarios"]
-                                      if sc.get("stan", True)]
+    assert list(sens["scenario"]) == [
+        sc["name"] for sc in smoke["scenarios"] if sc.get("stan", True)
+    ]
     for _, row in sens.iterrows():  # R-hat 1.05 is looser, counting tree depth stricter
         assert row["rhat1.01_treedepth_warns"] == row["K_stan_run"]
         assert row["rhat1.01_treedepth_fails"] <= row["rhat1.01_treedepth_warns"]
@@ -85,20 +90,42 @@ def test_paper_values_hold_every_stated_number():
     assert t50["marginal"]["var"] == {"a": 0.000355, "x0": 0.602}
     assert t50["marginal"]["mse"] == {"a": 0.000360, "x0": 0.605}
     # Table III
-    assert t20["coverage"] == {"cover90": {"a": 0.870, "x0": 0.895}, "mean_cover90_states": 0.910,
-                               "mean_abs_bias_states": 0.00892, "mean_mse_states": 0.116}
-    assert t50["coverage"] == {"cover90": {"a": 0.893, "x0": 0.905}, "mean_cover90_states": 0.909,
-                               "mean_abs_bias_states": 0.00335, "mean_mse_states": 0.105}
+    assert t20["coverage"] == {
+        "cover90": {"a": 0.870, "x0": 0.895},
+        "mean_cover90_states": 0.910,
+        "mean_abs_bias_states": 0.00892,
+        "mean_mse_states": 0.116,
+    }
+    assert t50["coverage"] == {
+        "cover90": {"a": 0.893, "x0": 0.905},
+        "mean_cover90_states": 0.909,
+        "mean_abs_bias_states": 0.00335,
+        "mean_mse_states": 0.105,
+    }
     # Section IV counts
-    counts = {"same_a07_T100": (3600, 3600, 2910), "sep_ab_T75": (4000, 1956, 3680),
-              "sep_b_T75": (4000, None, 2109), "sep_d2_p1_abc_T50": (4000, 1833, 3995),
-              "sep_d2_p1_a_T50": (4000, None, 2972), "ranwalk_T4": (2000, 0, 0),
-              "ranwalk_T100": (4000, 0, 1575), "mult_T50": (4000, 3995, 2598)}
+    counts = {
+        "same_a07_T100": (3600, 3600, 2910),
+        "sep_ab_T75": (4000, 1956, 3680),
+        "sep_b_T75": (4000, None, 2109),
+        "sep_d2_p1_abc_T50": (4000, 1833, 3995),
+        "sep_d2_p1_a_T50": (4000, None, 2972),
+        "ranwalk_T4": (2000, 0, 0),
+        "ranwalk_T100": (4000, 0, 1575),
+        "mult_T50": (4000, 3995, 2598),
+    }
     for key, (K, kmax, kstan) in counts.items():
         assert pv[key]["K"] == K and pv[key].get("K_max") == kmax and pv[key]["K_stan"] == kstan
     assert pv["sep_d1_p2"]["K_stan"] == 0
-    ksel = {k: pv[k]["k_selection"]["design"]["K"] for k in ("same_a09_T4", "same_a09_T20", "same_a09_T50", "same_a07_T100")}
-    assert ksel == {"same_a09_T4": 300, "same_a09_T20": 1300, "same_a09_T50": 3100, "same_a07_T100": 3600}
+    ksel = {
+        k: pv[k]["k_selection"]["design"]["K"]
+        for k in ("same_a09_T4", "same_a09_T20", "same_a09_T50", "same_a07_T100")
+    }
+    assert ksel == {
+        "same_a09_T4": 300,
+        "same_a09_T20": 1300,
+        "same_a09_T50": 3100,
+        "same_a07_T100": 3600,
+    }
     assert pv["same_a09_T4"]["k_selection"]["random"]["K_min"] == 2500
 
 
@@ -124,9 +151,24 @@ def test_report_lists_every_table_and_figure(smoke_run):
 
 def test_slurm_profile_dry_run():
     proc = subprocess.run(
-        [sys.executable, "-m", "snakemake", "-n", "--workflow-profile", "config/profiles/slurm",
-         "--configfile", "config/paper.yaml", "--default-resources", "slurm_account=acct",
-         "slurm_partition=part"], cwd=REPO, capture_output=True, text=True, timeout=600)
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-n",
+            "--workflow-profile",
+            "config/profiles/slurm",
+            "--configfile",
+            "config/paper.yaml",
+            "--default-resources",
+            "slurm_account=acct",
+            "slurm_partition=part",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = proc.stdout + proc.stderr
     assert "sample_nuts" in out and "This was a dry-run" in out

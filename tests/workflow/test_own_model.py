@@ -16,7 +16,6 @@ import sys
 
 import pandas as pd
 import pytest
-
 from helpers import REPO, make_workdir, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -47,8 +46,9 @@ def test_config_entry_in_tutorial_is_the_config():
 
 def _python(workdir, *args):
     env = {**os.environ, "PYTHONPATH": str(workdir / "workflow")}
-    return subprocess.run([sys.executable, *args], cwd=workdir, env=env, capture_output=True,
-                          text=True, timeout=900)
+    return subprocess.run(
+        [sys.executable, *args], cwd=workdir, env=env, capture_output=True, text=True, timeout=900
+    )
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +69,9 @@ def copy_package_first(monkeypatch, request):
 
 
 def test_step_check_command(fresh):
-    proc = _python(fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile",
-                   "config/stoch_vol.yaml")
+    proc = _python(
+        fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile", "config/stoch_vol.yaml"
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
 
@@ -88,17 +89,17 @@ def test_mistake_swapped_stan_parameters(tmp_path):
     stan = work / "stan" / "stoch_vol.stan"
     code = stan.read_text()
     phi = "  real<lower=phi_lower, upper=phi_upper> phi;  // persistence of the log-variance\n"
-    sigma = ("  real<lower=sigma_lo, upper=sigma_upper> sigma;  // volatility of the "
-             "log-variance\n")
+    sigma = "  real<lower=sigma_lo, upper=sigma_upper> sigma;  // volatility of the log-variance\n"
     assert phi + sigma in code
     stan.write_text(code.replace(phi + sigma, sigma + phi))
-    proc = snakemake(work, "--cores", "1", TARGET, "--configfile", "config/smoke.yaml",
-                     check=False)
+    proc = snakemake(work, "--cores", "1", TARGET, "--configfile", "config/smoke.yaml", check=False)
     assert proc.returncode != 0
     log = (work / "results" / "shared" / "logs" / "check_model" / "stoch_vol.log").read_text()
-    assert ("the parameters block declares ['sigma', 'phi', 'x0', 'x'], but the Python model "
-            "'stoch_vol' (param_names = ['phi', 'sigma']) needs exactly ['phi', 'sigma', 'x0', "
-            "'x'] in this order") in log
+    assert (
+        "the parameters block declares ['sigma', 'phi', 'x0', 'x'], but the Python model "
+        "'stoch_vol' (param_names = ['phi', 'sigma']) needs exactly ['phi', 'sigma', 'x0', "
+        "'x'] in this order"
+    ) in log
     assert not (work / "results" / "stoch_vol_T5" / "design_trajectories").exists()
 
 
@@ -106,8 +107,10 @@ def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
     work = make_workdir(tmp_path)
     models = work / "workflow" / "ssmobs" / "models"
     shutil.copy(models / "stoch_vol.py", models / "my_model.py")
-    proc = snakemake(work, "-n", "--cores", "1", TARGET, "--configfile", "config/smoke.yaml",
-                     check=False)
+    proc = snakemake(
+        work, "-n", "--cores", "1", TARGET, "--configfile", "config/smoke.yaml", check=False
+    )
     assert proc.returncode != 0
-    assert ("slug 'stoch_vol' is used twice: by my_model.py (StochVol) and stoch_vol.py "
-            "(StochVol)") in proc.stdout + proc.stderr
+    assert (
+        "slug 'stoch_vol' is used twice: by my_model.py (StochVol) and stoch_vol.py (StochVol)"
+    ) in proc.stdout + proc.stderr

@@ -10,14 +10,18 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from helpers import SMOKE, kill_when, make_workdir, snakemake
 
 pytestmark = [pytest.mark.workflow, pytest.mark.slow]
 
-TABLE_GLOBS = ["paper_figures/*.csv", "paper_figures/*.md", "paper_figures/*.tex",
-               "results/*/joint_map/joint_map.parquet", "results/*/gather_nuts/*.parquet",
-               "results/k_selection/*/*.csv"]
+TABLE_GLOBS = [
+    "paper_figures/*.csv",
+    "paper_figures/*.md",
+    "paper_figures/*.tex",
+    "results/*/joint_map/joint_map.parquet",
+    "results/*/gather_nuts/*.parquet",
+    "results/k_selection/*/*.csv",
+]
 
 
 def final_tables(workdir: Path) -> dict[str, bytes]:
@@ -29,8 +33,10 @@ def final_tables(workdir: Path) -> dict[str, bytes]:
 
 
 def records(workdir: Path) -> dict[str, tuple[int, bytes]]:
-    return {str(f.relative_to(workdir)): (f.stat().st_mtime_ns, f.read_bytes())
-            for f in sorted(workdir.glob("results/*/sample_nuts/records/k*.json"))}
+    return {
+        str(f.relative_to(workdir)): (f.stat().st_mtime_ns, f.read_bytes())
+        for f in sorted(workdir.glob("results/*/sample_nuts/records/k*.json"))
+    }
 
 
 def stale_temporaries(folder: Path) -> list[Path]:
@@ -53,8 +59,11 @@ def assert_same_tables(a: Path, b: Path) -> None:
 
 def test_interrupted_stan_stage_resumes_without_recomputing(smoke_run, tmp_path):
     workdir = make_workdir(tmp_path)
-    kill_when(workdir, ["--cores", "2", *SMOKE],
-              lambda w: len(list(w.glob("results/*/sample_nuts/records/k*.json"))) >= 3)
+    kill_when(
+        workdir,
+        ["--cores", "2", *SMOKE],
+        lambda w: len(list(w.glob("results/*/sample_nuts/records/k*.json"))) >= 3,
+    )
     before = records(workdir)
     assert before, "no record was finished before the kill"
     resume(workdir)
@@ -67,12 +76,19 @@ def test_interrupted_stan_stage_resumes_without_recomputing(smoke_run, tmp_path)
 def test_interrupted_design_stage_resumes(smoke_run, tmp_path):
     """After a SIGKILL the make targets' preflight removes the stale lock (issue 14)."""
     workdir = make_workdir(tmp_path)
-    kill_when(workdir, ["--cores", "2", *SMOKE],
-              lambda w: len(list(w.glob("results/shared/design_disturbances/*.nc"))) >= 1)
+    kill_when(
+        workdir,
+        ["--cores", "2", *SMOKE],
+        lambda w: len(list(w.glob("results/shared/design_disturbances/*.nc"))) >= 1,
+    )
     assert list((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock"
-    proc = subprocess.run([sys.executable, "-m", "ssmobs.preflight", "--unlock-stale",
-                           "config/smoke.yaml"], cwd=workdir, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(workdir / "workflow")})
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", "--unlock-stale", "config/smoke.yaml"],
+        cwd=workdir,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(workdir / "workflow")},
+    )
     assert proc.returncode == 0, proc.stderr
     assert "removed a stale Snakemake lock" in proc.stderr
     snakemake(workdir, "--cores", "2", "--rerun-incomplete", *SMOKE)  # no --unlock
@@ -126,18 +142,24 @@ def test_damaged_record_is_reported_with_its_batch(smoke_run, tmp_path):
     workdir = copy_run(smoke_run, tmp_path / "run")
     victim = workdir / "results/same_T4/sample_nuts/records/k00001.json"
     victim.write_text(victim.read_text()[:60])
-    stale = [workdir / "paper_figures/.fig3_joint_vs_marginal.png.ab12cd34.png",
-             workdir / "paper_figures/.table3_coverage.csv.x_y_z_01.csv"]
+    stale = [
+        workdir / "paper_figures/.fig3_joint_vs_marginal.png.ab12cd34.png",
+        workdir / "paper_figures/.table3_coverage.csv.x_y_z_01.csv",
+    ]
     for p in stale:
         p.write_bytes(b"")
     proc = snakemake(workdir, "--cores", "2", *SMOKE, check=False)
     assert proc.returncode != 0
     out = proc.stdout + proc.stderr
-    assert ("results/same_T4/sample_nuts/batch0.parquet: the record of trajectory k=1 "
-            "(results/same_T4/sample_nuts/records/k00001.json) was changed after this table "
-            "was written; this batch must be rerun") in out
-    assert not (workdir / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns > (
-        smoke_run / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns
+    assert (
+        "results/same_T4/sample_nuts/batch0.parquet: the record of trajectory k=1 "
+        "(results/same_T4/sample_nuts/records/k00001.json) was changed after this table "
+        "was written; this batch must be rerun"
+    ) in out
+    assert (
+        not (workdir / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns
+        > (smoke_run / "results/same_T4/gather_nuts/summary.json").stat().st_mtime_ns
+    )
     (workdir / "results/same_T4/sample_nuts/batch0.parquet").unlink()
     snakemake(workdir, "--cores", "2", *SMOKE)
     assert victim.read_text().rstrip().endswith("}")
@@ -147,27 +169,44 @@ def test_damaged_record_is_reported_with_its_batch(smoke_run, tmp_path):
     os.umask(umask)
     readable = 0o444 & ~umask
     for folder in ("paper_figures", "results"):
-        unreadable = [str(f) for f in (workdir / folder).rglob("*")
-                      if f.is_file() and f.stat().st_mode & readable != readable]
+        unreadable = [
+            str(f)
+            for f in (workdir / folder).rglob("*")
+            if f.is_file() and f.stat().st_mode & readable != readable
+        ]
         assert not unreadable, unreadable[:5]
 
 
 BAD_CONFIGS = {
-    "nan threshold": ({"convergence": {"ess_bulk_min": float("nan")}},
-                      "convergence.ess_bulk_min = nan: must be a finite number"),
+    "nan threshold": (
+        {"convergence": {"ess_bulk_min": float("nan")}},
+        "convergence.ess_bulk_min = nan: must be a finite number",
+    ),
     "figure2.a": ({"figure2": {"a": 1.5}}, "figure2.a = 1.5: must be < 1"),
     "keep_draws": ({"stan": {"keep_draws": [999]}}, "stan.keep_draws = [999]"),
-    "runaway size": ({"scenarios": [{"name": "big", "model": "same", "omega": {"a": 0.9},
-                                     "x0": 8, "T": 1000, "K": 10_000_000}],
-                      "k_selection": [], "observability_studies": []},
-                     "scenario 'big': a design_disturbances job needs about"),
+    "runaway size": (
+        {
+            "scenarios": [
+                {
+                    "name": "big",
+                    "model": "same",
+                    "omega": {"a": 0.9},
+                    "x0": 8,
+                    "T": 1000,
+                    "K": 10_000_000,
+                }
+            ],
+            "k_selection": [],
+            "observability_studies": [],
+        },
+        "scenario 'big': a design_disturbances job needs about",
+    ),
 }
 
 
 @pytest.mark.parametrize("case", BAD_CONFIGS, ids=list(BAD_CONFIGS))
 def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path, case):
     import yaml
-
     from helpers import smoke_config
 
     change, needle = BAD_CONFIGS[case]
@@ -176,8 +215,7 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
         conf[key] = {**conf.get(key, {}), **value} if isinstance(value, dict) else value
     workdir = make_workdir(tmp_path)
     (workdir / "bad.yaml").write_text(yaml.safe_dump(conf))
-    proc = snakemake(workdir, "--cores", "2", "--configfile", "bad.yaml", check=False,
-                     timeout=600)
+    proc = snakemake(workdir, "--cores", "2", "--configfile", "bad.yaml", check=False, timeout=600)
     assert proc.returncode != 0
     assert needle in proc.stdout + proc.stderr
     assert "config file(s) " in proc.stdout + proc.stderr
@@ -187,7 +225,6 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
 def test_job_count_estimate_matches_the_dry_run(tmp_path):
     """The size budget counts the jobs Snakemake plans for the default profile."""
     import yaml
-
     from ssmobs import budget
     from ssmobs.config import validate
 

@@ -8,7 +8,6 @@ import sys
 import numpy as np
 import pytest
 import yaml
-
 from helpers import REPO, make_workdir, smoke_config, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -18,7 +17,9 @@ def test_design_trajectories_written(smoke_run):
     from ssmobs.trajectories import read_trajectories
 
     for sc in smoke_config()["scenarios"]:
-        traj = read_trajectories(smoke_run / "results" / sc["name"] / "design_trajectories" / "trajectories.nc")
+        traj = read_trajectories(
+            smoke_run / "results" / sc["name"] / "design_trajectories" / "trajectories.nc"
+        )
         assert traj.K == sc["K"] and traj.T == sc["T"]
         assert np.all(np.isfinite(traj.x)) and np.all(np.isfinite(traj.z))
 
@@ -48,16 +49,26 @@ def test_rerun_does_nothing(smoke_run):
 
 
 def test_lint_passes():
-    proc = subprocess.run([sys.executable, "-m", "snakemake", "--lint", "--cores", "1"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "snakemake", "--lint", "--cores", "1"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "Lints for" not in proc.stdout + proc.stderr, proc.stdout + proc.stderr
 
 
 @pytest.mark.parametrize("profile", ["config/config.yaml", "config/paper.yaml"])
 def test_dry_run_profiles(profile):
-    proc = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "2", "--configfile", profile],
-                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "snakemake", "-n", "--cores", "2", "--configfile", profile],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
 
 
@@ -84,8 +95,9 @@ def test_pystan_backend_gives_the_same_tables(smoke_run, tmp_path):
     snakemake(workdir, "--cores", "2", "--configfile", "config/smoke_pystan.yaml")
     tables = ["table2_joint_vs_marginal.csv", "table3_coverage.csv", "section4_summary.csv"]
     for name in tables:
-        assert (workdir / "paper_figures" / name).read_bytes() == \
-            (smoke_run / "paper_figures" / name).read_bytes(), name
+        assert (workdir / "paper_figures" / name).read_bytes() == (
+            smoke_run / "paper_figures" / name
+        ).read_bytes(), name
     rec = next((workdir / "results" / "same_T4" / "sample_nuts" / "records").glob("*.json"))
     assert yaml.safe_load(rec.read_text())["key"]["backend"].startswith("pystan")
     native_rec = smoke_run / "results" / "same_T4" / "sample_nuts" / "records" / rec.name
@@ -99,8 +111,9 @@ def test_every_model_was_checked_before_its_trajectories(smoke_run):
         check = smoke_run / "results" / "shared" / "check_model" / f"{model}.json"
         report = io.read_json(check)
         assert report["ok"] and report["problems"] == []
-        stan_used = any(sc.get("stan", True) for sc in smoke_config()["scenarios"]
-                        if sc["model"] == model)
+        stan_used = any(
+            sc.get("stan", True) for sc in smoke_config()["scenarios"] if sc["model"] == model
+        )
         assert any("stan compiled" in c for c in report["checks"]) == stan_used
 
 
@@ -113,4 +126,6 @@ def test_own_model_observability_study_written(smoke_run):
     for col in ("K_max_ratio", "K_stan_ratio"):
         assert 0.0 <= frame[col].iloc[0] <= 1.0
     assert (smoke_run / "paper_figures" / "ours_stoch_vol_observability.png").stat().st_size > 1000
-    assert "|K^max|/K" in (smoke_run / "paper_figures" / "ours_stoch_vol_observability.md").read_text()
+    assert (
+        "|K^max|/K" in (smoke_run / "paper_figures" / "ours_stoch_vol_observability.md").read_text()
+    )

@@ -22,8 +22,11 @@ pytestmark = pytest.mark.workflow
 
 PROFILE = REPO / "config" / "tables.yaml"
 OUT = REPO / "paper_figures" / "paper_settings"
-TARGETS = [f"paper_figures/paper_settings/{stem}.{ext}"
-           for stem in ("table2_joint_vs_marginal", "table3_coverage") for ext in ("csv", "md", "tex")]
+TARGETS = [
+    f"paper_figures/paper_settings/{stem}.{ext}"
+    for stem in ("table2_joint_vs_marginal", "table3_coverage")
+    for ext in ("csv", "md", "tex")
+]
 TARGETS += [f"paper_figures/paper_settings/fig3_joint_vs_marginal.{ext}" for ext in ("pdf", "png")]
 
 
@@ -37,8 +40,11 @@ def test_profile_is_the_papers_setting():
     assert not {"chains", "iter_warmup", "iter_sampling"} & set(conf.get("stan", {}))
     schema = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
     stan = schema["properties"]["stan"]["properties"]
-    assert (stan["chains"]["default"], stan["iter_warmup"]["default"],
-            stan["iter_sampling"]["default"]) == (4, 4000, 6000)
+    assert (
+        stan["chains"]["default"],
+        stan["iter_warmup"]["default"],
+        stan["iter_sampling"]["default"],
+    ) == (4, 4000, 6000)
 
 
 def test_dry_run_plans_every_trajectory(tmp_path):
@@ -50,8 +56,10 @@ def test_dry_run_plans_every_trajectory(tmp_path):
     assert int(counts["joint_map"]) == 2 and int(counts["gather_nuts"]) == 2
 
 
-committed = pytest.mark.skipif(not (OUT / "provenance.json").is_file(),
-                               reason="no committed paper-settings outputs in this checkout")
+committed = pytest.mark.skipif(
+    not (OUT / "provenance.json").is_file(),
+    reason="no committed paper-settings outputs in this checkout",
+)
 
 
 @committed

@@ -33,8 +33,11 @@ STUDIES = {st["name"]: st for st in config["observability_studies"]}
 REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
-MU0_SCENARIOS = [n for n, sc in SCENARIOS.items()
-                 if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]]
+MU0_SCENARIOS = [
+    n
+    for n, sc in SCENARIOS.items()
+    if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]
+]
 #: the scenarios the paper's tables and figures show (config key paper_outputs)
 TABLE_II_SCENARIOS = list(config["paper_outputs"]["tables_2_3"])
 FIGURE3_SCENARIOS = list(config["paper_outputs"]["figure3"])
@@ -57,7 +60,9 @@ def exact_table(name, K):
 
 def exact_summary_path(name):
     """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
-    return f"results/{name}/exact_marginal/K{SCENARIO_OBJECTS[name].exact_trajectories}/summary.json"
+    return (
+        f"results/{name}/exact_marginal/K{SCENARIO_OBJECTS[name].exact_trajectories}/summary.json"
+    )
 
 
 def exact_trajectories(wildcards):
@@ -124,8 +129,10 @@ def k_selection_points(ks):
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
         for sets in ks["sets"]:
             for seed in seeds:
-                out += [f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
-                        for K in ks["K_grid"]]
+                out += [
+                    f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
+                    for K in ks["K_grid"]
+                ]
     return out
 
 
@@ -137,8 +144,9 @@ def nuts_batches(wildcards):
 
     sc = SCENARIO_OBJECTS[wildcards.scenario]
     ranges = batches(sc.K, sc.batch_size(config["stan"]))
-    tables = [f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet"
-              for b in range(len(ranges))]
+    tables = [
+        f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(len(ranges))
+    ]
     for table in tables:
         problem = changed_batch_records(table)
         if problem:
@@ -153,31 +161,43 @@ def figure2_disturbances(wildcards=None):
 
 def all_targets():
     targets = [f"results/{name}/design_trajectories/trajectories.nc" for name in SCENARIOS]
-    targets += [f"results/{name}/joint_map/summary.json" for name, sc in SCENARIOS.items()
-                if sc["joint_map"]]
-    targets += [f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items()
-                if sc["stan"]]
+    targets += [
+        f"results/{name}/joint_map/summary.json"
+        for name, sc in SCENARIOS.items()
+        if sc["joint_map"]
+    ]
+    targets += [
+        f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items() if sc["stan"]
+    ]
     for name in KSEL:
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
         targets += expand(f"{OUT}/table_k_selection.{{ext}}", ext=["csv", "md", "tex"])
     targets += [exact_summary_path(name) for name in EXACT_SCENARIOS]
-    targets += expand(f"{OUT}/fig_exact_vs_stan_{{name}}.{{ext}}",
-                      name=EXACT_VS_STAN_SCENARIOS, ext=["pdf", "png"])
+    targets += expand(
+        f"{OUT}/fig_exact_vs_stan_{{name}}.{{ext}}",
+        name=EXACT_VS_STAN_SCENARIOS,
+        ext=["pdf", "png"],
+    )
     if FIGURE4_SCENARIO:
-        targets += expand(f"{OUT}/fig4_profile_posterior_{FIGURE4_SCENARIO}.{{ext}}",
-                          ext=["pdf", "png"])
+        targets += expand(
+            f"{OUT}/fig4_profile_posterior_{FIGURE4_SCENARIO}.{{ext}}", ext=["pdf", "png"]
+        )
     for name in STUDIES:
-        targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}",
-                          ext=["csv", "md", "png"])
+        targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}", ext=["csv", "md", "png"])
     targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
-    targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["csv", "md", "tex"],
-                      stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"])
-    targets += expand(f"{OUT}/{{stem}}.{{ext}}", ext=["pdf", "png"],
-                      stem=["fig3_joint_vs_marginal", "fig_observability_ratios"])
+    targets += expand(
+        f"{OUT}/{{stem}}.{{ext}}",
+        ext=["csv", "md", "tex"],
+        stem=["table2_joint_vs_marginal", "table3_coverage", "section4_summary"],
+    )
+    targets += expand(
+        f"{OUT}/{{stem}}.{{ext}}",
+        ext=["pdf", "png"],
+        stem=["fig3_joint_vs_marginal", "fig_observability_ratios"],
+    )
     if MU0_SCENARIOS:
         targets += expand(f"{OUT}/table_mu0_sweep.{{ext}}", ext=["csv", "md", "tex"])
     if STAN_SCENARIOS:
-        targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}",
-                          ext=["csv", "md", "tex"])
+        targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}", ext=["csv", "md", "tex"])
     return targets

@@ -9,14 +9,14 @@ rule design_disturbances:
         "results/shared/logs/design_disturbances/q{q}_K{K}_{method}_seed{seed}.log",
     benchmark:
         "results/shared/benchmarks/design_disturbances/q{q}_K{K}_{method}_seed{seed}.tsv"
-    params:
-        design=config["design"],
+    conda:
+        "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=30,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        design=config["design"],
     script:
         "../scripts/design_disturbances.py"
 
@@ -30,12 +30,12 @@ rule design_trajectories:
         "results/{scenario}/design_trajectories/trajectories.nc",
     log:
         "results/{scenario}/logs/design_trajectories.log",
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
+    conda:
+        "../../envs/ssmobs.yaml"
     resources:
         mem_mb=2000,
         runtime=10,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
     script:
         "../scripts/design_trajectories.py"

@@ -10,13 +10,13 @@ rule exact_design_trajectories:
         "results/{scenario}/exact_marginal/K{K}/trajectories.nc",
     log:
         "results/{scenario}/logs/exact_marginal/design_trajectories_K{K}.log",
-    params:
-        scenario=lambda wc: {**SCENARIOS[wc.scenario], "K": int(wc.K)},
+    conda:
+        "../../envs/ssmobs.yaml"
     resources:
         mem_mb=2000,
         runtime=10,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: {**SCENARIOS[wc.scenario], "K": int(wc.K)},
     script:
         "../scripts/design_trajectories.py"
 
@@ -32,13 +32,13 @@ rule exact_marginal:
         "results/{scenario}/logs/exact_marginal/K{K}.log",
     benchmark:
         "results/{scenario}/benchmarks/exact_marginal/K{K}.tsv"
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
+    conda:
+        "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=60,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
     script:
         "../scripts/exact_marginal.py"

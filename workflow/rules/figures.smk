@@ -7,15 +7,16 @@ rule figure_design_points:
     input:
         figure2_disturbances,
     output:
-        pdf=report(f"{OUT}/fig2_design_points.pdf", caption="../report/fig2.rst",
-                   category="Figures"),
+        pdf=report(
+            f"{OUT}/fig2_design_points.pdf", caption="../report/fig2.rst", category="Figures"
+        ),
         png=f"{OUT}/fig2_design_points.png",
     log:
         "results/shared/logs/figure_design_points.log",
-    params:
-        figure=config["figure2"],
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        figure=config["figure2"],
     script:
         "../scripts/figure_design_points.py"
 
@@ -33,11 +34,11 @@ rule figure_joint_vs_marginal:
         ),
     log:
         "results/shared/logs/figure_joint_vs_marginal.log",
-    params:
-        scenarios=[SCENARIOS[n] for n in FIGURE3_SCENARIOS],
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        scenarios=[SCENARIOS[n] for n in FIGURE3_SCENARIOS],
     script:
         "../scripts/figure_joint_vs_marginal.py"
 
@@ -54,11 +55,11 @@ rule figure_profile_posterior:
         ),
     log:
         "results/{scenario}/logs/figure_profile_posterior.log",
+    conda:
+        "../../envs/ssmobs.yaml"
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         grid=config["figure4"],
-    conda:
-        "../../envs/ssmobs.yaml"
     script:
         "../scripts/figure_profile_posterior.py"
 
@@ -95,10 +96,10 @@ rule figure_exact_vs_stan:
         ),
     log:
         "results/{scenario}/logs/figure_exact_vs_stan.log",
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
     script:
         "../scripts/figure_exact_vs_stan.py"

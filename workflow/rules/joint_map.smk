@@ -14,15 +14,15 @@ rule joint_map:
         "results/{scenario}/logs/joint_map.log",
     benchmark:
         "results/{scenario}/benchmarks/joint_map.tsv"
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-        settings=config["joint_map"],
+    conda:
+        "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=60,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
+        settings=config["joint_map"],
     script:
         "../scripts/joint_map.py"
 
@@ -40,15 +40,15 @@ rule joint_map_mu0_sweep:
         ),
     log:
         "results/shared/logs/joint_map_mu0_sweep.log",
-    params:
-        scenarios=[SCENARIOS[n] for n in MU0_SCENARIOS],
-        settings=config["joint_map"],
-        mu0_per_T=config["mu0_sweep"]["mu0_per_T"],
+    conda:
+        "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=120,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenarios=[SCENARIOS[n] for n in MU0_SCENARIOS],
+        settings=config["joint_map"],
+        mu0_per_T=config["mu0_sweep"]["mu0_per_T"],
     script:
         "../scripts/joint_map_mu0_sweep.py"

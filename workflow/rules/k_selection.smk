@@ -10,15 +10,15 @@ rule k_selection_point:
         "results/k_selection/{ksel}/{method}_{sets}_seed{seed}/K{K}.json",
     log:
         "results/k_selection/{ksel}/logs/{method}_{sets}_seed{seed}_K{K}.log",
-    params:
-        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
-        settings=config["joint_map"],
+    conda:
+        "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
         runtime=60,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
+        settings=config["joint_map"],
     script:
         "../scripts/k_selection_point.py"
 
@@ -38,12 +38,12 @@ rule select_k:
         ),
     log:
         "results/k_selection/{ksel}/logs/select_k.log",
-    params:
-        ksel=lambda wc: KSEL[wc.ksel],
-        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        ksel=lambda wc: KSEL[wc.ksel],
+        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
     script:
         "../scripts/select_k.py"
 

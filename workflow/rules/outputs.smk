@@ -27,15 +27,15 @@ rule paper_tables:
         ),
     log:
         "results/shared/logs/paper_tables.log",
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
     params:
         scenarios=config["scenarios"],
         tables_2_3=TABLE_II_SCENARIOS,
         joint_names=JOINT_SCENARIOS,
         marginal_names=STAN_SCENARIOS,
         exact_names=EXACT_SCENARIOS,
-    localrule: True
-    conda:
-        "../../envs/ssmobs.yaml"
     script:
         "../scripts/paper_tables.py"
 
@@ -52,11 +52,11 @@ rule convergence_sensitivity:
         ),
     log:
         "results/shared/logs/convergence_sensitivity.log",
-    params:
-        scenarios=STAN_SCENARIOS,
-        convergence=config["convergence"],
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        scenarios=STAN_SCENARIOS,
+        convergence=config["convergence"],
     script:
         "../scripts/convergence_sensitivity.py"

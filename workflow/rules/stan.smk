@@ -9,13 +9,13 @@ rule build_stan_model:
         "results/shared/stan/{backend}/{model}.json",
     log:
         "results/shared/logs/build_stan_model/{backend}/{model}.log",
-    params:
-        backend=lambda wc: wc.backend,
+    conda:
+        "../../envs/ssmobs.yaml"
     resources:
         mem_mb=4000,
         runtime=30,
-    conda:
-        "../../envs/ssmobs.yaml"
+    params:
+        backend=lambda wc: wc.backend,
     script:
         "../scripts/build_stan_model.py"
 
@@ -31,6 +31,14 @@ rule sample_nuts:
         "results/{scenario}/logs/sample_nuts/batch{batch}.log",
     benchmark:
         "results/{scenario}/benchmarks/sample_nuts/batch{batch}.tsv"
+    group:
+        "nuts"
+    conda:
+        "../../envs/ssmobs.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=lambda wc: 10 + 2 * SCENARIO_OBJECTS[wc.scenario].batch_size(config["stan"]),
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         stan=config["stan"],
@@ -38,14 +46,6 @@ rule sample_nuts:
         convergence=config["convergence"],
         records="results/{scenario}/sample_nuts/records",
         draws="results/{scenario}/draws",
-    threads: 1
-    resources:
-        mem_mb=3000,
-        runtime=lambda wc: 10 + 2 * SCENARIO_OBJECTS[wc.scenario].batch_size(config["stan"]),
-    group:
-        "nuts"
-    conda:
-        "../../envs/ssmobs.yaml"
     script:
         "../scripts/sample_nuts.py"
 
@@ -60,9 +60,9 @@ rule gather_nuts:
         summary="results/{scenario}/gather_nuts/summary.json",
     log:
         "results/{scenario}/logs/gather_nuts.log",
-    params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        scenario=lambda wc: SCENARIOS[wc.scenario],
     script:
         "../scripts/gather_nuts.py"

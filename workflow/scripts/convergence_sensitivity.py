@@ -5,5 +5,8 @@ from ssmobs.stages import run_convergence_sensitivity
 
 log.setup(snakemake.log[0])
 p = snakemake.params
-run_convergence_sensitivity(dict(zip(p.scenarios, snakemake.input.tables, strict=True)), p.convergence,
-                            list(snakemake.output.table))
+run_convergence_sensitivity(
+    dict(zip(p.scenarios, snakemake.input.tables, strict=True)),
+    p.convergence,
+    list(snakemake.output.table),
+)

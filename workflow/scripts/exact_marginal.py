@@ -5,5 +5,9 @@ from ssmobs.scenario import Scenario
 from ssmobs.stages import run_exact_marginal
 
 log.setup(snakemake.log[0])
-run_exact_marginal(snakemake.input.trajectories, Scenario.from_config(snakemake.params.scenario),
-                   snakemake.output.table, snakemake.output.summary)
+run_exact_marginal(
+    snakemake.input.trajectories,
+    Scenario.from_config(snakemake.params.scenario),
+    snakemake.output.table,
+    snakemake.output.summary,
+)

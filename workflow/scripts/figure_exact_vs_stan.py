@@ -5,7 +5,10 @@ from ssmobs.scenario import Scenario
 from ssmobs.stages import run_figure_exact_vs_stan
 
 logger = log.setup(snakemake.log[0])
-stats = run_figure_exact_vs_stan(Scenario.from_config(snakemake.params.scenario),
-                                 snakemake.input.stan, snakemake.input.exact,
-                                 list(snakemake.output.figure))
+stats = run_figure_exact_vs_stan(
+    Scenario.from_config(snakemake.params.scenario),
+    snakemake.input.stan,
+    snakemake.input.exact,
+    list(snakemake.output.figure),
+)
 logger.info("Stan + KDE vs exact: %s", stats)

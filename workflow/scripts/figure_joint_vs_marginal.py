@@ -7,6 +7,9 @@ log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 scenarios = snakemake.params.scenarios
 names = [sc["name"] for sc in scenarios]
-run_figure_joint_vs_marginal(scenarios, dict(zip(names, snakemake.input.joint, strict=True)),
-                             dict(zip(names, snakemake.input.marginal, strict=True)),
-                             list(snakemake.output.figure))
+run_figure_joint_vs_marginal(
+    scenarios,
+    dict(zip(names, snakemake.input.joint, strict=True)),
+    dict(zip(names, snakemake.input.marginal, strict=True)),
+    list(snakemake.output.figure),
+)

@@ -6,5 +6,9 @@ from ssmobs.stages import run_figure_profile_posterior
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_figure_profile_posterior(snakemake.input[0], Scenario.from_config(snakemake.params.scenario),
-                             snakemake.params.grid, list(snakemake.output.figure))
+run_figure_profile_posterior(
+    snakemake.input[0],
+    Scenario.from_config(snakemake.params.scenario),
+    snakemake.params.grid,
+    list(snakemake.output.figure),
+)

@@ -6,5 +6,10 @@ from ssmobs.stages import run_gather_nuts
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_gather_nuts(snakemake.input.trajectories, list(snakemake.input.batches),
-                Scenario.from_config(snakemake.params.scenario), snakemake.output.table, snakemake.output.summary)
+run_gather_nuts(
+    snakemake.input.trajectories,
+    list(snakemake.input.batches),
+    Scenario.from_config(snakemake.params.scenario),
+    snakemake.output.table,
+    snakemake.output.summary,
+)

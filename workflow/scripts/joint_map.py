@@ -6,6 +6,11 @@ from ssmobs.stages import run_joint_map
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_joint_map(snakemake.input[0], Scenario.from_config(snakemake.params.scenario), snakemake.params.settings,
-              table=snakemake.output.table, summary=snakemake.output.summary,
-              theta=snakemake.output.theta)
+run_joint_map(
+    snakemake.input[0],
+    Scenario.from_config(snakemake.params.scenario),
+    snakemake.params.settings,
+    table=snakemake.output.table,
+    summary=snakemake.output.summary,
+    theta=snakemake.output.theta,
+)

@@ -7,8 +7,11 @@ from ssmobs.stages import run_joint_map_mu0_sweep
 log.setup(snakemake.log[0])
 p = snakemake.params
 names = [sc["name"] for sc in p.scenarios]
-run_joint_map_mu0_sweep(dict(zip(names, snakemake.input.trajectories, strict=True)),
-                        {sc["name"]: Scenario.from_config(sc) for sc in p.scenarios},
-                        dict(p.settings),
-                        list(p.mu0_per_T), snakemake.input.paper_values,
-                        list(snakemake.output.table))
+run_joint_map_mu0_sweep(
+    dict(zip(names, snakemake.input.trajectories, strict=True)),
+    {sc["name"]: Scenario.from_config(sc) for sc in p.scenarios},
+    dict(p.settings),
+    list(p.mu0_per_T),
+    snakemake.input.paper_values,
+    list(snakemake.output.table),
+)

@@ -7,6 +7,13 @@ from ssmobs.stages import run_k_selection_point
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 wc = snakemake.wildcards
-run_k_selection_point(snakemake.input[0], Scenario.from_config(snakemake.params.scenario), int(wc.K), wc.method,
-                      int(wc.seed), snakemake.params.settings, snakemake.output[0],
-                      sets=wc.sets)
+run_k_selection_point(
+    snakemake.input[0],
+    Scenario.from_config(snakemake.params.scenario),
+    int(wc.K),
+    wc.method,
+    int(wc.seed),
+    snakemake.params.settings,
+    snakemake.output[0],
+    sets=wc.sets,
+)

@@ -1,14 +1,19 @@
 """Rule observability_study: one model's |K^max|/K and |K^Stan|/K over T."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
 from ssmobs.observability_study import run_observability_study
+from ssmobs.scenario import Scenario
 
 log.setup(snakemake.log[0])
 p, inp = snakemake.params, snakemake.input
-run_observability_study(p.study, [Scenario.from_config(sc) for sc in p.scenarios],
-                        dict(zip(p.joint_names, inp.joint, strict=True)),
-                        dict(zip(p.stan_names, inp.stan, strict=True)),
-                        dict(zip(p.stan_names, inp.stan_tables, strict=True)), snakemake.output.csv,
-                        snakemake.output.md, snakemake.output.png,
-                        stan_settings=p.stan_settings)
+run_observability_study(
+    p.study,
+    [Scenario.from_config(sc) for sc in p.scenarios],
+    dict(zip(p.joint_names, inp.joint, strict=True)),
+    dict(zip(p.stan_names, inp.stan, strict=True)),
+    dict(zip(p.stan_names, inp.stan_tables, strict=True)),
+    snakemake.output.csv,
+    snakemake.output.md,
+    snakemake.output.png,
+    stan_settings=p.stan_settings,
+)

@@ -6,8 +6,15 @@ from ssmobs.stages import run_paper_tables
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p, inp, out = snakemake.params, snakemake.input, snakemake.output
-run_paper_tables(p.scenarios, list(p.tables_2_3), dict(zip(p.joint_names, inp.joint, strict=True)),
-                 dict(zip(p.marginal_names, inp.marginal, strict=True)), inp.paper_values,
-                 table2=list(out.table2), table3=list(out.table3),
-                 section4_csv=out.section4_csv, section4=list(out.section4),
-                 exact=dict(zip(p.exact_names, inp.exact, strict=True)))
+run_paper_tables(
+    p.scenarios,
+    list(p.tables_2_3),
+    dict(zip(p.joint_names, inp.joint, strict=True)),
+    dict(zip(p.marginal_names, inp.marginal, strict=True)),
+    inp.paper_values,
+    table2=list(out.table2),
+    table3=list(out.table3),
+    section4_csv=out.section4_csv,
+    section4=list(out.section4),
+    exact=dict(zip(p.exact_names, inp.exact, strict=True)),
+)

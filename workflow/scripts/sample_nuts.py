@@ -6,7 +6,15 @@ from ssmobs.stages import run_sample_batch
 
 log.setup(snakemake.log[0])
 p = snakemake.params
-run_sample_batch(snakemake.input.trajectories, snakemake.input.marker,
-                 Scenario.from_config(p.scenario), p.stan,
-                 p.convergence, int(snakemake.wildcards.batch), p.records, p.draws,
-                 snakemake.output[0], threads=snakemake.threads)
+run_sample_batch(
+    snakemake.input.trajectories,
+    snakemake.input.marker,
+    Scenario.from_config(p.scenario),
+    p.stan,
+    p.convergence,
+    int(snakemake.wildcards.batch),
+    p.records,
+    p.draws,
+    snakemake.output[0],
+    threads=snakemake.threads,
+)

@@ -7,5 +7,12 @@ from ssmobs.stages import run_select_k
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p, out = snakemake.params, snakemake.output
-run_select_k(p.ksel, Scenario.from_config(p.scenario), list(snakemake.input.points), snakemake.input.paper_values,
-             out.json, out.csv, list(out.figure))
+run_select_k(
+    p.ksel,
+    Scenario.from_config(p.scenario),
+    list(snakemake.input.points),
+    snakemake.input.paper_values,
+    out.json,
+    out.csv,
+    list(out.figure),
+)

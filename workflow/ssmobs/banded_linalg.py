@@ -47,7 +47,7 @@ def inverse_cholesky(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             good = ok & (a > 0)
             l11 = np.sqrt(np.where(good, a, 1.0))
             l21 = b / l11
-            r = c - l21 ** 2
+            r = c - l21**2
             good &= r > 0
             l22 = np.sqrt(np.where(good, r, 1.0))
             Linv = np.zeros_like(S)
@@ -123,16 +123,16 @@ class BlockTridiagonalCholesky:
         u = np.empty_like(R)
         with np.errstate(all="ignore"):
             if self.p == 1:
-                l, mm = self.linv[:, :, None], self.m[:, :, None]
+                linv, mm = self.linv[:, :, None], self.m[:, :, None]
                 R = R[:, :, 0, :]
                 u = np.empty_like(R)
-                u[0] = l[0] * R[0]
+                u[0] = linv[0] * R[0]
                 for t in range(1, N):
-                    u[t] = l[t] * (R[t] - mm[t - 1] * u[t - 1])
+                    u[t] = linv[t] * (R[t] - mm[t - 1] * u[t - 1])
                 v = np.empty_like(u)
-                v[N - 1] = l[N - 1] * u[N - 1]
+                v[N - 1] = linv[N - 1] * u[N - 1]
                 for t in range(N - 2, -1, -1):
-                    v[t] = l[t] * (u[t] - mm[t] * v[t + 1])
+                    v[t] = linv[t] * (u[t] - mm[t] * v[t + 1])
                 return np.moveaxis(v, 0, 1)[:, :, None, :]
             Li, mm = self.linv, self.m
             u[0] = Li[0] @ R[0]
@@ -156,10 +156,10 @@ def arrow_to_dense(A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray)
     H[:, :m, m:] = np.swapaxes(cross, 1, 2)
     for t in range(N):
         s = m + t * p
-        H[:, s:s + p, s:s + p] = Dd[:, t]
+        H[:, s : s + p, s : s + p] = Dd[:, t]
         if t >= 1:
-            H[:, s:s + p, s - p:s] = Dl[:, t - 1]
-            H[:, s - p:s, s:s + p] = np.swapaxes(Dl[:, t - 1], 1, 2)
+            H[:, s : s + p, s - p : s] = Dl[:, t - 1]
+            H[:, s - p : s, s : s + p] = np.swapaxes(Dl[:, t - 1], 1, 2)
     return H
 
 
@@ -175,8 +175,15 @@ class ArrowFactor:
     over t, see :meth:`solve_rhs`).  :meth:`matvec` uses the unshifted H.
     """
 
-    def __init__(self, A: np.ndarray, C: np.ndarray, Dd: np.ndarray, Dl: np.ndarray,
-                 tau: np.ndarray | None = None, rhs: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        A: np.ndarray,
+        C: np.ndarray,
+        Dd: np.ndarray,
+        Dl: np.ndarray,
+        tau: np.ndarray | None = None,
+        rhs: np.ndarray | None = None,
+    ) -> None:
         K, N, p, m = C.shape
         self.K, self.N, self.p, self.m = K, N, p, m
         self.A, self.C, self.Dd, self.Dl = A, C, Dd, Dl
@@ -191,8 +198,12 @@ class ArrowFactor:
         with np.errstate(all="ignore"):
             S = A - np.einsum("ktpi,ktpj->kij", C, self.Y)
             self.LSi, okS = inverse_cholesky(S)
-        self.ok = (self.fac.ok & okS & np.all(np.isfinite(self.Y), axis=(1, 2, 3))
-                   & np.all(np.isfinite(self.LSi), axis=(1, 2)))
+        self.ok = (
+            self.fac.ok
+            & okS
+            & np.all(np.isfinite(self.Y), axis=(1, 2, 3))
+            & np.all(np.isfinite(self.LSi), axis=(1, 2))
+        )
 
     def _finish(self, bw: np.ndarray, y: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
@@ -203,12 +214,12 @@ class ArrowFactor:
 
     def solve_rhs(self) -> np.ndarray:
         """H^{-1} rhs for the ``rhs`` given at construction."""
-        return self._finish(self._rhs[:, :self.m], self._y_rhs)
+        return self._finish(self._rhs[:, : self.m], self._y_rhs)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """H^{-1} b for b (K, n)."""
-        y = self.fac.solve(b[:, self.m:].reshape(self.K, self.N, self.p, 1))[..., 0]
-        return self._finish(b[:, :self.m], y)
+        y = self.fac.solve(b[:, self.m :].reshape(self.K, self.N, self.p, 1))[..., 0]
+        return self._finish(b[:, : self.m], y)
 
     def matvec(self, v: np.ndarray) -> np.ndarray:
         """H v for v (K, n) (unshifted H)."""
@@ -233,11 +244,11 @@ class ArrowFactor:
             Sinv = np.einsum("kji,kjl->kil", self.LSi, self.LSi)
             zd = np.empty((N, K, p))
             if p == 1:
-                l, mm = self.fac.linv, self.fac.m
-                z = l[N - 1] ** 2
+                linv, mm = self.fac.linv, self.fac.m
+                z = linv[N - 1] ** 2
                 zd[N - 1, :, 0] = z
                 for t in range(N - 2, -1, -1):
-                    z = l[t] ** 2 * (1.0 + mm[t] ** 2 * z)
+                    z = linv[t] ** 2 * (1.0 + mm[t] ** 2 * z)
                     zd[t, :, 0] = z
             else:
                 Li, mm = self.fac.linv, self.fac.m
@@ -252,8 +263,9 @@ class ArrowFactor:
         return np.concatenate([np.diagonal(Sinv, axis1=1, axis2=2), dx.reshape(K, -1)], axis=1)
 
 
-def lanczos(apply: Callable[[np.ndarray], np.ndarray], v0: np.ndarray, steps: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def lanczos(
+    apply: Callable[[np.ndarray], np.ndarray], v0: np.ndarray, steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batched Lanczos with full reorthogonalisation.
 
     ``apply`` maps (K, n) -> (K, n) (a symmetric operator per k).  Returns the diagonal
@@ -282,13 +294,13 @@ def lanczos(apply: Callable[[np.ndarray], np.ndarray], v0: np.ndarray, steps: in
             alpha[:, j] = np.einsum("kn,kn->k", w, q)
             if j == s - 1:
                 break
-            w = orth(w, Q[:, :j + 1])
+            w = orth(w, Q[:, : j + 1])
             b = np.linalg.norm(w, axis=1)
-            scale = np.abs(alpha[:, :j + 1]).max(axis=1) + 1e-300
+            scale = np.abs(alpha[:, : j + 1]).max(axis=1) + 1e-300
             dead = ~(b > 1e-10 * scale)
             if dead.any():
                 r = np.broadcast_to(fresh.standard_normal(n), (int(dead.sum()), n)).copy()
-                w[dead] = orth(r, Q[dead, :j + 1])
+                w[dead] = orth(r, Q[dead, : j + 1])
                 b[dead] = 0.0
             beta[:, j] = b
             q = w / np.linalg.norm(w, axis=1, keepdims=True)
@@ -306,7 +318,7 @@ def tridiagonal_max_eigenvalue(a: np.ndarray, b: np.ndarray, iters: int = 60) ->
     rad[:, :-1] += np.abs(b)
     rad[:, 1:] += np.abs(b)
     lo, hi = (a - rad).min(axis=1), (a + rad).max(axis=1)
-    b2 = b ** 2
+    b2 = b**2
     tiny = np.finfo(float).tiny
     with np.errstate(all="ignore"):
         for _ in range(iters):
@@ -351,8 +363,9 @@ def tridiagonal_top_eigenvector(a: np.ndarray, b: np.ndarray, lam: np.ndarray) -
     return y
 
 
-def arrow_extreme_eigenpairs(fac: ArrowFactor, method: str = "lanczos", steps: int = 24
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def arrow_extreme_eigenpairs(
+    fac: ArrowFactor, method: str = "lanczos", steps: int = 24
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest and largest eigenvalue of each arrow matrix H and the unit eigenvector of the
     smallest: (K,), (K,), (K, n); NaN where H is not finite.
 
@@ -374,10 +387,12 @@ def arrow_extreme_eigenpairs(fac: ArrowFactor, method: str = "lanczos", steps: i
             lam_min[fin], lam_max[fin], v_min[fin] = lam[:, 0], lam[:, -1], vec[:, :, 0]
         return lam_min, lam_max, v_min
     v0 = np.broadcast_to(np.random.default_rng(n + 1).standard_normal(n), (K, n))
-    fin = np.flatnonzero(np.all(np.isfinite(fac.A), axis=(1, 2))
-                         & np.all(np.isfinite(fac.Dd.reshape(K, -1)), axis=1)
-                         & np.all(np.isfinite(fac.C.reshape(K, -1)), axis=1)
-                         & np.all(np.isfinite(fac.Dl.reshape(K, -1)), axis=1))
+    fin = np.flatnonzero(
+        np.all(np.isfinite(fac.A), axis=(1, 2))
+        & np.all(np.isfinite(fac.Dd.reshape(K, -1)), axis=1)
+        & np.all(np.isfinite(fac.C.reshape(K, -1)), axis=1)
+        & np.all(np.isfinite(fac.Dl.reshape(K, -1)), axis=1)
+    )
     if fin.size:
         sub = ArrowFactor(fac.A[fin], fac.C[fin], fac.Dd[fin], fac.Dl[fin])
         a, b, _ = lanczos(sub.matvec, v0[fin], steps)

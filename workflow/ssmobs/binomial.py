@@ -29,8 +29,9 @@ def clopper_pearson(successes: float, trials: float, level: float = 0.95) -> tup
     if math.isnan(x) or math.isnan(n) or n == 0:
         return math.nan, math.nan
     if x != round(x) or n != round(n) or not 0 <= x <= n:
-        raise ValueError(f"need whole counts 0 <= successes <= trials, got {successes!r} of "
-                         f"{trials!r}")
+        raise ValueError(
+            f"need whole counts 0 <= successes <= trials, got {successes!r} of {trials!r}"
+        )
     alpha = 1.0 - level
     lower = 0.0 if x == 0 else float(stats.beta.ppf(alpha / 2, x, n - x + 1))
     upper = 1.0 if x == n else float(stats.beta.ppf(1 - alpha / 2, x + 1, n - x))
@@ -44,4 +45,3 @@ def format_fraction(successes: float, trials: float, digits: int = 2) -> str:
         return ""
     frac = float(successes) / float(trials)
     return f"{frac:.{digits}f} [{lower:.{digits}f}, {upper:.{digits}f}]"
-

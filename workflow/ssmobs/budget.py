@@ -119,19 +119,42 @@ def estimates(config: dict) -> list[JobEstimate]:
         q = (model.obs_dim + model.state_dim) * T
         who = f"scenario '{sc['name']}'"
         sizes = f"K = {K}, T = {T}, q = {q}"
-        out.append(JobEstimate(who, "design_disturbances",
-                               disturbance_bytes(q, K, sc["method"]), sizes + f", {sc['method']}"))
+        out.append(
+            JobEstimate(
+                who,
+                "design_disturbances",
+                disturbance_bytes(q, K, sc["method"]),
+                sizes + f", {sc['method']}",
+            )
+        )
         out.append(JobEstimate(who, "design_trajectories", trajectories_bytes(q, K), sizes))
         if sc["joint_map"]:
-            out.append(JobEstimate(who, "joint_map",
-                                   joint_map_bytes(model, T, K, jm["chunk_size"]),
-                                   sizes + f", |Theta| = {model.n_theta(T)}"))
+            out.append(
+                JobEstimate(
+                    who,
+                    "joint_map",
+                    joint_map_bytes(model, T, K, jm["chunk_size"]),
+                    sizes + f", |Theta| = {model.n_theta(T)}",
+                )
+            )
         if sc["stan"]:
-            out.append(JobEstimate(who, "sample_nuts", stan_batch_bytes(model, T, K, stan),
-                                   sizes + f", {stan['chains']} chains x "
-                                   f"{stan['iter_warmup'] + stan['iter_sampling']} iterations"))
-            out.append(JobEstimate(who, "gather_nuts", gather_bytes(model, T, K),
-                                   sizes + f", |Theta| = {model.n_theta(T)}"))
+            out.append(
+                JobEstimate(
+                    who,
+                    "sample_nuts",
+                    stan_batch_bytes(model, T, K, stan),
+                    sizes + f", {stan['chains']} chains x "
+                    f"{stan['iter_warmup'] + stan['iter_sampling']} iterations",
+                )
+            )
+            out.append(
+                JobEstimate(
+                    who,
+                    "gather_nuts",
+                    gather_bytes(model, T, K),
+                    sizes + f", |Theta| = {model.n_theta(T)}",
+                )
+            )
     for ks in config["k_selection"]:
         sc = scenarios.get(ks["scenario"])
         if sc is None:
@@ -142,21 +165,42 @@ def estimates(config: dict) -> list[JobEstimate]:
         who = f"k_selection '{ks['name']}'"
         sizes = f"largest K_i = {K}, T = {T}, q = {q}"
         for method in ks["methods"]:
-            out.append(JobEstimate(who, "design_disturbances", disturbance_bytes(q, K, method),
-                                   sizes + f", {method}"))
-        out.append(JobEstimate(who, "k_selection_point",
-                               trajectories_bytes(q, K) + joint_map_bytes(model, T, K,
-                                                                          jm["chunk_size"]),
-                               sizes))
+            out.append(
+                JobEstimate(
+                    who,
+                    "design_disturbances",
+                    disturbance_bytes(q, K, method),
+                    sizes + f", {method}",
+                )
+            )
+        out.append(
+            JobEstimate(
+                who,
+                "k_selection_point",
+                trajectories_bytes(q, K) + joint_map_bytes(model, T, K, jm["chunk_size"]),
+                sizes,
+            )
+        )
     f2 = config["figure2"]
-    out.append(JobEstimate("figure2", "design_disturbances",
-                           disturbance_bytes(2, f2["K"], "design"), f"K = {f2['K']}, q = 2"))
+    out.append(
+        JobEstimate(
+            "figure2",
+            "design_disturbances",
+            disturbance_bytes(2, f2["K"], "design"),
+            f"K = {f2['K']}, q = 2",
+        )
+    )
     sc = scenarios.get(config["paper_outputs"]["figure4"] or "")  # the scenario of Figure 4
     if sc is not None:
         n_grid = config["figure4"]["n"]
-        out.append(JobEstimate(f"scenario '{sc['name']}'", "figure_profile_posterior",
-                               profile_posterior_bytes(MODELS[sc["model"]], sc["T"], n_grid),
-                               f"figure4.n = {n_grid}"))
+        out.append(
+            JobEstimate(
+                f"scenario '{sc['name']}'",
+                "figure_profile_posterior",
+                profile_posterior_bytes(MODELS[sc["model"]], sc["T"], n_grid),
+                f"figure4.n = {n_grid}",
+            )
+        )
     return [JobEstimate(e.owner, e.job, MARGIN * (BASE_BYTES + e.bytes), e.sizes) for e in out]
 
 
@@ -182,12 +226,13 @@ def job_counts(config: dict) -> dict[str, int]:
         q = (model.obs_dim + model.state_dim) * sc["T"]
         runs = sum(1 if m == "design" else len(ks["seeds"]) for m in ks["methods"])
         for m in ks["methods"]:
-            for seed in (ks["seeds"][:1] if m == "design" else ks["seeds"]):
+            for seed in ks["seeds"][:1] if m == "design" else ks["seeds"]:
                 disturbances.update((q, K, m, seed) for K in ks["K_grid"])
         counts[f"k_selection '{ks['name']}'"] = runs * len(ks["K_grid"]) + 1
     counts["design disturbance sets"] = len(disturbances) + 1  # + Figure 2's
     counts["Stan programs, tables and figures"] = (
-        len({sc["model"] for sc in config["scenarios"] if sc["stan"]}) + FIXED_JOBS)
+        len({sc["model"] for sc in config["scenarios"] if sc["stan"]}) + FIXED_JOBS
+    )
     return counts
 
 
@@ -199,17 +244,21 @@ def problems(config: dict) -> list[str]:
     out = []
     for e in estimates(config):
         if e.bytes > mem_limit:
-            out.append(f"{e.owner}: a {e.job} job needs about {_gib(e.bytes)} of memory "
-                       f"({e.sizes}), more than limits.job_memory_gib = "
-                       f"{limits['job_memory_gib']} GiB; reduce the sizes or raise the limit "
-                       f"(config/README.md, section 'limits')")
+            out.append(
+                f"{e.owner}: a {e.job} job needs about {_gib(e.bytes)} of memory "
+                f"({e.sizes}), more than limits.job_memory_gib = "
+                f"{limits['job_memory_gib']} GiB; reduce the sizes or raise the limit "
+                f"(config/README.md, section 'limits')"
+            )
     counts = job_counts(config)
     total = sum(counts.values())
     if total > limits["jobs"]:
         largest = sorted(counts.items(), key=lambda kv: -kv[1])[:3]
         detail = ", ".join(f"{who}: {n}" for who, n in largest)
-        out.append(f"the run would have about {total} jobs, more than limits.jobs = "
-                   f"{limits['jobs']} (largest: {detail}); reduce K, raise stan.batch_size "
-                   f"(now {config['stan']['batch_size']}) or raise limits.jobs "
-                   f"(config/README.md, section 'limits')")
+        out.append(
+            f"the run would have about {total} jobs, more than limits.jobs = "
+            f"{limits['jobs']} (largest: {detail}); reduce K, raise stan.batch_size "
+            f"(now {config['stan']['batch_size']}) or raise limits.jobs "
+            f"(config/README.md, section 'limits')"
+        )
     return out

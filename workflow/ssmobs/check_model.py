@@ -28,9 +28,10 @@ import json
 import re
 import sys
 import zlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -63,8 +64,12 @@ class CheckReport:
     problems: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"slug": self.slug, "ok": not self.problems, "checks": self.checks,
-                "problems": self.problems}
+        return {
+            "slug": self.slug,
+            "ok": not self.problems,
+            "checks": self.checks,
+            "problems": self.problems,
+        }
 
 
 # ----------------------------------------------------------------------------- cases
@@ -89,8 +94,9 @@ def cases_from_scenarios(scenarios: Sequence[Mapping[str, Any]], slug: str) -> l
         if sc["model"] != slug:
             continue
         x0 = sc["x0"] if isinstance(sc["x0"], list) else [sc["x0"]]
-        case = CheckCase({k: float(v) for k, v in sc["omega"].items()},
-                         [float(v) for v in x0], sc.get("prior"))
+        case = CheckCase(
+            {k: float(v) for k, v in sc["omega"].items()}, [float(v) for v in x0], sc.get("prior")
+        )
         if case not in out:
             out.append(case)
     return out
@@ -105,14 +111,17 @@ def _random_omega(model: StateSpaceModel, bounds, rng: np.random.Generator, n: i
     cand = lo + (hi - lo) * rng.uniform(0.05, 0.95, size=(50 * n, model.n_params))
     inside = cand[in_support(model, cand, bounds)]
     if inside.shape[0] < n:
-        raise ModelCheckError(f"model '{model.slug}': found no points inside the support of "
-                              f"the prior box ({bounds.lower}, {bounds.upper}) and the model "
-                              f"constraints")
+        raise ModelCheckError(
+            f"model '{model.slug}': found no points inside the support of "
+            f"the prior box ({bounds.lower}, {bounds.upper}) and the model "
+            f"constraints"
+        )
     return inside[:n]
 
 
-def _sample_theta(model: StateSpaceModel, case: CheckCase, T: int, n: int,
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, Any]:
+def _sample_theta(
+    model: StateSpaceModel, case: CheckCase, T: int, n: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, Any]:
     """n random Theta inside the support and one simulated z (T, d) for the case."""
     bounds = model.prior_bounds(case.omega, case.prior)
     omega_true = model.omega_array(case.omega)
@@ -127,8 +136,9 @@ def _sample_theta(model: StateSpaceModel, case: CheckCase, T: int, n: int,
 
 
 # ----------------------------------------------------------------------------- 1. Python
-def python_problems(model: StateSpaceModel, case: CheckCase, T: int = 5, n_points: int = 3,
-                    seed: int = 0) -> list[str]:
+def python_problems(
+    model: StateSpaceModel, case: CheckCase, T: int = 5, n_points: int = 3, seed: int = 0
+) -> list[str]:
     """Simulator and start shapes, and derivatives against central finite differences."""
     problems: list[str] = []
     rng = np.random.default_rng(seed)
@@ -145,24 +155,30 @@ def python_problems(model: StateSpaceModel, case: CheckCase, T: int = 5, n_point
     x, z = (np.asarray(a) for a in out)
     for name, arr, want in (("x", x, (K, T, p)), ("z", z, (K, T, d))):
         if arr.shape != want:
-            problems.append(f"simulate returned {name} of shape {arr.shape} for K={K}, T={T}; "
-                            f"expected (K, T, {'p' if name == 'x' else 'd'}) = {want} "
-                            f"(state_dim p={p}, obs_dim d={d})")
+            problems.append(
+                f"simulate returned {name} of shape {arr.shape} for K={K}, T={T}; "
+                f"expected (K, T, {'p' if name == 'x' else 'd'}) = {want} "
+                f"(state_dim p={p}, obs_dim d={d})"
+            )
         elif not np.all(np.isfinite(arr)):
             problems.append(f"simulate returned non-finite {name} at {case.label()}")
     if problems:
         return problems
     start = np.asarray(model.initial_states(omega, z))
     if start.shape != (K, T, p) or not np.all(np.isfinite(start)):
-        problems.append(f"initial_states returned shape {start.shape} (finite: "
-                        f"{bool(np.all(np.isfinite(start)))}); expected finite (K, T, p) = "
-                        f"{(K, T, p)}")
+        problems.append(
+            f"initial_states returned shape {start.shape} (finite: "
+            f"{bool(np.all(np.isfinite(start)))}); expected finite (K, T, p) = "
+            f"{(K, T, p)}"
+        )
     theta, z1, bounds = _sample_theta(model, case, T, n_points, rng)
     value, grad, hess = neg2_log_posterior(model, theta, z1, bounds, order=2)
     if not np.all(np.isfinite(value)):
         bad = theta[~np.isfinite(value)][0]
-        return problems + [f"-2 log posterior is not finite at Theta = {bad.tolist()} inside the "
-                           f"support ({case.label()})"]
+        return problems + [
+            f"-2 log posterior is not finite at Theta = {bad.tolist()} inside the "
+            f"support ({case.label()})"
+        ]
     names = model.theta_names(T)
     n = theta.shape[1]
     for j in range(n):
@@ -176,14 +192,18 @@ def python_problems(model: StateSpaceModel, case: CheckCase, T: int = 5, n_point
         err_g = np.abs(grad[:, j] - fd_g) / (1.0 + np.abs(fd_g))
         if err_g.max() > 1e-4:
             i = int(err_g.argmax())
-            problems.append(f"gradient of -2 log posterior in {names[j]} is {grad[i, j]:.6g}, "
-                            f"finite differences give {fd_g[i]:.6g} at Theta = "
-                            f"{theta[i].tolist()}")
+            problems.append(
+                f"gradient of -2 log posterior in {names[j]} is {grad[i, j]:.6g}, "
+                f"finite differences give {fd_g[i]:.6g} at Theta = "
+                f"{theta[i].tolist()}"
+            )
         err_h = np.abs(hess[:, :, j] - fd_h) / (1.0 + np.abs(fd_h))
         if err_h.max() > 1e-4:
             i, r = np.unravel_index(int(err_h.argmax()), err_h.shape)
-            problems.append(f"Hessian entry ({names[r]}, {names[j]}) of -2 log posterior is "
-                            f"{hess[i, r, j]:.6g}, finite differences give {fd_h[i, r]:.6g}")
+            problems.append(
+                f"Hessian entry ({names[r]}, {names[j]}) of -2 log posterior is "
+                f"{hess[i, r, j]:.6g}, finite differences give {fd_h[i, r]:.6g}"
+            )
     return problems
 
 
@@ -197,7 +217,7 @@ def stan_block(code: str, name: str) -> str | None:
     """Body of the block ``name`` (e.g. ``parameters``; not ``transformed parameters``)."""
     code = _strip_comments(code)
     for match in re.finditer(rf"\b{name}\s*\{{", code):
-        before = code[:match.start()].rstrip()
+        before = code[: match.start()].rstrip()
         if not before.endswith(("transformed", "generated")):
             break
     else:
@@ -247,7 +267,8 @@ def stan_source_problems(model: StateSpaceModel, stan_path: Path) -> list[str]:
             problems.append(
                 f"{stan_path.name}: the parameters block declares {got}, but the Python model "
                 f"'{model.slug}' (param_names = {list(model.param_names)}) needs exactly {want} "
-                f"in this order: Theta = (Omega, x0, x_1..x_T)")
+                f"in this order: Theta = (Omega, x0, x_1..x_T)"
+            )
     data = stan_block(code, "data")
     declared = declared_names(data) if data is not None else []
     needed = ["T", "z"] + [f"{n}_{s}" for n in model.param_names for s in ("lower", "upper")]
@@ -257,7 +278,8 @@ def stan_source_problems(model: StateSpaceModel, stan_path: Path) -> list[str]:
             f"{stan_path.name}: the data block does not declare {missing}; the Python model "
             f"passes T, z and the flat prior bounds <name>_lower, <name>_upper of every "
             f"parameter (ssmobs.models.base.StateSpaceModel.stan_data), and the Stan program "
-            f"must bound each parameter by them")
+            f"must bound each parameter by them"
+        )
     return problems
 
 
@@ -289,8 +311,15 @@ def _fmt(omega: np.ndarray, names: Sequence[str]) -> str:
     return ", ".join(f"{n}={v:.6g}" for n, v in zip(names, omega))
 
 
-def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: int = 6,
-                  n_points: int = 6, seed: int = 0, rtol: float = 1e-8) -> list[str]:
+def stan_problems(
+    model: StateSpaceModel,
+    stan_path: Path,
+    case: CheckCase,
+    T: int = 6,
+    n_points: int = 6,
+    seed: int = 0,
+    rtol: float = 1e-8,
+) -> list[str]:
     """Compiled Stan against Python for one case: names, shapes, log density, support."""
     import stan
 
@@ -306,30 +335,38 @@ def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: i
         try:
             post = stan.build(stan_path.read_text(), data=data)
         except Exception as err:  # noqa: BLE001 - reported as a problem
-            return [f"{stan_path.name}: building the program with the Python model's data "
-                    f"failed {where} (rejected data, or a PyStan/httpstan error): "
-                    f"{type(err).__name__}: {err}"]
+            return [
+                f"{stan_path.name}: building the program with the Python model's data "
+                f"failed {where} (rejected data, or a PyStan/httpstan error): "
+                f"{type(err).__name__}: {err}"
+            ]
         want = expected_parameters(model)
         got = list(post.param_names)
         if got != want:
-            return [f"{stan_path.name}: compiled parameters are {got}, the Python model needs "
-                    f"{want} in this order"]
+            return [
+                f"{stan_path.name}: compiled parameters are {got}, the Python model needs "
+                f"{want} in this order"
+            ]
         p = model.state_dim
         dims = dict(zip(post.param_names, post.dims))
-        want_dims = {**{n: [] for n in names}, "x0": [] if p == 1 else [p],
-                     "x": [T] if p == 1 else [T, p]}
+        want_dims = {
+            **{n: [] for n in names},
+            "x0": [] if p == 1 else [p],
+            "x": [T] if p == 1 else [T, p],
+        }
         bad = {k: (dims[k], v) for k, v in want_dims.items() if list(dims[k]) != v}
         if bad:
-            return [f"{stan_path.name}: parameter shapes (Stan, expected) {bad} for T={T}, "
-                    f"p={p}"]
+            return [f"{stan_path.name}: parameter shapes (Stan, expected) {bad} for T={T}, p={p}"]
         # log density inside the support: equal up to one additive constant
         py = np.array([float(log_posterior(model, th, z, bounds)) for th in theta])
         st = [_stan_log_prob(post, _stan_point(model, th, T)) for th in theta]
         for th, s in zip(theta, st):
             if s is None:
-                problems.append(f"{stan_path.name}: Stan rejects {_fmt(th, names)}, which is "
-                                f"inside the Python model's support {where}; the bounds in "
-                                f"Stan are narrower than the Python prior")
+                problems.append(
+                    f"{stan_path.name}: Stan rejects {_fmt(th, names)}, which is "
+                    f"inside the Python model's support {where}; the bounds in "
+                    f"Stan are narrower than the Python prior"
+                )
         if problems:
             return problems
         diff = np.array(st) - py
@@ -339,8 +376,10 @@ def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: i
             i = int(off.argmax())
             problems.append(
                 f"{stan_path.name}: log density differs from the Python log posterior by more "
-                f"than a constant {where}: Stan - Python = {diff[0]:.10g} at {_fmt(theta[0], names)}"
-                f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ)")
+                f"than a constant {where}: Stan - Python = {diff[0]:.10g} at "
+                f"{_fmt(theta[0], names)}"
+                f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ)"
+            )
             return problems
         const = diff[0]
         # support: just inside / just outside every finite prior bound, and model constraints
@@ -354,42 +393,56 @@ def stan_problems(model: StateSpaceModel, stan_path: Path, case: CheckCase, T: i
                 inside, outside = base.copy(), base.copy()
                 inside[j] = bound + sign * step
                 outside[j] = bound - sign * step
-                if in_support(model, inside[None, :model.n_params], bounds)[0]:
+                if in_support(model, inside[None, : model.n_params], bounds)[0]:
                     s = _stan_log_prob(post, _stan_point(model, inside, T))
                     if s is None:
                         problems.append(
                             f"{stan_path.name}: Stan rejects {name}={inside[j]:.6g}, just inside "
                             f"the Python prior's {side} bound {bound:g} {where}; declare "
-                            f"<lower={name}_lower, upper={name}_upper> on {name}")
-                    elif abs(s - float(log_posterior(model, inside, z, bounds)) - const) > \
-                            rtol * max(1.0, abs(s)) * 10:
-                        problems.append(f"{stan_path.name}: log density differs by more than a "
-                                        f"constant at {name}={inside[j]:.6g} {where}")
+                            f"<lower={name}_lower, upper={name}_upper> on {name}"
+                        )
+                    elif (
+                        abs(s - float(log_posterior(model, inside, z, bounds)) - const)
+                        > rtol * max(1.0, abs(s)) * 10
+                    ):
+                        problems.append(
+                            f"{stan_path.name}: log density differs by more than a "
+                            f"constant at {name}={inside[j]:.6g} {where}"
+                        )
                 s = _stan_log_prob(post, _stan_point(model, outside, T))
                 if s is not None:
                     problems.append(
                         f"{stan_path.name}: Stan accepts {name}={outside[j]:.6g} (log density "
                         f"{s:.6g}), outside the Python prior's {side} bound {bound:g} "
                         f"('{bounds.variants[j]}' {where}); Stan does not share this prior "
-                        f"bound: declare <lower={name}_lower, upper={name}_upper> on {name}")
+                        f"bound: declare <lower={name}_lower, upper={name}_upper> on {name}"
+                    )
         # points of the prior box that violate a model constraint must be rejected by Stan
         lo = np.where(np.isfinite(bounds.lower), bounds.lower, -3.0)
         hi = np.where(np.isfinite(bounds.upper), bounds.upper, 3.0)
         cand = lo + (hi - lo) * rng.uniform(0.01, 0.99, size=(400, model.n_params))
         violating = cand[~in_support(model, cand, bounds)][:3]
         for om in violating:
-            point = np.concatenate([om, base[model.n_params:]])
+            point = np.concatenate([om, base[model.n_params :]])
             s = _stan_log_prob(post, _stan_point(model, point, T))
             if s is not None:
-                problems.append(f"{stan_path.name}: Stan accepts {_fmt(om, names)}, which "
-                                f"violates a support constraint of the Python model "
-                                f"({', '.join(model.constraint_text) or 'support_constraints'})")
+                problems.append(
+                    f"{stan_path.name}: Stan accepts {_fmt(om, names)}, which "
+                    f"violates a support constraint of the Python model "
+                    f"({', '.join(model.constraint_text) or 'support_constraints'})"
+                )
     return problems
 
 
 # ----------------------------------------------------------------------------- driver
-def check_model(slug: str, cases: Sequence[CheckCase] | None = None, stan: bool = True,
-                stan_path: Path | None = None, T: int = 6, seed: int | None = None) -> CheckReport:
+def check_model(
+    slug: str,
+    cases: Sequence[CheckCase] | None = None,
+    stan: bool = True,
+    stan_path: Path | None = None,
+    T: int = 6,
+    seed: int | None = None,
+) -> CheckReport:
     """Every check of this module for one model; the report lists each problem found.
 
     ``cases`` default to :func:`default_cases`; ``stan=False`` skips the Stan checks (for a
@@ -407,8 +460,10 @@ def check_model(slug: str, cases: Sequence[CheckCase] | None = None, stan: bool 
         if not problems:
             problems = python_problems(model, case, T=T, seed=seed + i)
         report.problems += [f"[python, {case.label()}] {p}" for p in problems]
-    report.checks.append(f"python: simulator shapes, initial_states, gradient and Hessian vs "
-                         f"finite differences ({len(cases)} case(s))")
+    report.checks.append(
+        f"python: simulator shapes, initial_states, gradient and Hessian vs "
+        f"finite differences ({len(cases)} case(s))"
+    )
     if report.problems or not stan:
         return report
     path = Path(stan_path) if stan_path is not None else stan_file(slug)
@@ -418,13 +473,20 @@ def check_model(slug: str, cases: Sequence[CheckCase] | None = None, stan: bool 
         return report
     for i, case in enumerate(cases):
         report.problems += stan_problems(model, path, case, T=T, seed=seed + i)
-    report.checks.append(f"stan compiled: names, shapes, log density up to a constant, support "
-                         f"bounds ({len(cases)} case(s))")
+    report.checks.append(
+        f"stan compiled: names, shapes, log density up to a constant, support "
+        f"bounds ({len(cases)} case(s))"
+    )
     return report
 
 
-def run_check_model(slug: str, scenarios: Sequence[Mapping[str, Any]], out: str | Path,
-                    stan: bool = True, stan_path: str | Path | None = None) -> CheckReport:
+def run_check_model(
+    slug: str,
+    scenarios: Sequence[Mapping[str, Any]],
+    out: str | Path,
+    stan: bool = True,
+    stan_path: str | Path | None = None,
+) -> CheckReport:
     """Rule check_model: check the model for the default cases and every configured case;
     write the report; raise :class:`ModelCheckError` listing every problem."""
     model = get_model(slug)
@@ -434,8 +496,10 @@ def run_check_model(slug: str, scenarios: Sequence[Mapping[str, Any]], out: str 
             cases.append(case)
     report = check_model(slug, cases, stan=stan, stan_path=stan_path)
     if report.problems:
-        raise ModelCheckError(f"model '{slug}': the Python model and the Stan program "
-                              f"disagree:\n  - " + "\n  - ".join(report.problems))
+        raise ModelCheckError(
+            f"model '{slug}': the Python model and the Stan program "
+            f"disagree:\n  - " + "\n  - ".join(report.problems)
+        )
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     Path(out).write_text(json.dumps(report.to_dict(), indent=2) + "\n")
     return report
@@ -444,10 +508,13 @@ def run_check_model(slug: str, scenarios: Sequence[Mapping[str, Any]], out: str 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m ssmobs.check_model",
-        description="Check workflow/ssmobs/models/<slug>.py against stan/<slug>.stan.")
+        description="Check workflow/ssmobs/models/<slug>.py against stan/<slug>.stan.",
+    )
     parser.add_argument("slug", help="model slug (the file name of the model module)")
-    parser.add_argument("--configfile", help="also check every (omega, x0, prior) of this "
-                                             "config's scenarios of the model")
+    parser.add_argument(
+        "--configfile",
+        help="also check every (omega, x0, prior) of this config's scenarios of the model",
+    )
     parser.add_argument("--no-stan", action="store_true", help="Python checks only")
     args = parser.parse_args(argv)
     try:
@@ -466,8 +533,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ConfigError as err:
             print(f"error: {err}", file=sys.stderr)
             return 2
-        cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug)
-                  if c not in cases]
+        cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug) if c not in cases]
     report = check_model(args.slug, cases, stan=not args.no_stan)
     for line in report.checks:
         print(f"checked  {line}")

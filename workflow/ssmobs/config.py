@@ -118,8 +118,9 @@ def _validator_class() -> type:
 def schema_problems(instance: Any, schema: dict) -> list[str]:
     """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
     the schema's defaults into ``instance`` (in place)."""
-    errors = sorted(_validator_class()(schema).iter_errors(instance),
-                    key=lambda e: list(e.absolute_path))
+    errors = sorted(
+        _validator_class()(schema).iter_errors(instance), key=lambda e: list(e.absolute_path)
+    )
     return [_describe(e) for e in errors]
 
 
@@ -133,53 +134,70 @@ def _scenario_problems(config: dict) -> list[str]:
     for i, sc in enumerate(config["scenarios"]):
         where = f"scenarios[{i}] ('{sc['name']}')"
         if sc["name"] in seen:
-            problems.append(f"{where}.name = {sc['name']!r}: used twice (also scenarios"
-                            f"[{seen[sc['name']]}]); scenario names must be unique")
+            problems.append(
+                f"{where}.name = {sc['name']!r}: used twice (also scenarios"
+                f"[{seen[sc['name']]}]); scenario names must be unique"
+            )
         seen.setdefault(sc["name"], i)
         if sc["name"].lower() in RESERVED_SCENARIO_NAMES:
-            problems.append(f"{where}.name = {sc['name']!r}: reserved (results/{sc['name']}/ "
-                            f"holds the workflow's own files); reserved names: "
-                            f"{list(RESERVED_SCENARIO_NAMES)}")
+            problems.append(
+                f"{where}.name = {sc['name']!r}: reserved (results/{sc['name']}/ "
+                f"holds the workflow's own files); reserved names: "
+                f"{list(RESERVED_SCENARIO_NAMES)}"
+            )
         if sc["model"] not in MODELS:
-            problems.append(f"{where}.model = {sc['model']!r}: unknown model; allowed: "
-                            f"{sorted(MODELS)}")
+            problems.append(
+                f"{where}.model = {sc['model']!r}: unknown model; allowed: {sorted(MODELS)}"
+            )
             continue
         model = MODELS[sc["model"]]
         for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior")):
             problems.append(f"{where}: {msg}")
         if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
-            problems.append(f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
-                            f"has no sign-consistent start; allowed: 'observations'")
+            problems.append(
+                f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
+                f"has no sign-consistent start; allowed: 'observations'"
+            )
     names = {sc["name"] for sc in config["scenarios"]}
     problems += _repeated_names(config.get("k_selection", []), "k_selection")
     for i, ks in enumerate(config.get("k_selection", [])):
         where = f"k_selection[{i}] ('{ks['name']}')"
         if ks["scenario"] not in names:
-            problems.append(f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
-                            f"configured: {sorted(names)}")
+            problems.append(
+                f"{where}.scenario = {ks['scenario']!r}: no scenario of that name; "
+                f"configured: {sorted(names)}"
+            )
         grid = ks["K_grid"]
         if isinstance(grid, dict):  # the paper's K_i = i * step, i = 1 .. last / step
             if grid["last"] % grid["step"] or grid["last"] < 2 * grid["step"]:
-                problems.append(f"{where}.K_grid = {grid}: 'last' must be a multiple of 'step' "
-                                f"and at least 2 * step")
+                problems.append(
+                    f"{where}.K_grid = {grid}: 'last' must be a multiple of 'step' "
+                    f"and at least 2 * step"
+                )
                 continue
             grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
             problems.append(f"{where}.K_grid = {grid}: must be strictly increasing")
     models = {sc["name"]: sc["model"] for sc in config["scenarios"]}
-    problems += _repeated_names(config.get("observability_studies", []),
-                                "observability_studies")
+    problems += _repeated_names(config.get("observability_studies", []), "observability_studies")
     for i, st in enumerate(config.get("observability_studies", [])):
         where = f"observability_studies[{i}] ('{st['name']}')"
         unknown = [n for n in st["scenarios"] if n not in names]
         if unknown:
-            problems.append(f"{where}.scenarios: no scenario(s) named {unknown}; configured: "
-                            f"{sorted(names)}")
+            problems.append(
+                f"{where}.scenarios: no scenario(s) named {unknown}; configured: {sorted(names)}"
+            )
         elif len({models[n] for n in st["scenarios"]}) > 1:
-            problems.append(f"{where}.scenarios = {st['scenarios']}: must all use one model, "
-                            f"got {sorted({models[n] for n in st['scenarios']})}")
-    return (problems + _keep_draws_problems(config) + _figure_problems(config)
-            + _paper_output_problems(config))
+            problems.append(
+                f"{where}.scenarios = {st['scenarios']}: must all use one model, "
+                f"got {sorted({models[n] for n in st['scenarios']})}"
+            )
+    return (
+        problems
+        + _keep_draws_problems(config)
+        + _figure_problems(config)
+        + _paper_output_problems(config)
+    )
 
 
 def _repeated_names(entries: list[dict], section: str) -> list[str]:
@@ -188,8 +206,10 @@ def _repeated_names(entries: list[dict], section: str) -> list[str]:
     problems = []
     for i, entry in enumerate(entries):
         if entry["name"] in seen:
-            problems.append(f"{section}[{i}] ('{entry['name']}').name = {entry['name']!r}: "
-                            f"used twice; names must be unique")
+            problems.append(
+                f"{section}[{i}] ('{entry['name']}').name = {entry['name']!r}: "
+                f"used twice; names must be unique"
+            )
         seen.add(entry["name"])
     return problems
 
@@ -203,9 +223,11 @@ def _keep_draws_problems(config: dict) -> list[str]:
     beyond = [k for k in config["stan"]["keep_draws"] if k >= largest]
     if not beyond:
         return []
-    return [f"stan.keep_draws = {config['stan']['keep_draws']}: k = {beyond} is beyond every "
-            f"Stan scenario (k counts from 0, so k < K; the largest K is {largest}); "
-            f"K per Stan scenario: {stan_K}"]
+    return [
+        f"stan.keep_draws = {config['stan']['keep_draws']}: k = {beyond} is beyond every "
+        f"Stan scenario (k counts from 0, so k < K; the largest K is {largest}); "
+        f"K per Stan scenario: {stan_K}"
+    ]
 
 
 def _figure_problems(config: dict) -> list[str]:
@@ -214,8 +236,10 @@ def _figure_problems(config: dict) -> list[str]:
     problems = []
     for lo, hi in (("a_min", "a_max"), ("x0_min", "x0_max")):
         if not f4[lo] < f4[hi]:
-            problems.append(f"figure4.{lo} = {f4[lo]!r}, figure4.{hi} = {f4[hi]!r}: "
-                            f"{lo} must be < {hi} (the grid of Figure 4 would be empty)")
+            problems.append(
+                f"figure4.{lo} = {f4[lo]!r}, figure4.{hi} = {f4[hi]!r}: "
+                f"{lo} must be < {hi} (the grid of Figure 4 would be empty)"
+            )
     return problems
 
 
@@ -229,30 +253,40 @@ def _paper_output_problems(config: dict) -> list[str]:
         names = [value] if isinstance(value, str) else list(value or [])
         unknown = [n for n in names if n not in scenarios]
         if unknown:
-            problems.append(f"paper_outputs.{key}: no scenario(s) named {unknown}; configured: "
-                            f"{sorted(scenarios)}")
+            problems.append(
+                f"paper_outputs.{key}: no scenario(s) named {unknown}; configured: "
+                f"{sorted(scenarios)}"
+            )
             continue
         entries = [scenarios[n] for n in names]
         if key != "figure4":
             one_stage = [sc["name"] for sc in entries if not (sc["joint_map"] and sc["stan"])]
             if one_stage:
-                problems.append(f"paper_outputs.{key}: scenario(s) {one_stage} do not run both "
-                                f"stages; allowed: scenarios with joint_map and stan true")
+                problems.append(
+                    f"paper_outputs.{key}: scenario(s) {one_stage} do not run both "
+                    f"stages; allowed: scenarios with joint_map and stan true"
+                )
         models = [MODELS.get(sc["model"]) for sc in entries]
         if key == "figure3" and entries:
             truths = {(sc["model"], repr(sc["omega"]), repr(x0_list(sc))) for sc in entries}
             if len(truths) > 1:
-                problems.append(f"paper_outputs.figure3 = {names}: must share one model, omega "
-                                f"and x0 (one pair of true-value lines), got {sorted(truths)}")
+                problems.append(
+                    f"paper_outputs.figure3 = {names}: must share one model, omega "
+                    f"and x0 (one pair of true-value lines), got {sorted(truths)}"
+                )
             elif models[0] is not None and models[0].state_dim != 1:
-                problems.append(f"paper_outputs.figure3: model {entries[0]['model']!r} has "
-                                f"p = {models[0].state_dim}; Figure 3 plots a scalar x0")
+                problems.append(
+                    f"paper_outputs.figure3: model {entries[0]['model']!r} has "
+                    f"p = {models[0].state_dim}; Figure 3 plots a scalar x0"
+                )
         if key == "figure4" and entries and models[0] is not None:
             if models[0].n_params != 1 or models[0].state_dim != 1:
-                problems.append(f"paper_outputs.figure4 = {value!r}: model "
-                                f"{entries[0]['model']!r} has {models[0].n_params} parameter(s) "
-                                f"and p = {models[0].state_dim}; Figure 4's (Omega, x0) grid "
-                                f"needs one parameter and p = 1")
+                problems.append(
+                    f"paper_outputs.figure4 = {value!r}: model "
+                    f"{entries[0]['model']!r} has {models[0].n_params} parameter(s) "
+                    f"and p = {models[0].state_dim}; Figure 4's (Omega, x0) grid "
+                    f"needs one parameter and p = 1"
+                )
     return problems
 
 
@@ -263,9 +297,11 @@ def _backend_problems(config: dict) -> list[str]:
     from .stan_backends import have_cmdstan
 
     if not have_cmdstan():
-        return ["stan.backend = 'cmdstanpy': no CmdStan installation was found (set $CMDSTAN "
-                "or install CmdStan under ~/.cmdstan); allowed without CmdStan: 'auto' or "
-                "'native' or 'pystan'"]
+        return [
+            "stan.backend = 'cmdstanpy': no CmdStan installation was found (set $CMDSTAN "
+            "or install CmdStan under ~/.cmdstan); allowed without CmdStan: 'auto' or "
+            "'native' or 'pystan'"
+        ]
     return []
 
 
@@ -275,8 +311,10 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     Raises :class:`ConfigError` listing every problem (key, value, what is allowed).
     """
     if not isinstance(config, dict):
-        raise ConfigError(f"invalid configuration: the top level must be a mapping with the "
-                          f"required key 'scenarios', got {type(config).__name__}")
+        raise ConfigError(
+            f"invalid configuration: the top level must be a mapping with the "
+            f"required key 'scenarios', got {type(config).__name__}"
+        )
     _numbers_from_command_line(config)
     problems = _nonfinite_problems(config) or _schema_problems(config)
     if not problems:

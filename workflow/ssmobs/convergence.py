@@ -32,18 +32,33 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .diagnostics import ebfmi, rank_diagnostics
 from .stan_backends.base import Draws
 
-__all__ = ["ARVIZ_STAT_NAMES", "CHECKS", "SENSITIVITY_VARIANTS", "THRESHOLD_CHECKS",
-           "ConvergenceSettings", "check_convergence", "converged_under", "ebfmi",
-           "rank_diagnostics", "sensitivity_table", "stack_params", "threshold_failures",
-           "to_inference_data"]
+if TYPE_CHECKING:
+    import pandas
+
+__all__ = [
+    "ARVIZ_STAT_NAMES",
+    "CHECKS",
+    "SENSITIVITY_VARIANTS",
+    "THRESHOLD_CHECKS",
+    "ConvergenceSettings",
+    "check_convergence",
+    "converged_under",
+    "ebfmi",
+    "rank_diagnostics",
+    "sensitivity_table",
+    "stack_params",
+    "threshold_failures",
+    "to_inference_data",
+]
 
 #: the checks a run can fail, in the order they are reported
 CHECKS = ("nonfinite", "divergences", "rhat", "ess_bulk", "ess_tail", "ebfmi", "treedepth")
@@ -87,8 +102,10 @@ class ConvergenceSettings:
 
     def __post_init__(self) -> None:
         if self.implementation not in ("vectorized", "arviz"):
-            raise ValueError(f"ConvergenceSettings.implementation must be 'vectorized' or "
-                             f"'arviz', got {self.implementation!r}")
+            raise ValueError(
+                f"ConvergenceSettings.implementation must be 'vectorized' or "
+                f"'arviz', got {self.implementation!r}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,7 +123,9 @@ def stack_params(draws: Draws) -> tuple[list[str], np.ndarray]:
     for name, arr in draws.params.items():
         arr = np.asarray(arr, dtype=float)
         if arr.ndim < 2:
-            raise ValueError(f"parameter '{name}' has shape {arr.shape}; expected (chain, draw, ...)")
+            raise ValueError(
+                f"parameter '{name}' has shape {arr.shape}; expected (chain, draw, ...)"
+            )
         c, s = arr.shape[:2]
         shape = arr.shape[2:]
         flat = arr.reshape(c, s, -1)
@@ -130,8 +149,9 @@ def to_inference_data(draws: Draws) -> Any:
         new = ARVIZ_STAT_NAMES.get(key, key)
         arr = np.asarray(arr)
         stats[new] = arr.astype(bool) if new == "diverging" else arr
-    return arviz_base.from_dict({"posterior": {k: np.asarray(v) for k, v in draws.params.items()},
-                                 "sample_stats": stats})
+    return arviz_base.from_dict(
+        {"posterior": {k: np.asarray(v) for k, v in draws.params.items()}, "sample_stats": stats}
+    )
 
 
 def _arviz_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
@@ -140,9 +160,11 @@ def _arviz_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # 0/0 of constant rows, warnings of rows with NaN
-        return {"rhat": array_stats.rhat(x, method="rank"),
-                "ess_bulk": array_stats.ess(x, method="bulk"),
-                "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95))}
+        return {
+            "rhat": array_stats.rhat(x, method="rank"),
+            "ess_bulk": array_stats.ess(x, method="bulk"),
+            "ess_tail": array_stats.ess(x, method="tail", prob=(0.05, 0.95)),
+        }
 
 
 def _worst(values: np.ndarray, names: list[str], largest: bool) -> tuple[float, str | None]:
@@ -173,6 +195,7 @@ def threshold_failures(worst: Mapping[str, Any], settings: ConvergenceSettings) 
     :func:`check_convergence` and to re-evaluate stored records under other thresholds
     (:func:`converged_under`).
     """
+
     def num(key: str) -> float:
         v = worst.get(key)
         return math.nan if v is None else float(v)
@@ -193,8 +216,10 @@ def threshold_failures(worst: Mapping[str, Any], settings: ConvergenceSettings) 
     return failed
 
 
-def converged_under(table: "pandas.DataFrame", settings: ConvergenceSettings  # noqa: F821
-                    ) -> np.ndarray:
+def converged_under(
+    table: pandas.DataFrame,
+    settings: ConvergenceSettings,
+) -> np.ndarray:
     """(K,) bool: would each trajectory of a Stan-stage table pass under ``settings``?
 
     ``table`` is the per-trajectory table of rule gather_nuts (columns ``failed_checks``,
@@ -205,8 +230,11 @@ def converged_under(table: "pandas.DataFrame", settings: ConvergenceSettings  # 
     """
     out = np.zeros(len(table), dtype=bool)
     for i, row in enumerate(table.to_dict("records")):
-        other = [c for c in str(row.get("failed_checks") or "").split(",")
-                 if c and c not in THRESHOLD_CHECKS]
+        other = [
+            c
+            for c in str(row.get("failed_checks") or "").split(",")
+            if c and c not in THRESHOLD_CHECKS
+        ]
         if other or row.get("status", "ok") != "ok":
             continue
         out[i] = not threshold_failures(row, settings)
@@ -214,14 +242,18 @@ def converged_under(table: "pandas.DataFrame", settings: ConvergenceSettings  # 
 
 
 #: the variants of the sensitivity table: (column, R-hat threshold, tree depth counted)
-SENSITIVITY_VARIANTS = (("rhat1.01_treedepth_warns", 1.01, False),
-                        ("rhat1.01_treedepth_fails", 1.01, True),
-                        ("rhat1.05_treedepth_warns", 1.05, False),
-                        ("rhat1.05_treedepth_fails", 1.05, True))
+SENSITIVITY_VARIANTS = (
+    ("rhat1.01_treedepth_warns", 1.01, False),
+    ("rhat1.01_treedepth_fails", 1.01, True),
+    ("rhat1.05_treedepth_warns", 1.05, False),
+    ("rhat1.05_treedepth_fails", 1.05, True),
+)
 
 
-def sensitivity_table(tables: Mapping[str, "pandas.DataFrame"],  # noqa: F821
-                      base: ConvergenceSettings) -> "pandas.DataFrame":  # noqa: F821
+def sensitivity_table(
+    tables: Mapping[str, pandas.DataFrame],  # noqa: F821
+    base: ConvergenceSettings,
+) -> pandas.DataFrame:  # noqa: F821
     """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted.
 
     ``tables`` maps scenario names to their gather_nuts tables; the other thresholds are
@@ -232,20 +264,26 @@ def sensitivity_table(tables: Mapping[str, "pandas.DataFrame"],  # noqa: F821
 
     rows = []
     for name, table in tables.items():
-        row: dict[str, Any] = {"scenario": name, "K": int(len(table)),
-                               "K_stan_run": int(np.asarray(table["converged"], bool).sum())}
+        row: dict[str, Any] = {
+            "scenario": name,
+            "K": int(len(table)),
+            "K_stan_run": int(np.asarray(table["converged"], bool).sum()),
+        }
         for col, rhat_max, td in SENSITIVITY_VARIANTS:
-            settings = ConvergenceSettings(**{**base.to_dict(), "rhat_max": rhat_max,
-                                              "treedepth_fails": td})
+            settings = ConvergenceSettings(
+                **{**base.to_dict(), "rhat_max": rhat_max, "treedepth_fails": td}
+            )
             row[col] = int(converged_under(table, settings).sum())
         rows.append(row)
-    return pd.DataFrame(rows, columns=["scenario", "K", "K_stan_run",
-                                       *[v[0] for v in SENSITIVITY_VARIANTS]])
+    return pd.DataFrame(
+        rows, columns=["scenario", "K", "K_stan_run", *[v[0] for v in SENSITIVITY_VARIANTS]]
+    )
 
 
 # --------------------------------------------------------------------------- main entry
-def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
-                      max_treedepth: int = 10) -> dict[str, Any]:
+def check_convergence(
+    draws: Draws, settings: ConvergenceSettings | None = None, max_treedepth: int = 10
+) -> dict[str, Any]:
     """Run every check on one run's post-warmup draws.
 
     Parameters
@@ -276,8 +314,10 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
     if n_nonfinite:
         bad = [names[i] for i in np.flatnonzero(~finite.reshape(len(names), -1).all(axis=1))]
         failed.append("nonfinite")
-        messages.append(f"nonfinite: {n_nonfinite} non-finite draws in {bad[:5]}"
-                        f"{' ...' if len(bad) > 5 else ''}")
+        messages.append(
+            f"nonfinite: {n_nonfinite} non-finite draws in {bad[:5]}"
+            f"{' ...' if len(bad) > 5 else ''}"
+        )
         x = np.where(finite, x, np.nan)  # NaN rows get NaN diagnostics below
 
     stats = draws.sample_stats
@@ -285,8 +325,10 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
     n_div = int(np.nansum(div))
     if n_div > settings.max_divergences:
         failed.append("divergences")
-        messages.append(f"divergences: {n_div} divergent transitions after warmup "
-                        f"({100.0 * n_div / div.size:.2f} %), allowed {settings.max_divergences}")
+        messages.append(
+            f"divergences: {n_div} divergent transitions after warmup "
+            f"({100.0 * n_div / div.size:.2f} %), allowed {settings.max_divergences}"
+        )
 
     use_arviz = settings.implementation == "arviz"
     diag = _arviz_diagnostics(x) if use_arviz else rank_diagnostics(x)
@@ -295,16 +337,19 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
     min_tail, min_tail_param = _worst(diag["ess_tail"], names, largest=False)
     if not max_rhat < settings.rhat_max:
         failed.append("rhat")
-        messages.append(f"rhat: max rank R-hat {max_rhat:.4g} ({max_rhat_param}) "
-                        f">= {settings.rhat_max}")
+        messages.append(
+            f"rhat: max rank R-hat {max_rhat:.4g} ({max_rhat_param}) >= {settings.rhat_max}"
+        )
     if not min_bulk >= settings.ess_bulk_min:
         failed.append("ess_bulk")
-        messages.append(f"ess_bulk: min bulk-ESS {min_bulk:.4g} ({min_bulk_param}) "
-                        f"< {settings.ess_bulk_min}")
+        messages.append(
+            f"ess_bulk: min bulk-ESS {min_bulk:.4g} ({min_bulk_param}) < {settings.ess_bulk_min}"
+        )
     if not min_tail >= settings.ess_tail_min:
         failed.append("ess_tail")
-        messages.append(f"ess_tail: min tail-ESS {min_tail:.4g} ({min_tail_param}) "
-                        f"< {settings.ess_tail_min}")
+        messages.append(
+            f"ess_tail: min tail-ESS {min_tail:.4g} ({min_tail_param}) < {settings.ess_tail_min}"
+        )
 
     if "energy__" in stats:
         if use_arviz:
@@ -325,8 +370,10 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
     depth = np.asarray(stats.get("treedepth__", np.zeros((n_chains, n_draws))), dtype=float)
     hits = int(np.count_nonzero(depth >= max_treedepth))
     if hits:
-        text = (f"treedepth: {hits} of {depth.size} draws ({100.0 * hits / depth.size:.2f} %) "
-                f"hit max_treedepth {max_treedepth}")
+        text = (
+            f"treedepth: {hits} of {depth.size} draws ({100.0 * hits / depth.size:.2f} %) "
+            f"hit max_treedepth {max_treedepth}"
+        )
         if settings.treedepth_fails:
             failed.append("treedepth")
             messages.append(text)
@@ -335,8 +382,14 @@ def check_convergence(draws: Draws, settings: ConvergenceSettings | None = None,
 
     failed = [c for c in CHECKS if c in failed]
     # one rule for the thresholds: the same function re-evaluates stored records
-    worst = {"n_divergent": n_div, "max_rhat": max_rhat, "min_ess_bulk": min_bulk,
-             "min_ess_tail": min_tail, "min_ebfmi": min_bfmi, "n_treedepth_hits": hits}
+    worst = {
+        "n_divergent": n_div,
+        "max_rhat": max_rhat,
+        "min_ess_bulk": min_bulk,
+        "min_ess_tail": min_tail,
+        "min_ebfmi": min_bfmi,
+        "n_treedepth_hits": hits,
+    }
     assert [c for c in failed if c in THRESHOLD_CHECKS] == threshold_failures(worst, settings)
     return {
         "converged": not failed,

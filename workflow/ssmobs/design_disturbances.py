@@ -31,10 +31,10 @@ import ctypes
 import math
 import os
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Callable, Iterator
 
 import numpy as np
 from scipy import optimize, special
@@ -202,7 +202,11 @@ def _quadrature(q: int, b_max: float, n_nodes: int = N_NODES) -> _Quadrature:
     d1p = 0.0
     for lo, hi in zip(edges[:-1], edges[1:]):
         u = lo + 0.5 * (hi - lo) * (xs + 1.0)
-        d1p += 0.5 * (hi - lo) * float(np.sum(ws * 0.5 * np.expm1(q * _log_tanh(u)) * np.sinh(2.0 * u)))
+        d1p += (
+            0.5
+            * (hi - lo)
+            * float(np.sum(ws * 0.5 * np.expm1(q * _log_tanh(u)) * np.sinh(2.0 * u)))
+        )
     j0p = float(np.expm1(lam) @ alpha)
     for arr in (lam, sig, alpha, beta):
         arr.setflags(write=False)
@@ -231,7 +235,10 @@ def _e1(c: np.ndarray, zero_diag: bool = False) -> np.ndarray:
             e = special.exp1(c)
         else:
             # number of terms: first m with cmax <= _SERIES_CMAX[m - 1]
-            m = min(int(np.searchsorted(_SERIES_CMAX, cmax, side="left")), len(_SERIES_COEF) - 1) + 1
+            m = (
+                min(int(np.searchsorted(_SERIES_CMAX, cmax, side="left")), len(_SERIES_COEF) - 1)
+                + 1
+            )
             e = np.multiply(c, _SERIES_COEF[m - 1])
             for k in range(m - 2, -1, -1):
                 e += _SERIES_COEF[k]
@@ -258,7 +265,9 @@ def _blocks(n: int, size: int) -> list[tuple[int, int]]:
 def _check_points(points: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(points, dtype=np.float64)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be a 2-D array of shape (n_points, q); got shape {arr.shape}")
+        raise ValueError(
+            f"{name} must be a 2-D array of shape (n_points, q); got shape {arr.shape}"
+        )
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite")
     return arr
@@ -527,8 +536,9 @@ def _covariance_correct(half: np.ndarray, K: int) -> tuple[np.ndarray, str]:
 
     C = X^T X / K = 2 S^T S / K (divisor K, origin included).  If N >= q (K >= 2q) the set is
     whitened with the symmetric W = C^{-1/2} (plus one refinement pass with the residual
-    C' ~ I, so that the sample covariance is I to ~1e-15 even for ill-conditioned C); otherwise (C rank-deficient) it is scaled so that
-    trace(C) = q.  A numerically singular C with K >= 2q also falls back to trace scaling.
+    C' ~ I, so that the sample covariance is I to ~1e-15 even for ill-conditioned C);
+    otherwise (C rank-deficient) it is scaled so that trace(C) = q.  A numerically singular
+    C with K >= 2q also falls back to trace scaling.
     """
     n_half, q = half.shape
     if n_half == 0:
@@ -707,8 +717,9 @@ def design_disturbances(
     if blas_threads is not None:
         blas_threads = _check_positive_int("blas_threads", blas_threads)
     with _blas_threads(blas_threads):
-        return _generate(q, K, method, seed, bm, progress, correct_covariance, rel_tol, grad_tol,
-                         max_iter)
+        return _generate(
+            q, K, method, seed, bm, progress, correct_covariance, rel_tol, grad_tol, max_iter
+        )
 
 
 def _generate(

@@ -87,7 +87,7 @@ def _sorted_quantile(srt: np.ndarray, prob: float) -> np.ndarray:
 def _split(a: np.ndarray) -> np.ndarray:
     """(P, C, N) -> (P, 2C, N//2): first and last halves of each chain (ArviZ ``_split_chains``)."""
     half = a.shape[2] // 2
-    return np.concatenate([a[:, :, :half], a[:, :, a.shape[2] - half:]], axis=1)
+    return np.concatenate([a[:, :, :half], a[:, :, a.shape[2] - half :]], axis=1)
 
 
 def _rhat_rows(z: np.ndarray) -> np.ndarray:
@@ -121,8 +121,9 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     chain_mean = x.mean(axis=2)
     f = np.fft.rfft(x - chain_mean[:, :, None], n=nfft, axis=2)
     # |F|^2 averaged over chains before the one inverse FFT
-    power = (np.einsum("rck,rck->rk", f.real, f.real)
-             + np.einsum("rck,rck->rk", f.imag, f.imag)) / m_chains
+    power = (
+        np.einsum("rck,rck->rk", f.real, f.real) + np.einsum("rck,rck->rk", f.imag, f.imag)
+    ) / m_chains
     acov_mean = np.fft.irfft(power, n=nfft, axis=1)[:, :n] / n  # mean over chains of acov
     mean_var = acov_mean[:, 0] * n / (n - 1.0)
     var_plus = mean_var * (n - 1.0) / n
@@ -133,7 +134,7 @@ def _ess_rows(a: np.ndarray) -> np.ndarray:
     rho[:, 0] = 1.0
     jmax = max((n - 3) // 2, 0)  # last pair (2j, 2j+1) ArviZ's loop can reach (n >= 2)
     n_pairs = jmax + 1
-    ps = rho[:, 0:2 * n_pairs:2] + rho[:, 1:2 * n_pairs:2]  # pair sums, j = 0..jmax
+    ps = rho[:, 0 : 2 * n_pairs : 2] + rho[:, 1 : 2 * n_pairs : 2]  # pair sums, j = 0..jmax
     nonpos = ps <= 0
     first = np.where(nonpos.any(axis=1), nonpos.argmax(axis=1), n_pairs)
     jc = np.minimum(jmax, first)  # pairs computed by the loop (j = 1..jc)
@@ -171,7 +172,7 @@ def rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     """
     x = np.asarray(x, dtype=float)
     if x.shape[0] > CHUNK_ROWS:
-        parts = [_rank_diagnostics(x[i:i + CHUNK_ROWS]) for i in range(0, x.shape[0], CHUNK_ROWS)]
+        parts = [_rank_diagnostics(x[i : i + CHUNK_ROWS]) for i in range(0, x.shape[0], CHUNK_ROWS)]
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     return _rank_diagnostics(x)
 
@@ -201,8 +202,9 @@ def _rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
             r_bulk, r_fold = _rhat_rows(z_bulk), _rhat_rows(z_fold)
             # NaN in either (a constant parameter) gives NaN, which fails the check
             # (ArviZ's builtin max() would keep a number that comes first)
-            rhat[idx] = np.where(np.isnan(r_bulk) | np.isnan(r_fold), np.nan,
-                                 np.maximum(r_bulk, r_fold))
+            rhat[idx] = np.where(
+                np.isnan(r_bulk) | np.isnan(r_fold), np.nan, np.maximum(r_bulk, r_fold)
+            )
     ess_bulk[idx] = _ess_rows(z_bulk)
     if 2 * half == s:  # the split chains hold every draw: quantiles from the sorted rows
         q = [_sorted_quantile(srt, 0.05), _sorted_quantile(srt, 0.95)]
@@ -210,7 +212,7 @@ def _rank_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
         q = list(_quantile_type7(xv.reshape(idx.size, -1), [0.05, 0.95]))
     ind = np.concatenate([sp <= q[0][:, None, None], sp <= q[1][:, None, None]]).astype(float)
     ess_q = _ess_rows(ind)
-    ess_tail[idx] = np.minimum(ess_q[:idx.size], ess_q[idx.size:])
+    ess_tail[idx] = np.minimum(ess_q[: idx.size], ess_q[idx.size :])
     return {"rhat": rhat, "ess_bulk": ess_bulk, "ess_tail": ess_tail}
 
 

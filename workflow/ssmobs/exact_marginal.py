@@ -74,8 +74,9 @@ class KalmanMarginal:
     var: np.ndarray | None = None
 
 
-def kalman_marginal(model: StateSpaceModel, omega: np.ndarray, z: np.ndarray,
-                    smooth: bool = False) -> KalmanMarginal:
+def kalman_marginal(
+    model: StateSpaceModel, omega: np.ndarray, z: np.ndarray, smooth: bool = False
+) -> KalmanMarginal:
     """Log marginal likelihood with a diffuse x_0 and, optionally, the smoothed states.
 
     Parameters
@@ -103,12 +104,12 @@ def kalman_marginal(model: StateSpaceModel, omega: np.ndarray, z: np.ndarray,
 
 def _kalman_p1(f, q, h, r, z, smooth):
     T, d = z.shape[-2:]
-    hr = h / r                                             # (..., d)
+    hr = h / r  # (..., d)
     hrh = sum(h[..., i] * hr[..., i] for i in range(d))
     a0 = f * f / q
     a_mid = hrh + 1 / q + a0
     a_end = hrh + 1 / q
-    bm = -f / q                                            # block (t, t-1) of the precision
+    bm = -f / q  # block (t, t-1) of the precision
     zz = (z * z).sum(-2)
     c = sum(zz[..., i] / r[..., i] for i in range(d))
     S = a0
@@ -119,15 +120,20 @@ def _kalman_p1(f, q, h, r, z, smooth):
     for t in range(1, T + 1):
         g = bm / S
         S = (a_mid if t < T else a_end) - g * bm
-        b_t = sum(z[..., t - 1, i] * hr[..., i] for i in range(d))     # H' R^-1 z_t
+        b_t = sum(z[..., t - 1, i] * hr[..., i] for i in range(d))  # H' R^-1 z_t
         y = b_t - g * y
         quad = quad + y * y / S
         logdet = logdet + np.log(S)
         if smooth:
             Ss.append(S)
             ys.append(y)
-    neg2 = (c - quad + logdet + T * (sum(np.log(r[..., i]) for i in range(d)) + np.log(q))
-            + ((d + 1) * T - (T + 1)) * LOG_2PI)
+    neg2 = (
+        c
+        - quad
+        + logdet
+        + T * (sum(np.log(r[..., i]) for i in range(d)) + np.log(q))
+        + ((d + 1) * T - (T + 1)) * LOG_2PI
+    )
     if not smooth:
         return KalmanMarginal(neg2)
     shape = np.broadcast_shapes(np.shape(neg2), np.shape(Ss[-1]))
@@ -162,13 +168,13 @@ def _kalman_general(F, Q, H, R, z, smooth):
     T, d = z.shape[-2:]
     Ft = np.swapaxes(F, -1, -2)
     Qi = 1 / Q
-    HtRi = np.swapaxes(H, -1, -2) / R[..., None, :]        # (..., p, d)
+    HtRi = np.swapaxes(H, -1, -2) / R[..., None, :]  # (..., p, d)
     hrh = HtRi @ H
     a0 = Ft @ (Qi[..., :, None] * F)
     diagQi = Qi[..., :, None] * np.eye(p)
     a_mid = hrh + diagQi + a0
     a_end = hrh + diagQi
-    bm = -Qi[..., :, None] * F                             # block (t, t-1)
+    bm = -Qi[..., :, None] * F  # block (t, t-1)
     bmt = np.swapaxes(bm, -1, -2)
     c = ((z * z).sum(-2) / R).sum(-1)
     S = a0
@@ -189,8 +195,13 @@ def _kalman_general(F, Q, H, R, z, smooth):
             Ss.append(S)
             Sis.append(Si)
             ys.append(y)
-    neg2 = (c - quad + logdet + T * (np.log(R).sum(-1) + np.log(Q).sum(-1))
-            + ((d + p) * T - p * (T + 1)) * LOG_2PI)
+    neg2 = (
+        c
+        - quad
+        + logdet
+        + T * (np.log(R).sum(-1) + np.log(Q).sum(-1))
+        + ((d + p) * T - p * (T + 1)) * LOG_2PI
+    )
     if not smooth:
         return KalmanMarginal(neg2)
     shape = np.broadcast_shapes(np.shape(neg2), Sis[-1].shape[:-2])
@@ -200,7 +211,7 @@ def _kalman_general(F, Q, H, R, z, smooth):
     P = Sis[T]
     mean[..., T, :], var[..., T, :] = m, np.diagonal(P, axis1=-2, axis2=-1)
     for t in range(T - 1, -1, -1):
-        gi = Sis[t] @ bmt                                  # S_t^-1 B'
+        gi = Sis[t] @ bmt  # S_t^-1 B'
         m = (Sis[t] @ ys[t][..., None])[..., 0] - (gi @ m[..., None])[..., 0]
         P = Sis[t] + gi @ P @ np.swapaxes(gi, -1, -2)
         mean[..., t, :], var[..., t, :] = m, np.diagonal(P, axis1=-2, axis2=-1)
@@ -234,8 +245,10 @@ def _axes(bounds: PriorBounds, margin: float, log_range: tuple[float, float]) ->
     uhi = np.where(log_scale, log_range[1], hi - margin * (hi - lo))
     for i in np.flatnonzero(log_scale):
         if not ((lo[i] == 0 and hi[i] == np.inf) or (lo[i] == -np.inf and hi[i] == 0)):
-            raise ValueError(f"unsupported prior support ({lo[i]}, {hi[i]}) for the exact "
-                             f"marginal: need a bounded interval or a half line at 0")
+            raise ValueError(
+                f"unsupported prior support ({lo[i]}, {hi[i]}) for the exact "
+                f"marginal: need a bounded interval or a half line at 0"
+            )
     return _Axes(lo=ulo, hi=uhi, log_scale=log_scale, sign=sign)
 
 
@@ -277,21 +290,21 @@ class ExactResult:
     """Per-trajectory exact marginal summaries (K rows), see :meth:`to_frame`."""
 
     theta_names: list[str]
-    theta_map: np.ndarray          # (K, |Theta|)
+    theta_map: np.ndarray  # (K, |Theta|)
     theta_q5: np.ndarray
     theta_q95: np.ndarray
-    maxima: np.ndarray             # (K,) str: unique / several / none
-    n_local_max: np.ndarray        # (K,) interior local maxima on the coarse grid
-    joint_mode: np.ndarray         # (K, m) mode of p(Omega | z)
-    laplace_sd: np.ndarray         # (K, m)
-    box_truncated: np.ndarray      # (K,) a box face still carries non-negligible density
-    spike_ratio: np.ndarray        # (K,) improper part cut off / basin mass (_valley_limits)
+    maxima: np.ndarray  # (K,) str: unique / several / none
+    n_local_max: np.ndarray  # (K,) interior local maxima on the coarse grid
+    joint_mode: np.ndarray  # (K, m) mode of p(Omega | z)
+    laplace_sd: np.ndarray  # (K, m)
+    box_truncated: np.ndarray  # (K,) a box face still carries non-negligible density
+    spike_ratio: np.ndarray  # (K,) improper part cut off / basin mass (_valley_limits)
     spike_tol: float
-    slopes_lower: np.ndarray       # (K, m) d log p / d log(distance to lower boundary)
-    slopes_upper: np.ndarray       # (K, m)
+    slopes_lower: np.ndarray  # (K, m) d log p / d log(distance to lower boundary)
+    slopes_upper: np.ndarray  # (K, m)
     info: dict
 
-    def to_frame(self, model: StateSpaceModel) -> "pandas.DataFrame":  # noqa: F821
+    def to_frame(self, model: StateSpaceModel) -> pandas.DataFrame:  # noqa: F821
         """One row per trajectory, columns like the Stan stage's gather table:
         ``k``, ``status``, ``converged`` (= unique interior maximum and the grid box not
         truncated: Definition 3's set, the rows the statistics use), ``maxima``,
@@ -318,9 +331,9 @@ class ExactResult:
             cols[f"slope_lower_{pname}"] = self.slopes_lower[:, i]
             cols[f"slope_upper_{pname}"] = self.slopes_upper[:, i]
             cols[f"improper_lower_{pname}"] = improper(self.slopes_lower[:, i], finite=True)
-            cols[f"improper_upper_{pname}"] = improper(self.slopes_upper[:, i],
-                                                       finite=not np.isinf(
-                                                           self.info["upper"][i]))
+            cols[f"improper_upper_{pname}"] = improper(
+                self.slopes_upper[:, i], finite=not np.isinf(self.info["upper"][i])
+            )
             cols[f"mode_{pname}"] = self.joint_mode[:, i]
             cols[f"laplace_sd_{pname}"] = self.laplace_sd[:, i]
         for j, name in enumerate(self.theta_names):
@@ -339,8 +352,9 @@ def improper(slope: np.ndarray, finite: bool) -> np.ndarray:
 
 
 # ====================================================================== log posterior
-def log_posterior_omega(model: StateSpaceModel, omega: np.ndarray, z: np.ndarray,
-                        bounds: PriorBounds) -> np.ndarray:
+def log_posterior_omega(
+    model: StateSpaceModel, omega: np.ndarray, z: np.ndarray, bounds: PriorBounds
+) -> np.ndarray:
     """log p(Omega | z) + const (flat priors on Omega and x_0); -inf outside the support.
 
     ``omega`` (..., m) and ``z`` (..., T, d) broadcast over their batch shapes.
@@ -358,8 +372,11 @@ def log_posterior_omega(model: StateSpaceModel, omega: np.ndarray, z: np.ndarray
 
 def _interior(bounds: PriorBounds) -> np.ndarray:
     lo, hi = bounds.lower, bounds.upper
-    return np.where(np.isfinite(lo) & np.isfinite(hi), (lo + hi) / 2,
-                    np.where(np.isfinite(lo), lo + 1.0, hi - 1.0))
+    return np.where(
+        np.isfinite(lo) & np.isfinite(hi),
+        (lo + hi) / 2,
+        np.where(np.isfinite(lo), lo + 1.0, hi - 1.0),
+    )
 
 
 def _logp_u(model, axes, u, z, bounds):
@@ -409,12 +426,12 @@ def _coarse_search(model, axes, z, bounds, settings):
     m = model.n_params
     n = settings.coarse_nodes[m]
     nodes = [np.linspace(axes.lo[j], axes.hi[j], n) for j in range(m)]
-    grid = _tensor(nodes).reshape(-1, m)                   # (G, m)
+    grid = _tensor(nodes).reshape(-1, m)  # (G, m)
     K = z.shape[0]
     ns = settings.n_starts
     starts = np.full((K, ns, m), np.nan)
     for sl in _chunks(K, grid.shape[0] * z.shape[1], settings.chunk_elements * 8):
-        _, lp = _logp_u(model, axes, grid[None, :, :], z[sl, None], bounds)   # (Kc, G)
+        _, lp = _logp_u(model, axes, grid[None, :, :], z[sl, None], bounds)  # (Kc, G)
         lp = lp.reshape((lp.shape[0],) + (n,) * m)
         loc = _interior_local_maxima(lp, m).reshape(lp.shape[0], -1)
         masked = np.where(loc, lp.reshape(lp.shape[0], -1), -np.inf)
@@ -436,8 +453,7 @@ def _modes(model, axes, z, bounds, starts, spacing, settings):
     flat = np.where(valid[..., None], starts, (axes.lo + axes.hi) / 2).reshape(K * ns, m)
     zz = np.repeat(z, ns, axis=0)
     u, H, ok, f = _newton(model, axes, zz, bounds, flat, spacing, settings)
-    u, H, ok, f = (u.reshape(K, ns, m), H.reshape(K, ns, m, m), ok.reshape(K, ns),
-                   f.reshape(K, ns))
+    u, H, ok, f = (u.reshape(K, ns, m), H.reshape(K, ns, m, m), ok.reshape(K, ns), f.reshape(K, ns))
     ok &= valid
     # distinct maxima: farther apart than 1e-3 of the coarse spacing in some coordinate
     n_distinct = np.zeros(K, dtype=np.int64)
@@ -485,7 +501,7 @@ def _valley_limits(model, axes, z, bounds, u, H, slopes, cut, settings):
                 continue
             end = axes.lo[j] if side == 0 else axes.hi[j]
             pts = np.repeat(u[:, None, :], n, axis=1)
-            pts[:, :, j] = end + (u[:, j:j + 1] - end) * s          # end -> mode
+            pts[:, :, j] = end + (u[:, j : j + 1] - end) * s  # end -> mode
             lpu, lp = _logp_u(model, axes, pts, z[:, None], bounds)
             lpu = np.where(np.isfinite(lpu), lpu, np.inf)
             i = lpu.argmin(1)
@@ -502,12 +518,17 @@ def _valley_limits(model, axes, z, bounds, u, H, slopes, cut, settings):
             slope = slopes[side][:, j]
             with np.errstate(all="ignore"):
                 y0 = delta / dist
-                integral = np.where(np.abs(slope + 1) < 1e-2, np.log(1 / y0),
-                                    (1 - y0 ** (slope + 1)) / (slope + 1))
+                integral = np.where(
+                    np.abs(slope + 1) < 1e-2, np.log(1 / y0), (1 - y0 ** (slope + 1)) / (slope + 1)
+                )
                 om_mode = axes.omega(u)[:, j]
                 sd_om = sd_u * np.where(axes.log_scale[j], np.abs(om_mode), 1.0)
-                log_r = (lp[rows, i] + np.log(dist * np.maximum(integral, 0))
-                         - lp[:, -1] - np.log(math.sqrt(2 * math.pi) * sd_om))
+                log_r = (
+                    lp[rows, i]
+                    + np.log(dist * np.maximum(integral, 0))
+                    - lp[:, -1]
+                    - np.log(math.sqrt(2 * math.pi) * sd_om)
+                )
                 r = np.where(valley, np.exp(np.minimum(log_r, 700)), np.inf)
             ratio = np.where(cut_j, np.maximum(ratio, np.nan_to_num(r, nan=np.inf)), ratio)
     return lo_lim, hi_lim, ratio
@@ -528,7 +549,7 @@ def _fd_derivatives(f, u, h):
             ej = np.zeros(m)
             ei[i], ej[j] = h[i], h[j]
             pts += [u + ei + ej, u + ei - ej, u - ei + ej, u - ei - ej]
-    vals = f(np.stack(pts, axis=1))                        # (K, P)
+    vals = f(np.stack(pts, axis=1))  # (K, P)
     f0 = vals[:, 0]
     g = np.empty((K, m))
     H = np.empty((K, m, m))
@@ -568,10 +589,14 @@ def _newton(model, axes, z, bounds, u0, spacing, settings):
         with np.errstate(all="ignore"):
             Hs = np.where(np.isfinite(H), H, 0.0)
             negdef = np.all(np.linalg.eigvalsh(Hs) < 0, axis=1)
-            step = np.where(negdef[:, None],
-                            -np.linalg.solve(np.where(negdef[:, None, None], Hs, -np.eye(m)),
-                                             np.where(np.isfinite(g), g, 0.0)[..., None])[..., 0],
-                            np.sign(g) * spacing / 2)
+            step = np.where(
+                negdef[:, None],
+                -np.linalg.solve(
+                    np.where(negdef[:, None, None], Hs, -np.eye(m)),
+                    np.where(np.isfinite(g), g, 0.0)[..., None],
+                )[..., 0],
+                np.sign(g) * spacing / 2,
+            )
         step = np.where(np.isfinite(step), step, 0.0)
         step = np.clip(step, -spacing, spacing)
         t = np.ones(K)
@@ -594,7 +619,7 @@ def _newton(model, axes, z, bounds, u0, spacing, settings):
         cov = np.linalg.inv(np.where(ok[:, None, None], -Hs, np.eye(m)))
         step = (cov @ np.where(np.isfinite(g), g, np.inf)[..., None])[..., 0]
         sd = np.sqrt(np.abs(np.diagonal(cov, axis1=1, axis2=2)))
-        ok &= np.all(np.abs(step) <= 1e-3 * sd, axis=1)    # converged: gradient ~ 0
+        ok &= np.all(np.abs(step) <= 1e-3 * sd, axis=1)  # converged: gradient ~ 0
     at_edge = np.any((u <= lo + 1e-12) | (u >= hi - 1e-12), axis=1)
     return u, H, ok & ~at_edge & np.isfinite(f0), f0
 
@@ -647,10 +672,12 @@ def _fine_grid(model, axes, z, bounds, centre, sd, lim_lo, lim_hi, settings):
         if rnd == settings.max_widen:
             truncated[idx[need]] = True
             break
-        left[idx] = np.where(widen_l, np.minimum(2 * left[idx], centre[idx] - lim_lo[idx]),
-                             left[idx])
-        right[idx] = np.where(widen_r, np.minimum(2 * right[idx], lim_hi[idx] - centre[idx]),
-                              right[idx])
+        left[idx] = np.where(
+            widen_l, np.minimum(2 * left[idx], centre[idx] - lim_lo[idx]), left[idx]
+        )
+        right[idx] = np.where(
+            widen_r, np.minimum(2 * right[idx], lim_hi[idx] - centre[idx]), right[idx]
+        )
         todo[:] = False
         todo[idx[need]] = True
     return out_lp, lo_box, hi_box, truncated
@@ -671,14 +698,14 @@ def _marginal_omega(axes, lpu, lo_box, hi_box, settings):
     est = np.full((K, m), np.nan)
     q = np.full((K, m, len(QUANTILES)), np.nan)
     for j in range(m):
-        marg = w.sum(axis=tuple(1 + i for i in range(m) if i != j)) / tw[None, :]   # (K, n)
+        marg = w.sum(axis=tuple(1 + i for i in range(m) if i != j)) / tw[None, :]  # (K, n)
         with np.errstate(divide="ignore"):
             logm = np.log(marg)
         top = logm.max(1, keepdims=True)
         logm = np.maximum(logm, top - 60.0)
         spl = CubicSpline(np.arange(n), logm.T, axis=0)
-        log_fine = spl(s_fine).T                                        # (K, nf)
-        u_fine = lo_box[:, j:j + 1] + (hi_box - lo_box)[:, j:j + 1] * s_fine / (n - 1)
+        log_fine = spl(s_fine).T  # (K, nf)
+        u_fine = lo_box[:, j : j + 1] + (hi_box - lo_box)[:, j : j + 1] * s_fine / (n - 1)
         dens_u = np.exp(log_fine - log_fine.max(1, keepdims=True))
         # density of Omega_j itself (Jacobian of u = log|Omega| removed)
         log_dens_om = log_fine - np.where(axes.log_scale[j], u_fine, 0.0)
@@ -691,11 +718,11 @@ def _marginal_omega(axes, lpu, lo_box, hi_box, settings):
         i = np.where(is_max, inner, -np.inf).argmax(1) + 1
         rows = np.arange(K)
         x = np.stack([om_fine[rows, i - 1], om_fine[rows, i], om_fine[rows, i + 1]], 1)
-        y = np.stack([log_dens_om[rows, i - 1], log_dens_om[rows, i],
-                      log_dens_om[rows, i + 1]], 1)
+        y = np.stack([log_dens_om[rows, i - 1], log_dens_om[rows, i], log_dens_om[rows, i + 1]], 1)
         est[:, j] = np.where(has_max, _parabola_vertex(x, y), np.nan)
-        cdf = np.concatenate([np.zeros((K, 1)), np.cumsum(
-            0.5 * (dens_u[:, 1:] + dens_u[:, :-1]), axis=1)], axis=1)
+        cdf = np.concatenate(
+            [np.zeros((K, 1)), np.cumsum(0.5 * (dens_u[:, 1:] + dens_u[:, :-1]), axis=1)], axis=1
+        )
         cdf /= cdf[:, -1:]
         for qi, level in enumerate(QUANTILES):
             k = np.clip((cdf < level).sum(1), 1, s_fine.size - 1)
@@ -767,8 +794,9 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
         # quantiles use the plain components (trapezoid rule: spectrally accurate).
         spread = sum(np.gradient(mean, axis=1 + j) ** 2 for j in range(m)) / 12
         idx = order[sl][:, :, None]
-        mean, var, spread = (np.take_along_axis(a.reshape(kc, -1, n_states), idx, 1)
-                             for a in (mean, var, spread))           # (Kc, G_kept, S)
+        mean, var, spread = (
+            np.take_along_axis(a.reshape(kc, -1, n_states), idx, 1) for a in (mean, var, spread)
+        )  # (Kc, G_kept, S)
         wc = np.broadcast_to(w[sl][:, :, None], mean.shape)
         # a component whose smoother lost precision (far from the mode) gets weight 0
         bad = ~(np.isfinite(mean) & np.isfinite(var) & (var > 0))
@@ -777,8 +805,9 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
         mean = np.where(bad, mean[:, :1], mean)
         var = np.where(bad, var[:, :1], var)
         spread = np.where(np.isfinite(spread), spread, 0.0)
-        est[sl], q[sl] = _mixture_mode_quantiles(wc, mean, np.sqrt(var), settings,
-                                                 np.sqrt(var + spread))
+        est[sl], q[sl] = _mixture_mode_quantiles(
+            wc, mean, np.sqrt(var), settings, np.sqrt(var + spread)
+        )
     return est, q
 
 
@@ -801,7 +830,7 @@ def _mixture_mode_quantiles(w, mean, sd, settings, sd_mode=None):
     lo_m = np.where(big, mean, np.inf).min(1)
     hi_m = np.where(big, mean, -np.inf).max(1)
     sdm = sd if sd_mode is None else sd_mode
-    x = mean[:, 0].copy()          # the heaviest component (weights are sorted)
+    x = mean[:, 0].copy()  # the heaviest component (weights are sorted)
     for _ in range(settings.mode_iter):
         u = (x[:, None] - mean) / sdm
         phi = w * np.exp(-0.5 * u * u) / sdm
@@ -835,9 +864,13 @@ def _mixture_mode_quantiles(w, mean, sd, settings, sd_mode=None):
 
 
 # ====================================================================== boundaries
-def boundary_slopes(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
-                    at: np.ndarray, distances: tuple[float, float] = (1e-4, 1e-6)
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def boundary_slopes(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    at: np.ndarray,
+    distances: tuple[float, float] = (1e-4, 1e-6),
+) -> tuple[np.ndarray, np.ndarray]:
     """Slopes d log p(Omega|z) / d log(distance) toward each boundary of each component.
 
     Along axis j from ``at`` (K, m) (the other components held there): at a finite bound
@@ -871,8 +904,12 @@ def boundary_slopes(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
 
 
 # ====================================================================== driver
-def exact_marginal(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
-                   settings: ExactSettings | None = None) -> ExactResult:
+def exact_marginal(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    settings: ExactSettings | None = None,
+) -> ExactResult:
     """Exact marginal posteriors of every trajectory ``z`` (K, T, d) (module docstring).
 
     Returns per trajectory the marginal MAP and 5 %/95 % quantiles of every component of
@@ -882,12 +919,15 @@ def exact_marginal(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
     """
     settings = settings or ExactSettings()
     if not model.linear_in_states:
-        raise ValueError(f"model '{model.slug}' is not linear-Gaussian in the states; the "
-                         f"exact marginal does not apply")
+        raise ValueError(
+            f"model '{model.slug}' is not linear-Gaussian in the states; the "
+            f"exact marginal does not apply"
+        )
     m = model.n_params
     if m not in settings.coarse_nodes:
-        raise ValueError(f"exact marginal grids are set for 1..4 parameters, model "
-                         f"'{model.slug}' has {m}")
+        raise ValueError(
+            f"exact marginal grids are set for 1..4 parameters, model '{model.slug}' has {m}"
+        )
     z = np.asarray(z, dtype=float)
     if z.ndim != 3 or z.shape[2] != model.obs_dim:
         raise ValueError(f"z must have shape (K, T, {model.obs_dim}), got {z.shape}")
@@ -908,15 +948,18 @@ def exact_marginal(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
     sd = np.where(has_mode[:, None] & np.isfinite(sd) & (sd > 0), sd, 2 * spacing)
     mode = axes.omega(u)
     slopes_lower, slopes_upper = boundary_slopes(model, z, bounds, mode)
-    cut_lower = improper(slopes_lower, finite=True) | \
-        (axes.log_scale & np.isinf(bounds.lower) & improper(slopes_lower, finite=False))
-    cut_upper = improper(slopes_upper, finite=True) & np.isfinite(bounds.upper) | \
-        (np.isinf(bounds.upper) & improper(slopes_upper, finite=False))
-    lim_lo, lim_hi, spike_ratio = _valley_limits(model, axes, z, bounds, u, H,
-                                                 (slopes_lower, slopes_upper),
-                                                 (cut_lower, cut_upper), settings)
-    lpu, lo_box, hi_box, truncated = _fine_grid(model, axes, z, bounds, u, sd, lim_lo, lim_hi,
-                                                 settings)
+    cut_lower = improper(slopes_lower, finite=True) | (
+        axes.log_scale & np.isinf(bounds.lower) & improper(slopes_lower, finite=False)
+    )
+    cut_upper = improper(slopes_upper, finite=True) & np.isfinite(bounds.upper) | (
+        np.isinf(bounds.upper) & improper(slopes_upper, finite=False)
+    )
+    lim_lo, lim_hi, spike_ratio = _valley_limits(
+        model, axes, z, bounds, u, H, (slopes_lower, slopes_upper), (cut_lower, cut_upper), settings
+    )
+    lpu, lo_box, hi_box, truncated = _fine_grid(
+        model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings
+    )
     om_map, om_q = _marginal_omega(axes, lpu, lo_box, hi_box, settings)
     x_map, x_q = _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings)
     nan_rows = maxima == "none"
@@ -925,13 +968,28 @@ def exact_marginal(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
     theta_q95 = np.concatenate([om_q[..., 1], x_q[..., 1]], 1)
     for arr in (theta_map, theta_q5, theta_q95):
         arr[nan_rows] = np.nan
-    info = {"coarse_nodes": settings.coarse_nodes[m], "fine_nodes": settings.fine_nodes(m),
-            "state_nodes": settings.state_nodes[m], "box_sd": settings.box_sd,
-            "face_drop": settings.face_drop, "lower": bounds.lower.tolist(),
-            "upper": bounds.upper.tolist()}
-    return ExactResult(theta_names=model.theta_names(T), theta_map=theta_map,
-                       theta_q5=theta_q5, theta_q95=theta_q95, maxima=maxima,
-                       n_local_max=n_max, joint_mode=mode, laplace_sd=sd,
-                       box_truncated=truncated, spike_ratio=spike_ratio,
-                       spike_tol=settings.spike_tol, slopes_lower=slopes_lower,
-                       slopes_upper=slopes_upper, info=info)
+    info = {
+        "coarse_nodes": settings.coarse_nodes[m],
+        "fine_nodes": settings.fine_nodes(m),
+        "state_nodes": settings.state_nodes[m],
+        "box_sd": settings.box_sd,
+        "face_drop": settings.face_drop,
+        "lower": bounds.lower.tolist(),
+        "upper": bounds.upper.tolist(),
+    }
+    return ExactResult(
+        theta_names=model.theta_names(T),
+        theta_map=theta_map,
+        theta_q5=theta_q5,
+        theta_q95=theta_q95,
+        maxima=maxima,
+        n_local_max=n_max,
+        joint_mode=mode,
+        laplace_sd=sd,
+        box_truncated=truncated,
+        spike_ratio=spike_ratio,
+        spike_tol=settings.spike_tol,
+        slopes_lower=slopes_lower,
+        slopes_upper=slopes_upper,
+        info=info,
+    )

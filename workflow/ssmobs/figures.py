@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import io
+
+if TYPE_CHECKING:
+    import pandas
 
 
 def _plt():
@@ -46,8 +50,9 @@ def _gauss_contours(ax, mean: np.ndarray, cov: np.ndarray, span: float = 3.2, le
     ax.contour(X, Y, dens, levels=levels, cmap="Blues", linewidths=0.9)
 
 
-def figure_design_points(disturbances: np.ndarray, a: float, x0: float,
-                         paths: Sequence[str | os.PathLike]) -> None:
+def figure_design_points(
+    disturbances: np.ndarray, a: float, x0: float, paths: Sequence[str | os.PathLike]
+) -> None:
     """Figure 2 (Sec. III.A, Example 5): design disturbances (eta_1, eps_1) over N(0, I_2)
     and the design values (x~_1, z~_1) of model Same over the density of (X_1, Z_1).
     """
@@ -76,8 +81,13 @@ def figure_design_points(disturbances: np.ndarray, a: float, x0: float,
     plt.close(fig)
 
 
-def figure_joint_vs_marginal(panels: list[dict], omega_true: float, x0_true: float,
-                             paths: Sequence[str | os.PathLike], name: str = "a") -> None:
+def figure_joint_vs_marginal(
+    panels: list[dict],
+    omega_true: float,
+    x0_true: float,
+    paths: Sequence[str | os.PathLike],
+    name: str = "a",
+) -> None:
     """Figure 3 (Sec. IV.A): pairwise scatter of joint-MAP estimates (a^, x0^) over K^max
     (left) and marginal-MAP estimates over K^Stan (right), one colour per T; true values as
     lines.  ``panels``: dicts with ``T``, ``joint`` (DataFrame with <name>, x0) and
@@ -91,10 +101,22 @@ def figure_joint_vs_marginal(panels: list[dict], omega_true: float, x0_true: flo
     colours = sns.color_palette("deep", n_colors=max(len(panels), 1))
     for panel, colour in zip(panels, colours):
         j, m = panel["joint"], panel["marginal"]
-        axes[0].scatter(j[name], j["x0"], s=6, alpha=0.5, color=colour,
-                        label=f"T={panel['T']} (|K^max|={len(j)})")
-        axes[1].scatter(m[f"{name}_map"], m["x0_map"], s=6, alpha=0.5, color=colour,
-                        label=f"T={panel['T']} (|K^Stan|={len(m)})")
+        axes[0].scatter(
+            j[name],
+            j["x0"],
+            s=6,
+            alpha=0.5,
+            color=colour,
+            label=f"T={panel['T']} (|K^max|={len(j)})",
+        )
+        axes[1].scatter(
+            m[f"{name}_map"],
+            m["x0_map"],
+            s=6,
+            alpha=0.5,
+            color=colour,
+            label=f"T={panel['T']} (|K^Stan|={len(m)})",
+        )
     for ax, title in zip(axes, ("joint MAP", "marginal MAP")):
         ax.axvline(omega_true, color="k", lw=0.8)
         ax.axhline(x0_true, color="k", lw=0.8)
@@ -107,7 +129,9 @@ def figure_joint_vs_marginal(panels: list[dict], omega_true: float, x0_true: flo
     plt.close(fig)
 
 
-def figure_observability_ratios(frame: "pandas.DataFrame", paths: Sequence[str | os.PathLike]) -> None:  # noqa: F821
+def figure_observability_ratios(
+    frame: pandas.DataFrame, paths: Sequence[str | os.PathLike]
+) -> None:  # noqa: F821
     """|K^max|/K and |K^Stan|/K for every scenario, ours beside the paper's, each bar with
     its exact binomial 95 % interval (``<fraction>_lo95`` / ``_hi95`` of the Section IV
     summary, :mod:`ssmobs.binomial`): at K = 40 about +-0.15, at the paper's K = 4000 about
@@ -118,18 +142,25 @@ def figure_observability_ratios(frame: "pandas.DataFrame", paths: Sequence[str |
     fig, axes = plt.subplots(1, 2, figsize=(2 * height, height), sharey=True, squeeze=False)
     y = np.arange(n)
     bar = 0.38
-    for ax, (title, col) in zip(axes[0], (("|K^max|/K", "K_max_frac"),
-                                          ("|K^Stan|/K", "K_stan_frac"))):
-        for offset, (source, suffix, colour) in zip((-bar / 2, bar / 2),
-                                                    (("ours", "", "tab:blue"),
-                                                     ("paper", "_paper", "tab:gray"))):
+    for ax, (title, col) in zip(
+        axes[0], (("|K^max|/K", "K_max_frac"), ("|K^Stan|/K", "K_stan_frac"))
+    ):
+        for offset, (source, suffix, colour) in zip(
+            (-bar / 2, bar / 2), (("ours", "", "tab:blue"), ("paper", "_paper", "tab:gray"))
+        ):
             value = frame[f"{col}{suffix}"].to_numpy(dtype=float)
             lo = frame[f"{col}{suffix}_lo95"].to_numpy(dtype=float)
             hi = frame[f"{col}{suffix}_hi95"].to_numpy(dtype=float)
             err = np.vstack([value - lo, hi - value])
-            ax.barh(y + offset, np.nan_to_num(value), height=bar, color=colour, label=source,
-                    xerr=np.where(np.isfinite(err), err, 0.0), error_kw={"lw": 0.8,
-                                                                         "capsize": 2})
+            ax.barh(
+                y + offset,
+                np.nan_to_num(value),
+                height=bar,
+                color=colour,
+                label=source,
+                xerr=np.where(np.isfinite(err), err, 0.0),
+                error_kw={"lw": 0.8, "capsize": 2},
+            )
         ax.set_xlim(0, 1.05)
         ax.set_title(f"{title} (95 % interval)")
         ax.set_xlabel("fraction")
@@ -141,16 +172,21 @@ def figure_observability_ratios(frame: "pandas.DataFrame", paths: Sequence[str |
     plt.close(fig)
 
 
-def figure_profile_posterior(a_values: np.ndarray, x0_values: np.ndarray, values: np.ndarray,
-                             a_true: float, x0_true: float, title: str,
-                             paths: Sequence[str | os.PathLike]) -> None:
+def figure_profile_posterior(
+    a_values: np.ndarray,
+    x0_values: np.ndarray,
+    values: np.ndarray,
+    a_true: float,
+    x0_true: float,
+    title: str,
+    paths: Sequence[str | os.PathLike],
+) -> None:
     """Figure 4 (Sec. IV.E): profile posterior pi(a, x0 | z~) = max over x_1..x_T."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
     finite = values[np.isfinite(values)]
     vmin = np.quantile(finite, 0.05) if finite.size else None
-    mesh = ax.pcolormesh(a_values, x0_values, values.T, shading="auto", cmap="viridis",
-                         vmin=vmin)
+    mesh = ax.pcolormesh(a_values, x0_values, values.T, shading="auto", cmap="viridis", vmin=vmin)
     ax.contour(a_values, x0_values, values.T, levels=12, colors="white", linewidths=0.5)
     fig.colorbar(mesh, ax=ax, label=r"$\pi(a, x_0 \mid \tilde z)$ (profile)")
     ax.plot([a_true], [x0_true], "r+", ms=10, mew=2)
@@ -162,8 +198,12 @@ def figure_profile_posterior(a_values: np.ndarray, x0_values: np.ndarray, values
     plt.close(fig)
 
 
-def figure_k_convergence(frame: "pandas.DataFrame", chosen: "pandas.DataFrame",  # noqa: F821
-                         title: str, paths: Sequence[str | os.PathLike]) -> None:
+def figure_k_convergence(
+    frame: pandas.DataFrame,
+    chosen: pandas.DataFrame,  # noqa: F821
+    title: str,
+    paths: Sequence[str | os.PathLike],
+) -> None:
     """Each component of V_{K_i} against K_i, one line per method and seed (Sec. IV.A).
 
     ``frame``: long table with columns K, method, seed, component, value;
@@ -177,20 +217,24 @@ def figure_k_convergence(frame: "pandas.DataFrame", chosen: "pandas.DataFrame", 
     nrow = int(np.ceil(len(comps) / ncol))
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 2.6 * nrow), squeeze=False)
     frame = frame.assign(run=frame["method"] + " seed " + frame["seed"].astype(str))
-    palette = dict(zip(sorted(frame["run"].unique()),
-                       sns.color_palette("tab10", n_colors=frame["run"].nunique())))
+    palette = dict(
+        zip(
+            sorted(frame["run"].unique()),
+            sns.color_palette("tab10", n_colors=frame["run"].nunique()),
+        )
+    )
     for ax, comp in zip(axes.flat, comps):
         sub = frame[frame["component"] == comp]
         for run, g in sub.groupby("run", sort=True):
             ax.plot(g["K"], g["value"], marker="o", ms=3, lw=1, color=palette[run], label=run)
         ax.set_title(comp, fontsize=9)
         ax.set_xlabel("K")
-    for ax in list(axes.flat)[len(comps):]:
+    for ax in list(axes.flat)[len(comps) :]:
         ax.axis("off")
     for _, c in chosen.iterrows():
         if np.isfinite(c.get("K_chosen", np.nan)):
             run = f"{c['method']} seed {c['seed']}"
-            for ax in list(axes.flat)[:len(comps)]:
+            for ax in list(axes.flat)[: len(comps)]:
                 ax.axvline(c["K_chosen"], color=palette.get(run, "k"), ls=":", lw=0.8)
     axes.flat[0].legend(fontsize=6)
     fig.suptitle(title)
@@ -199,9 +243,13 @@ def figure_k_convergence(frame: "pandas.DataFrame", chosen: "pandas.DataFrame", 
     plt.close(fig)
 
 
-def figure_exact_vs_stan(stan: "pandas.DataFrame", exact: "pandas.DataFrame",  # noqa: F821
-                         names: Sequence[str], title: str,
-                         paths: Sequence[str | os.PathLike]) -> dict:
+def figure_exact_vs_stan(
+    stan: pandas.DataFrame,
+    exact: pandas.DataFrame,  # noqa: F821
+    names: Sequence[str],
+    title: str,
+    paths: Sequence[str | os.PathLike],
+) -> dict:
     """Stan + KDE marginal MAP against the exact one, trajectory by trajectory (issue 11).
 
     Top row: one scatter per component (exact on x, Stan + KDE on y, the diagonal); bottom

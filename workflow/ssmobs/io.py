@@ -15,8 +15,9 @@ import os
 import re
 import tempfile
 import threading
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -69,8 +70,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=_temporary_suffix(path, suffix),
-                               dir=path.parent)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.name}.", suffix=_temporary_suffix(path, suffix), dir=path.parent
+    )
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -89,8 +91,12 @@ def temporaries(path: str | os.PathLike, suffix: str | None = None) -> list[Path
     path = Path(path)
     if not path.parent.is_dir():
         return []
-    pattern = re.compile(re.escape(f".{path.name}.") + r"[A-Za-z0-9_]{8}"
-                         + re.escape(_temporary_suffix(path, suffix)) + "$")
+    pattern = re.compile(
+        re.escape(f".{path.name}.")
+        + r"[A-Za-z0-9_]{8}"
+        + re.escape(_temporary_suffix(path, suffix))
+        + "$"
+    )
     return sorted(p for p in path.parent.iterdir() if pattern.match(p.name) and p.is_file())
 
 
@@ -142,8 +148,9 @@ def json_default(obj: Any) -> Any:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON atomically (sorted keys, so reruns give identical bytes)."""
-    write_text(path, json.dumps(obj, indent=1, sort_keys=True, default=json_default,
-                                allow_nan=True) + "\n")
+    write_text(
+        path, json.dumps(obj, indent=1, sort_keys=True, default=json_default, allow_nan=True) + "\n"
+    )
 
 
 def read_json(path: str | os.PathLike, required: Sequence[str] = ()) -> Any:
@@ -159,13 +166,13 @@ def read_json(path: str | os.PathLike, required: Sequence[str] = ()) -> Any:
     return obj
 
 
-def write_netcdf(path: str | os.PathLike, dataset: "xarray.Dataset") -> None:  # noqa: F821
+def write_netcdf(path: str | os.PathLike, dataset: xarray.Dataset) -> None:  # noqa: F821
     """Write an xarray Dataset atomically with the pinned h5netcdf engine."""
     with atomic_path(path, suffix=".nc") as tmp:
         dataset.to_netcdf(tmp, engine="h5netcdf")
 
 
-def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> "xarray.Dataset":  # noqa: F821
+def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> xarray.Dataset:  # noqa: F821
     """Load a NetCDF file fully into memory; CorruptFileError naming the file if unreadable."""
     import xarray as xr
 
@@ -181,12 +188,12 @@ def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> "
     return ds
 
 
-def write_parquet(path: str | os.PathLike, frame: "pandas.DataFrame") -> None:  # noqa: F821
+def write_parquet(path: str | os.PathLike, frame: pandas.DataFrame) -> None:  # noqa: F821
     with atomic_path(path, suffix=".parquet") as tmp:
         frame.to_parquet(tmp, index=False)
 
 
-def read_parquet(path: str | os.PathLike, required_columns: Sequence[str] = ()) -> "pandas.DataFrame":  # noqa: F821
+def read_parquet(path: str | os.PathLike, required_columns: Sequence[str] = ()) -> pandas.DataFrame:  # noqa: F821
     import pandas as pd
 
     path = Path(path)
@@ -212,7 +219,7 @@ def array_checksum(*arrays: np.ndarray) -> str:
 
 
 # ---------------------------------------------------------------- joint MAP (Sec. III.B)
-def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> "xarray.Dataset":  # noqa: F821
+def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> xarray.Dataset:  # noqa: F821
     """Full Theta_hat and local variances of every k of a
     :class:`~ssmobs.joint_map.JointMapResult` as a labelled dataset (dims ``k``,
     ``component`` = ``model.theta_names(T)``), for :func:`write_netcdf`."""
@@ -220,9 +227,11 @@ def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> "xarray.D
 
     names = model.theta_names(T)
     return xr.Dataset(
-        {"theta_hat": (("k", "component"), result.theta_hat),
-         "local_variance": (("k", "component"), result.local_variance),
-         "status": (("k",), np.asarray(result.status, dtype=str))},
+        {
+            "theta_hat": (("k", "component"), result.theta_hat),
+            "local_variance": (("k", "component"), result.local_variance),
+            "status": (("k",), np.asarray(result.status, dtype=str)),
+        },
         coords={"k": np.arange(result.theta_hat.shape[0]), "component": names},
         attrs=attrs,
     )
@@ -238,22 +247,26 @@ def write_disturbances(path: str | os.PathLike, result: Any) -> None:
         {"disturbance": (("component", "k"), matrix)},
         coords={"component": np.arange(matrix.shape[0]), "k": np.arange(matrix.shape[1])},
         attrs={
-            "method": result.method, "q": int(result.q), "K": int(result.K),
+            "method": result.method,
+            "q": int(result.q),
+            "K": int(result.K),
             "seed": int(result.seed),
             "b_max": float(result.b_max) if result.b_max is not None else float("nan"),
-            "distance_raw": float(result.distance_raw), "distance": float(result.distance),
+            "distance_raw": float(result.distance_raw),
+            "distance": float(result.distance),
             "iterations": int(result.iterations),
             "covariance_correction": result.covariance_correction,
             "checksum": array_checksum(matrix),
             "description": "design disturbance vectors (columns), state disturbances first "
-                           "(Hanebeck & Czado, Sec. III.A)",
+            "(Hanebeck & Czado, Sec. III.A)",
         },
     )
     write_netcdf(path, ds)
 
 
-def read_disturbances(path: str | os.PathLike, q: int | None = None,
-                      K: int | None = None) -> tuple[np.ndarray, dict]:
+def read_disturbances(
+    path: str | os.PathLike, q: int | None = None, K: int | None = None
+) -> tuple[np.ndarray, dict]:
     """Load a disturbance matrix (q x K) and its attributes; CorruptFileError if damaged."""
     ds = read_netcdf(path, required_vars=["disturbance"])
     matrix = np.asarray(ds["disturbance"].values, dtype=float)

@@ -90,8 +90,9 @@ much -2 pi changed; ``ridge_test`` says which decides (see :class:`JointMapSetti
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
@@ -101,8 +102,14 @@ from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import compile_model, neg2_log_posterior, neg2_log_posterior_blocks
 
 #: the six statuses, in the order in which the checks assign them
-STATUSES: tuple[str, ...] = ("ok", "not-positive-definite", "gradient", "ridge", "boundary",
-                             "failed")
+STATUSES: tuple[str, ...] = (
+    "ok",
+    "not-positive-definite",
+    "gradient",
+    "ridge",
+    "boundary",
+    "failed",
+)
 
 
 # =========================================================================== settings
@@ -180,9 +187,23 @@ class JointMapSettings:
     chunk_size: int = 0
 
     def __post_init__(self) -> None:
-        positive = ("grad_tol", "eig_ratio_min", "newton_tol", "inner_tol_factor", "mu0",
-                    "mu_min", "armijo_c1", "damping_init", "ridge_shift", "ridge_move_tol", "ridge_value_tol",
-                    "boundary_tol", "boundary_stop_tol", "boundary_near_tol", "divergence_limit")
+        positive = (
+            "grad_tol",
+            "eig_ratio_min",
+            "newton_tol",
+            "inner_tol_factor",
+            "mu0",
+            "mu_min",
+            "armijo_c1",
+            "damping_init",
+            "ridge_shift",
+            "ridge_move_tol",
+            "ridge_value_tol",
+            "boundary_tol",
+            "boundary_stop_tol",
+            "boundary_near_tol",
+            "divergence_limit",
+        )
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -193,32 +214,42 @@ class JointMapSettings:
         if not 0 < self.mu_factor < 1:
             raise ValueError(f"joint-MAP setting mu_factor={self.mu_factor!r} must be in (0, 1)")
         if not 0 < self.fraction_to_boundary < 1:
-            raise ValueError(f"joint-MAP setting fraction_to_boundary={self.fraction_to_boundary!r}"
-                             " must be in (0, 1)")
+            raise ValueError(
+                f"joint-MAP setting fraction_to_boundary={self.fraction_to_boundary!r}"
+                " must be in (0, 1)"
+            )
         if self.mu_min > self.mu0:
-            raise ValueError(f"joint-MAP setting mu_min={self.mu_min!r} must not exceed "
-                             f"mu0={self.mu0!r}")
+            raise ValueError(
+                f"joint-MAP setting mu_min={self.mu_min!r} must not exceed mu0={self.mu0!r}"
+            )
         if self.mu0_per_step < 0:
             raise ValueError(f"joint-MAP setting mu0_per_step={self.mu0_per_step!r} must be >= 0")
         if self.boundary_stop_tol > self.boundary_tol:
-            raise ValueError(f"joint-MAP setting boundary_stop_tol={self.boundary_stop_tol!r} "
-                             f"must not exceed boundary_tol={self.boundary_tol!r}")
-        for name, allowed in (("mu0_rule", ("gradient_balance", "per_step")),
-                              ("start_states", ("observations", "sign_of_x0")),
-                              ("ridge_test", ("location", "value"))):
+            raise ValueError(
+                f"joint-MAP setting boundary_stop_tol={self.boundary_stop_tol!r} "
+                f"must not exceed boundary_tol={self.boundary_tol!r}"
+            )
+        for name, allowed in (
+            ("mu0_rule", ("gradient_balance", "per_step")),
+            ("start_states", ("observations", "sign_of_x0")),
+            ("ridge_test", ("location", "value")),
+        ):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be one "
-                                 f"of {list(allowed)}")
+                raise ValueError(
+                    f"joint-MAP setting {name}={getattr(self, name)!r} must be one "
+                    f"of {list(allowed)}"
+                )
         if self.eigen_method not in ("lanczos", "dense"):
-            raise ValueError(f"joint-MAP setting eigen_method={self.eigen_method!r} must be "
-                             f"'lanczos' or 'dense'")
+            raise ValueError(
+                f"joint-MAP setting eigen_method={self.eigen_method!r} must be 'lanczos' or 'dense'"
+            )
         if self.pd_tol < 0:
             raise ValueError(f"joint-MAP setting pd_tol={self.pd_tol!r} must be >= 0")
         if self.chunk_size < 0:
             raise ValueError(f"joint-MAP setting chunk_size={self.chunk_size!r} must be >= 0")
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any] | None) -> "JointMapSettings":
+    def from_mapping(cls, values: Mapping[str, Any] | None) -> JointMapSettings:
         """Settings from a config block; unknown keys raise ValueError naming them."""
         values = dict(values or {})
         known = {f.name for f in dataclasses.fields(cls)}
@@ -277,20 +308,24 @@ class JointMapResult:
         and for every component c of Omega and x_0 its estimate ``c`` and ``lvar_c``."""
         names = model.theta_names(T)
         head = model.n_params + model.state_dim
-        frame = pd.DataFrame({
-            "k": np.arange(self.theta_hat.shape[0], dtype=np.int64),
-            "status": pd.Series(self.status, dtype=object).astype(str),
-            "reason": pd.Series(self.reason, dtype=object).astype(str),
-            "neg2_log_post": self.neg2_log_post.astype(float),
-            "eig_ratio": self.eig_ratio.astype(float),
-            "grad_max": self.grad_max.astype(float),
-            "iterations": self.iterations.astype(np.int64),
-        })
+        frame = pd.DataFrame(
+            {
+                "k": np.arange(self.theta_hat.shape[0], dtype=np.int64),
+                "status": pd.Series(self.status, dtype=object).astype(str),
+                "reason": pd.Series(self.reason, dtype=object).astype(str),
+                "neg2_log_post": self.neg2_log_post.astype(float),
+                "eig_ratio": self.eig_ratio.astype(float),
+                "grad_max": self.grad_max.astype(float),
+                "iterations": self.iterations.astype(np.int64),
+            }
+        )
         K = self.theta_hat.shape[0]
-        frame["mu0"] = (np.full(K, np.nan) if self.mu_start is None
-                        else self.mu_start.astype(float))
-        frame["ridge_value_change"] = (np.full(K, np.nan) if self.ridge_value_change is None
-                                       else self.ridge_value_change.astype(float))
+        frame["mu0"] = np.full(K, np.nan) if self.mu_start is None else self.mu_start.astype(float)
+        frame["ridge_value_change"] = (
+            np.full(K, np.nan)
+            if self.ridge_value_change is None
+            else self.ridge_value_change.astype(float)
+        )
         for j, name in enumerate(names[:head]):
             frame[name] = self.theta_hat[:, j]
         for j, name in enumerate(names[:head]):
@@ -303,9 +338,9 @@ class _ProgressLike(Protocol):
 
 
 # =========================================================================== Newton direction
-def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
-                             tau_hint: np.ndarray | None = None
-                             ) -> tuple[np.ndarray, np.ndarray]:
+def _damped_newton_direction(
+    A, C, Dd, Dl, g, settings: JointMapSettings, tau_hint: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Newton direction d = -(H + tau I)^{-1} g with the smallest tried tau making H + tau I PD.
 
     Tries tau = 0 (or tau_hint / 10, the previous iteration's shift reduced, where that is
@@ -314,8 +349,10 @@ def _damped_newton_direction(A, C, Dd, Dl, g, settings: "JointMapSettings",
     direction and tau is inf.
     """
     K = g.shape[0]
-    scale = 1.0 + np.maximum(np.abs(np.diagonal(A, axis1=1, axis2=2)).max(axis=1),
-                             np.abs(np.diagonal(Dd, axis1=2, axis2=3)).max(axis=(1, 2)))
+    scale = 1.0 + np.maximum(
+        np.abs(np.diagonal(A, axis1=1, axis2=2)).max(axis=1),
+        np.abs(np.diagonal(Dd, axis1=2, axis2=3)).max(axis=(1, 2)),
+    )
     first = settings.damping_init * scale
     tau = np.zeros(K)
     if tau_hint is not None:
@@ -360,8 +397,10 @@ class _Barrier:
 
         Values only (no derivatives): this is what the line search evaluates.
         """
-        parts = [omega[:, self.lo_idx] - self.lower[self.lo_idx],
-                 self.upper[self.up_idx] - omega[:, self.up_idx]]
+        parts = [
+            omega[:, self.lo_idx] - self.lower[self.lo_idx],
+            self.upper[self.up_idx] - omega[:, self.up_idx],
+        ]
         if self.constraints.count:
             parts.append(self.constraints.values(omega))
         return np.concatenate(parts, axis=1)
@@ -369,8 +408,10 @@ class _Barrier:
     def slack_gradients(self, omega: np.ndarray) -> np.ndarray:
         """(K, n_s, m) gradients of the slacks, in the order of :meth:`slacks`."""
         K, m = omega.shape
-        parts = [np.broadcast_to(np.eye(m)[self.lo_idx], (K, self.lo_idx.size, m)),
-                 np.broadcast_to(-np.eye(m)[self.up_idx], (K, self.up_idx.size, m))]
+        parts = [
+            np.broadcast_to(np.eye(m)[self.lo_idx], (K, self.lo_idx.size, m)),
+            np.broadcast_to(-np.eye(m)[self.up_idx], (K, self.up_idx.size, m)),
+        ]
         if self.constraints.count:
             parts.append(self.constraints.derivatives(omega)[0])
         return np.concatenate(parts, axis=1)
@@ -403,18 +444,27 @@ class _Barrier:
                 dc, d2c = self.constraints.derivatives(omega)
                 phi -= np.log(c).sum(axis=1)
                 grad -= np.einsum("kj,kji->ki", 1.0 / c, dc)
-                hess += (np.einsum("kj,kji,kjl->kil", 1.0 / c**2, dc, dc)
-                         - np.einsum("kj,kjil->kil", 1.0 / c, d2c))
+                hess += np.einsum("kj,kji,kjl->kil", 1.0 / c**2, dc, dc) - np.einsum(
+                    "kj,kjil->kil", 1.0 / c, d2c
+                )
         return phi, grad, hess
 
     def max_step(self, omega: np.ndarray, d_omega: np.ndarray, tau: float) -> np.ndarray:
         """(K,) largest alpha <= 1 keeping a fraction (1 - tau) of every box slack."""
         alpha = np.ones(omega.shape[0])
         with np.errstate(all="ignore"):
-            for idx, s, rate in ((self.lo_idx, omega[:, self.lo_idx] - self.lower[self.lo_idx],
-                                  -d_omega[:, self.lo_idx]),
-                                 (self.up_idx, self.upper[self.up_idx] - omega[:, self.up_idx],
-                                  d_omega[:, self.up_idx])):
+            for idx, s, rate in (
+                (
+                    self.lo_idx,
+                    omega[:, self.lo_idx] - self.lower[self.lo_idx],
+                    -d_omega[:, self.lo_idx],
+                ),
+                (
+                    self.up_idx,
+                    self.upper[self.up_idx] - omega[:, self.up_idx],
+                    d_omega[:, self.up_idx],
+                ),
+            ):
                 if idx.size:
                     lim = np.where(rate > 0, tau * s / rate, np.inf)
                     alpha = np.minimum(alpha, lim.min(axis=1))
@@ -422,9 +472,14 @@ class _Barrier:
 
 
 # =========================================================================== optimiser
-def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier: _Barrier,
-              settings: JointMapSettings, mu_start: float | np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _optimize(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    theta0: np.ndarray,
+    barrier: _Barrier,
+    settings: JointMapSettings,
+    mu_start: float | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Batched primal barrier-Newton minimisation of -2 pi from ``theta0``.
 
     Returns theta (K, n), iterations (K,), final mu (K,) and the stop reason (K,) str:
@@ -452,8 +507,12 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
         th, zz, mu_a = theta[act], z[act], mu[act]
         f, g, blk = neg2_log_posterior_blocks(model, th, zz)
         phi, bg, bh = barrier.derivatives(th[:, :m])
-        finite = (np.isfinite(f) & np.isfinite(phi) & np.all(np.isfinite(g), axis=1)
-                  & np.all(np.isfinite(bg), axis=1))
+        finite = (
+            np.isfinite(f)
+            & np.isfinite(phi)
+            & np.all(np.isfinite(g), axis=1)
+            & np.all(np.isfinite(bg), axis=1)
+        )
         gp = grad_p(g, bg, mu_a)
         gnorm = np.abs(gp).max(axis=1)
         # finish barrier stages whose inner problem is solved, possibly several at once
@@ -478,8 +537,9 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
         th, zz, mu_s, gps = th[sel], zz[sel], mu_a[sel], gp[sel]
         P0 = f[sel] + mu_s * phi[sel]
         A = blk.omega[sel] + mu_s[:, None, None] * bh[sel]
-        d, tau_used = _damped_newton_direction(A, blk.cross[sel], blk.diag[sel], blk.lower[sel],
-                                               gps, settings, tau_last[idx])
+        d, tau_used = _damped_newton_direction(
+            A, blk.cross[sel], blk.diag[sel], blk.lower[sel], gps, settings, tau_last[idx]
+        )
         tau_last[idx] = tau_used
         slope = np.einsum("kj,kj->k", gps, d)
         uphill = ~(slope < 0)
@@ -487,8 +547,9 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
             d[uphill] = -gps[uphill]
             slope[uphill] = -np.einsum("kj,kj->k", gps[uphill], gps[uphill])
         # a full step smaller than rounding at mu_min: nothing left to gain
-        tiny = ((np.abs(d).max(axis=1) <= 4 * eps * (1.0 + np.abs(th).max(axis=1)))
-                & (mu_s <= settings.mu_min))
+        tiny = (np.abs(d).max(axis=1) <= 4 * eps * (1.0 + np.abs(th).max(axis=1))) & (
+            mu_s <= settings.mu_min
+        )
         if tiny.any():
             reason[idx[tiny]] = "converged"
             active[idx[tiny]] = False
@@ -502,8 +563,10 @@ def _optimize(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray, barrier
             trial = th[pi] + alpha[pi, None] * d[pi]
             (ft,) = neg2_log_posterior(model, trial, zz[pi], None, order=0)
             Pt = ft + mu_s[pi] * barrier.value(trial[:, :m])
-            ok = np.isfinite(Pt) & (Pt <= P0[pi] + settings.armijo_c1 * alpha[pi] * slope[pi]
-                                    + 16 * eps * np.abs(P0[pi]))
+            ok = np.isfinite(Pt) & (
+                Pt
+                <= P0[pi] + settings.armijo_c1 * alpha[pi] * slope[pi] + 16 * eps * np.abs(P0[pi])
+            )
             good = pi[ok]
             theta[idx[good]] = trial[ok]
             accepted[good] = True
@@ -530,8 +593,7 @@ def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
-def _classify_chunk(model, z, theta, mu, stop, barrier, settings
-                    ) -> dict[str, np.ndarray]:
+def _classify_chunk(model, z, theta, mu, stop, barrier, settings) -> dict[str, np.ndarray]:
     """Checks of Sec. III.B for one chunk (ridge re-optimisation included)."""
     K, n = theta.shape
     m = model.n_params
@@ -540,12 +602,14 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
     fin_h = np.ones(K, dtype=bool)
     for a in (blk.omega, blk.cross, blk.diag, blk.lower):
         fin_h &= np.all(np.isfinite(a.reshape(K, -1)), axis=1)
-    finite = (np.isfinite(f) & np.all(np.isfinite(g), axis=1) & fin_h
-              & np.all(np.isfinite(theta), axis=1))
+    finite = (
+        np.isfinite(f) & np.all(np.isfinite(g), axis=1) & fin_h & np.all(np.isfinite(theta), axis=1)
+    )
     fac = ArrowFactor(blk.omega, blk.cross, blk.diag, blk.lower)
     fac.ok &= finite
-    lam_min, lam_max, v_min = arrow_extreme_eigenpairs(fac, settings.eigen_method,
-                                                       settings.lanczos_steps)
+    lam_min, lam_max, v_min = arrow_extreme_eigenpairs(
+        fac, settings.eigen_method, settings.lanczos_steps
+    )
     with np.errstate(all="ignore"):
         ratio = lam_min / lam_max
         grad_max = np.abs(g).max(axis=1)
@@ -554,8 +618,9 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
         mult = np.where(stop == "converged", mu / s_min, 0.0)
         # rate of decrease of -2 pi when moving towards each constraint (unit normal)
         ds = barrier.slack_gradients(theta[:, :m])
-        pull = (np.einsum("ki,ksi->ks", g[:, :m], ds)
-                / np.maximum(np.linalg.norm(ds, axis=2), 1e-300))
+        pull = np.einsum("ki,ksi->ks", g[:, :m], ds) / np.maximum(
+            np.linalg.norm(ds, axis=2), 1e-300
+        )
         pushed = np.any((s < settings.boundary_near_tol) & (pull > settings.grad_tol), axis=1)
         pushed &= stop != "converged"
         lvar = 2.0 * fac.diag_inverse()
@@ -574,29 +639,53 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
             reason[k] = why(k) if callable(why) else why
         undecided &= ~hit
 
-    assign(~finite, "failed", lambda k: f"non-finite value/gradient/Hessian at the result "
-                                        f"(optimiser stop: {stop[k]})")
-    assign(stop == "diverged", "boundary",
-           f"iterates ran off to infinity (|Theta|_inf > {settings.divergence_limit:g})")
-    assign(s_min < settings.boundary_tol, "boundary",
-           lambda k: f"optimum on the boundary of the prior support (min slack {s_min[k]:.3g})")
-    assign(mult > settings.grad_tol, "boundary",
-           lambda k: f"barrier holds the optimum (mu/slack = {mult[k]:.3g})")
-    assign(pushed, "boundary",
-           lambda k: f"-2 pi still decreases towards the boundary (min slack {s_min[k]:.3g}, "
-                     f"optimiser stop: {stop[k]})")
-    assign(~pd_, "not-positive-definite",
-           lambda k: f"Hessian not positive definite (smallest eigenvalue about "
-                     f"{lam_min[k]:.3g})")
-    assign(~(grad_max < settings.grad_tol), "gradient",
-           lambda k: f"max |gradient| {grad_max[k]:.3g} >= {settings.grad_tol:g} "
-                     f"(optimiser stop: {stop[k]})")
+    assign(
+        ~finite,
+        "failed",
+        lambda k: f"non-finite value/gradient/Hessian at the result (optimiser stop: {stop[k]})",
+    )
+    assign(
+        stop == "diverged",
+        "boundary",
+        f"iterates ran off to infinity (|Theta|_inf > {settings.divergence_limit:g})",
+    )
+    assign(
+        s_min < settings.boundary_tol,
+        "boundary",
+        lambda k: f"optimum on the boundary of the prior support (min slack {s_min[k]:.3g})",
+    )
+    assign(
+        mult > settings.grad_tol,
+        "boundary",
+        lambda k: f"barrier holds the optimum (mu/slack = {mult[k]:.3g})",
+    )
+    assign(
+        pushed,
+        "boundary",
+        lambda k: (
+            f"-2 pi still decreases towards the boundary (min slack {s_min[k]:.3g}, "
+            f"optimiser stop: {stop[k]})"
+        ),
+    )
+    assign(
+        ~pd_,
+        "not-positive-definite",
+        lambda k: f"Hessian not positive definite (smallest eigenvalue about {lam_min[k]:.3g})",
+    )
+    assign(
+        ~(grad_max < settings.grad_tol),
+        "gradient",
+        lambda k: (
+            f"max |gradient| {grad_max[k]:.3g} >= {settings.grad_tol:g} (optimiser stop: {stop[k]})"
+        ),
+    )
 
     cand = np.flatnonzero(undecided & ~(ratio >= settings.eig_ratio_min))
     value_change = np.full(K, np.nan)
     if cand.size:
-        ridge, dist, dval = _ridge_check(model, z[cand], theta[cand], f[cand], v_min[cand],
-                                         barrier, settings)
+        ridge, dist, dval = _ridge_check(
+            model, z[cand], theta[cand], f[cand], v_min[cand], barrier, settings
+        )
         value_change[cand] = dval
         for j, k in enumerate(cand):
             small = f"eigenvalue ratio {ratio[k]:.3g} < {settings.eig_ratio_min:g}"
@@ -605,14 +694,24 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings
                 status[k] = "ridge"
                 reason[k] = f"{small}; after a shift along the ridge the re-optimisation {what}"
             else:
-                reason[k] = (f"{small} but the re-optimisation returned ({what}; "
-                             f"test: {settings.ridge_test})")
-    return dict(neg2_log_post=f, local_variance=lvar, eig_ratio=ratio, grad_max=grad_max,
-                status=status, reason=reason, ridge_value_change=value_change)
+                reason[k] = (
+                    f"{small} but the re-optimisation returned ({what}; "
+                    f"test: {settings.ridge_test})"
+                )
+    return dict(
+        neg2_log_post=f,
+        local_variance=lvar,
+        eig_ratio=ratio,
+        grad_max=grad_max,
+        status=status,
+        reason=reason,
+        ridge_value_change=value_change,
+    )
 
 
-def _ridge_check(model, z, theta, f_hat, v, barrier, settings
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ridge_check(
+    model, z, theta, f_hat, v, barrier, settings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Re-optimise from Theta_hat + h v (or - h v if that leaves the support).
 
     Returns (ridge, distance moved (sup norm), |change of -2 pi|); ``ridge`` by
@@ -645,8 +744,13 @@ def _ridge_check(model, z, theta, f_hat, v, barrier, settings
 
 
 # =========================================================================== public API
-def initial_theta(model: StateSpaceModel, z: np.ndarray, omega_true: np.ndarray,
-                  x0_true: np.ndarray, start_states: str = "observations") -> np.ndarray:
+def initial_theta(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    start_states: str = "observations",
+) -> np.ndarray:
     """Start of Sec. III.B: (Omega_true, x0_true, initial_states(Omega_true, z)) for every k.
 
     ``start_states="sign_of_x0"``: the states start at
@@ -658,15 +762,27 @@ def initial_theta(model: StateSpaceModel, z: np.ndarray, omega_true: np.ndarray,
     else:
         x = np.asarray(model.initial_states(omega_true, z), dtype=float)
     if x.shape != (K, T, model.state_dim):
-        raise ValueError(f"initial_states of model '{model.slug}' returned shape {x.shape}, "
-                         f"expected {(K, T, model.state_dim)}")
-    return np.concatenate([np.broadcast_to(omega_true, (K, model.n_params)),
-                           np.broadcast_to(x0_true, (K, model.state_dim)),
-                           x.reshape(K, -1)], axis=1)
+        raise ValueError(
+            f"initial_states of model '{model.slug}' returned shape {x.shape}, "
+            f"expected {(K, T, model.state_dim)}"
+        )
+    return np.concatenate(
+        [
+            np.broadcast_to(omega_true, (K, model.n_params)),
+            np.broadcast_to(x0_true, (K, model.state_dim)),
+            x.reshape(K, -1),
+        ],
+        axis=1,
+    )
 
 
-def initial_mu_values(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray,
-                      barrier: "_Barrier", settings: JointMapSettings) -> np.ndarray:
+def initial_mu_values(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    theta0: np.ndarray,
+    barrier: _Barrier,
+    settings: JointMapSettings,
+) -> np.ndarray:
     """(K,) barrier start mu_0 of every trajectory (``settings.mu0_rule``).
 
     ``gradient_balance``: mu_0 = ||grad_Omega(-2 pi)(Theta_0)||_2 / ||grad_Omega B(Theta_0)||_2,
@@ -685,10 +801,15 @@ def initial_mu_values(model: StateSpaceModel, z: np.ndarray, theta0: np.ndarray,
     return np.where(np.isfinite(mu0), np.maximum(mu0, settings.mu_min), settings.mu_min)
 
 
-def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
-              omega_true: np.ndarray, x0_true: np.ndarray,
-              settings: JointMapSettings | None = None,
-              progress: _ProgressLike | None = None) -> JointMapResult:
+def joint_map(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    settings: JointMapSettings | None = None,
+    progress: _ProgressLike | None = None,
+) -> JointMapResult:
     """Joint MAP estimate and numerical checks for every design trajectory (Sec. III.B).
 
     Parameters
@@ -709,29 +830,40 @@ def joint_map(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
     settings = settings or JointMapSettings()
     z = np.asarray(z, dtype=float)
     if z.ndim != 3 or z.shape[2] != model.obs_dim:
-        raise ValueError(f"z must have shape (K, T, {model.obs_dim}) for model '{model.slug}', "
-                         f"got {z.shape}")
+        raise ValueError(
+            f"z must have shape (K, T, {model.obs_dim}) for model '{model.slug}', got {z.shape}"
+        )
     K, T, _ = z.shape
     omega = np.asarray(omega_true, dtype=float)
     x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
     if omega.shape != (model.n_params,):
-        raise ValueError(f"omega_true must have {model.n_params} value(s) in the order "
-                         f"{list(model.param_names)}, got {omega.tolist()}")
+        raise ValueError(
+            f"omega_true must have {model.n_params} value(s) in the order "
+            f"{list(model.param_names)}, got {omega.tolist()}"
+        )
     if x0.shape != (model.state_dim,):
         raise ValueError(f"x0_true must have {model.state_dim} component(s), got {x0.tolist()}")
     barrier = _Barrier(model, bounds)
     if not np.isfinite(barrier.value(omega[None, :]))[0]:
-        raise ValueError(f"start Omega={omega.tolist()} is not strictly inside the prior support "
-                         f"({bounds.lower.tolist()}, {bounds.upper.tolist()}) and the model "
-                         f"constraints")
+        raise ValueError(
+            f"start Omega={omega.tolist()} is not strictly inside the prior support "
+            f"({bounds.lower.tolist()}, {bounds.upper.tolist()}) and the model "
+            f"constraints"
+        )
     n = model.n_theta(T)
     out = JointMapResult(
-        theta_hat=np.full((K, n), np.nan), neg2_log_post=np.full(K, np.nan),
-        local_variance=np.full((K, n), np.nan), eig_ratio=np.full(K, np.nan),
-        grad_max=np.full(K, np.nan), iterations=np.zeros(K, dtype=np.int64),
-        status=np.full(K, "failed", dtype=object), reason=np.full(K, "", dtype=object),
-        theta_names=model.theta_names(T), mu_start=np.full(K, np.nan),
-        ridge_value_change=np.full(K, np.nan))
+        theta_hat=np.full((K, n), np.nan),
+        neg2_log_post=np.full(K, np.nan),
+        local_variance=np.full((K, n), np.nan),
+        eig_ratio=np.full(K, np.nan),
+        grad_max=np.full(K, np.nan),
+        iterations=np.zeros(K, dtype=np.int64),
+        status=np.full(K, "failed", dtype=object),
+        reason=np.full(K, "", dtype=object),
+        theta_names=model.theta_names(T),
+        mu_start=np.full(K, np.nan),
+        ridge_value_change=np.full(K, np.nan),
+    )
     for sl in _chunks(K, n, settings):
         zc = z[sl]
         theta0 = initial_theta(model, zc, omega, x0, settings.start_states)
@@ -753,8 +885,9 @@ def component_names(model: StateSpaceModel) -> list[str]:
     return model.theta_names(0)
 
 
-def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
-                      omega_true: np.ndarray, x0_true: np.ndarray) -> dict[str, Any]:
+def joint_map_summary(
+    frame: pd.DataFrame, model: StateSpaceModel, omega_true: np.ndarray, x0_true: np.ndarray
+) -> dict[str, Any]:
     """Scenario summary of the joint MAP estimator over K^max (Sec. III.B, Table II).
 
     Keys: ``K``, ``K_max`` (= |K^max|), ``ratio`` (= |K^max| / K), ``components``, the count
@@ -765,20 +898,28 @@ def joint_map_summary(frame: pd.DataFrame, model: StateSpaceModel,
     defined (|K^max| = 0, or 1 for the variance) are NaN.
     """
     names = component_names(model)
-    truth = np.concatenate([np.atleast_1d(np.asarray(omega_true, dtype=float)),
-                            np.atleast_1d(np.asarray(x0_true, dtype=float))])
+    truth = np.concatenate(
+        [
+            np.atleast_1d(np.asarray(omega_true, dtype=float)),
+            np.atleast_1d(np.asarray(x0_true, dtype=float)),
+        ]
+    )
     if truth.size != len(names):
         raise ValueError(f"true values {truth.tolist()} do not match components {names}")
-    missing = [c for c in ["status", *names, *[f"lvar_{c}" for c in names]]
-               if c not in frame.columns]
+    missing = [
+        c for c in ["status", *names, *[f"lvar_{c}" for c in names]] if c not in frame.columns
+    ]
     if missing:
         raise ValueError(f"joint-MAP frame lacks columns {missing}")
     ok = (frame["status"] == "ok").to_numpy()
     K = int(len(frame))
     k_max = int(ok.sum())
-    out: dict[str, Any] = {"K": K, "K_max": k_max,
-                           "ratio": k_max / K if K else float("nan"),
-                           "components": names}
+    out: dict[str, Any] = {
+        "K": K,
+        "K_max": k_max,
+        "ratio": k_max / K if K else float("nan"),
+        "components": names,
+    }
     counts = frame["status"].value_counts()
     for st in STATUSES:
         out[f"n_{st}"] = int(counts.get(st, 0))

@@ -21,8 +21,9 @@ which correlates V_{K_i} and V_{K_j} and makes the RD rule stop earlier.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -84,8 +85,12 @@ def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
     for the ratio and the means, c2 for the variances and the mean local variances.
     """
     comps = model.theta_names(0)
-    labels = (["ratio"] + [f"{c}_mean" for c in comps] + [f"{c}_var" for c in comps]
-              + [f"{c}_lvar_mean" for c in comps])
+    labels = (
+        ["ratio"]
+        + [f"{c}_mean" for c in comps]
+        + [f"{c}_var" for c in comps]
+        + [f"{c}_lvar_mean" for c in comps]
+    )
     kinds = ["c1"] * (1 + len(comps)) + ["c2"] * (2 * len(comps))
     missing = [lab for lab in labels if lab not in summary]
     if missing:
@@ -94,8 +99,11 @@ def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
     return VVector(values=values, labels=tuple(labels), kinds=tuple(kinds))
 
 
-def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[float]],
-             thresholds: np.ndarray | Sequence[float]) -> int | None:
+def select_k(
+    k_values: Sequence[int],
+    vectors: np.ndarray | Sequence[Sequence[float]],
+    thresholds: np.ndarray | Sequence[float],
+) -> int | None:
     """Index i of the chosen K = K_i by the RD rule of Sec. IV.A, or None.
 
     Parameters
@@ -116,22 +124,27 @@ def select_k(k_values: Sequence[int], vectors: np.ndarray | Sequence[Sequence[fl
     V = np.asarray(vectors, dtype=float)
     thr = np.asarray(thresholds, dtype=float)
     if k.ndim != 1 or V.ndim != 2 or V.shape[0] != k.size:
-        raise ValueError(f"need one V row per K_i: got {k.size} K values and vectors of shape "
-                         f"{V.shape}")
+        raise ValueError(
+            f"need one V row per K_i: got {k.size} K values and vectors of shape {V.shape}"
+        )
     if thr.shape != (V.shape[1],):
         raise ValueError(f"thresholds must have shape ({V.shape[1]},), got {thr.shape}")
     if k.size > 1 and not np.all(np.diff(k) > 0):
         raise ValueError(f"K values must be strictly increasing, got {k.tolist()}")
     for i in range(k.size - 1):
-        rd = relative_difference(V[i][None, :], V[i + 1:])
+        rd = relative_difference(V[i][None, :], V[i + 1 :])
         if np.all(rd < thr):  # NaN compares False
             return i
     return None
 
 
-def choose_k(summaries: Sequence[Mapping[str, Any]], model: StateSpaceModel,
-             ksel: Mapping[str, Any], scenario: str, paper: Mapping[str, Any]
-             ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+def choose_k(
+    summaries: Sequence[Mapping[str, Any]],
+    model: StateSpaceModel,
+    ksel: Mapping[str, Any],
+    scenario: str,
+    paper: Mapping[str, Any],
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The RD rule (:func:`select_k`) for every (method, set variant, seed) of one
     ``k_selection`` entry, from the joint-MAP summaries of its K_i (Sec. IV.A).
 
@@ -156,9 +169,16 @@ def choose_k(summaries: Sequence[Mapping[str, Any]], model: StateSpaceModel,
     choices: list[dict[str, Any]] = []
     runs = sorted({(s["method"], s.get("sets", "nested"), int(s["seed"])) for s in summaries})
     for method, sets, seed in runs:
-        sel = sorted((s for s in summaries if s["method"] == method
-                      and s.get("sets", "nested") == sets and int(s["seed"]) == seed),
-                     key=lambda s: s["K_i"])
+        sel = sorted(
+            (
+                s
+                for s in summaries
+                if s["method"] == method
+                and s.get("sets", "nested") == sets
+                and int(s["seed"]) == seed
+            ),
+            key=lambda s: s["K_i"],
+        )
         ks = [int(s["K_i"]) for s in sel]
         vecs = [v_vector(s, model) for s in sel]
         V = np.array([v.values for v in vecs])
@@ -167,19 +187,34 @@ def choose_k(summaries: Sequence[Mapping[str, Any]], model: StateSpaceModel,
         ref = (paper.get("k_selection") or {}).get(method) or {}
         if "c1" in ref and (ref["c1"], ref["c2"]) != (ksel["c1"], ksel["c2"]):
             ref = {"K": None}  # the paper's K belongs to other thresholds: not comparable
-        choices.append({
-            "name": ksel["name"], "scenario": scenario, "method": method, "sets": sets,
-            "seed": seed, "c1": ksel["c1"], "c2": ksel["c2"],
-            "K_chosen": ks[idx] if idx is not None else None,
-            "K_grid": f"{ks[0]}-{ks[-1]}" + (f" step {ks[1] - ks[0]}"
-                                              if len(set(np.diff(ks))) == 1 else " (uneven)"),
-            "K_max_grid": ks[-1],
-            "K_paper": ref.get("K"),
-            "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
-            "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
-        })
+        choices.append(
+            {
+                "name": ksel["name"],
+                "scenario": scenario,
+                "method": method,
+                "sets": sets,
+                "seed": seed,
+                "c1": ksel["c1"],
+                "c2": ksel["c2"],
+                "K_chosen": ks[idx] if idx is not None else None,
+                "K_grid": f"{ks[0]}-{ks[-1]}"
+                + (f" step {ks[1] - ks[0]}" if len(set(np.diff(ks))) == 1 else " (uneven)"),
+                "K_max_grid": ks[-1],
+                "K_paper": ref.get("K"),
+                "c_paper": f"({ref['c1']}, {ref['c2']})" if "c1" in ref else "",
+                "K_paper_range": (f"{ref['K_min']}-{ref['K_max']}" if "K_min" in ref else ""),
+            }
+        )
         for K, v in zip(ks, vecs):
             for label, value in zip(v.labels, v.values):
-                long_rows.append({"K": K, "method": method, "sets": sets, "seed": seed,
-                                  "component": label, "value": float(value)})
+                long_rows.append(
+                    {
+                        "K": K,
+                        "method": method,
+                        "sets": sets,
+                        "seed": seed,
+                        "component": label,
+                        "value": float(value),
+                    }
+                )
     return long_rows, choices

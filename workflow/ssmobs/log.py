@@ -39,8 +39,9 @@ def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logg
 class Progress:
     """Logs 'label: done/total, about N s left' at most every ``every`` seconds."""
 
-    def __init__(self, label: str, total: int, logger: logging.Logger | None = None,
-                 every: float = 10.0) -> None:
+    def __init__(
+        self, label: str, total: int, logger: logging.Logger | None = None, every: float = 10.0
+    ) -> None:
         self.label, self.total, self.every = label, total, every
         self.logger = logger or logging.getLogger(LOGGER_NAME)
         self.start = time.monotonic()
@@ -48,7 +49,8 @@ class Progress:
         self.done = 0
 
     def update(self, n: int = 1) -> None:
-        """Count ``n`` more done; log when the last line is ``every`` seconds old or all are done."""
+        """Count ``n`` more done; log when the last line is ``every`` seconds old or all
+        are done."""
         self.done += n
         now = time.monotonic()
         if self.done >= self.total or now - self.last >= self.every:
@@ -56,5 +58,11 @@ class Progress:
             elapsed = now - self.start
             rate = self.done / elapsed if elapsed > 0 else float("inf")
             left = (self.total - self.done) / rate if rate > 0 else float("nan")
-            self.logger.info("%s: %d/%d done, %.0f s elapsed, about %.0f s left",
-                             self.label, self.done, self.total, elapsed, left)
+            self.logger.info(
+                "%s: %d/%d done, %.0f s elapsed, about %.0f s left",
+                self.label,
+                self.done,
+                self.total,
+                elapsed,
+                left,
+            )

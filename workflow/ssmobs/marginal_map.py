@@ -20,8 +20,8 @@ exact Gaussian KDE by O(spacing^2 / h^2) (tested against ``scipy.stats.gaussian_
 Why not ArviZ's KDE (``arviz_stats``' ``kde``, formerly ``az.kde``): it is binned too but
 convolves directly on a 512-point grid over [min, max], so its grid error grows with the
 range of the draws (heavy tails), it loops in Python per component, and its default
-bandwidth ("experimental": mean of Silverman's rule and ISJ) is not the paper's.  Both agree on the mode well within Monte Carlo error
-(``tests/unit/test_marginal_map.py``).
+bandwidth ("experimental": mean of Silverman's rule and ISJ) is not the paper's.  Both
+agree on the mode well within Monte Carlo error (``tests/unit/test_marginal_map.py``).
 
 Empirical quantiles are R's type 7 (NumPy's default ``linear``), as ``quantile()`` in R.
 """
@@ -47,8 +47,9 @@ class KDEError(ValueError):
     """A KDE mode cannot be computed (non-finite draws, zero spread, too few draws)."""
 
 
-def silverman_bandwidth(x: np.ndarray, sd: np.ndarray | None = None,
-                        iqr: np.ndarray | None = None) -> np.ndarray:
+def silverman_bandwidth(
+    x: np.ndarray, sd: np.ndarray | None = None, iqr: np.ndarray | None = None
+) -> np.ndarray:
     """Silverman's rule of thumb 0.9 min(sd, IQR/1.34) n^(-1/5) per row of ``x`` (rows, n).
 
     When the IQR is 0 (more than half the draws tied) the sd is used, as R's ``bw.nrd0``.
@@ -76,12 +77,14 @@ def _validate(x: np.ndarray, names: list[str] | None) -> None:
     zero = ~(spread > 0)
     if zero.any():
         bad = [label(i) for i in np.flatnonzero(zero)]
-        raise KDEError(f"zero spread (all draws equal) in {bad[:5]}"
-                       f"{' ...' if len(bad) > 5 else ''}")
+        raise KDEError(
+            f"zero spread (all draws equal) in {bad[:5]}{' ...' if len(bad) > 5 else ''}"
+        )
 
 
-def binned_kde(x: np.ndarray, bw: np.ndarray | None = None, names: list[str] | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def binned_kde(
+    x: np.ndarray, bw: np.ndarray | None = None, names: list[str] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gaussian KDE of every row of ``x`` (rows, n) on a regular grid, by binning + FFT.
 
     Returns ``lo`` (rows,), ``delta`` (rows,) and ``density`` (rows, G): the density at
@@ -165,7 +168,10 @@ def _param_block(draws: Draws, name: str, shape_tail: tuple[int, ...]) -> np.nda
         raise ValueError(f"parameter '{name}' has shape {arr.shape}; expected (chain, draw, ...)")
     c, s = arr.shape[:2]
     tail = arr.shape[2:]
-    squeeze = (lambda shp: tuple(d for d in shp if d != 1))
+
+    def squeeze(shp: tuple[int, ...]) -> tuple[int, ...]:
+        return tuple(d for d in shp if d != 1)
+
     if squeeze(tail) == squeeze(shape_tail):
         return arr.reshape(c, s, -1)
     if len(shape_tail) == 2 and tail == shape_tail[::-1]:
@@ -183,7 +189,10 @@ def theta_draws(draws: Draws, model: Any, T: int) -> np.ndarray:
     """
     p = int(model.state_dim)
     blocks = [_param_block(draws, name, ()) for name in model.param_names]
-    state_shape = (lambda rows: (rows,) if p == 1 else (rows, p))
+
+    def state_shape(rows: int) -> tuple[int, ...]:
+        return (rows,) if p == 1 else (rows, p)
+
     if "x0" in draws.params:
         blocks.append(_param_block(draws, "x0", () if p == 1 else (p,)))
         blocks.append(_param_block(draws, "x", state_shape(T)))

@@ -51,8 +51,9 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -60,21 +61,36 @@ from . import io
 from .convergence import ConvergenceSettings, check_convergence, to_inference_data
 from .log import Progress
 from .marginal_map import KDEError, marginal_summary
-from .record_cache import (RECORD_VERSION, backend_identity, draws_path, load_record,
-                           program_hash, record_key, record_path, settings_hash)
+from .record_cache import (
+    RECORD_VERSION,
+    backend_identity,
+    draws_path,
+    load_record,
+    program_hash,
+    record_key,
+    record_path,
+    settings_hash,
+)
 from .stan_backends.base import Draws, SamplerSettings, SamplingError
 
 LOG = logging.getLogger("ssmobs.nuts")
 
 INIT_MODES = ("random", "true")
 #: diagnostics columns copied into the per-k table
-DIAGNOSTIC_COLUMNS = ("max_rhat", "min_ess_bulk", "min_ess_tail", "n_divergent",
-                      "n_treedepth_hits", "min_ebfmi")
+DIAGNOSTIC_COLUMNS = (
+    "max_rhat",
+    "min_ess_bulk",
+    "min_ess_tail",
+    "n_divergent",
+    "n_treedepth_hits",
+    "min_ebfmi",
+)
 
 
 # --------------------------------------------------------------------------- one trajectory
-def _inits(model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_k: np.ndarray,
-           chains: int) -> list[dict[str, Any]]:
+def _inits(
+    model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_k: np.ndarray, chains: int
+) -> list[dict[str, Any]]:
     """Initial values at the true (Omega, x0) and the design states x~(k), one dict per chain."""
     init: dict[str, Any] = dict(zip(model.param_names, _floats(omega_true)))
     x0 = _floats(np.atleast_1d(x0_true))
@@ -92,29 +108,59 @@ def _floats(values: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=float)]
 
 
-def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
-                    x_k: np.ndarray, k: int, key: dict[str, Any], bounds: Any,
-                    omega_true: Any, x0_true: Any, scenario: str, sampler: SamplerSettings,
-                    convergence: ConvergenceSettings, init: str, keep_draws: Path | None
-                    ) -> dict[str, Any]:
+def _one_trajectory(
+    model: Any,
+    backend: Any,
+    stan_file: str,
+    z_k: np.ndarray,
+    x_k: np.ndarray,
+    k: int,
+    key: dict[str, Any],
+    bounds: Any,
+    omega_true: Any,
+    x0_true: Any,
+    scenario: str,
+    sampler: SamplerSettings,
+    convergence: ConvergenceSettings,
+    init: str,
+    keep_draws: Path | None,
+) -> dict[str, Any]:
     T = int(np.asarray(z_k).shape[0])
     names = model.theta_names(T)
     t0, c0 = time.perf_counter(), time.process_time()
     sample_cpu = 0.0
-    timings: dict[str, Any] = {"sample_call": 0.0, "backend": {}, "prepare": 0.0,
-                               "diagnostics": 0.0, "marginal": 0.0, "keep_draws": 0.0}
+    timings: dict[str, Any] = {
+        "sample_call": 0.0,
+        "backend": {},
+        "prepare": 0.0,
+        "diagnostics": 0.0,
+        "marginal": 0.0,
+        "keep_draws": 0.0,
+    }
     rec: dict[str, Any] = {
-        "record_version": RECORD_VERSION, "key": key, "k": int(k), "scenario": scenario,
-        "model": model.slug, "T": T, "status": "ok", "converged": False, "failed_checks": [],
-        "reason": None, "diagnostics": None, "theta_names": names, "map": None, "q5": None,
-        "q95": None, "init": init, "backend": getattr(backend, "name", type(backend).__name__),
+        "record_version": RECORD_VERSION,
+        "key": key,
+        "k": int(k),
+        "scenario": scenario,
+        "model": model.slug,
+        "T": T,
+        "status": "ok",
+        "converged": False,
+        "failed_checks": [],
+        "reason": None,
+        "diagnostics": None,
+        "theta_names": names,
+        "map": None,
+        "q5": None,
+        "q95": None,
+        "init": init,
+        "backend": getattr(backend, "name", type(backend).__name__),
     }
     reasons: list[str] = []
     draws: Draws | None = None
     try:
         data = model.stan_data(np.asarray(z_k, dtype=float), bounds)
-        inits = (_inits(model, omega_true, x0_true, x_k, sampler.chains)
-                 if init == "true" else None)
+        inits = _inits(model, omega_true, x0_true, x_k, sampler.chains) if init == "true" else None
         t1, c1 = time.perf_counter(), time.process_time()
         timings["prepare"] = t1 - t0
         try:
@@ -123,12 +169,16 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
             timings["sample_call"] = time.perf_counter() - t1
             sample_cpu = time.process_time() - c1
     except SamplingError as err:
-        rec.update(status="error", failed_checks=["sampling_error"],
-                   reason=f"sampling error: {err}")
+        rec.update(
+            status="error", failed_checks=["sampling_error"], reason=f"sampling error: {err}"
+        )
         LOG.warning("k=%d: %s", k, rec["reason"])
     except ValueError as err:  # the model rejected these data (e.g. a reject() statement)
-        rec.update(status="error", failed_checks=["exception"],
-                   reason=f"exception during sampling: {type(err).__name__}: {err}")
+        rec.update(
+            status="error",
+            failed_checks=["exception"],
+            reason=f"exception during sampling: {type(err).__name__}: {err}",
+        )
         LOG.warning("k=%d: %s", k, rec["reason"], exc_info=True)
     # anything else (BackendError: a broken installation, a killed driver; bugs) is not a
     # property of this trajectory: it fails the job and no record is written
@@ -184,22 +234,40 @@ def _one_trajectory(model: Any, backend: Any, stan_file: str, z_k: np.ndarray,
 
 def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
     idata = to_inference_data(draws)
-    idata.posterior.attrs.update({"scenario": rec["scenario"], "k": rec["k"],
-                                  "stan_seed": rec["key"]["stan_seed"],
-                                  "program_hash": rec["key"]["program_hash"]})
+    idata.posterior.attrs.update(
+        {
+            "scenario": rec["scenario"],
+            "k": rec["k"],
+            "stan_seed": rec["key"]["stan_seed"],
+            "program_hash": rec["key"]["program_hash"],
+        }
+    )
     with io.atomic_path(path, suffix=".nc") as tmp:
         idata.to_netcdf(str(tmp), engine="h5netcdf")
 
 
 # --------------------------------------------------------------------------- the loop
-def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndarray,
-                     x_true: np.ndarray, ks: Sequence[int], bounds: Any,
-                     omega_true: np.ndarray, x0_true: np.ndarray, scenario: str, seed: int,
-                     sampler: SamplerSettings | None = None,
-                     convergence: ConvergenceSettings | None = None, init: str = "random",
-                     records_dir: str | Path = ".", keep_draws_for: Iterable[int] = (),
-                     draws_dir: str | Path | None = None, progress: Progress | None = None,
-                     retry_errors: bool = False) -> list[dict[str, Any]]:
+def run_trajectories(
+    model: Any,
+    backend: Any,
+    stan_file: str | Path,
+    z: np.ndarray,
+    x_true: np.ndarray,
+    ks: Sequence[int],
+    bounds: Any,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    scenario: str,
+    seed: int,
+    sampler: SamplerSettings | None = None,
+    convergence: ConvergenceSettings | None = None,
+    init: str = "random",
+    records_dir: str | Path = ".",
+    keep_draws_for: Iterable[int] = (),
+    draws_dir: str | Path | None = None,
+    progress: Progress | None = None,
+    retry_errors: bool = False,
+) -> list[dict[str, Any]]:
     """Sample, check and summarise the design trajectories ``ks`` of one scenario.
 
     Parameters
@@ -244,9 +312,11 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
     omega_true = np.asarray(omega_true, dtype=float)
     x0_true = np.atleast_1d(np.asarray(x0_true, dtype=float))
     if omega_true.shape != (model.n_params,) or x0_true.shape != (model.state_dim,):
-        raise ValueError(f"need Omega as {model.n_params} value(s) in the order "
-                         f"{list(model.param_names)} and x0 as {model.state_dim} value(s), got "
-                         f"{omega_true.tolist()} and {x0_true.tolist()}")
+        raise ValueError(
+            f"need Omega as {model.n_params} value(s) in the order "
+            f"{list(model.param_names)} and x0 as {model.state_dim} value(s), got "
+            f"{omega_true.tolist()} and {x0_true.tolist()}"
+        )
     T = z.shape[1]
     keep = {int(k) for k in keep_draws_for}
     if keep and draws_dir is None:
@@ -268,16 +338,24 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
         if rec is not None and retry_errors and rec["status"] == "error":
             rec = None
         if rec is not None and k in keep and not draws_path(draws_dir, k).exists():
-            LOG.info("recomputing k=%d: its draws are to be kept but %s is missing", k,
-                     draws_path(draws_dir, k))
+            LOG.info(
+                "recomputing k=%d: its draws are to be kept but %s is missing",
+                k,
+                draws_path(draws_dir, k),
+            )
             rec = None
         if rec is None:
             todo.append((k, key))
         else:
             records[k] = rec
     stale = sum(record_path(records_dir, k).exists() for k, _ in todo)
-    LOG.info("%s: %d trajectories to sample, %d records reused, %d stale or damaged records "
-             "recomputed", scenario, len(todo), len(records), stale)
+    LOG.info(
+        "%s: %d trajectories to sample, %d records reused, %d stale or damaged records recomputed",
+        scenario,
+        len(todo),
+        len(records),
+        stale,
+    )
     if records and progress is not None:
         progress.update(len(records))
     own_progress = progress is None
@@ -286,21 +364,41 @@ def run_trajectories(model: Any, backend: Any, stan_file: str | Path, z: np.ndar
     if todo:
         backend.compile(stan_file)
     for k, key in todo:
-        rec = _one_trajectory(model, backend, stan_file, z[k], x_true[k], k, key, bounds,
-                              omega_true, x0_true, scenario, sampler, convergence, init,
-                              draws_path(draws_dir, k) if k in keep else None)
+        rec = _one_trajectory(
+            model,
+            backend,
+            stan_file,
+            z[k],
+            x_true[k],
+            k,
+            key,
+            bounds,
+            omega_true,
+            x0_true,
+            scenario,
+            sampler,
+            convergence,
+            init,
+            draws_path(draws_dir, k) if k in keep else None,
+        )
         t_w = time.perf_counter()
         io.write_json(record_path(records_dir, k), rec)
-        LOG.debug("k=%d: converged=%s %s (sample %.2f s, overhead %.3f s, write %.3f s)", k,
-                  rec["converged"], rec["reason"] or "", rec["timings"]["sample_call"],
-                  rec["timings"]["overhead"], time.perf_counter() - t_w)
+        LOG.debug(
+            "k=%d: converged=%s %s (sample %.2f s, overhead %.3f s, write %.3f s)",
+            k,
+            rec["converged"],
+            rec["reason"] or "",
+            rec["timings"]["sample_call"],
+            rec["timings"]["overhead"],
+            time.perf_counter() - t_w,
+        )
         records[k] = rec
         progress.update()
     return [records[int(k)] for k in ks]
 
 
 # --------------------------------------------------------------------------- table
-def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> "pandas.DataFrame":  # noqa: F821
+def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> pandas.DataFrame:  # noqa: F821
     """One row per trajectory k (sorted by k): wide table of status, diagnostics and Theta.
 
     Columns: ``k`` (int), ``scenario``, ``stan_seed``, ``status``, ``converged`` (bool),
@@ -336,8 +434,10 @@ def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> "
     block = {s: np.full((m, n), np.nan) for s in ("map", "q5", "q95")}
     for i, r in enumerate(recs):
         if r.get("theta_names") is not None and list(r["theta_names"]) != names:
-            raise ValueError(f"record k={r['k']} has Theta names {r['theta_names'][:4]}..., "
-                             f"expected {names[:4]}... (model {model.slug}, T={T})")
+            raise ValueError(
+                f"record k={r['k']} has Theta names {r['theta_names'][:4]}..., "
+                f"expected {names[:4]}... (model {model.slug}, T={T})"
+            )
         for s in ("map", "q5", "q95"):
             if r[s] is not None:
                 block[s][i] = np.asarray(r[s], dtype=float)

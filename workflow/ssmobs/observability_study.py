@@ -3,16 +3,18 @@
 For the scenarios of one ``observability_studies`` config entry (same model, different T),
 one table and one figure of the two observability measures of Sec. III: |K^max|/K (joint
 MAP found and passing the checks of Sec. III.B) and |K^Stan|/K (NUTS converged, Sec.
-III.C), each with its exact binomial 95 % interval (``_lo95``, ``_hi95``), with the reasons the others failed (joint-MAP status counts, failed convergence
-checks), the marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the
-draws went, the median over all K of the KDE modes of Omega (converged or not).
+III.C), each with its exact binomial 95 % interval (``_lo95``, ``_hi95``), with the
+reasons the others failed (joint-MAP status counts, failed convergence checks), the
+marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the draws went,
+the median over all K of the KDE modes of Omega (converged or not).
 """
 
 from __future__ import annotations
 
 import os
 from collections import Counter
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -24,12 +26,21 @@ from .joint_map import STATUSES
 from .scenario import Scenario
 
 
-def study_row(scenario: Scenario, joint: Mapping[str, Any] | None,
-              stan: Mapping[str, Any] | None, stan_table: pd.DataFrame | None) -> dict[str, Any]:
+def study_row(
+    scenario: Scenario,
+    joint: Mapping[str, Any] | None,
+    stan: Mapping[str, Any] | None,
+    stan_table: pd.DataFrame | None,
+) -> dict[str, Any]:
     """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega."""
     model = scenario.model
-    row: dict[str, Any] = {"scenario": scenario.name, "model": model.slug, "T": scenario.T,
-                           "K": scenario.K, "method": scenario.method}
+    row: dict[str, Any] = {
+        "scenario": scenario.name,
+        "model": model.slug,
+        "T": scenario.T,
+        "K": scenario.K,
+        "method": scenario.method,
+    }
     row.update({f"{n}_true": float(v) for n, v in zip(model.param_names, scenario.omega)})
     row["K_max"] = joint["K_max"] if joint else np.nan
     row["K_max_ratio"] = joint["ratio"] if joint else np.nan
@@ -44,8 +55,9 @@ def study_row(scenario: Scenario, joint: Mapping[str, Any] | None,
         counts: Counter[str] = Counter()
         for checks in stan_table.loc[~stan_table["converged"].astype(bool), "failed_checks"]:
             counts.update(c for c in str(checks).split(",") if c)
-        row["stan_failed_checks"] = ", ".join(f"{c} {counts[c]}" for c in CHECKS
-                                              if counts[c]) or "none"
+        row["stan_failed_checks"] = (
+            ", ".join(f"{c} {counts[c]}" for c in CHECKS if counts[c]) or "none"
+        )
     for n in model.param_names:
         row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
         row[f"{n}_mean_joint"] = joint.get(f"{n}_mean", np.nan) if joint else np.nan
@@ -53,18 +65,25 @@ def study_row(scenario: Scenario, joint: Mapping[str, Any] | None,
         # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
         for n in model.param_names:
             col = f"{n}_map"
-            row[f"{n}_map_median_all_k"] = (float(np.nanmedian(stan_table[col]))
-                                            if col in stan_table and stan_table[col].notna().any()
-                                            else np.nan)
+            row[f"{n}_map_median_all_k"] = (
+                float(np.nanmedian(stan_table[col]))
+                if col in stan_table and stan_table[col].notna().any()
+                else np.nan
+            )
     return row
 
 
-def study_table(scenarios: Sequence[Scenario], joint: Mapping[str, Mapping],
-                stan: Mapping[str, Mapping], stan_tables: Mapping[str, pd.DataFrame]
-                ) -> pd.DataFrame:
+def study_table(
+    scenarios: Sequence[Scenario],
+    joint: Mapping[str, Mapping],
+    stan: Mapping[str, Mapping],
+    stan_tables: Mapping[str, pd.DataFrame],
+) -> pd.DataFrame:
     """Rows of :func:`study_row` sorted by T (a stage not run gives NaN)."""
-    rows = [study_row(sc, joint.get(sc.name), stan.get(sc.name), stan_tables.get(sc.name))
-            for sc in scenarios]
+    rows = [
+        study_row(sc, joint.get(sc.name), stan.get(sc.name), stan_tables.get(sc.name))
+        for sc in scenarios
+    ]
     return pd.DataFrame(rows).sort_values("T", kind="stable").reset_index(drop=True)
 
 
@@ -75,11 +94,21 @@ def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> No
     plt = _plt()
     fig, ax = plt.subplots(figsize=(4.6, 3.2))
     ax.plot(frame["T"], frame["K_max_ratio"], "o-", label=r"$|\mathcal{K}^{\max}|/K$ (joint MAP)")
-    ax.plot(frame["T"], frame["K_stan_ratio"], "s--",
-            label=r"$|\mathcal{K}^{\mathrm{Stan}}|/K$ (marginal MAP)")
+    ax.plot(
+        frame["T"],
+        frame["K_stan_ratio"],
+        "s--",
+        label=r"$|\mathcal{K}^{\mathrm{Stan}}|/K$ (marginal MAP)",
+    )
     for ratio, colour in (("K_max_ratio", "C0"), ("K_stan_ratio", "C1")):
-        ax.fill_between(frame["T"], frame[f"{ratio}_lo95"].astype(float),
-                        frame[f"{ratio}_hi95"].astype(float), color=colour, alpha=0.15, lw=0)
+        ax.fill_between(
+            frame["T"],
+            frame[f"{ratio}_lo95"].astype(float),
+            frame[f"{ratio}_hi95"].astype(float),
+            color=colour,
+            alpha=0.15,
+            lw=0,
+        )
     ax.set_xlabel("T")
     ax.set_ylabel("fraction of the K trajectories")
     ax.set_ylim(-0.03, 1.03)
@@ -90,28 +119,42 @@ def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> No
     plt.close(fig)
 
 
-def run_observability_study(study: Mapping[str, Any], scenarios: Sequence[Scenario],
-                            joint: Mapping[str, str], stan: Mapping[str, str],
-                            stan_tables: Mapping[str, str], csv: str | os.PathLike,
-                            md: str | os.PathLike, png: str | os.PathLike,
-                            stan_settings: Mapping[str, Any] | None = None) -> pd.DataFrame:
+def run_observability_study(
+    study: Mapping[str, Any],
+    scenarios: Sequence[Scenario],
+    joint: Mapping[str, str],
+    stan: Mapping[str, str],
+    stan_tables: Mapping[str, str],
+    csv: str | os.PathLike,
+    md: str | os.PathLike,
+    png: str | os.PathLike,
+    stan_settings: Mapping[str, Any] | None = None,
+) -> pd.DataFrame:
     """Rule observability_study: read the scenario summaries, write table (CSV, Markdown)
     and figure (PNG)."""
     frame = study_table(
         scenarios,
         {n: io.read_json(p) for n, p in joint.items()},
         {n: io.read_json(p) for n, p in stan.items()},
-        {n: io.read_parquet(p, required_columns=["converged", "failed_checks"])
-         for n, p in stan_tables.items()})
+        {
+            n: io.read_parquet(p, required_columns=["converged", "failed_checks"])
+            for n, p in stan_tables.items()
+        },
+    )
     io.write_text(csv, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
     model = scenarios[0].model
-    caption = (f"Observability of {model.title} ({study['name']}, ours): |K^max|/K (joint MAP, "
-               f"Sec. III.B) and |K^Stan|/K (NUTS, Sec. III.C) over T.")
+    caption = (
+        f"Observability of {model.title} ({study['name']}, ours): |K^max|/K (joint MAP, "
+        f"Sec. III.B) and |K^Stan|/K (NUTS, Sec. III.C) over T."
+    )
     if stan_settings:
-        caption += (f" Stan: {stan_settings['chains']} chains x ({stan_settings['iter_warmup']}"
-                    f" + {stan_settings['iter_sampling']}) iterations.")
+        caption += (
+            f" Stan: {stan_settings['chains']} chains x ({stan_settings['iter_warmup']}"
+            f" + {stan_settings['iter_sampling']}) iterations."
+        )
     shown = frame.astype(object).where(frame.notna(), None)
-    io.write_text(md, caption + "\n\n" + shown.to_markdown(index=False, floatfmt=".4g",
-                                                          missingval="") + "\n")
+    io.write_text(
+        md, caption + "\n\n" + shown.to_markdown(index=False, floatfmt=".4g", missingval="") + "\n"
+    )
     figure_study(frame, f"{model.title}: observability over T", png)
     return frame

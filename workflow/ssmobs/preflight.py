@@ -48,14 +48,20 @@ def load_config_file(path: str | os.PathLike) -> dict[str, Any]:
     except yaml.YAMLError as err:
         raise ConfigError(f"config file {path}: YAML syntax error: {err}") from None
     if config is None:
-        raise ConfigError(f"config file {path} is empty; it needs at least the key 'scenarios' "
-                          f"(a list of scenarios; see {README})")
+        raise ConfigError(
+            f"config file {path} is empty; it needs at least the key 'scenarios' "
+            f"(a list of scenarios; see {README})"
+        )
     if not isinstance(config, dict):
-        raise ConfigError(f"config file {path}: the top level must be a mapping with the key "
-                          f"'scenarios', not a {type(config).__name__} (see {README})")
+        raise ConfigError(
+            f"config file {path}: the top level must be a mapping with the key "
+            f"'scenarios', not a {type(config).__name__} (see {README})"
+        )
     if "scenarios" not in config:
-        raise ConfigError(f"config file {path} has no key 'scenarios' (required: a list of "
-                          f"scenarios; see {README}); its keys: {sorted(config)}")
+        raise ConfigError(
+            f"config file {path} has no key 'scenarios' (required: a list of "
+            f"scenarios; see {README}); its keys: {sorted(config)}"
+        )
     return config
 
 
@@ -120,30 +126,42 @@ def unlock_if_stale(workdir: str | os.PathLike, configfile: str | None) -> str |
     """Remove a stale Snakemake lock of ``workdir``; returns what was done (None: no lock)."""
     if not lock_files(workdir):
         return None
-    remedy = ("if no other Snakemake run uses this directory, remove it with "
-              "`snakemake --unlock` (with the same --configfile), then rerun")
+    remedy = (
+        "if no other Snakemake run uses this directory, remove it with "
+        "`snakemake --unlock` (with the same --configfile), then rerun"
+    )
     running = snakemake_processes(workdir)
     if running is None:
         return f"a Snakemake lock exists in {workdir}/.snakemake/locks; {remedy}"
     if running:
-        return (f"a Snakemake lock exists and Snakemake processes run in {workdir} "
-                f"(PIDs {running}); left as it is")
+        return (
+            f"a Snakemake lock exists and Snakemake processes run in {workdir} "
+            f"(PIDs {running}); left as it is"
+        )
     cmd = [sys.executable, "-m", "snakemake", "--unlock"]
     if configfile:
         cmd += ["--configfile", str(configfile)]
     proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True)
     if proc.returncode != 0:
         return f"could not remove the stale lock ({proc.stderr.strip()[-500:]}); {remedy}"
-    return (f"removed a stale Snakemake lock in {workdir} (left by a killed run; no "
-            f"Snakemake process runs there)")
+    return (
+        f"removed a stale Snakemake lock in {workdir} (left by a killed run; no "
+        f"Snakemake process runs there)"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ssmobs.preflight", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m ssmobs.preflight",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("configfile", help="the config file Snakemake will be given")
-    parser.add_argument("--unlock-stale", action="store_true",
-                        help="remove a stale Snakemake lock when no Snakemake runs here")
+    parser.add_argument(
+        "--unlock-stale",
+        action="store_true",
+        help="remove a stale Snakemake lock when no Snakemake runs here",
+    )
     args = parser.parse_args(argv)
     try:
         check_config_file(args.configfile)

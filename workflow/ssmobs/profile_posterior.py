@@ -20,7 +20,7 @@ x_0, and find the maximum within that sign pattern.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -29,9 +29,15 @@ from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import in_support, neg2_log_posterior, neg2_log_posterior_blocks
 
 
-def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: np.ndarray,
-                  x_start: np.ndarray, max_iter: int, tol: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def _state_newton(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    omega: np.ndarray,
+    x0: np.ndarray,
+    x_start: np.ndarray,
+    max_iter: int,
+    tol: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Minimise -2 pi over x_1..x_T for fixed (Omega, x_0), batched over rows.
 
     Returns the minimum value (K,) and a converged flag (K,).
@@ -52,7 +58,7 @@ def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: 
         theta = np.concatenate([head[act], x[act]], axis=1)
         with np.errstate(all="ignore"):
             f, g, blk = neg2_log_posterior_blocks(model, theta, zz[act])
-        gx = g[:, m + p:]
+        gx = g[:, m + p :]
         value[act] = f
         finite = np.isfinite(f) & np.all(np.isfinite(gx), axis=1)
         done = finite & (np.abs(gx).max(axis=1) <= tol * (1.0 + np.abs(f)))
@@ -68,9 +74,10 @@ def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: 
         d = np.full((go.size, T * p), np.nan)
         tau = np.zeros(go.size)
         todo = np.arange(go.size)
-        for attempt in range(30):
-            fac = BlockTridiagonalCholesky(diag[todo] + tau[todo, None, None, None] * np.eye(p),
-                                           lower[todo])
+        for _attempt in range(30):
+            fac = BlockTridiagonalCholesky(
+                diag[todo] + tau[todo, None, None, None] * np.eye(p), lower[todo]
+            )
             step = -fac.solve(g_go[todo])[..., 0].reshape(todo.size, -1)
             ok = fac.ok & np.all(np.isfinite(step), axis=1)
             d[todo[ok]] = step[ok]
@@ -88,10 +95,12 @@ def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: 
             if pi.size == 0:
                 break
             trial = x[idx[pi]] + alpha[pi, None] * d[pi]
-            (ft,) = neg2_log_posterior(model, np.concatenate([head[idx[pi]], trial], axis=1),
-                                       zz[idx[pi]], None, order=0)
-            ok = np.isfinite(ft) & (ft <= f[go][pi] + 1e-4 * alpha[pi] * slope[pi]
-                                    + 16 * eps * np.abs(f[go][pi]))
+            (ft,) = neg2_log_posterior(
+                model, np.concatenate([head[idx[pi]], trial], axis=1), zz[idx[pi]], None, order=0
+            )
+            ok = np.isfinite(ft) & (
+                ft <= f[go][pi] + 1e-4 * alpha[pi] * slope[pi] + 16 * eps * np.abs(f[go][pi])
+            )
             x[idx[pi[ok]]] = trial[ok]
             pending[pi[ok]] = False
             alpha[pi[~ok]] *= 0.5
@@ -99,12 +108,18 @@ def _state_newton(model: StateSpaceModel, z: np.ndarray, omega: np.ndarray, x0: 
     return value, conv
 
 
-def profile_posterior(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds,
-                      omega_grid_name: str, omega_values: Sequence[float] | np.ndarray,
-                      x0_values: Sequence[float] | np.ndarray,
-                      omega_fixed: Mapping[str, float] | None = None,
-                      max_iter: int = 100, tol: float = 1e-10,
-                      chunk_size: int = 4096) -> np.ndarray:
+def profile_posterior(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    omega_grid_name: str,
+    omega_values: Sequence[float] | np.ndarray,
+    x0_values: Sequence[float] | np.ndarray,
+    omega_fixed: Mapping[str, float] | None = None,
+    max_iter: int = 100,
+    tol: float = 1e-10,
+    chunk_size: int = 4096,
+) -> np.ndarray:
     """Profile log posterior pi(omega_i, x_0 | z) = max_{x_1..x_T} pi (Figure 4).
 
     Parameters
@@ -129,20 +144,25 @@ def profile_posterior(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds
     """
     z = np.asarray(z, dtype=float)
     if z.ndim != 2 or z.shape[1] != model.obs_dim:
-        raise ValueError(f"z must have shape (T, {model.obs_dim}) for model '{model.slug}', "
-                         f"got {z.shape}")
+        raise ValueError(
+            f"z must have shape (T, {model.obs_dim}) for model '{model.slug}', got {z.shape}"
+        )
     T = z.shape[0]
     p = model.state_dim
     if omega_grid_name not in model.param_names:
-        raise ValueError(f"model '{model.slug}' has no parameter '{omega_grid_name}'; "
-                         f"its parameters are {list(model.param_names)}")
+        raise ValueError(
+            f"model '{model.slug}' has no parameter '{omega_grid_name}'; "
+            f"its parameters are {list(model.param_names)}"
+        )
     fixed = dict(omega_fixed or {})
     others = [nm for nm in model.param_names if nm != omega_grid_name]
     missing = [nm for nm in others if nm not in fixed]
     unknown = sorted(set(fixed) - set(others))
     if missing or unknown:
-        raise ValueError(f"omega_fixed must give exactly {others} for model '{model.slug}' "
-                         f"(grid over '{omega_grid_name}'); missing {missing}, unknown {unknown}")
+        raise ValueError(
+            f"omega_fixed must give exactly {others} for model '{model.slug}' "
+            f"(grid over '{omega_grid_name}'); missing {missing}, unknown {unknown}"
+        )
     w_vals = np.asarray(omega_values, dtype=float).reshape(-1)
     x0_arr = np.asarray(x0_values, dtype=float)
     if p == 1 and x0_arr.ndim == 1:
@@ -159,7 +179,7 @@ def profile_posterior(model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds
     inside = np.flatnonzero(in_support(model, omega, bounds))
     zeros = np.zeros((1, T, p)), np.zeros((1, T, model.obs_dim))
     for s in range(0, inside.size, chunk_size):
-        idx = inside[s:s + chunk_size]
+        idx = inside[s : s + chunk_size]
         x_start = np.empty((idx.size, T, p))
         for r, k in enumerate(idx):  # noise-free state path of each grid point
             with np.errstate(all="ignore"):

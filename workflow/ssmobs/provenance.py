@@ -44,8 +44,13 @@ def machine() -> dict[str, Any]:
                 break
     except OSError:
         pass
-    return {"cpus": os.cpu_count(), "cpu_model": cpu, "memory_gib": mem,
-            "os": platform.platform(), "python": platform.python_version()}
+    return {
+        "cpus": os.cpu_count(),
+        "cpu_model": cpu,
+        "memory_gib": mem,
+        "os": platform.platform(),
+        "python": platform.python_version(),
+    }
 
 
 def backend_info(config: dict[str, Any]) -> dict[str, str]:
@@ -56,14 +61,16 @@ def backend_info(config: dict[str, Any]) -> dict[str, str]:
     return dict(get_backend(name).identity())
 
 
-def provenance(config_path: str | os.PathLike, started: float, finished: float,
-               command: str, note: str = "") -> dict[str, Any]:
+def provenance(
+    config_path: str | os.PathLike, started: float, finished: float, command: str, note: str = ""
+) -> dict[str, Any]:
     """The provenance record of one run of ``config_path`` (see the module docstring)."""
     text = Path(config_path).read_text()
     config = yaml.safe_load(text)
     return {
         "date_utc": dt.datetime.fromtimestamp(finished, dt.timezone.utc).isoformat(
-            timespec="seconds"),
+            timespec="seconds"
+        ),
         "commit": _git("rev-parse", "HEAD"),
         "uncommitted_changes": bool(_git("status", "--porcelain", "--untracked-files=no")),
         "machine": machine(),

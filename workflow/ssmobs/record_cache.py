@@ -14,9 +14,10 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,11 +34,27 @@ LOG = logging.getLogger("ssmobs.nuts")
 #: version of the record format; records of another version are recomputed
 RECORD_VERSION = 1
 #: keys every record has (checked when a record is read back)
-RECORD_KEYS = ("record_version", "key", "k", "status", "converged", "failed_checks", "reason",
-               "diagnostics", "theta_names", "map", "q5", "q95")
+RECORD_KEYS = (
+    "record_version",
+    "key",
+    "k",
+    "status",
+    "converged",
+    "failed_checks",
+    "reason",
+    "diagnostics",
+    "theta_names",
+    "map",
+    "q5",
+    "q95",
+)
 #: the KDE/quantile method, part of the settings hash (change it when the estimator changes)
-ESTIMATOR = {"kde": "gaussian, silverman bw, linear binning + fft", "grid_per_bw": GRID_PER_BW,
-             "quantile": "type 7", "mode": "argmax + parabolic refinement"}
+ESTIMATOR = {
+    "kde": "gaussian, silverman bw, linear binning + fft",
+    "grid_per_bw": GRID_PER_BW,
+    "quantile": "type 7",
+    "mode": "argmax + parabolic refinement",
+}
 
 
 # --------------------------------------------------------------------------- keys
@@ -56,9 +73,16 @@ def program_hash(stan_file: str | Path) -> str:
     return hashlib.sha256(Path(stan_file).read_bytes()).hexdigest()[:16]
 
 
-def settings_hash(model: StateSpaceModel, T: int, sampler: SamplerSettings,
-                  convergence: ConvergenceSettings, init: str, bounds: PriorBounds,
-                  omega_true: np.ndarray, x0_true: np.ndarray) -> str:
+def settings_hash(
+    model: StateSpaceModel,
+    T: int,
+    sampler: SamplerSettings,
+    convergence: ConvergenceSettings,
+    init: str,
+    bounds: PriorBounds,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+) -> str:
     """Hash of everything besides (scenario, k, seed, program, data) that determines a record.
 
     ``omega_true`` in the model's parameter order and ``x0_true`` are arrays (as a
@@ -67,11 +91,18 @@ def settings_hash(model: StateSpaceModel, T: int, sampler: SamplerSettings,
     """
     sampler_d = {k: v for k, v in asdict(sampler).items() if k != "workers"}
     payload = {
-        "record_version": RECORD_VERSION, "model": model.slug, "T": int(T),
-        "sampler": sampler_d, "convergence": asdict(convergence), "init": init,
-        "bounds": {"lower": np.asarray(bounds.lower, float).tolist(),
-                   "upper": np.asarray(bounds.upper, float).tolist()},
-        "omega_true": _floats(omega_true), "x0_true": _floats(x0_true),
+        "record_version": RECORD_VERSION,
+        "model": model.slug,
+        "T": int(T),
+        "sampler": sampler_d,
+        "convergence": asdict(convergence),
+        "init": init,
+        "bounds": {
+            "lower": np.asarray(bounds.lower, float).tolist(),
+            "upper": np.asarray(bounds.upper, float).tolist(),
+        },
+        "omega_true": _floats(omega_true),
+        "x0_true": _floats(x0_true),
         "estimator": ESTIMATOR,
     }
     return _sha(payload)
@@ -79,18 +110,35 @@ def settings_hash(model: StateSpaceModel, T: int, sampler: SamplerSettings,
 
 def backend_identity(backend: Any) -> str:
     """``"<backend> <Stan version>"``: records of another backend or Stan are not reused."""
-    ident = backend.identity() if hasattr(backend, "identity") else {
-        "backend": getattr(backend, "name", type(backend).__name__)}
+    ident = (
+        backend.identity()
+        if hasattr(backend, "identity")
+        else {"backend": getattr(backend, "name", type(backend).__name__)}
+    )
     return " ".join(str(ident[k]) for k in sorted(ident))
 
 
-def record_key(scenario: str, k: int, seed: int, prog_hash: str, set_hash: str,
-               z_k: np.ndarray, x_k: np.ndarray, backend: str = "") -> dict[str, Any]:
+def record_key(
+    scenario: str,
+    k: int,
+    seed: int,
+    prog_hash: str,
+    set_hash: str,
+    z_k: np.ndarray,
+    x_k: np.ndarray,
+    backend: str = "",
+) -> dict[str, Any]:
     """The key a stored record must match to be reused."""
-    return {"scenario": scenario, "k": int(k), "seed": int(seed),
-            "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
-            "program_hash": prog_hash, "settings_hash": set_hash, "backend": backend,
-            "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16]}
+    return {
+        "scenario": scenario,
+        "k": int(k),
+        "seed": int(seed),
+        "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
+        "program_hash": prog_hash,
+        "settings_hash": set_hash,
+        "backend": backend,
+        "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16],
+    }
 
 
 def record_path(records_dir: str | Path, k: int) -> Path:
@@ -101,8 +149,9 @@ def draws_path(draws_dir: str | Path, k: int) -> Path:
     return Path(draws_dir) / f"k{int(k):05d}.nc"
 
 
-def load_record(path: str | Path, key: dict[str, Any] | None = None,
-                n_theta: int | None = None) -> dict[str, Any] | None:
+def load_record(
+    path: str | Path, key: dict[str, Any] | None = None, n_theta: int | None = None
+) -> dict[str, Any] | None:
     """The record at ``path`` if it exists, parses, and matches ``key`` (else None)."""
     path = Path(path)
     if not path.exists():
@@ -113,16 +162,23 @@ def load_record(path: str | Path, key: dict[str, Any] | None = None,
         LOG.warning("recomputing: %s", err)
         return None
     if rec.get("record_version") != RECORD_VERSION:
-        LOG.debug("recomputing %s: record version %s != %s", path, rec.get("record_version"),
-                  RECORD_VERSION)
+        LOG.debug(
+            "recomputing %s: record version %s != %s",
+            path,
+            rec.get("record_version"),
+            RECORD_VERSION,
+        )
         return None
     if key is not None and rec.get("key") != key:
         old = rec["key"] if isinstance(rec.get("key"), dict) else {}
         changed = sorted(k for k in set(key) | set(old) if old.get(k) != key.get(k))
         LOG.debug("recomputing %s: key changed (%s)", path, ", ".join(changed))
         return None
-    if n_theta is not None and rec["map"] is not None and not (
-            len(rec["map"]) == len(rec["q5"]) == len(rec["q95"]) == n_theta):
+    if (
+        n_theta is not None
+        and rec["map"] is not None
+        and not (len(rec["map"]) == len(rec["q5"]) == len(rec["q95"]) == n_theta)
+    ):
         LOG.warning("recomputing %s: Theta arrays have the wrong length", path)
         return None
     return rec

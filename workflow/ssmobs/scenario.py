@@ -15,9 +15,10 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -71,7 +72,7 @@ class Scenario:
 
     # ---------------------------------------------------------------- construction
     @classmethod
-    def from_config(cls, entry: Mapping[str, Any]) -> "Scenario":
+    def from_config(cls, entry: Mapping[str, Any]) -> Scenario:
         """The Scenario of one entry of the config's ``scenarios`` list.
 
         Missing optional keys take the schema's defaults.  Raises
@@ -81,8 +82,9 @@ class Scenario:
         from .config import ConfigError, schema_problems
 
         if not isinstance(entry, Mapping):
-            raise ConfigError(f"a scenario must be a mapping of keys to values, got "
-                              f"{type(entry).__name__}")
+            raise ConfigError(
+                f"a scenario must be a mapping of keys to values, got {type(entry).__name__}"
+            )
         sc = copy.deepcopy(dict(entry))
         where = f"scenario '{sc.get('name', '?')}'"
         problems = schema_problems(sc, _entry_schema())  # also fills in the defaults
@@ -90,27 +92,37 @@ class Scenario:
             from .models import MODELS
 
             if sc["model"] not in MODELS:
-                problems = [f"model = {sc['model']!r}: unknown model; allowed: "
-                            f"{sorted(MODELS)}"]
+                problems = [f"model = {sc['model']!r}: unknown model; allowed: {sorted(MODELS)}"]
             else:
-                problems = MODELS[sc["model"]].check_true_values(sc["omega"], sc["x0"],
-                                                                  sc.get("prior"))
+                problems = MODELS[sc["model"]].check_true_values(
+                    sc["omega"], sc["x0"], sc.get("prior")
+                )
         if problems:
             raise ConfigError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         model = get_model(sc["model"])
         prior = sc.get("prior")
         return cls(
-            name=sc["name"], model=model, omega=_frozen_array(model.omega_array(sc["omega"])),
+            name=sc["name"],
+            model=model,
+            omega=_frozen_array(model.omega_array(sc["omega"])),
             x0=_frozen_array(np.atleast_1d(np.asarray(sc["x0"], dtype=float))),
-            T=int(sc["T"]), K=int(sc["K"]),
+            T=int(sc["T"]),
+            K=int(sc["K"]),
             prior=MappingProxyType(dict(prior)) if isinstance(prior, Mapping) else prior,
-            method=sc["method"], seed=int(sc["seed"]), joint_map=bool(sc["joint_map"]),
-            stan=bool(sc["stan"]), stan_init=sc["stan_init"],
-            joint_map_start=sc["joint_map_start"], exact=bool(sc.get("exact", True)),
-            exact_K=sc.get("exact_K"), stan_batch_size=sc.get("stan_batch_size"),
-            paper_ref=sc["paper_ref"], description=sc["description"])
+            method=sc["method"],
+            seed=int(sc["seed"]),
+            joint_map=bool(sc["joint_map"]),
+            stan=bool(sc["stan"]),
+            stan_init=sc["stan_init"],
+            joint_map_start=sc["joint_map_start"],
+            exact=bool(sc.get("exact", True)),
+            exact_K=sc.get("exact_K"),
+            stan_batch_size=sc.get("stan_batch_size"),
+            paper_ref=sc["paper_ref"],
+            description=sc["description"],
+        )
 
-    def replace(self, **changes: Any) -> "Scenario":
+    def replace(self, **changes: Any) -> Scenario:
         """A copy with some fields changed (e.g. another K, method or seed)."""
         return dataclasses.replace(self, **changes)
 

@@ -24,8 +24,11 @@ def _tag(text: str) -> int:
 
 def check_seed(seed: int) -> int:
     """``seed`` as an int if it is an integer in [0, MAX_SEED]; ValueError otherwise."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not (
-            0 <= seed <= MAX_SEED):
+    if (
+        isinstance(seed, bool)
+        or not isinstance(seed, (int, np.integer))
+        or not (0 <= seed <= MAX_SEED)
+    ):
         raise ValueError(f"seed must be an integer in [0, {MAX_SEED}]; got {seed!r}")
     return int(seed)
 

@@ -38,8 +38,9 @@ def _mean(v: np.ndarray) -> float:
     return float(np.mean(v)) if v.size else math.nan
 
 
-def stan_summary(frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.ndarray,
-                 x_true: np.ndarray) -> dict[str, Any]:
+def stan_summary(
+    frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_true: np.ndarray
+) -> dict[str, Any]:
     """|K^Stan| and the properties of the marginal MAP estimator over K^Stan.
 
     Parameters
@@ -60,25 +61,27 @@ def stan_summary(frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.nda
         x_true = x_true[:, :, None]
     _, T, p = x_true.shape
     if p != model.state_dim:
-        raise ValueError(f"x_true has {p} state components, model '{model.slug}' has "
-                         f"{model.state_dim}")
+        raise ValueError(
+            f"x_true has {p} state components, model '{model.slug}' has {model.state_dim}"
+        )
     names = model.theta_names(T)
     m = model.n_params
     omega = np.atleast_1d(np.asarray(omega_true, dtype=float)).ravel()
     x0 = np.atleast_1d(np.asarray(x0_true, dtype=float)).ravel()
     if omega.size != m or x0.size != p:
-        raise ValueError(f"need {m} true parameter(s) and {p} x0 component(s), got "
-                         f"{omega.tolist()} and {x0.tolist()}")
+        raise ValueError(
+            f"need {m} true parameter(s) and {p} x0 component(s), got "
+            f"{omega.tolist()} and {x0.tolist()}"
+        )
 
     conv = frame["converged"].to_numpy(dtype=bool)
     ks = frame["k"].to_numpy(dtype=np.int64)[conv]
     K = int(len(frame))
     n_stan = int(conv.sum())
-    out: dict[str, Any] = {"K": K, "n_stan": n_stan,
-                           "ratio": (n_stan / K) if K else math.nan}
+    out: dict[str, Any] = {"K": K, "n_stan": n_stan, "ratio": (n_stan / K) if K else math.nan}
 
     truths = np.concatenate([omega, x0])
-    for name, truth in zip(names[:m + p], truths):
+    for name, truth in zip(names[: m + p], truths):
         est = _col(frame, f"{name}_map")[conv]
         q5 = _col(frame, f"{name}_q5")[conv]
         q95 = _col(frame, f"{name}_q95")[conv]
@@ -91,13 +94,14 @@ def stan_summary(frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.nda
         out[f"{name}_cover90"] = _mean(((q5 < truth) & (truth < q95)).astype(float))
 
     # states x_1..x_T: names[m + p:] are time-major (t = 1..T, component i = 1..p)
-    state_names = names[m + p:]
+    state_names = names[m + p :]
     est = np.stack([_col(frame, f"{n}_map")[conv] for n in state_names], axis=1)
     q5 = np.stack([_col(frame, f"{n}_q5")[conv] for n in state_names], axis=1)
     q95 = np.stack([_col(frame, f"{n}_q95")[conv] for n in state_names], axis=1)
     if n_stan and ks.max() >= x_true.shape[0]:
-        raise IndexError(f"table has trajectory k={int(ks.max())} but x_true has only "
-                         f"{x_true.shape[0]} rows")
+        raise IndexError(
+            f"table has trajectory k={int(ks.max())} but x_true has only {x_true.shape[0]} rows"
+        )
     truth = x_true[ks].reshape(n_stan, T * p)  # (|K^Stan|, T*p), same time-major order
     if n_stan:
         bias_t = (est - truth).mean(axis=0)  # Bias(x_{t,i}), (T*p,)

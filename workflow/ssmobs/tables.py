@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -49,8 +50,9 @@ def _num(v: Any) -> float:
     return float(v) if v is not None else math.nan
 
 
-def write_table(frame: pd.DataFrame, paths: Sequence[str | os.PathLike],
-                caption: str = "") -> list[str]:
+def write_table(
+    frame: pd.DataFrame, paths: Sequence[str | os.PathLike], caption: str = ""
+) -> list[str]:
     """Write ``frame`` atomically to every path in the format of its suffix (.csv, .md or
     .tex; the caption goes above the Markdown and into the LaTeX table); return the paths."""
     paths = [os.fspath(p) for p in paths]
@@ -66,8 +68,16 @@ def write_table(frame: pd.DataFrame, paths: Sequence[str | os.PathLike],
             md = shown.to_markdown(index=False, floatfmt=".4g", missingval="")
             io.write_text(path, (f"{caption}\n\n" if caption else "") + md + "\n")
         else:
-            io.write_text(path, frame.to_latex(index=False, float_format="%.4g", na_rep="",
-                                               caption=caption or None, escape=True))
+            io.write_text(
+                path,
+                frame.to_latex(
+                    index=False,
+                    float_format="%.4g",
+                    na_rep="",
+                    caption=caption or None,
+                    escape=True,
+                ),
+            )
     return paths
 
 
@@ -89,8 +99,12 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         for est_key, est_name in (("joint", "joint MAP"), ("marginal", "marginal MAP")):
             summ = r.get(est_key) or {}
             for stat, stat_name in STATS:
-                row = {"T": r["T"], "scenario": r["scenario"], "estimator": est_name,
-                       "statistic": stat_name}
+                row = {
+                    "T": r["T"],
+                    "scenario": r["scenario"],
+                    "estimator": est_name,
+                    "statistic": stat_name,
+                }
                 exact = r.get("exact") or {} if est_key == "marginal" else {}
                 for comp in ("a", "x0"):
                     ours = _num(summ.get(f"{comp}_{stat}"))
@@ -125,17 +139,31 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         for label, key, ref_path in TABLE_III:
             ours = _num(summ.get(key))
             ref = _get(pv, *ref_path)
-            out.append({"T": r["T"], "scenario": r["scenario"], "quantity": label,
-                        "ours": ours, "exact": _num(exact.get(key)), "paper": _num(ref),
-                        "rel_diff": rel_diff(ours, ref), "K_stan": summ.get("n_stan"),
-                        "K_exact": exact.get("K"), "n_exact": exact.get("n_exact")})
+            out.append(
+                {
+                    "T": r["T"],
+                    "scenario": r["scenario"],
+                    "quantity": label,
+                    "ours": ours,
+                    "exact": _num(exact.get(key)),
+                    "paper": _num(ref),
+                    "rel_diff": rel_diff(ours, ref),
+                    "K_stan": summ.get("n_stan"),
+                    "K_exact": exact.get("K"),
+                    "n_exact": exact.get("n_exact"),
+                }
+            )
     return pd.DataFrame(out)
 
 
 # ---------------------------------------------------------------- Section IV summary
 #: (fraction column, count column, K column) of the Section IV summary
-FRACTIONS = (("K_max_frac", "K_max", "K"), ("K_max_frac_paper", "K_max_paper", "K_paper"),
-             ("K_stan_frac", "K_stan", "K"), ("K_stan_frac_paper", "K_stan_paper", "K_paper"))
+FRACTIONS = (
+    ("K_max_frac", "K_max", "K"),
+    ("K_max_frac_paper", "K_max_paper", "K_paper"),
+    ("K_stan_frac", "K_stan", "K"),
+    ("K_stan_frac_paper", "K_stan_paper", "K_paper"),
+)
 
 
 def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
@@ -151,12 +179,19 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         pv = paper.get(sc.get("paper_ref", ""), {}) or {}
         K = sc["K"]
         row: dict[str, Any] = {
-            "scenario": sc["name"], "description": sc.get("description", ""),
-            "model": sc["model"], "omega": " ".join(f"{k}={v}" for k, v in sc["omega"].items()),
-            "x0": str(sc["x0"]), "prior": str(r.get("prior", sc.get("prior", ""))),
-            "T": sc["T"], "K": K, "method": sc["method"], "stan_init": sc["stan_init"],
+            "scenario": sc["name"],
+            "description": sc.get("description", ""),
+            "model": sc["model"],
+            "omega": " ".join(f"{k}={v}" for k, v in sc["omega"].items()),
+            "x0": str(sc["x0"]),
+            "prior": str(r.get("prior", sc.get("prior", ""))),
+            "T": sc["T"],
+            "K": K,
+            "method": sc["method"],
+            "stan_init": sc["stan_init"],
             "K_max": joint.get("K_max", math.nan) if sc["joint_map"] else math.nan,
-            "K_max_paper": _num(pv.get("K_max")), "K_paper": _num(pv.get("K")),
+            "K_max_paper": _num(pv.get("K_max")),
+            "K_paper": _num(pv.get("K")),
             "K_stan": marg.get("n_stan", math.nan) if sc["stan"] else math.nan,
             "K_stan_paper": _num(pv.get("K_stan")),
         }
@@ -183,7 +218,8 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
             row[f"exact_{kind}"] = exact.get(f"n_{kind}", math.nan) if exact else math.nan
         row["exact_unique_frac"] = (row["exact_unique"] / row["K_exact"]) if exact else math.nan
         row["exact_unique_frac_lo95"], row["exact_unique_frac_hi95"] = clopper_pearson(
-            row["exact_unique"], row["K_exact"])
+            row["exact_unique"], row["K_exact"]
+        )
         row["K_exact_used"] = exact.get("n_exact", math.nan) if exact else math.nan
         ex = exact or {}
         for c in comps:
@@ -211,23 +247,29 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         K, K_paper = sc["K"], _num(pv.get("K"))
         k_max = joint.get("K_max", math.nan) if sc["joint_map"] else math.nan
         k_stan = marg.get("n_stan", math.nan) if sc["stan"] else math.nan
-        out.append({
-            "scenario": sc["name"], "T": sc["T"], "K": K,
-            "K^max/K (95 % CI)": format_fraction(k_max, K),
-            "paper K^max/K": format_fraction(_num(pv.get("K_max")), K_paper),
-            "K^Stan/K (95 % CI)": format_fraction(k_stan, K),
-            "paper K^Stan/K": format_fraction(_num(pv.get("K_stan")), K_paper),
-            "marginal MAP mean": _per_component(marg, comps, "mean"),
-            "Cover90": _per_component(marg, comps, "cover90"),
-        })
+        out.append(
+            {
+                "scenario": sc["name"],
+                "T": sc["T"],
+                "K": K,
+                "K^max/K (95 % CI)": format_fraction(k_max, K),
+                "paper K^max/K": format_fraction(_num(pv.get("K_max")), K_paper),
+                "K^Stan/K (95 % CI)": format_fraction(k_stan, K),
+                "paper K^Stan/K": format_fraction(_num(pv.get("K_stan")), K_paper),
+                "marginal MAP mean": _per_component(marg, comps, "mean"),
+                "Cover90": _per_component(marg, comps, "cover90"),
+            }
+        )
     return pd.DataFrame(out)
 
 
 def _per_component(summary: Mapping, comps: Sequence[str], stat: str) -> str:
     """``"a 0.897, x0 8.05"``: ``<c>_<stat>`` of every component c that has a value."""
-    cells = [f"{c} {summary[f'{c}_{stat}']:.3g}" for c in comps
-             if summary.get(f"{c}_{stat}") is not None
-             and math.isfinite(float(summary[f"{c}_{stat}"]))]
+    cells = [
+        f"{c} {summary[f'{c}_{stat}']:.3g}"
+        for c in comps
+        if summary.get(f"{c}_{stat}") is not None and math.isfinite(float(summary[f"{c}_{stat}"]))
+    ]
     return ", ".join(cells)
 
 
@@ -236,8 +278,20 @@ def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
     """Chosen K per k_selection entry, method, set variant and seed, with (c1, c2), the grid
     and the paper's K."""
     frame = pd.DataFrame(list(rows))
-    cols = ["name", "scenario", "method", "sets", "seed", "c1", "c2", "K_chosen", "K_grid",
-            "K_paper", "K_paper_range", "c_paper"]
+    cols = [
+        "name",
+        "scenario",
+        "method",
+        "sets",
+        "seed",
+        "c1",
+        "c2",
+        "K_chosen",
+        "K_grid",
+        "K_paper",
+        "K_paper_range",
+        "c_paper",
+    ]
     for c in cols:
         if c not in frame.columns:
             frame[c] = np.nan

@@ -37,23 +37,34 @@ class Trajectories:
         return self.x.shape[1]
 
 
-def make_trajectories(scenario: Scenario, matrix: np.ndarray,
-                      provenance: dict | None = None) -> Trajectories:
+def make_trajectories(
+    scenario: Scenario, matrix: np.ndarray, provenance: dict | None = None
+) -> Trajectories:
     """Turn a (q x K) disturbance matrix into the scenario's design trajectories (Sec. III.A)."""
     model = scenario.model
     x, z = model.design_trajectories(scenario.omega, scenario.x0, matrix, scenario.T)
     attrs = {
-        "scenario": scenario.name, "model": model.slug, "T": scenario.T,
-        "K": int(matrix.shape[1]), "method": scenario.method, "seed": scenario.seed,
+        "scenario": scenario.name,
+        "model": model.slug,
+        "T": scenario.T,
+        "K": int(matrix.shape[1]),
+        "method": scenario.method,
+        "seed": scenario.seed,
         "omega": json.dumps(dict(zip(model.param_names, scenario.omega.tolist()))),
         "x0": json.dumps(scenario.x0.tolist()),
         "prior": json.dumps(scenario.prior_config),
     }
     if provenance:
-        attrs.update({f"disturbances_{k}": v for k, v in provenance.items()
-                      if isinstance(v, (int, float, str))})
-    return Trajectories(model=model, omega=np.array(scenario.omega), x0=np.array(scenario.x0),
-                        x=x, z=z, attrs=attrs)
+        attrs.update(
+            {
+                f"disturbances_{k}": v
+                for k, v in provenance.items()
+                if isinstance(v, (int, float, str))
+            }
+        )
+    return Trajectories(
+        model=model, omega=np.array(scenario.omega), x0=np.array(scenario.x0), x=x, z=z, attrs=attrs
+    )
 
 
 def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:
@@ -63,8 +74,12 @@ def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:
     d = traj.z.shape[2]
     ds = xr.Dataset(
         {"x": (("k", "t", "state"), traj.x), "z": (("k", "t", "obs"), traj.z)},
-        coords={"k": np.arange(K), "t": np.arange(1, T + 1), "state": np.arange(p),
-                "obs": np.arange(d)},
+        coords={
+            "k": np.arange(K),
+            "t": np.arange(1, T + 1),
+            "state": np.arange(p),
+            "obs": np.arange(d),
+        },
         attrs={**traj.attrs, "checksum": io.array_checksum(traj.x, traj.z)},
     )
     io.write_netcdf(path, ds)

@@ -5,9 +5,9 @@ A model is one module ``workflow/ssmobs/models/<slug>.py`` that defines exactly 
 one Stan program ``stan/<slug>.stan`` (see ``docs/your-own-model.md``).  Every such module
 is imported at the first lookup in :data:`MODELS` and checked by
 :func:`definition_problems`; a module that breaks the contract stops the lookup with one
-:class:`ModelDefinitionError`
-naming the file and what is wrong, at the first lookup (before any work is done).  Modules whose name starts
-with ``_`` and the package's own modules (``base``, ``log_posterior``) are not models.
+:class:`ModelDefinitionError` naming the file and what is wrong, at the first lookup
+(before any work is done).  Modules whose name starts with ``_`` and the package's own
+modules (``base``, ``log_posterior``) are not models.
 """
 
 from __future__ import annotations
@@ -30,8 +30,15 @@ MODELS_DIR = Path(__file__).resolve().parent
 INTERNAL_MODULES: frozenset[str] = frozenset({"base", "log_posterior"})
 
 #: class attributes every model sets (see :class:`StateSpaceModel`)
-REQUIRED_ATTRIBUTES: tuple[str, ...] = ("slug", "title", "obs_dim", "state_dim", "param_names",
-                                        "default_prior", "allowed_priors")
+REQUIRED_ATTRIBUTES: tuple[str, ...] = (
+    "slug",
+    "title",
+    "obs_dim",
+    "state_dim",
+    "param_names",
+    "default_prior",
+    "allowed_priors",
+)
 
 #: methods every model implements
 REQUIRED_METHODS: tuple[str, ...] = ("obs_term", "trans_term", "simulate")
@@ -54,16 +61,20 @@ def definition_problems(cls: type, expected_slug: str) -> list[str]:
     missing = [a for a in REQUIRED_ATTRIBUTES if not hasattr(cls, a)]
     if missing:
         problems.append(f"missing required class attribute(s) {missing}")
-    not_implemented = [m for m in REQUIRED_METHODS
-                       if getattr(cls, m, None) is getattr(StateSpaceModel, m)]
+    not_implemented = [
+        m for m in REQUIRED_METHODS if getattr(cls, m, None) is getattr(StateSpaceModel, m)
+    ]
     if not_implemented:
-        problems.append(f"missing required method(s) {not_implemented} (see "
-                        f"ssmobs.models.base.StateSpaceModel)")
+        problems.append(
+            f"missing required method(s) {not_implemented} (see ssmobs.models.base.StateSpaceModel)"
+        )
     if missing:
         return problems
     if cls.slug != expected_slug:
-        problems.append(f"slug = {cls.slug!r} but the file is {expected_slug}.py; a model's slug "
-                        f"is its file name (set slug = {expected_slug!r})")
+        problems.append(
+            f"slug = {cls.slug!r} but the file is {expected_slug}.py; a model's slug "
+            f"is its file name (set slug = {expected_slug!r})"
+        )
     for dim in ("obs_dim", "state_dim"):
         value = getattr(cls, dim)
         if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -72,29 +83,42 @@ def definition_problems(cls: type, expected_slug: str) -> list[str]:
     if not isinstance(names, tuple) or not names or not all(isinstance(n, str) for n in names):
         problems.append(f"param_names = {names!r} must be a non-empty tuple of strings")
         return problems
-    bad = [n for n in names if not _IDENTIFIER.match(n) or keyword.iskeyword(n)
-           or n in RESERVED_NAMES or n.endswith(("_lower", "_upper"))]
+    bad = [
+        n
+        for n in names
+        if not _IDENTIFIER.match(n)
+        or keyword.iskeyword(n)
+        or n in RESERVED_NAMES
+        or n.endswith(("_lower", "_upper"))
+    ]
     if bad:
-        problems.append(f"param_names {list(bad)} are not allowed: use identifiers (letters, "
-                        f"digits, _) other than {sorted(RESERVED_NAMES)} and not ending in "
-                        f"_lower/_upper")
+        problems.append(
+            f"param_names {list(bad)} are not allowed: use identifiers (letters, "
+            f"digits, _) other than {sorted(RESERVED_NAMES)} and not ending in "
+            f"_lower/_upper"
+        )
     if len(set(names)) != len(names):
         problems.append(f"param_names = {names!r} lists a name twice")
     for attr in ("default_prior", "allowed_priors"):
         mapping = getattr(cls, attr)
         if not isinstance(mapping, dict) or set(mapping) != set(names):
             keys = sorted(mapping) if isinstance(mapping, dict) else mapping
-            problems.append(f"{attr} must have exactly one entry per parameter {list(names)}, "
-                            f"got {keys!r}")
+            problems.append(
+                f"{attr} must have exactly one entry per parameter {list(names)}, got {keys!r}"
+            )
             return problems
     for name in names:
         default, allowed = cls.default_prior[name], cls.allowed_priors[name]
         if isinstance(allowed, str) or not all(v in PRIOR_VARIANTS for v in allowed):
-            problems.append(f"allowed_priors[{name!r}] = {allowed!r} must be a tuple of "
-                            f"variants from {list(PRIOR_VARIANTS)}")
+            problems.append(
+                f"allowed_priors[{name!r}] = {allowed!r} must be a tuple of "
+                f"variants from {list(PRIOR_VARIANTS)}"
+            )
         elif default not in allowed:
-            problems.append(f"default_prior[{name!r}] = {default!r} is not in "
-                            f"allowed_priors[{name!r}] = {allowed!r}")
+            problems.append(
+                f"default_prior[{name!r}] = {default!r} is not in "
+                f"allowed_priors[{name!r}] = {allowed!r}"
+            )
     for attr in ("unit_interval_params", "positive_params"):
         unknown = [n for n in getattr(cls, attr) if n not in names]
         if unknown:
@@ -104,8 +128,11 @@ def definition_problems(cls: type, expected_slug: str) -> list[str]:
 
 def model_files(directory: Path = MODELS_DIR) -> list[Path]:
     """The model modules of ``directory``: ``*.py`` except ``_*`` and the package's own."""
-    return sorted(p for p in Path(directory).glob("*.py")
-                  if not p.stem.startswith("_") and p.stem not in INTERNAL_MODULES)
+    return sorted(
+        p
+        for p in Path(directory).glob("*.py")
+        if not p.stem.startswith("_") and p.stem not in INTERNAL_MODULES
+    )
 
 
 def _import(path: Path, directory: Path) -> ModuleType:
@@ -119,14 +146,20 @@ def _import(path: Path, directory: Path) -> ModuleType:
 
 
 def _model_class(path: Path, module: ModuleType) -> type:
-    classes = [obj for obj in vars(module).values()
-               if inspect.isclass(obj) and issubclass(obj, StateSpaceModel)
-               and obj is not StateSpaceModel and obj.__module__ == module.__name__]
+    classes = [
+        obj
+        for obj in vars(module).values()
+        if inspect.isclass(obj)
+        and issubclass(obj, StateSpaceModel)
+        and obj is not StateSpaceModel
+        and obj.__module__ == module.__name__
+    ]
     if len(classes) != 1:
         found = [c.__name__ for c in classes]
         raise ModelDefinitionError(
             f"model module {path}: must define exactly one subclass of "
-            f"ssmobs.models.base.StateSpaceModel, found {found or 'none'}")
+            f"ssmobs.models.base.StateSpaceModel, found {found or 'none'}"
+        )
     return classes[0]
 
 
@@ -153,8 +186,10 @@ def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
     for slug, owners in by_slug.items():
         if len(owners) > 1:
             where = " and ".join(f"{p.name} ({c.__name__})" for p, c in owners)
-            problems.append(f"slug {slug!r} is used twice: by {where}; each model needs its own "
-                            f"slug, equal to its file name")
+            problems.append(
+                f"slug {slug!r} is used twice: by {where}; each model needs its own "
+                f"slug, equal to its file name"
+            )
     for path, cls in found:
         if len(by_slug[getattr(cls, "slug", path.stem)]) > 1:
             continue
@@ -195,10 +230,19 @@ def get_model(slug: str) -> StateSpaceModel:
     try:
         return MODELS[slug]
     except KeyError:
-        raise ValueError(f"unknown model '{slug}'; known models: {sorted(MODELS)} (a model "
-                         f"'{slug}' would be the module workflow/ssmobs/models/{slug}.py)"
-                         ) from None
+        raise ValueError(
+            f"unknown model '{slug}'; known models: {sorted(MODELS)} (a model "
+            f"'{slug}' would be the module workflow/ssmobs/models/{slug}.py)"
+        ) from None
 
 
-__all__ = ["MODELS", "PRIOR_VARIANTS", "ModelDefinitionError", "PriorBounds", "StateSpaceModel",
-           "definition_problems", "discover_models", "get_model"]
+__all__ = [
+    "MODELS",
+    "PRIOR_VARIANTS",
+    "ModelDefinitionError",
+    "PriorBounds",
+    "StateSpaceModel",
+    "definition_problems",
+    "discover_models",
+    "get_model",
+]

@@ -23,8 +23,9 @@ Hessian in Theta for a whole batch of trajectories from them.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Mapping, Sequence
+from typing import ClassVar
 
 import numpy as np
 import sympy as sp
@@ -96,13 +97,15 @@ class StateSpaceModel:
     linear_in_states: ClassVar[bool] = False
 
     # ----------------------------------------------------------------- symbolic terms
-    def obs_term(self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol],
-                 z: Sequence[sp.Symbol]) -> sp.Expr:
+    def obs_term(
+        self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol], z: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         """-2 log f_z(z_t | x_t, Omega), up to an additive constant."""
         raise NotImplementedError
 
-    def trans_term(self, omega: Sequence[sp.Symbol], x_prev: Sequence[sp.Symbol],
-                   x: Sequence[sp.Symbol]) -> sp.Expr:
+    def trans_term(
+        self, omega: Sequence[sp.Symbol], x_prev: Sequence[sp.Symbol], x: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         """-2 log p_x(x_t | x_{t-1}, Omega), up to an additive constant."""
         raise NotImplementedError
 
@@ -110,8 +113,9 @@ class StateSpaceModel:
         """Expressions c(Omega) that must be > 0 besides the prior box (e.g. 1 - a^2 - b^2)."""
         return []
 
-    def state_space_matrices(self, omega: np.ndarray
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def state_space_matrices(
+        self, omega: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Linear-Gaussian form for models with :attr:`linear_in_states`, batched over Omega.
 
         ``omega`` (..., m) gives F (..., p, p), state-noise variances Q (..., p), H (..., d, p)
@@ -122,8 +126,9 @@ class StateSpaceModel:
         raise NotImplementedError(f"model '{self.slug}' is not linear-Gaussian in the states")
 
     # ----------------------------------------------------------------- simulation
-    def simulate(self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray,
-                 eps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def simulate(
+        self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray, eps: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """States and observations for disturbances (Eq. (1); Sec. III.A).
 
         Parameters
@@ -159,17 +164,21 @@ class StateSpaceModel:
         if self.obs_dim != self.state_dim:
             raise NotImplementedError(
                 f"model '{self.slug}' has d={self.obs_dim} != p={self.state_dim} and must "
-                f"override initial_states")
+                f"override initial_states"
+            )
         return z.copy()
 
     #: True where :meth:`sign_consistent_states` is defined
     has_sign_consistent_start: bool = False
 
-    def sign_consistent_states(self, omega: np.ndarray, x0: np.ndarray,
-                               z: np.ndarray) -> np.ndarray:
+    def sign_consistent_states(
+        self, omega: np.ndarray, x0: np.ndarray, z: np.ndarray
+    ) -> np.ndarray:
         """Alternative start of the states whose signs agree with x0 (see the models)."""
-        raise NotImplementedError(f"model '{self.slug}' defines no sign-consistent start; "
-                                  f"use joint_map_start: observations")
+        raise NotImplementedError(
+            f"model '{self.slug}' defines no sign-consistent start; "
+            f"use joint_map_start: observations"
+        )
 
     # ----------------------------------------------------------------- derived facts
     @property
@@ -190,8 +199,11 @@ class StateSpaceModel:
                 names.extend(f"x{t}_{i + 1}" for i in range(self.state_dim))
         return names
 
-    def prior_bounds(self, omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
-                     prior: str | Mapping[str, str] | None = None) -> PriorBounds:
+    def prior_bounds(
+        self,
+        omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
+        prior: str | Mapping[str, str] | None = None,
+    ) -> PriorBounds:
         """Bounds of the flat prior on Omega for the given variants (Eq. (3), Eq. (14)).
 
         ``prior`` is one variant for all parameters, a mapping parameter -> variant
@@ -212,7 +224,8 @@ class StateSpaceModel:
                 raise ValueError(
                     f"prior '{variant}' for parameter '{name}' of model '{self.slug}' takes its "
                     f"sign from the true value, which is 0; use a non-zero true value or "
-                    f"prior 'unrestricted'")
+                    f"prior 'unrestricted'"
+                )
             if variant == "restricted":
                 lower[i], upper[i] = (0.0, 1.0) if value > 0 else (-1.0, 0.0)
             else:  # half_line
@@ -230,7 +243,8 @@ class StateSpaceModel:
             if unknown:
                 raise ValueError(
                     f"prior names parameter(s) {unknown} that model '{self.slug}' does not "
-                    f"have; its parameters are {list(self.param_names)}")
+                    f"have; its parameters are {list(self.param_names)}"
+                )
             chosen = {**self.default_prior, **prior}
         out = []
         for name in self.param_names:
@@ -238,17 +252,22 @@ class StateSpaceModel:
             if variant not in PRIOR_VARIANTS:
                 raise ValueError(
                     f"unknown prior variant '{variant}' for parameter '{name}'; "
-                    f"allowed: {list(PRIOR_VARIANTS)}")
+                    f"allowed: {list(PRIOR_VARIANTS)}"
+                )
             if variant not in self.allowed_priors[name]:
                 raise ValueError(
                     f"prior variant '{variant}' is not allowed for parameter '{name}' of model "
-                    f"'{self.slug}'; allowed: {list(self.allowed_priors[name])}")
+                    f"'{self.slug}'; allowed: {list(self.allowed_priors[name])}"
+                )
             out.append(variant)
         return out
 
-    def check_true_values(self, omega_true: Mapping[str, float] | Sequence[float],
-                          x0_true: Sequence[float] | float,
-                          prior: str | Mapping[str, str] | None = None) -> list[str]:
+    def check_true_values(
+        self,
+        omega_true: Mapping[str, float] | Sequence[float],
+        x0_true: Sequence[float] | float,
+        prior: str | Mapping[str, str] | None = None,
+    ) -> list[str]:
         """Problems with true values (empty list when valid): each names key, value and range."""
         problems: list[str] = []
         try:
@@ -257,27 +276,33 @@ class StateSpaceModel:
             return [str(err)]
         x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
         if x0.shape != (self.state_dim,):
-            problems.append(f"x0 must have {self.state_dim} component(s) for model "
-                            f"'{self.slug}', got {x0.tolist()}")
+            problems.append(
+                f"x0 must have {self.state_dim} component(s) for model "
+                f"'{self.slug}', got {x0.tolist()}"
+            )
         if not np.all(np.isfinite(omega)) or not np.all(np.isfinite(x0)):
             problems.append("true values must be finite numbers")
             return problems
         for i, name in enumerate(self.param_names):
             if name in self.unit_interval_params and not abs(omega[i]) < 1:
-                problems.append(f"true value {name}={omega[i]} must satisfy |{name}| < 1 "
-                                f"in model '{self.slug}'")
+                problems.append(
+                    f"true value {name}={omega[i]} must satisfy |{name}| < 1 in model '{self.slug}'"
+                )
             if name in self.positive_params and not omega[i] > 0:
-                problems.append(f"true value {name}={omega[i]} must be > 0 in model "
-                                f"'{self.slug}'")
+                problems.append(f"true value {name}={omega[i]} must be > 0 in model '{self.slug}'")
         syms = sp.symbols(" ".join(f"w{i}" for i in range(self.n_params)), seq=True)
         for i, expr in enumerate(self.support_constraints(list(syms))):
             val = float(expr.subs(dict(zip(syms, omega))))
             if not val > 0:
-                text = (self.constraint_text[i] if i < len(self.constraint_text) else
-                        sp.sstr(expr.subs(dict(zip(syms, sp.symbols(self.param_names))))) + " > 0")
+                text = (
+                    self.constraint_text[i]
+                    if i < len(self.constraint_text)
+                    else sp.sstr(expr.subs(dict(zip(syms, sp.symbols(self.param_names))))) + " > 0"
+                )
                 problems.append(
                     f"true values {dict(zip(self.param_names, omega.tolist()))} violate the "
-                    f"constraint {text} of model '{self.slug}'")
+                    f"constraint {text} of model '{self.slug}'"
+                )
         if problems:
             return problems
         try:
@@ -288,7 +313,8 @@ class StateSpaceModel:
             if not bounds.lower[i] < omega[i] < bounds.upper[i]:
                 problems.append(
                     f"true value {name}={omega[i]} lies outside the support "
-                    f"({bounds.lower[i]}, {bounds.upper[i]}) of its prior '{bounds.variants[i]}'")
+                    f"({bounds.lower[i]}, {bounds.upper[i]}) of its prior '{bounds.variants[i]}'"
+                )
         return problems
 
     def omega_array(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
@@ -305,12 +331,15 @@ class StateSpaceModel:
             if missing or extra:
                 raise ValueError(
                     f"model '{self.slug}' needs true values for exactly {list(self.param_names)}; "
-                    f"missing {missing}, unknown {extra}")
+                    f"missing {missing}, unknown {extra}"
+                )
             return np.array([float(omega[n]) for n in self.param_names])
         arr = np.asarray(omega, dtype=float).reshape(-1)
         if arr.shape != (self.n_params,):
-            raise ValueError(f"model '{self.slug}' has {self.n_params} parameters "
-                             f"{list(self.param_names)}, got {arr.tolist()}")
+            raise ValueError(
+                f"model '{self.slug}' has {self.n_params} parameters "
+                f"{list(self.param_names)}, got {arr.tolist()}"
+            )
         return arr
 
     # ----------------------------------------------------------------- disturbances
@@ -324,16 +353,22 @@ class StateSpaceModel:
         p, d = self.state_dim, self.obs_dim
         matrix = np.asarray(matrix, dtype=float)
         if matrix.ndim != 2 or matrix.shape[0] != (p + d) * T:
-            raise ValueError(f"disturbance matrix for model '{self.slug}' with T={T} must have "
-                             f"(d+p)T = {(p + d) * T} rows, got shape {matrix.shape}")
+            raise ValueError(
+                f"disturbance matrix for model '{self.slug}' with T={T} must have "
+                f"(d+p)T = {(p + d) * T} rows, got shape {matrix.shape}"
+            )
         K = matrix.shape[1]
         eta = matrix[: p * T].T.reshape(K, T, p)
-        eps = matrix[p * T:].T.reshape(K, T, d)
+        eps = matrix[p * T :].T.reshape(K, T, d)
         return eta, eps
 
-    def design_trajectories(self, omega: Mapping[str, float] | Sequence[float] | np.ndarray,
-                            x0: Sequence[float] | float | np.ndarray, matrix: np.ndarray,
-                            T: int) -> tuple[np.ndarray, np.ndarray]:
+    def design_trajectories(
+        self,
+        omega: Mapping[str, float] | Sequence[float] | np.ndarray,
+        x0: Sequence[float] | float | np.ndarray,
+        matrix: np.ndarray,
+        T: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Design states and observations x~(k), z~(k) for every column k (Sec. III.A)."""
         eta, eps = self.split_disturbances(matrix, T)
         omega_v = self.omega_array(omega)

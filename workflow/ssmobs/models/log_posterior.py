@@ -15,9 +15,9 @@ the joint-MAP barrier method (Sec. III.B) never steps there.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Callable
+from functools import cache, lru_cache
 
 import numpy as np
 import scipy.sparse as sps
@@ -60,7 +60,7 @@ class ModelConstraints:
     _derivatives: Callable | None
 
     @classmethod
-    def compile(cls, w: list[sp.Symbol], cons: list[sp.Expr]) -> "ModelConstraints":
+    def compile(cls, w: list[sp.Symbol], cons: list[sp.Expr]) -> ModelConstraints:
         """Lambdify the expressions ``cons`` (in the symbols ``w``) and their derivatives."""
         if not cons:
             return cls(n_params=len(w), count=0, _values=None, _derivatives=None)
@@ -68,9 +68,12 @@ class ModelConstraints:
         for c in cons:
             derivs.extend(sp.diff(c, v) for v in w)
             derivs.extend(sp.diff(c, v, u) for v in w for u in w)
-        return cls(n_params=len(w), count=len(cons),
-                   _values=sp.lambdify(w, cons, modules="numpy"),
-                   _derivatives=sp.lambdify(w, derivs, modules="numpy", cse=True))
+        return cls(
+            n_params=len(w),
+            count=len(cons),
+            _values=sp.lambdify(w, cons, modules="numpy"),
+            _derivatives=sp.lambdify(w, derivs, modules="numpy", cse=True),
+        )
 
     def values(self, omega: np.ndarray) -> np.ndarray:
         """(..., n_c) c(Omega) for Omega (..., m)."""
@@ -99,7 +102,7 @@ class ModelConstraints:
         raw = [np.broadcast_to(np.asarray(v, dtype=float), (K,)) for v in raw]
         per = m + m * m
         for j in range(self.count):
-            chunk = raw[j * per:(j + 1) * per]
+            chunk = raw[j * per : (j + 1) * per]
             grads[:, j] = np.stack(chunk[:m], axis=1)
             hess[:, j] = np.stack(chunk[m:], axis=1).reshape(K, m, m)
         return grads, hess
@@ -115,7 +118,7 @@ class CompiledModel:
     constraints: ModelConstraints
 
 
-@lru_cache(maxsize=None)
+@cache
 def compile_model(model: StateSpaceModel) -> CompiledModel:
     """Differentiate the model's per-step terms and constraints symbolically (cached per model)."""
     m, p, d = model.n_params, model.state_dim, model.obs_dim
@@ -125,8 +128,12 @@ def compile_model(model: StateSpaceModel) -> CompiledModel:
     z = list(sp.symbols(f"z0:{d}", real=True))
     obs = _compile(w + x + z, m + p, model.obs_term(w, x, z))
     trans = _compile(w + xp + x, m + 2 * p, model.trans_term(w, xp, x))
-    return CompiledModel(model=model, obs=obs, trans=trans,
-                         constraints=ModelConstraints.compile(w, model.support_constraints(w)))
+    return CompiledModel(
+        model=model,
+        obs=obs,
+        trans=trans,
+        constraints=ModelConstraints.compile(w, model.support_constraints(w)),
+    )
 
 
 def _evaluate(term: _Term, arrays: list[np.ndarray], shape: tuple[int, ...]) -> list[np.ndarray]:
@@ -151,7 +158,9 @@ def _scatter(m: int, p: int, T: int) -> tuple[sps.csr_matrix, sps.csr_matrix]:
     for t in range(1, T + 1):
         blocks.append(np.concatenate([om, m + t * p + np.arange(p)]))
     for t in range(1, T + 1):
-        blocks.append(np.concatenate([om, m + (t - 1) * p + np.arange(p), m + t * p + np.arange(p)]))
+        blocks.append(
+            np.concatenate([om, m + (t - 1) * p + np.arange(p), m + t * p + np.arange(p)])
+        )
     for idx in blocks:
         L = idx.size
         rows_g.append(offset_g + np.arange(L))
@@ -161,10 +170,13 @@ def _scatter(m: int, p: int, T: int) -> tuple[sps.csr_matrix, sps.csr_matrix]:
         cols_h.append((ii * n + jj).reshape(-1))
         offset_g += L
         offset_h += L * L
-    G = sps.csr_matrix((np.ones(offset_g), (np.concatenate(rows_g), np.concatenate(cols_g))),
-                       shape=(offset_g, n))
-    H = sps.csr_matrix((np.ones(offset_h), (np.concatenate(rows_h), np.concatenate(cols_h))),
-                       shape=(offset_h, n * n))
+    G = sps.csr_matrix(
+        (np.ones(offset_g), (np.concatenate(rows_g), np.concatenate(cols_g))), shape=(offset_g, n)
+    )
+    H = sps.csr_matrix(
+        (np.ones(offset_h), (np.concatenate(rows_h), np.concatenate(cols_h))),
+        shape=(offset_h, n * n),
+    )
     return G, H
 
 
@@ -192,9 +204,13 @@ def in_support(model: StateSpaceModel, omega: np.ndarray, bounds: PriorBounds) -
     return bounds.contains(omega) & compile_model(model).constraints.satisfied(omega)
 
 
-def neg2_log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
-                       bounds: PriorBounds | None = None, order: int = 0
-                       ) -> tuple[np.ndarray, ...]:
+def neg2_log_posterior(
+    model: StateSpaceModel,
+    theta: np.ndarray,
+    z: np.ndarray,
+    bounds: PriorBounds | None = None,
+    order: int = 0,
+) -> tuple[np.ndarray, ...]:
     """-2 pi(Theta | z) up to a constant, with derivatives up to ``order`` (0, 1 or 2).
 
     Parameters
@@ -226,7 +242,7 @@ def neg2_log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
         raise ValueError(f"z must have {model.obs_dim} column(s) per step, got {d}")
     cm = compile_model(model)
     omega, states = split_theta(theta, model, T)
-    om_cols = [omega[:, i:i + 1] for i in range(m)]
+    om_cols = [omega[:, i : i + 1] for i in range(m)]
     shape = (K, T)
     obs_args = om_cols + [states[:, 1:, i] for i in range(p)] + [z[:, :, i] for i in range(d)]
     tr_args = om_cols + [states[:, :-1, i] for i in range(p)] + [states[:, 1:, i] for i in range(p)]
@@ -239,12 +255,17 @@ def neg2_log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
     if order >= 1:
         G, H = _scatter(m, p, T)
         Lo, Lt = cm.obs.n_local, cm.trans.n_local
-        gl = np.concatenate([np.stack(obs[1:1 + Lo], axis=2).reshape(K, -1),
-                             np.stack(tr[1:1 + Lt], axis=2).reshape(K, -1)], axis=1)
+        gl = np.concatenate(
+            [
+                np.stack(obs[1 : 1 + Lo], axis=2).reshape(K, -1),
+                np.stack(tr[1 : 1 + Lt], axis=2).reshape(K, -1),
+            ],
+            axis=1,
+        )
         out.append(np.asarray((G.T @ gl.T).T))
     if order >= 2:
-        ho = _full_from_triu(obs[1 + Lo:], cm.obs).reshape(K, -1)
-        ht = _full_from_triu(tr[1 + Lt:], cm.trans).reshape(K, -1)
+        ho = _full_from_triu(obs[1 + Lo :], cm.obs).reshape(K, -1)
+        ht = _full_from_triu(tr[1 + Lt :], cm.trans).reshape(K, -1)
         hl = np.concatenate([ho, ht], axis=1)
         out.append(np.asarray((H.T @ hl.T).T).reshape(K, n, n))
     if single:
@@ -252,8 +273,9 @@ def neg2_log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
     return tuple(out)
 
 
-def log_posterior(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray,
-                  bounds: PriorBounds | None = None) -> np.ndarray:
+def log_posterior(
+    model: StateSpaceModel, theta: np.ndarray, z: np.ndarray, bounds: PriorBounds | None = None
+) -> np.ndarray:
     """pi(Theta | z) of Eq. (2) up to an additive constant (-inf outside the support)."""
     (v,) = neg2_log_posterior(model, theta, z, bounds, order=0)
     return -0.5 * v
@@ -286,8 +308,9 @@ class BlockHessian:
         return arrow_to_dense(self.omega, self.cross, self.diag, self.lower)
 
 
-def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.ndarray
-                              ) -> tuple[np.ndarray, np.ndarray, BlockHessian]:
+def neg2_log_posterior_blocks(
+    model: StateSpaceModel, theta: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, BlockHessian]:
     """Value, gradient and block-structured Hessian of -2 pi (smooth formula, no bounds).
 
     Same per-step symbolic derivatives as :func:`neg2_log_posterior`, but the Hessian is
@@ -306,22 +329,29 @@ def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.n
         raise ValueError(f"theta must have shape ({K}, {n}) for T={T}, got {theta.shape}")
     cm = compile_model(model)
     omega, states = split_theta(theta, model, T)
-    om_cols = [omega[:, i:i + 1] for i in range(m)]
+    om_cols = [omega[:, i : i + 1] for i in range(m)]
     shape = (K, T)
-    obs = _evaluate(cm.obs, om_cols + [states[:, 1:, i] for i in range(p)]
-                    + [z[:, :, i] for i in range(d)], shape)
-    tr = _evaluate(cm.trans, om_cols + [states[:, :-1, i] for i in range(p)]
-                   + [states[:, 1:, i] for i in range(p)], shape)
+    obs = _evaluate(
+        cm.obs,
+        om_cols + [states[:, 1:, i] for i in range(p)] + [z[:, :, i] for i in range(d)],
+        shape,
+    )
+    tr = _evaluate(
+        cm.trans,
+        om_cols + [states[:, :-1, i] for i in range(p)] + [states[:, 1:, i] for i in range(p)],
+        shape,
+    )
     Lo, Lt = cm.obs.n_local, cm.trans.n_local
     value = obs[0].sum(axis=1) + tr[0].sum(axis=1)
 
-    go = np.stack(obs[1:1 + Lo], axis=2)          # (K, T, m + p)
-    gt = np.stack(tr[1:1 + Lt], axis=2)           # (K, T, m + 2p)
+    go = np.stack(obs[1 : 1 + Lo], axis=2)  # (K, T, m + p)
+    gt = np.stack(tr[1 : 1 + Lt], axis=2)  # (K, T, m + 2p)
     grad_states = np.zeros((K, T + 1, p))
-    grad_states[:, 1:] += go[:, :, m:] + gt[:, :, m + p:]
-    grad_states[:, :-1] += gt[:, :, m:m + p]
-    grad = np.concatenate([go[:, :, :m].sum(axis=1) + gt[:, :, :m].sum(axis=1),
-                           grad_states.reshape(K, -1)], axis=1)
+    grad_states[:, 1:] += go[:, :, m:] + gt[:, :, m + p :]
+    grad_states[:, :-1] += gt[:, :, m : m + p]
+    grad = np.concatenate(
+        [go[:, :, :m].sum(axis=1) + gt[:, :, :m].sum(axis=1), grad_states.reshape(K, -1)], axis=1
+    )
 
     h_omega = np.zeros((K, m, m))
     cross = np.zeros((K, T + 1, p, m))
@@ -332,7 +362,10 @@ def neg2_log_posterior_blocks(model: StateSpaceModel, theta: np.ndarray, z: np.n
     obs_roles = [None] * m + [(0, c) for c in range(p)]
     tr_roles = [None] * m + [(-1, c) for c in range(p)] + [(0, c) for c in range(p)]
     steps = {0: slice(1, None), -1: slice(None, -1)}
-    for vals, term, roles in ((obs[1 + Lo:], cm.obs, obs_roles), (tr[1 + Lt:], cm.trans, tr_roles)):
+    for vals, term, roles in (
+        (obs[1 + Lo :], cm.obs, obs_roles),
+        (tr[1 + Lt :], cm.trans, tr_roles),
+    ):
         for v, i, j in zip(vals, *term.triu):
             ri, rj = roles[i], roles[j]
             if ri is None and rj is None:

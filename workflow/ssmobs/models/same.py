@@ -1,6 +1,6 @@
 """Model (Same, d=p=1): same dynamics for observations and states (Sec. IV, model 1; Eq. (5)).
 
-    Z_t = a X_t + sqrt(1 - a^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
+Z_t = a X_t + sqrt(1 - a^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Model (Sep, d=p=1): separate dynamics for observations and states (Sec. IV, model 2).
 
-    Z_t = b X_t + sqrt(1 - b^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
+Z_t = b X_t + sqrt(1 - b^2) eps_t,   X_t = a X_{t-1} + sqrt(1 - a^2) eta_t.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Model (Sep, d=1, p=2): one observation of two independent AR(1) states (Sec. IV, model 4).
 
     Z_t = a X_{t,1} + b X_{t,2} + sqrt(1 - a^2 - b^2) eps_t,
-    X_{t,1} = c X_{t-1,1} + sqrt(1 - c^2) eta_{t,1},   X_{t,2} = d X_{t-1,2} + sqrt(1 - d^2) eta_{t,2}.
+    X_{t,1} = c X_{t-1,1} + sqrt(1 - c^2) eta_{t,1},
+    X_{t,2} = d X_{t-1,2} + sqrt(1 - d^2) eta_{t,2}.
 
 The paper gives no true values for this model; the configs choose a^2 + b^2 < 1.
 """
@@ -37,8 +38,12 @@ class SepD1P2(StateSpaceModel):
 
     def trans_term(self, omega, x_prev, x):
         (_, _, c, d), (p1, p2), (x1, x2) = omega, x_prev, x
-        return ((x1 - c * p1) ** 2 / (1 - c**2) + sp.log(1 - c**2)
-                + (x2 - d * p2) ** 2 / (1 - d**2) + sp.log(1 - d**2))
+        return (
+            (x1 - c * p1) ** 2 / (1 - c**2)
+            + sp.log(1 - c**2)
+            + (x2 - d * p2) ** 2 / (1 - d**2)
+            + sp.log(1 - d**2)
+        )
 
     def initial_states(self, omega, z):
         """Start of x_1..x_T for the joint MAP (Sec. III.B) when d = 1 < p = 2.

@@ -1,7 +1,7 @@
 """Model (Sep, d=2, p=1): bivariate observations driven by one state (Sec. IV, model 3).
 
-    Z_{t,1} = a X_t + sqrt(1 - a^2) eps_{t,1},   Z_{t,2} = b X_t + sqrt(1 - b^2) eps_{t,2},
-    X_t = c X_{t-1} + sqrt(1 - c^2) eta_t.
+Z_{t,1} = a X_t + sqrt(1 - a^2) eps_{t,1},   Z_{t,2} = b X_t + sqrt(1 - b^2) eps_{t,2},
+X_t = c X_{t-1} + sqrt(1 - c^2) eta_t.
 """
 
 from __future__ import annotations
@@ -25,8 +25,12 @@ class SepD2P1(StateSpaceModel):
 
     def obs_term(self, omega, x, z):
         (a, b, _), (xt,), (z1, z2) = omega, x, z
-        return ((z1 - a * xt) ** 2 / (1 - a**2) + sp.log(1 - a**2)
-                + (z2 - b * xt) ** 2 / (1 - b**2) + sp.log(1 - b**2))
+        return (
+            (z1 - a * xt) ** 2 / (1 - a**2)
+            + sp.log(1 - a**2)
+            + (z2 - b * xt) ** 2 / (1 - b**2)
+            + sp.log(1 - b**2)
+        )
 
     def trans_term(self, omega, x_prev, x):
         (_, _, c), (xp,), (xt,) = omega, x_prev, x
@@ -53,6 +57,8 @@ class SepD2P1(StateSpaceModel):
     def simulate(self, omega, x0, eta, eps):
         a, b, c = omega
         x = ar1_states(c, x0, eta)
-        z = np.concatenate([a * x + np.sqrt(1 - a**2) * eps[:, :, :1],
-                            b * x + np.sqrt(1 - b**2) * eps[:, :, 1:]], axis=2)
+        z = np.concatenate(
+            [a * x + np.sqrt(1 - a**2) * eps[:, :, :1], b * x + np.sqrt(1 - b**2) * eps[:, :, 1:]],
+            axis=2,
+        )
         return x, z

@@ -1,6 +1,6 @@
 """Model (Sep, d=p=1, ranWalk): random-walk states (Sec. IV, model 5; Eq. (8), (13)).
 
-    Z_t = a X_t + eps_t,   X_t = X_{t-1} + eta_t.
+Z_t = a X_t + eps_t,   X_t = X_{t-1} + eta_t.
 """
 
 from __future__ import annotations

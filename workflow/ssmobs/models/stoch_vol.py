@@ -30,8 +30,7 @@ class StochVol(StateSpaceModel):
     state_dim = 1
     param_names = ("phi", "sigma")
     default_prior = {"phi": "restricted", "sigma": "half_line"}
-    allowed_priors = {"phi": ("restricted", "unrestricted"),
-                      "sigma": ("half_line", "restricted")}
+    allowed_priors = {"phi": ("restricted", "unrestricted"), "sigma": ("half_line", "restricted")}
     unit_interval_params = ("phi",)
     positive_params = ("sigma",)
 

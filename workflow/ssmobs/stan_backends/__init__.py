@@ -16,8 +16,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from .base import BackendError, Draws, SamplerSettings, SamplingError, StanBackend
 
@@ -28,8 +28,15 @@ BACKEND_NAMES: tuple[str, ...] = ("auto", "native", "cmdstanpy", "pystan")
 STAN_DIR = Path(__file__).resolve().parents[3] / "stan"
 
 #: the sampler columns every backend returns in ``Draws.sample_stats``
-SAMPLER_COLUMNS: tuple[str, ...] = ("lp__", "accept_stat__", "stepsize__", "treedepth__",
-                                    "n_leapfrog__", "divergent__", "energy__")
+SAMPLER_COLUMNS: tuple[str, ...] = (
+    "lp__",
+    "accept_stat__",
+    "stepsize__",
+    "treedepth__",
+    "n_leapfrog__",
+    "divergent__",
+    "energy__",
+)
 
 LOG = logging.getLogger("ssmobs.stan")
 
@@ -60,8 +67,9 @@ def resolve_backend(name: str = "auto") -> str:
     Unknown names raise ValueError.
     """
     if name not in BACKEND_NAMES:
-        raise ValueError(f"stan.backend: unknown value {name!r}; choose one of "
-                         f"{list(BACKEND_NAMES)}")
+        raise ValueError(
+            f"stan.backend: unknown value {name!r}; choose one of {list(BACKEND_NAMES)}"
+        )
     if name == "auto":
         return "cmdstanpy" if have_cmdstan() else "native"
     return name
@@ -80,14 +88,18 @@ def get_backend(name: str = "auto") -> StanBackend:
     if name == "cmdstanpy":
         if not have_cmdstan():
             cmdstan_env = os.environ.get("CMDSTAN")
-            where = (f"$CMDSTAN={cmdstan_env!r} is not a CmdStan installation with bin/stanc"
-                     if cmdstan_env else "$CMDSTAN is unset and ~/.cmdstan has no cmdstan-*")
+            where = (
+                f"$CMDSTAN={cmdstan_env!r} is not a CmdStan installation with bin/stanc"
+                if cmdstan_env
+                else "$CMDSTAN is unset and ~/.cmdstan has no cmdstan-*"
+            )
             raise ValueError(
                 f"stan.backend: 'cmdstanpy' needs a CmdStan installation, but none was found "
                 f"({where}). Install CmdStan with `python -m cmdstanpy.install_cmdstan` (needs "
                 f"network access to GitHub and a C++ toolchain) or point $CMDSTAN at an "
                 f"existing installation; or set stan.backend to 'native' (embedded, no CmdStan "
-                f"needed) or 'auto' (cmdstanpy when CmdStan is there, else native).")
+                f"needed) or 'auto' (cmdstanpy when CmdStan is there, else native)."
+            )
         from .cmdstanpy import CmdStanPyBackend
 
         return CmdStanPyBackend()
@@ -101,8 +113,9 @@ def stan_file(slug: str) -> Path:
     path = STAN_DIR / f"{slug}.stan"
     if "/" in slug or "\\" in slug or not path.is_file():
         known = sorted(p.stem for p in STAN_DIR.glob("*.stan"))
-        raise FileNotFoundError(f"no Stan program for model {slug!r} at {path}; "
-                                f"programs in {STAN_DIR}: {known}")
+        raise FileNotFoundError(
+            f"no Stan program for model {slug!r} at {path}; programs in {STAN_DIR}: {known}"
+        )
     return path
 
 
@@ -153,6 +166,17 @@ def log_captured(label: str, text: str, limit: int = 20000) -> None:
         LOG.debug("%s output:\n%s", label, text)
 
 
-__all__ = ["BACKEND_NAMES", "BackendError", "Draws", "SAMPLER_COLUMNS", "STAN_DIR", "SamplerSettings",
-           "SamplingError", "StanBackend", "get_backend", "have_cmdstan", "resolve_backend",
-           "stan_file"]
+__all__ = [
+    "BACKEND_NAMES",
+    "BackendError",
+    "Draws",
+    "SAMPLER_COLUMNS",
+    "STAN_DIR",
+    "SamplerSettings",
+    "SamplingError",
+    "StanBackend",
+    "get_backend",
+    "have_cmdstan",
+    "resolve_backend",
+    "stan_file",
+]

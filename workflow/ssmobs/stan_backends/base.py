@@ -6,23 +6,24 @@ Both backends compile the same ``stan/<model>.stan`` program, take the same data
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Protocol
-
+from typing import Any, Protocol
 
 import numpy as np
 
 
 @dataclass(frozen=True)
 class SamplerSettings:
-    """NUTS settings; defaults are the paper's (Sec. IV): 4 chains, 10 000 iterations, 4 000 warmup."""
+    """NUTS settings; the defaults are the paper's (Sec. IV): 4 chains, 10 000 iterations,
+    4 000 of them warmup."""
 
     chains: int = 4
     iter_warmup: int = 4000
     iter_sampling: int = 6000
     adapt_delta: float = 0.8
     max_treedepth: int = 10
-    #: parallel chain processes used by one sampling call (PyStan pool size / cmdstanpy parallel_chains)
+    #: parallel chain processes of one sampling call (PyStan pool, cmdstanpy parallel_chains)
     workers: int = 1
 
 
@@ -55,8 +56,9 @@ def check_sample_args(seed: int, settings: SamplerSettings, inits: list[dict] | 
     if not 0 <= int(seed) < 2**32:
         raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     if inits is not None and len(inits) != settings.chains:
-        raise ValueError(f"inits must have one dict per chain ({settings.chains}), "
-                         f"got {len(inits)}")
+        raise ValueError(
+            f"inits must have one dict per chain ({settings.chains}), got {len(inits)}"
+        )
     if settings.workers < 1:
         raise ValueError(f"settings.workers must be >= 1, got {settings.workers}")
 
@@ -84,8 +86,15 @@ class StanBackend(Protocol):
         Stan version (part of every record's key)."""
 
     def compile(self, stan_file: str) -> dict[str, Any]:
-        """Compile (or find compiled) program; return a JSON-able marker (backend, program hash, paths)."""
+        """Compile (or find compiled) the program; return a JSON-able marker (backend,
+        program hash, paths)."""
 
-    def sample(self, stan_file: str, data: Mapping[str, Any], seed: int,
-               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+    def sample(
+        self,
+        stan_file: str,
+        data: Mapping[str, Any],
+        seed: int,
+        settings: SamplerSettings,
+        inits: list[dict] | None = None,
+    ) -> Draws:
         """Run NUTS; raise SamplingError with the reason when no draws can be had."""

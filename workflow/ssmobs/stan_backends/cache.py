@@ -65,11 +65,14 @@ def sweep_stale(directory: Path, prefix: str, max_age_s: float = STALE_AGE_S) ->
         return 0
     now = time.time()
     for cand in candidates:
-        rest = cand.name[len(prefix):]
+        rest = cand.name[len(prefix) :]
         pid_text = rest.split("-", 1)[0]
         try:
-            stale = (not _pid_alive(int(pid_text))) if pid_text.isdigit() else (
-                now - cand.stat().st_mtime > max_age_s)
+            stale = (
+                (not _pid_alive(int(pid_text)))
+                if pid_text.isdigit()
+                else (now - cand.stat().st_mtime > max_age_s)
+            )
         except OSError:
             continue
         if not stale:

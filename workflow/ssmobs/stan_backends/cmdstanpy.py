@@ -34,13 +34,14 @@ import re
 import shutil
 import tempfile
 import time
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from . import SAMPLER_COLUMNS, quiet_loggers
 from ..io import file_lock
+from . import SAMPLER_COLUMNS, quiet_loggers
 from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
 from .cache import cache_root, content_key, owned_tempdir_name, sweep_stale, tail
 
@@ -50,8 +51,11 @@ LOG = logging.getLogger("ssmobs.stan")
 SIG_FIGS = 18
 TMP_PREFIX = "ssmobs-cmdstan-"
 #: CmdStan console text that means the sampler failed on these data (not the installation)
-SAMPLER_FAILURE = re.compile(r"Initialization failed|Rejecting initial value|"
-                             r"Exception:|Error evaluating the log probability", re.I)
+SAMPLER_FAILURE = re.compile(
+    r"Initialization failed|Rejecting initial value|"
+    r"Exception:|Error evaluating the log probability",
+    re.I,
+)
 
 
 def cmdstan_identity(path: str | os.PathLike) -> dict[str, str]:
@@ -59,8 +63,7 @@ def cmdstan_identity(path: str | os.PathLike) -> dict[str, str]:
     root = Path(path)
     version = "unknown"
     try:
-        found = re.search(r"^CMDSTAN_VERSION\s*:?=\s*(\S+)", (root / "makefile").read_text(),
-                          re.M)
+        found = re.search(r"^CMDSTAN_VERSION\s*:?=\s*(\S+)", (root / "makefile").read_text(), re.M)
         version = found.group(1) if found else version
     except OSError:
         pass
@@ -68,8 +71,11 @@ def cmdstan_identity(path: str | os.PathLike) -> dict[str, str]:
         local = (root / "make" / "local").read_text()
     except OSError:
         local = ""
-    return {"cmdstan_path": str(root.resolve()), "cmdstan_version": version,
-            "make_local": hashlib.sha256(local.encode()).hexdigest()[:16]}
+    return {
+        "cmdstan_path": str(root.resolve()),
+        "cmdstan_version": version,
+        "make_local": hashlib.sha256(local.encode()).hexdigest()[:16],
+    }
 
 
 def _console_tail(directory: Path) -> str:
@@ -116,8 +122,9 @@ class CmdStanPyBackend:
 
     name = "cmdstanpy"
 
-    def __init__(self, tmp_root: str | os.PathLike | None = None,
-                 sig_figs: int | None = SIG_FIGS) -> None:
+    def __init__(
+        self, tmp_root: str | os.PathLike | None = None, sig_figs: int | None = SIG_FIGS
+    ) -> None:
         self.tmp_root = str(tmp_root or tempfile.gettempdir())
         self.sig_figs = sig_figs
         self._markers: dict[tuple[str, str], dict[str, Any]] = {}
@@ -153,8 +160,9 @@ class CmdStanPyBackend:
         if not exe.is_file():
             with file_lock(cache_dir / ".lock"):
                 if not exe.is_file():
-                    LOG.info("compiling %s with CmdStan %s in %s", path.name, version_tag,
-                             cache_dir)
+                    LOG.info(
+                        "compiling %s with CmdStan %s in %s", path.name, version_tag, cache_dir
+                    )
                     t0 = time.perf_counter()
                     copy.write_text(code)
                     try:
@@ -181,8 +189,14 @@ class CmdStanPyBackend:
         self._markers[key] = marker
         return marker
 
-    def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
-               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+    def sample(
+        self,
+        stan_file: str | os.PathLike,
+        data: Mapping[str, Any],
+        seed: int,
+        settings: SamplerSettings,
+        inits: list[dict] | None = None,
+    ) -> Draws:
         """Run NUTS and return the post-warmup draws (same contract as the PyStan backend).
 
         ``timings``: ``sample`` is the ``CmdStanModel.sample`` call (CmdStan run and CSV
@@ -208,14 +222,20 @@ class CmdStanPyBackend:
                 t0 = time.perf_counter()
                 try:
                     fit = model.sample(
-                        data=str(data_file), chains=settings.chains,
-                        parallel_chains=settings.workers, seed=int(seed), inits=init_arg,
+                        data=str(data_file),
+                        chains=settings.chains,
+                        parallel_chains=settings.workers,
+                        seed=int(seed),
+                        inits=init_arg,
                         iter_warmup=settings.iter_warmup,
                         iter_sampling=settings.iter_sampling,
                         adapt_delta=settings.adapt_delta,
                         max_treedepth=settings.max_treedepth,
-                        output_dir=str(tmp / "output"), sig_figs=self.sig_figs,
-                        show_progress=False, show_console=False)
+                        output_dir=str(tmp / "output"),
+                        sig_figs=self.sig_figs,
+                        show_progress=False,
+                        show_console=False,
+                    )
                 except RuntimeError as err:
                     console = _console_tail(tmp / "output")
                     # cmdstanpy's message lists files that are deleted below: keep only its
@@ -231,6 +251,9 @@ class CmdStanPyBackend:
             t_convert = time.perf_counter() - t0
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        draws.timings = {"sample": t_sample, "convert": t_convert,
-                         "total": time.perf_counter() - t_start}
+        draws.timings = {
+            "sample": t_sample,
+            "convert": t_convert,
+            "total": time.perf_counter() - t_start,
+        }
         return draws

@@ -36,14 +36,15 @@ import shutil
 import subprocess
 import tempfile
 import time
+from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from . import SAMPLER_COLUMNS, log_captured
 from ..io import file_lock, json_default
+from . import SAMPLER_COLUMNS, log_captured
 from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
 from .cache import cache_root, content_key, owned_tempdir_name, sweep_stale, tail
 
@@ -52,11 +53,21 @@ LOG = logging.getLogger("ssmobs.stan")
 #: the driver's C++ source
 DRIVER_SOURCE = Path(__file__).resolve().parent / "native_driver" / "driver.cpp"
 #: preprocessor definitions httpstan builds its models with (same numerics as PyStan)
-DEFINES: tuple[str, ...] = ("BOOST_DISABLE_ASSERTS", "BOOST_PHOENIX_NO_VARIADIC_EXPRESSION",
-                            "STAN_THREADS", "_REENTRANT", "_GLIBCXX_USE_CXX11_ABI=0")
+DEFINES: tuple[str, ...] = (
+    "BOOST_DISABLE_ASSERTS",
+    "BOOST_PHOENIX_NO_VARIADIC_EXPRESSION",
+    "STAN_THREADS",
+    "_REENTRANT",
+    "_GLIBCXX_USE_CXX11_ABI=0",
+)
 #: compiler flags (optimisation as httpstan's; C++17 for the driver)
-CXXFLAGS: tuple[str, ...] = ("-O3", "-std=c++17", "-Wno-sign-compare",
-                             "-Wno-ignored-attributes", "-Wno-deprecated-declarations")
+CXXFLAGS: tuple[str, ...] = (
+    "-O3",
+    "-std=c++17",
+    "-Wno-sign-compare",
+    "-Wno-ignored-attributes",
+    "-Wno-deprecated-declarations",
+)
 #: binary draws file: magic bytes, then uint32 header length
 MAGIC = b"SSMOBSD1"
 #: driver exit codes (see driver.cpp)
@@ -70,8 +81,10 @@ def httpstan_dir() -> Path:
     try:
         import httpstan
     except ImportError as err:  # pragma: no cover - httpstan is a dependency
-        raise BackendError("the native backend needs the httpstan wheel (pip install "
-                           "httpstan): it ships stanc, the Stan sources and TBB") from err
+        raise BackendError(
+            "the native backend needs the httpstan wheel (pip install "
+            "httpstan): it ships stanc, the Stan sources and TBB"
+        ) from err
     return Path(httpstan.__file__).resolve().parent
 
 
@@ -104,10 +117,13 @@ def compiler_version() -> str:
 
 def build_key(code: str) -> dict[str, str]:
     """Everything that determines the executable (its hash names the cache directory)."""
-    return {"program": content_key({"code": code}),
-            "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
-            "stan": stan_version(), "compiler": compiler_version(),
-            "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES))}
+    return {
+        "program": content_key({"code": code}),
+        "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
+        "stan": stan_version(),
+        "compiler": compiler_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
+    }
 
 
 def read_draws_file(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
@@ -116,13 +132,14 @@ def read_draws_file(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
     if raw[:8] != MAGIC or len(raw) < 12:
         raise BackendError(f"{path}: not a draws file of the native driver")
     n = int.from_bytes(raw[8:12], "little")
-    header = dict(line.split("=", 1) for line in raw[12:12 + n].decode().splitlines() if line)
+    header = dict(line.split("=", 1) for line in raw[12 : 12 + n].decode().splitlines() if line)
     chains, draws = int(header["chains"]), int(header["draws"])
     columns = header["columns"].split(",")
     values = np.frombuffer(raw, dtype="<f8", offset=12 + n)
     if values.size != chains * draws * len(columns):
-        raise BackendError(f"{path}: {values.size} values, expected "
-                           f"{chains} x {draws} x {len(columns)}")
+        raise BackendError(
+            f"{path}: {values.size} values, expected {chains} x {draws} x {len(columns)}"
+        )
     return columns, values.reshape(chains, draws, len(columns))
 
 
@@ -162,8 +179,7 @@ class NativeBackend:
 
     name = "native"
 
-    def __init__(self, tmp_root: str | os.PathLike | None = None,
-                 discard: bool = False) -> None:
+    def __init__(self, tmp_root: str | os.PathLike | None = None, discard: bool = False) -> None:
         self.tmp_root = Path(tmp_root or tempfile.gettempdir())
         self.discard = discard
         self._markers: dict[tuple[str, str], dict[str, Any]] = {}
@@ -193,10 +209,15 @@ class NativeBackend:
             with file_lock(cache_dir.parent / f".{cache_dir.name}.lock"):
                 if not exe.is_file():
                     self._build(path, code, cache_dir, parts)
-        marker = {"backend": self.name, "stan_file": str(path),
-                  "program_sha256": parts["program"], "stan_version": parts["stan"],
-                  "compiler": parts["compiler"], "cache_dir": str(cache_dir),
-                  "exe_file": str(exe)}
+        marker = {
+            "backend": self.name,
+            "stan_file": str(path),
+            "program_sha256": parts["program"],
+            "stan_version": parts["stan"],
+            "compiler": parts["compiler"],
+            "cache_dir": str(cache_dir),
+            "exe_file": str(exe),
+        }
         self._markers[memo] = marker
         return marker
 
@@ -204,40 +225,67 @@ class NativeBackend:
     def _build(path: Path, code: str, cache_dir: Path, parts: dict[str, str]) -> None:
         """stanc + g++ into a temporary sibling directory, renamed to ``cache_dir``."""
         sweep_stale(cache_dir.parent, f".{cache_dir.name}.tmp-")
-        work = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(f".{cache_dir.name}.tmp-"),
-                                     dir=cache_dir.parent))
+        work = Path(
+            tempfile.mkdtemp(
+                prefix=owned_tempdir_name(f".{cache_dir.name}.tmp-"), dir=cache_dir.parent
+            )
+        )
         try:
             t0 = time.perf_counter()
-            LOG.info("compiling %s with the native backend (%s) into %s", path.name,
-                     parts["stan"], cache_dir)
+            LOG.info(
+                "compiling %s with the native backend (%s) into %s",
+                path.name,
+                parts["stan"],
+                cache_dir,
+            )
             hdir = httpstan_dir()
             model_name = re.sub(r"\W", "_", path.stem) + "_model"
             (work / "program.stan").write_text(code)
             stanc = subprocess.run(
-                [str(hdir / "stanc"), "--name", model_name, "--o", str(work / "model.hpp"),
-                 str(work / "program.stan")], capture_output=True, text=True)
+                [
+                    str(hdir / "stanc"),
+                    "--name",
+                    model_name,
+                    "--o",
+                    str(work / "model.hpp"),
+                    str(work / "program.stan"),
+                ],
+                capture_output=True,
+                text=True,
+            )
             if stanc.returncode != 0:
-                msg = (stanc.stderr or stanc.stdout).replace(str(work / "program.stan"),
-                                                             str(path))
+                msg = (stanc.stderr or stanc.stdout).replace(str(work / "program.stan"), str(path))
                 raise RuntimeError(f"stanc rejected {path}:\n{msg.strip()}")
             log_captured(f"stanc warnings for {path.name}", stanc.stderr)
-            cmd = [compiler(), *CXXFLAGS, *("-D" + d for d in DEFINES),
-                   f"-DSSMOBS_MODEL_HPP=\"{work / 'model.hpp'}\"",
-                   f"-I{hdir / 'include'}", "-o", str(work / "driver"), str(DRIVER_SOURCE),
-                   f"-L{hdir / 'lib'}", "-ltbb", f"-Wl,-rpath,{hdir / 'lib'}"]
+            cmd = [
+                compiler(),
+                *CXXFLAGS,
+                *("-D" + d for d in DEFINES),
+                f'-DSSMOBS_MODEL_HPP="{work / "model.hpp"}"',
+                f"-I{hdir / 'include'}",
+                "-o",
+                str(work / "driver"),
+                str(DRIVER_SOURCE),
+                f"-L{hdir / 'lib'}",
+                "-ltbb",
+                f"-Wl,-rpath,{hdir / 'lib'}",
+            ]
             try:
                 cxx = subprocess.run(cmd, capture_output=True, text=True)
             except OSError as err:
-                raise RuntimeError(f"compiling {path} failed: cannot run the C++ compiler "
-                                   f"{compiler()!r}: {err}") from err
+                raise RuntimeError(
+                    f"compiling {path} failed: cannot run the C++ compiler {compiler()!r}: {err}"
+                ) from err
             if cxx.returncode != 0:
                 errors = [ln for ln in cxx.stderr.splitlines() if "error" in ln]
-                raise RuntimeError(f"compiling {path} failed ({compiler()} exit "
-                                   f"{cxx.returncode}):\n" + "\n".join(errors[:20] or
-                                                                       [tail(cxx.stderr)]))
+                raise RuntimeError(
+                    f"compiling {path} failed ({compiler()} exit "
+                    f"{cxx.returncode}):\n" + "\n".join(errors[:20] or [tail(cxx.stderr)])
+                )
             log_captured(f"compiler for {path.name}", cxx.stderr)
-            (work / "build.json").write_text(json.dumps(
-                {**parts, "stan_file": str(path), "command": cmd}, indent=1))
+            (work / "build.json").write_text(
+                json.dumps({**parts, "stan_file": str(path), "command": cmd}, indent=1)
+            )
             (work / "program.stan").unlink()
             if cache_dir.exists():  # an incomplete directory without the executable
                 shutil.rmtree(cache_dir)
@@ -247,8 +295,14 @@ class NativeBackend:
             shutil.rmtree(work, ignore_errors=True)
 
     # ------------------------------------------------------------------ sample
-    def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
-               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+    def sample(
+        self,
+        stan_file: str | os.PathLike,
+        data: Mapping[str, Any],
+        seed: int,
+        settings: SamplerSettings,
+        inits: list[dict] | None = None,
+    ) -> Draws:
         """Run NUTS and return the post-warmup draws (the contract of the other backends).
 
         ``settings.workers`` chains run at once (threads of one process).  ``timings``:
@@ -262,17 +316,29 @@ class NativeBackend:
         if not self._swept:
             sweep_stale(self.tmp_root, TMP_PREFIX)
             self._swept = True
-        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX),
-                                    dir=self.tmp_root))
+        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
         try:
             data_file = tmp / "data.json"
             data_file.write_text(json.dumps(dict(data), default=json_default))
-            cmd = [marker["exe_file"], "--data", str(data_file), "--seed", str(int(seed)),
-                   "--chains", str(settings.chains), "--warmup", str(settings.iter_warmup),
-                   "--samples", str(settings.iter_sampling),
-                   "--delta", repr(float(settings.adapt_delta)),
-                   "--max-depth", str(settings.max_treedepth),
-                   "--threads", str(min(settings.workers, settings.chains))]
+            cmd = [
+                marker["exe_file"],
+                "--data",
+                str(data_file),
+                "--seed",
+                str(int(seed)),
+                "--chains",
+                str(settings.chains),
+                "--warmup",
+                str(settings.iter_warmup),
+                "--samples",
+                str(settings.iter_sampling),
+                "--delta",
+                repr(float(settings.adapt_delta)),
+                "--max-depth",
+                str(settings.max_treedepth),
+                "--threads",
+                str(min(settings.workers, settings.chains)),
+            ]
             for c, init in enumerate(inits or []):
                 init_file = tmp / f"init{c + 1}.json"
                 init_file.write_text(json.dumps(dict(init), default=json_default))
@@ -284,32 +350,48 @@ class NativeBackend:
             try:
                 proc = subprocess.run(cmd, capture_output=True, text=True)
             except OSError as err:
-                raise BackendError(f"{label}: cannot start the native driver "
-                                   f"{marker['exe_file']}: {err}") from err
+                raise BackendError(
+                    f"{label}: cannot start the native driver {marker['exe_file']}: {err}"
+                ) from err
             t_sample = time.perf_counter() - t0
             after = os.times()
-            cpu = (after.children_user - before.children_user
-                   + after.children_system - before.children_system)
+            cpu = (
+                after.children_user
+                - before.children_user
+                + after.children_system
+                - before.children_system
+            )
             log_captured(f"native driver {label} (seed {seed})", proc.stderr)
             if proc.returncode == EXIT_SAMPLER_FAILED:
                 raise SamplingError(f"{label} (seed {seed}): {tail(proc.stderr, 5)}")
             if proc.returncode == EXIT_DATA_REJECTED:
                 raise ValueError(f"{label}: data rejected: {tail(proc.stderr, 5)}")
             if proc.returncode != 0:
-                why = (f"killed by signal {-proc.returncode}" if proc.returncode < 0
-                       else f"exit code {proc.returncode}")
-                raise BackendError(f"{label}: the native driver {marker['exe_file']} "
-                                   f"failed ({why}):\n{tail(proc.stderr)}")
+                why = (
+                    f"killed by signal {-proc.returncode}"
+                    if proc.returncode < 0
+                    else f"exit code {proc.returncode}"
+                )
+                raise BackendError(
+                    f"{label}: the native driver {marker['exe_file']} "
+                    f"failed ({why}):\n{tail(proc.stderr)}"
+                )
             t0 = time.perf_counter()
             if self.discard:
-                draws = Draws(params={}, sample_stats={
-                    c: np.empty((settings.chains, 0)) for c in SAMPLER_COLUMNS})
+                draws = Draws(
+                    params={},
+                    sample_stats={c: np.empty((settings.chains, 0)) for c in SAMPLER_COLUMNS},
+                )
             else:
                 draws = columns_to_draws(*read_draws_file(out_file))
             t_convert = time.perf_counter() - t0
         finally:
             with contextlib.suppress(OSError):
                 shutil.rmtree(tmp)
-        draws.timings = {"sample": t_sample, "sample_cpu": cpu, "convert": t_convert,
-                         "total": time.perf_counter() - t_start}
+        draws.timings = {
+            "sample": t_sample,
+            "sample_cpu": cpu,
+            "convert": t_convert,
+            "total": time.perf_counter() - t_start,
+        }
         return draws

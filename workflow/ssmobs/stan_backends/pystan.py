@@ -24,10 +24,11 @@ Sampling
     through :meth:`PyStanBackend.session`.
 
     Programs are built with httpstan's own functions, not through its HTTP server, whose
-    client (PyStan's) gives up after 300 s.  httpstan gives ``stanc`` one second (``subprocess.run(..., timeout=1)`` in
-    ``httpstan.compile``); on a loaded machine its start-up alone can take longer and the
-    build fails with ``TimeoutExpired``.  :func:`_patient_stanc` gives it
-    :data:`STANC_TIMEOUT` seconds instead, for httpstan's module only.
+    client (PyStan's) gives up after 300 s.  httpstan gives ``stanc`` one second
+    (``subprocess.run(..., timeout=1)`` in ``httpstan.compile``); on a loaded machine its
+    start-up alone can take longer and the build fails with ``TimeoutExpired``.
+    :func:`_patient_stanc` gives it :data:`STANC_TIMEOUT` seconds instead, for httpstan's
+    module only.
 
     The chains run in a process pool of ``settings.workers`` processes made for the call
     (``httpstan.services_stub.executor`` is replaced and restored; there is no public
@@ -55,15 +56,16 @@ import shutil
 import tempfile
 import threading
 import time
+from collections.abc import Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from importlib.machinery import EXTENSION_SUFFIXES
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
-from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
 from ..io import file_lock
+from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
 from .base import Draws, SamplerSettings, SamplingError, check_sample_args
 
 LOG = logging.getLogger("ssmobs.stan")
@@ -114,8 +116,9 @@ def _build_complete(directory: Path) -> bool:
         names = [p for p in directory.iterdir()]
     except FileNotFoundError:
         return False
-    return (any(p.suffix in EXTENSION_SUFFIXES for p in names)
-            and any(p.name == "stderr.log" for p in names))
+    return any(p.suffix in EXTENSION_SUFFIXES for p in names) and any(
+        p.name == "stderr.log" for p in names
+    )
 
 
 @contextlib.contextmanager
@@ -254,8 +257,9 @@ def _chain_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
     import httpstan.services_stub as ss
 
     old = ss.executor
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"),
-                               initializer=ss.init_worker)
+    pool = ProcessPoolExecutor(
+        max_workers=workers, mp_context=mp.get_context("fork"), initializer=ss.init_worker
+    )
     ss.executor = pool
     ok = False
     try:
@@ -270,8 +274,9 @@ def _chain_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _to_chain_draw(arr: np.ndarray, shape: tuple[int, ...], n_draws: int,
-                   n_chains: int) -> np.ndarray:
+def _to_chain_draw(
+    arr: np.ndarray, shape: tuple[int, ...], n_draws: int, n_chains: int
+) -> np.ndarray:
     """PyStan's ``fit[name]`` (shape + (draws*chains,), chain fastest) -> (chain, draw, *shape)."""
     arr = np.asarray(arr).reshape(shape + (n_draws, n_chains))
     return np.ascontiguousarray(np.moveaxis(arr, (-1, -2), (0, 1)))
@@ -335,6 +340,7 @@ class PyStanBackend:
         import httpstan
         import httpstan.cache
         import httpstan.models
+
         import stan
 
         _patient_stanc()
@@ -354,12 +360,10 @@ class PyStanBackend:
                     if not _build_complete(model_dir):  # another process may have built it
                         # a killed build's leftovers would be taken for a finished one
                         shutil.rmtree(model_dir, ignore_errors=True)
-                        LOG.info("compiling %s into %s (about a minute)", path.name,
-                                 model_dir)
+                        LOG.info("compiling %s into %s (about a minute)", path.name, model_dir)
                         t0 = time.perf_counter()
                         self._build_program(code, path)
-                        LOG.info("compiled %s in %.1f s", path.name,
-                                 time.perf_counter() - t0)
+                        LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
         marker = {
             "backend": self.name,
             "stan_file": str(path),
@@ -389,18 +393,21 @@ class PyStanBackend:
         out = io.StringIO()
         # stderr stays the real one: httpstan then sends the compiler's messages (which
         # g++ writes to file descriptor 2) to a file instead, and returns them
-        with contextlib.redirect_stdout(out), \
-                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+        with (
+            contextlib.redirect_stdout(out),
+            quiet_loggers(forward=("httpstan",), mute=("aiohttp",)),
+        ):
             try:
                 _, stanc_warnings = httpstan.compile.compile(
-                    code, f"model_{model_name.split('/')[1]}")
+                    code, f"model_{model_name.split('/')[1]}"
+                )
             except ValueError as err:  # stanc's syntax or semantic error
                 raise RuntimeError(f"compiling {path} failed: {err}") from err
             httpstan.cache.dump_stanc_warnings(stanc_warnings, model_name)
-            compiler_output = asyncio.run(
-                httpstan.models.build_services_extension_module(code))
-            httpstan.cache.dump_services_extension_module_compiler_output(compiler_output,
-                                                                          model_name)
+            compiler_output = asyncio.run(httpstan.models.build_services_extension_module(code))
+            httpstan.cache.dump_services_extension_module_compiler_output(
+                compiler_output, model_name
+            )
         log_captured(f"httpstan build {path.name}", out.getvalue())
         log_captured(f"stanc warnings for {path.name}", stanc_warnings or "")
         log_captured(f"compiler for {path.name}", compiler_output or "")
@@ -408,10 +415,13 @@ class PyStanBackend:
     # ------------------------------------------------------------------ sessions
     @contextlib.contextmanager
     def _session(self, marker: Mapping[str, Any]) -> Iterator[Path]:
-        with _CALL_LOCK, \
-                private_cache(self.tmp_root).active(Path(marker["cache_dir"]),
-                                                    marker["model_name"]) as model_dir, \
-                quiet_loggers(forward=("httpstan",), mute=("aiohttp",)):
+        with (
+            _CALL_LOCK,
+            private_cache(self.tmp_root).active(
+                Path(marker["cache_dir"]), marker["model_name"]
+            ) as model_dir,
+            quiet_loggers(forward=("httpstan",), mute=("aiohttp",)),
+        ):
             yield model_dir
 
     @contextlib.contextmanager
@@ -428,8 +438,14 @@ class PyStanBackend:
             yield marker
 
     # ------------------------------------------------------------------ sample
-    def sample(self, stan_file: str | os.PathLike, data: Mapping[str, Any], seed: int,
-               settings: SamplerSettings, inits: list[dict] | None = None) -> Draws:
+    def sample(
+        self,
+        stan_file: str | os.PathLike,
+        data: Mapping[str, Any],
+        seed: int,
+        settings: SamplerSettings,
+        inits: list[dict] | None = None,
+    ) -> Draws:
         """Run NUTS (``hmc_nuts_diag_e_adapt``) and return the post-warmup draws.
 
         ``seed`` is Stan's random seed (0 <= seed < 2**32; chains get ids 1..chains).
@@ -450,9 +466,13 @@ class PyStanBackend:
         marker = self.compile(stan_file)
         code = Path(marker["stan_file"]).read_text()
         kwargs: dict[str, Any] = dict(
-            num_chains=settings.chains, num_warmup=settings.iter_warmup,
-            num_samples=settings.iter_sampling, delta=settings.adapt_delta,
-            max_depth=settings.max_treedepth, refresh=self.refresh)
+            num_chains=settings.chains,
+            num_warmup=settings.iter_warmup,
+            num_samples=settings.iter_sampling,
+            delta=settings.adapt_delta,
+            max_depth=settings.max_treedepth,
+            refresh=self.refresh,
+        )
         if inits is not None:
             kwargs["init"] = [dict(i) for i in inits]
         label = Path(marker["stan_file"]).name
@@ -462,8 +482,7 @@ class PyStanBackend:
                 try:
                     posterior = stan.build(code, data=dict(data), random_seed=int(seed))
                 except (RuntimeError, ValueError) as err:
-                    raise ValueError(f"{label}: data rejected: "
-                                     f"{_failure_reason(err)}") from err
+                    raise ValueError(f"{label}: data rejected: {_failure_reason(err)}") from err
                 if posterior is None:  # pystan swallows KeyboardInterrupt
                     raise KeyboardInterrupt
                 t_build = time.perf_counter() - t0
@@ -472,8 +491,7 @@ class PyStanBackend:
                 try:
                     fit = posterior.sample(**kwargs)
                 except RuntimeError as err:
-                    raise SamplingError(f"{label} (seed {seed}): "
-                                        f"{_failure_reason(err)}") from err
+                    raise SamplingError(f"{label} (seed {seed}): {_failure_reason(err)}") from err
                 if fit is None:
                     raise KeyboardInterrupt
                 t_sample = time.perf_counter() - t0
@@ -481,6 +499,10 @@ class PyStanBackend:
         draws = fit_to_draws(fit, settings.chains, settings.iter_sampling)
         del fit
         t_convert = time.perf_counter() - t0
-        draws.timings = {"build": t_build, "sample": t_sample, "convert": t_convert,
-                         "total": time.perf_counter() - t_start}
+        draws.timings = {
+            "build": t_build,
+            "sample": t_sample,
+            "convert": t_convert,
+            "total": time.perf_counter() - t_start,
+        }
         return draws
