@@ -1,0 +1,41 @@
+"""The README's rule diagram and layout section name what the tree holds."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+README = (REPO / "README.md").read_text()
+
+
+def _section(start: str, end: str) -> str:
+    i = README.index(start)
+    return README[i : README.index(end, i + len(start))]
+
+
+def test_diagram_names_every_rule():
+    diagram = _section("```mermaid", "```\n")
+    rules = set()
+    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+        rules |= set(re.findall(r"^rule (\w+):", smk.read_text(), flags=re.M))
+    rules |= set(re.findall(r"^rule (\w+):", (REPO / "Snakefile").read_text(), flags=re.M))
+    rules.discard("all")
+    drawn = set(re.findall(r"\[(\w+)", diagram))
+    assert rules - drawn == set(), "rules missing from the README's diagram"
+    assert drawn - rules == set(), "the README's diagram draws rules that do not exist"
+
+
+def test_layout_names_every_module_and_rule_file():
+    layout = _section("## Layout", "\n## ")
+    package = REPO / "workflow" / "ssmobs"
+    modules = {p.stem for p in package.glob("*.py")} - {"__init__"}
+    missing = {m for m in modules if not re.search(rf"\b{m}\.py\b", layout)}
+    assert missing == set(), "modules missing from the README's layout section"
+    for pkg in ("models", "stan_backends"):
+        assert f"{pkg}/" in layout
+    named = set(re.findall(r"\b(\w+)\.py\b", layout)) - {"rule"}
+    assert named <= modules | {"base", "log_posterior"}, "layout names modules that do not exist"
+    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+        stem = smk.stem.replace("common", "common.smk")
+        assert stem in layout, f"rule file {smk.name} missing from the layout section"
