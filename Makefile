@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run test smoke paper tables section4 clean
+.PHONY: setup run lint test smoke paper tables section4 clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,7 +26,14 @@ run: setup
 	$(PREFLIGHT) $(CONFIG)
 	$(BIN)/snakemake --cores $(CORES) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
 
-test: setup
+# Style and types (ruff, snakefmt, mypy; settings in pyproject.toml); `make test` runs it first.
+lint: setup
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/snakefmt --check Snakefile workflow/rules
+	$(BIN)/mypy
+
+test: setup lint
 	$(BIN)/pytest
 
 smoke: setup

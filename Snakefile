@@ -48,7 +48,7 @@ include: "workflow/rules/own_model.smk"
 
 
 rule all:
-    default_target: True
     """Every output of the configured scenarios and the paper figures."""
+    default_target: True
     input:
         all_targets(),

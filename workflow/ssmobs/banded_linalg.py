@@ -214,6 +214,7 @@ class ArrowFactor:
 
     def solve_rhs(self) -> np.ndarray:
         """H^{-1} rhs for the ``rhs`` given at construction."""
+        assert self._rhs is not None and self._y_rhs is not None, "no rhs given at construction"
         return self._finish(self._rhs[:, : self.m], self._y_rhs)
 
     def solve(self, b: np.ndarray) -> np.ndarray:

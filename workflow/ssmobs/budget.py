@@ -26,9 +26,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
-from .models import MODELS
+from .models import MODELS, StateSpaceModel
 
 GIB = 2**30
 MIB = 2**20
@@ -77,7 +76,7 @@ def trajectories_bytes(q: int, K: int) -> float:
     return 4 * F8 * q * K
 
 
-def joint_map_bytes(model: Any, T: int, K: int, chunk_size: int = 0) -> float:
+def joint_map_bytes(model: StateSpaceModel, T: int, K: int, chunk_size: int = 0) -> float:
     """Joint MAP of K trajectories: results (K x |Theta|) and one chunk's working set."""
     n = model.n_theta(T)
     q = (model.obs_dim + model.state_dim) * T
@@ -86,7 +85,7 @@ def joint_map_bytes(model: Any, T: int, K: int, chunk_size: int = 0) -> float:
     return 6 * F8 * K * n + JOINT_MAP_PER_THETA * F8 * chunk * n + 2 * F8 * q * K
 
 
-def stan_batch_bytes(model: Any, T: int, K: int, stan: dict) -> float:
+def stan_batch_bytes(model: StateSpaceModel, T: int, K: int, stan: dict) -> float:
     """One Stan batch: the scenario's trajectories and one run's draws (with ArviZ copies)."""
     n = model.n_theta(T)
     q = (model.obs_dim + model.state_dim) * T
@@ -94,14 +93,14 @@ def stan_batch_bytes(model: Any, T: int, K: int, stan: dict) -> float:
     return 2 * F8 * q * K + 4 * draws
 
 
-def gather_bytes(model: Any, T: int, K: int) -> float:
+def gather_bytes(model: StateSpaceModel, T: int, K: int) -> float:
     """gather_nuts: the per-k table (3 |Theta| + 13 columns) read, concatenated and written."""
     n = model.n_theta(T)
     q = (model.obs_dim + model.state_dim) * T
     return 4 * F8 * K * (3 * n + 13) + 2 * F8 * q * K
 
 
-def profile_posterior_bytes(model: Any, T: int, n_grid: int) -> float:
+def profile_posterior_bytes(model: StateSpaceModel, T: int, n_grid: int) -> float:
     """Figure 4: Newton's method over x_1..x_T batched over all n^2 grid points."""
     n = model.n_theta(T)
     return 10 * F8 * n_grid**2 * n

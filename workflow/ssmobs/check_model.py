@@ -199,7 +199,8 @@ def python_problems(
             )
         err_h = np.abs(hess[:, :, j] - fd_h) / (1.0 + np.abs(fd_h))
         if err_h.max() > 1e-4:
-            i, r = np.unravel_index(int(err_h.argmax()), err_h.shape)
+            i_row, r_col = np.unravel_index(int(err_h.argmax()), err_h.shape)
+            i, r = int(i_row), int(r_col)
             problems.append(
                 f"Hessian entry ({names[r]}, {names[j]}) of -2 log posterior is "
                 f"{hess[i, r, j]:.6g}, finite differences give {fd_h[i, r]:.6g}"
@@ -333,7 +334,8 @@ def stan_problems(
     where = f"({case.label()})"
     with PyStanBackend().session(stan_path):
         try:
-            post = stan.build(stan_path.read_text(), data=data)
+            # mypy resolves `stan` to the repository's stan/ folder (pystan has no stubs)
+            post = stan.build(stan_path.read_text(), data=data)  # type: ignore[attr-defined]
         except Exception as err:  # noqa: BLE001 - reported as a problem
             return [
                 f"{stan_path.name}: building the program with the Python model's data "
@@ -439,7 +441,7 @@ def check_model(
     slug: str,
     cases: Sequence[CheckCase] | None = None,
     stan: bool = True,
-    stan_path: Path | None = None,
+    stan_path: str | Path | None = None,
     T: int = 6,
     seed: int | None = None,
 ) -> CheckReport:

@@ -251,9 +251,9 @@ SENSITIVITY_VARIANTS = (
 
 
 def sensitivity_table(
-    tables: Mapping[str, pandas.DataFrame],  # noqa: F821
+    tables: Mapping[str, pandas.DataFrame],
     base: ConvergenceSettings,
-) -> pandas.DataFrame:  # noqa: F821
+) -> pandas.DataFrame:
     """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted.
 
     ``tables`` maps scenario names to their gather_nuts tables; the other thresholds are

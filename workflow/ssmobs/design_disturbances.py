@@ -35,6 +35,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from scipy import optimize, special
@@ -577,10 +578,16 @@ def _optimise_half(
     """
     shape = s0.shape
     t0 = time.perf_counter()
-    state = {"it": 0, "f_prev": math.inf, "best_f": math.inf, "best_x": s0.ravel().copy()}
+    state: dict[str, Any] = {
+        "it": 0,
+        "f_prev": math.inf,
+        "best_f": math.inf,
+        "best_x": s0.ravel().copy(),
+    }
 
     def fun(x: np.ndarray) -> tuple[float, np.ndarray]:
         f, g = _symmetric_eval(x.reshape(shape), K, b_max, gradient=True)
+        assert g is not None  # gradient=True
         return f, g.ravel()
 
     def callback(intermediate_result: optimize.OptimizeResult) -> None:

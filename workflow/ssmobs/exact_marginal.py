@@ -46,13 +46,16 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.special import ndtr, ndtri
 
 from .models import PriorBounds, StateSpaceModel
+
+if TYPE_CHECKING:
+    import pandas
 
 logger = logging.getLogger("ssmobs.exact")
 
@@ -304,7 +307,7 @@ class ExactResult:
     slopes_upper: np.ndarray  # (K, m)
     info: dict
 
-    def to_frame(self, model: StateSpaceModel) -> pandas.DataFrame:  # noqa: F821
+    def to_frame(self, model: StateSpaceModel) -> pandas.DataFrame:
         """One row per trajectory, columns like the Stan stage's gather table:
         ``k``, ``status``, ``converged`` (= unique interior maximum and the grid box not
         truncated: Definition 3's set, the rows the statistics use), ``maxima``,

@@ -131,7 +131,7 @@ def figure_joint_vs_marginal(
 
 def figure_observability_ratios(
     frame: pandas.DataFrame, paths: Sequence[str | os.PathLike]
-) -> None:  # noqa: F821
+) -> None:
     """|K^max|/K and |K^Stan|/K for every scenario, ours beside the paper's, each bar with
     its exact binomial 95 % interval (``<fraction>_lo95`` / ``_hi95`` of the Section IV
     summary, :mod:`ssmobs.binomial`): at K = 40 about +-0.15, at the paper's K = 4000 about
@@ -200,7 +200,7 @@ def figure_profile_posterior(
 
 def figure_k_convergence(
     frame: pandas.DataFrame,
-    chosen: pandas.DataFrame,  # noqa: F821
+    chosen: pandas.DataFrame,
     title: str,
     paths: Sequence[str | os.PathLike],
 ) -> None:
@@ -245,7 +245,7 @@ def figure_k_convergence(
 
 def figure_exact_vs_stan(
     stan: pandas.DataFrame,
-    exact: pandas.DataFrame,  # noqa: F821
+    exact: pandas.DataFrame,
     names: Sequence[str],
     title: str,
     paths: Sequence[str | os.PathLike],

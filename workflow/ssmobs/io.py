@@ -17,9 +17,15 @@ import tempfile
 import threading
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas
+    import xarray
+
+    from .models.base import StateSpaceModel
 
 LOG = logging.getLogger("ssmobs.io")
 
@@ -166,13 +172,13 @@ def read_json(path: str | os.PathLike, required: Sequence[str] = ()) -> Any:
     return obj
 
 
-def write_netcdf(path: str | os.PathLike, dataset: xarray.Dataset) -> None:  # noqa: F821
+def write_netcdf(path: str | os.PathLike, dataset: xarray.Dataset) -> None:
     """Write an xarray Dataset atomically with the pinned h5netcdf engine."""
     with atomic_path(path, suffix=".nc") as tmp:
         dataset.to_netcdf(tmp, engine="h5netcdf")
 
 
-def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> xarray.Dataset:  # noqa: F821
+def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> xarray.Dataset:
     """Load a NetCDF file fully into memory; CorruptFileError naming the file if unreadable."""
     import xarray as xr
 
@@ -188,12 +194,12 @@ def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> x
     return ds
 
 
-def write_parquet(path: str | os.PathLike, frame: pandas.DataFrame) -> None:  # noqa: F821
+def write_parquet(path: str | os.PathLike, frame: pandas.DataFrame) -> None:
     with atomic_path(path, suffix=".parquet") as tmp:
         frame.to_parquet(tmp, index=False)
 
 
-def read_parquet(path: str | os.PathLike, required_columns: Sequence[str] = ()) -> pandas.DataFrame:  # noqa: F821
+def read_parquet(path: str | os.PathLike, required_columns: Sequence[str] = ()) -> pandas.DataFrame:
     import pandas as pd
 
     path = Path(path)
@@ -219,7 +225,7 @@ def array_checksum(*arrays: np.ndarray) -> str:
 
 
 # ---------------------------------------------------------------- joint MAP (Sec. III.B)
-def joint_map_dataset(result: Any, model: Any, T: int, attrs: dict) -> xarray.Dataset:  # noqa: F821
+def joint_map_dataset(result: Any, model: StateSpaceModel, T: int, attrs: dict) -> xarray.Dataset:
     """Full Theta_hat and local variances of every k of a
     :class:`~ssmobs.joint_map.JointMapResult` as a labelled dataset (dims ``k``,
     ``component`` = ``model.theta_names(T)``), for :func:`write_netcdf`."""

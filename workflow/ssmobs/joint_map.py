@@ -870,6 +870,7 @@ def joint_map(
         mu_start = initial_mu_values(model, zc, theta0, barrier, settings)
         theta, iters, mu, stop = _optimize(model, zc, theta0, barrier, settings, mu_start)
         res = _classify_chunk(model, zc, theta, mu, stop, barrier, settings)
+        assert out.mu_start is not None  # set above
         out.mu_start[sl] = mu_start
         out.theta_hat[sl] = theta
         out.iterations[sl] = iters

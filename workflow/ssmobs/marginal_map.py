@@ -29,11 +29,14 @@ Empirical quantiles are R's type 7 (NumPy's default ``linear``), as ``quantile()
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .stan_backends.base import Draws
+
+if TYPE_CHECKING:
+    from .models.base import StateSpaceModel
 
 #: grid spacing is at most bandwidth / GRID_PER_BW
 GRID_PER_BW = 8
@@ -179,7 +182,7 @@ def _param_block(draws: Draws, name: str, shape_tail: tuple[int, ...]) -> np.nda
     raise ValueError(f"parameter '{name}' has shape {tail} per draw, expected {shape_tail}")
 
 
-def theta_draws(draws: Draws, model: Any, T: int) -> np.ndarray:
+def theta_draws(draws: Draws, model: StateSpaceModel, T: int) -> np.ndarray:
     """Draws of Theta = (Omega, x_0, x_1..x_T) as (|Theta|, chain * draw), pooled over chains.
 
     Row order is ``model.theta_names(T)``.  The Stan programs name Omega's components as
@@ -206,7 +209,7 @@ def theta_draws(draws: Draws, model: Any, T: int) -> np.ndarray:
     return np.ascontiguousarray(full.reshape(c * s, n).T)
 
 
-def marginal_summary(draws: Draws, model: Any, T: int) -> dict[str, Any]:
+def marginal_summary(draws: Draws, model: StateSpaceModel, T: int) -> dict[str, Any]:
     """Marginal MAP (Eq. (11)) and 5 % / 95 % empirical quantiles (Eq. (12)) of every
     component of Theta, in ``model.theta_names(T)`` order.
 

@@ -50,10 +50,11 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -73,6 +74,12 @@ from .record_cache import (
 )
 from .stan_backends.base import Draws, SamplerSettings, SamplingError
 
+if TYPE_CHECKING:
+    import pandas
+
+    from .models.base import StateSpaceModel
+    from .stan_backends.base import StanBackend
+
 LOG = logging.getLogger("ssmobs.nuts")
 
 INIT_MODES = ("random", "true")
@@ -89,7 +96,11 @@ DIAGNOSTIC_COLUMNS = (
 
 # --------------------------------------------------------------------------- one trajectory
 def _inits(
-    model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_k: np.ndarray, chains: int
+    model: StateSpaceModel,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    x_k: np.ndarray,
+    chains: int,
 ) -> list[dict[str, Any]]:
     """Initial values at the true (Omega, x0) and the design states x~(k), one dict per chain."""
     init: dict[str, Any] = dict(zip(model.param_names, _floats(omega_true)))
@@ -109,8 +120,8 @@ def _floats(values: np.ndarray) -> list[float]:
 
 
 def _one_trajectory(
-    model: Any,
-    backend: Any,
+    model: StateSpaceModel,
+    backend: StanBackend,
     stan_file: str,
     z_k: np.ndarray,
     x_k: np.ndarray,
@@ -248,8 +259,8 @@ def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- the loop
 def run_trajectories(
-    model: Any,
-    backend: Any,
+    model: StateSpaceModel,
+    backend: StanBackend,
     stan_file: str | Path,
     z: np.ndarray,
     x_true: np.ndarray,
@@ -262,9 +273,9 @@ def run_trajectories(
     sampler: SamplerSettings | None = None,
     convergence: ConvergenceSettings | None = None,
     init: str = "random",
-    records_dir: str | Path = ".",
+    records_dir: str | os.PathLike = ".",
     keep_draws_for: Iterable[int] = (),
-    draws_dir: str | Path | None = None,
+    draws_dir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     retry_errors: bool = False,
 ) -> list[dict[str, Any]]:
@@ -337,7 +348,12 @@ def run_trajectories(
         rec = load_record(record_path(records_dir, k), key, n_theta)
         if rec is not None and retry_errors and rec["status"] == "error":
             rec = None
-        if rec is not None and k in keep and not draws_path(draws_dir, k).exists():
+        if (
+            rec is not None
+            and k in keep
+            and draws_dir is not None  # checked above: keep needs draws_dir
+            and not draws_path(draws_dir, k).exists()
+        ):
             LOG.info(
                 "recomputing k=%d: its draws are to be kept but %s is missing",
                 k,
@@ -361,6 +377,7 @@ def run_trajectories(
     own_progress = progress is None
     if own_progress:
         progress = Progress(f"{scenario} NUTS", total=max(len(todo), 1), logger=LOG)
+    assert progress is not None  # given, or made just above
     if todo:
         backend.compile(stan_file)
     for k, key in todo:
@@ -379,7 +396,7 @@ def run_trajectories(
             sampler,
             convergence,
             init,
-            draws_path(draws_dir, k) if k in keep else None,
+            draws_path(draws_dir, k) if k in keep and draws_dir is not None else None,
         )
         t_w = time.perf_counter()
         io.write_json(record_path(records_dir, k), rec)
@@ -398,7 +415,9 @@ def run_trajectories(
 
 
 # --------------------------------------------------------------------------- table
-def records_to_frame(records: Sequence[dict[str, Any]], model: Any, T: int) -> pandas.DataFrame:  # noqa: F821
+def records_to_frame(
+    records: Sequence[dict[str, Any]], model: StateSpaceModel, T: int
+) -> pandas.DataFrame:
     """One row per trajectory k (sorted by k): wide table of status, diagnostics and Theta.
 
     Columns: ``k`` (int), ``scenario``, ``stan_seed``, ``status``, ``converged`` (bool),

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
@@ -141,11 +142,11 @@ def record_key(
     }
 
 
-def record_path(records_dir: str | Path, k: int) -> Path:
+def record_path(records_dir: str | os.PathLike, k: int) -> Path:
     return Path(records_dir) / f"k{int(k):05d}.json"
 
 
-def draws_path(draws_dir: str | Path, k: int) -> Path:
+def draws_path(draws_dir: str | os.PathLike, k: int) -> Path:
     return Path(draws_dir) / f"k{int(k):05d}.nc"
 
 

@@ -10,13 +10,19 @@ import logging
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import io
 from .log import Progress
 from .scenario import Scenario
+
+if TYPE_CHECKING:
+    import pandas
+
+    from .models.base import StateSpaceModel
+    from .stan_backends.base import SamplerSettings
 
 logger = logging.getLogger("ssmobs")
 
@@ -114,7 +120,9 @@ def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]
     """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
     gradient-balance rule (:func:`ssmobs.joint_map.initial_mu_values`)."""
     rows = []
-    variants = [("gradient balance", {"mu0_rule": "gradient_balance"})]
+    variants: list[tuple[str, dict[str, Any]]] = [
+        ("gradient balance", {"mu0_rule": "gradient_balance"})
+    ]
     variants += [
         (f"{f:g} T", {"mu0_rule": "per_step", "mu0": f * traj.T, "mu0_per_step": 0.0})
         for f in mu0_per_T
@@ -141,7 +149,7 @@ def run_joint_map_mu0_sweep(
     mu0_per_T: list[float],
     paper_values: PathLike,
     paths: list[PathLike],
-) -> pandas.DataFrame:  # noqa: F821
+) -> pandas.DataFrame:
     """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts.
 
     One row per mu_0 setting (the gradient-balance rule first, with its median mu_0 / T),
@@ -195,7 +203,7 @@ def batches(K: int, batch_size: int) -> list[range]:
     return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
 
 
-def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:  # noqa: F821
+def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
     from .stan_backends.base import SamplerSettings
 
     return SamplerSettings(
@@ -317,8 +325,8 @@ def changed_batch_records(batch_table: PathLike) -> str | None:
 
 def check_batch_records(
     batch_table: PathLike,
-    frame: pandas.DataFrame,  # noqa: F821
-    model: Any,
+    frame: pandas.DataFrame,
+    model: StateSpaceModel,
     T: int,
 ) -> None:
     """The per-trajectory records a batch table was built from are all there, parse and
@@ -399,7 +407,7 @@ def run_gather_nuts(
 
 def run_convergence_sensitivity(
     tables: dict[str, PathLike], convergence_cfg: dict, paths: list[PathLike]
-) -> pandas.DataFrame:  # noqa: F821
+) -> pandas.DataFrame:
     """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
 
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
@@ -632,7 +640,9 @@ def run_figure_profile_posterior(
 
 
 # ------------------------------------------------------------------ exact marginal (issue 11)
-def exact_summary(frame: Any, model: Any, omega: Any, x0: Any, x_true: np.ndarray) -> dict:
+def exact_summary(
+    frame: Any, model: StateSpaceModel, omega: Any, x0: Any, x_true: np.ndarray
+) -> dict:
     """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
     trajectories whose posterior is improper at each boundary."""

@@ -23,9 +23,12 @@ are NaN.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .models.base import StateSpaceModel
 
 
 def _col(frame: Any, name: str) -> np.ndarray:
@@ -39,7 +42,11 @@ def _mean(v: np.ndarray) -> float:
 
 
 def stan_summary(
-    frame: Any, model: Any, omega_true: np.ndarray, x0_true: np.ndarray, x_true: np.ndarray
+    frame: Any,
+    model: StateSpaceModel,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    x_true: np.ndarray,
 ) -> dict[str, Any]:
     """|K^Stan| and the properties of the marginal MAP estimator over K^Stan.
 

@@ -55,11 +55,11 @@ def write_table(
 ) -> list[str]:
     """Write ``frame`` atomically to every path in the format of its suffix (.csv, .md or
     .tex; the caption goes above the Markdown and into the LaTeX table); return the paths."""
-    paths = [os.fspath(p) for p in paths]
-    unknown = [p for p in paths if Path(p).suffix not in (".csv", ".md", ".tex")]
+    names = [os.fspath(p) for p in paths]
+    unknown = [p for p in names if Path(p).suffix not in (".csv", ".md", ".tex")]
     if unknown:
         raise ValueError(f"write_table: {unknown}: the suffix must be .csv, .md or .tex")
-    for path in paths:
+    for path in names:
         suffix = Path(path).suffix
         if suffix == ".csv":
             io.write_text(path, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
@@ -78,7 +78,7 @@ def write_table(
                     escape=True,
                 ),
             )
-    return paths
+    return names
 
 
 # ---------------------------------------------------------------- Table II

@@ -49,7 +49,7 @@ RESERVED_NAMES: frozenset[str] = frozenset({"x0", "x", "z", "T"})
 _IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
-def definition_problems(cls: type, expected_slug: str) -> list[str]:
+def definition_problems(cls: type[StateSpaceModel], expected_slug: str) -> list[str]:
     """Problems of a model class (empty list when it fulfils the contract).
 
     Checks the required attributes and methods, their types, that ``slug`` equals the
@@ -140,12 +140,13 @@ def _import(path: Path, directory: Path) -> ModuleType:
         return importlib.import_module(f"{__name__}.{path.stem}")
     name = f"_ssmobs_user_models_{abs(hash(str(directory)))}.{path.stem}"
     spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None, f"{path} is not a .py file"
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-def _model_class(path: Path, module: ModuleType) -> type:
+def _model_class(path: Path, module: ModuleType) -> type[StateSpaceModel]:
     classes = [
         obj
         for obj in vars(module).values()
@@ -171,7 +172,7 @@ def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
     contract of :func:`definition_problems`, or declares a slug that another module uses.
     """
     problems: list[str] = []
-    found: list[tuple[Path, type]] = []
+    found: list[tuple[Path, type[StateSpaceModel]]] = []
     for path in model_files(directory):
         try:
             module = _import(path, directory)
@@ -180,7 +181,7 @@ def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
             problems.append(str(err))
         except Exception as err:  # noqa: BLE001 - reported with the file it came from
             problems.append(f"model module {path}: import failed: {type(err).__name__}: {err}")
-    by_slug: dict[str, list[tuple[Path, type]]] = {}
+    by_slug: dict[str, list[tuple[Path, type[StateSpaceModel]]]] = {}
     for path, cls in found:
         by_slug.setdefault(getattr(cls, "slug", path.stem), []).append((path, cls))
     for slug, owners in by_slug.items():

@@ -64,7 +64,7 @@ class ModelConstraints:
         """Lambdify the expressions ``cons`` (in the symbols ``w``) and their derivatives."""
         if not cons:
             return cls(n_params=len(w), count=0, _values=None, _derivatives=None)
-        derivs = []
+        derivs: list[sp.Expr] = []
         for c in cons:
             derivs.extend(sp.diff(c, v) for v in w)
             derivs.extend(sp.diff(c, v, u) for v in w for u in w)

@@ -6,6 +6,7 @@ Both backends compile the same ``stan/<model>.stan`` program, take the same data
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -85,13 +86,13 @@ class StanBackend(Protocol):
         """What determines the draws besides program, data and settings: backend name and
         Stan version (part of every record's key)."""
 
-    def compile(self, stan_file: str) -> dict[str, Any]:
+    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
         """Compile (or find compiled) the program; return a JSON-able marker (backend,
         program hash, paths)."""
 
     def sample(
         self,
-        stan_file: str,
+        stan_file: str | os.PathLike,
         data: Mapping[str, Any],
         seed: int,
         settings: SamplerSettings,

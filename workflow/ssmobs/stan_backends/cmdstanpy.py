@@ -170,6 +170,7 @@ class CmdStanPyBackend:
                             model = cmdstanpy.CmdStanModel(stan_file=str(copy))
                     except Exception as err:
                         raise RuntimeError(f"compiling {path} failed: {err}") from err
+                    assert model.exe_file is not None  # set by the compile above
                     built = Path(model.exe_file)
                     if built != exe:
                         shutil.move(str(built), exe)
@@ -216,7 +217,9 @@ class CmdStanPyBackend:
             data_file = tmp / "data.json"
             cmdstanpy.write_stan_json(str(data_file), dict(data))
             # cmdstanpy writes one init file per chain and removes them afterwards
-            init_arg = None if inits is None else [dict(i) for i in inits]
+            init_arg: list[Mapping[str, Any]] | None = (
+                None if inits is None else [dict(i) for i in inits]
+            )
             with quiet_loggers(forward=("cmdstanpy",)):
                 model = cmdstanpy.CmdStanModel(exe_file=marker["exe_file"])
                 t0 = time.perf_counter()

@@ -370,7 +370,8 @@ class PyStanBackend:
             "program_sha256": sha,
             "model_name": model_name,
             "cache_dir": str(model_dir),
-            "pystan_version": stan.__version__,
+            # mypy resolves `stan` to the repository's stan/ folder (pystan has no stubs)
+            "pystan_version": stan.__version__,  # type: ignore[attr-defined]
             "httpstan_version": httpstan.__version__,
         }
         self._markers[key] = marker
@@ -480,7 +481,10 @@ class PyStanBackend:
             with _captured(f"pystan build {label}"):
                 t0 = time.perf_counter()
                 try:
-                    posterior = stan.build(code, data=dict(data), random_seed=int(seed))
+                    # mypy resolves `stan` to the repository's stan/ folder (no pystan stubs)
+                    posterior = stan.build(  # type: ignore[attr-defined]
+                        code, data=dict(data), random_seed=int(seed)
+                    )
                 except (RuntimeError, ValueError) as err:
                     raise ValueError(f"{label}: data rejected: {_failure_reason(err)}") from err
                 if posterior is None:  # pystan swallows KeyboardInterrupt
