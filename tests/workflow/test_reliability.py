@@ -198,6 +198,7 @@ BAD_CONFIGS = {
             ],
             "k_selection": [],
             "observability_studies": [],
+            "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
         },
         "scenario 'big': a design_disturbances job needs about",
     ),
