@@ -204,7 +204,9 @@ def estimates(config: dict) -> list[JobEstimate]:
 
 
 def job_counts(config: dict) -> dict[str, int]:
-    """Number of jobs of the run, by what makes them (an upper bound: shared files counted once)."""
+    """Number of jobs of the run, by what makes them (shared files counted once)."""
+    from .k_selection import set_seed
+
     counts: dict[str, int] = {}
     disturbances: set[tuple] = set()
     for sc in config["scenarios"]:
@@ -215,6 +217,12 @@ def job_counts(config: dict) -> dict[str, int]:
         if sc["stan"]:
             batch = sc.get("stan_batch_size") or config["stan"]["batch_size"]
             n += math.ceil(sc["K"] / batch) + 1
+        if sc.get("exact", True) and model.linear_in_states:  # the exact stage (issue 11)
+            n += 1 + int(bool(sc["stan"]))  # exact_marginal, figure_exact_vs_stan
+            exact_K = sc.get("exact_K") or sc["K"]
+            if exact_K != sc["K"]:
+                n += 1  # exact_design_trajectories
+                disturbances.add((q, exact_K, sc["method"], sc["seed"]))
         counts[f"scenario '{sc['name']}'"] = n
     scenarios = {sc["name"]: sc for sc in config["scenarios"]}
     for ks in config["k_selection"]:
@@ -223,14 +231,19 @@ def job_counts(config: dict) -> dict[str, int]:
             continue
         model = MODELS[sc["model"]]
         q = (model.obs_dim + model.state_dim) * sc["T"]
-        runs = sum(1 if m == "design" else len(ks["seeds"]) for m in ks["methods"])
+        sets = ks.get("sets") or ["nested"]
+        runs = sum(1 if m == "design" else len(ks["seeds"]) for m in ks["methods"]) * len(sets)
         for m in ks["methods"]:
             for seed in ks["seeds"][:1] if m == "design" else ks["seeds"]:
-                disturbances.update((q, K, m, seed) for K in ks["K_grid"])
+                disturbances.update(
+                    (q, K, m, set_seed(seed, K, variant)) for K in ks["K_grid"] for variant in sets
+                )
         counts[f"k_selection '{ks['name']}'"] = runs * len(ks["K_grid"]) + 1
     counts["design disturbance sets"] = len(disturbances) + 1  # + Figure 2's
-    counts["Stan programs, tables and figures"] = (
-        len({sc["model"] for sc in config["scenarios"] if sc["stan"]}) + FIXED_JOBS
+    counts["Stan programs, model checks, tables and figures"] = (
+        len({sc["model"] for sc in config["scenarios"] if sc["stan"]})
+        + len({sc["model"] for sc in config["scenarios"]})
+        + FIXED_JOBS
     )
     return counts
 
