@@ -134,3 +134,21 @@ def test_compact_summary_is_one_short_row_per_scenario(tmp_path):
 def test_write_table_refuses_unknown_suffix(tmp_path):
     with pytest.raises(ValueError, match=".csv, .md or .tex"):
         write_table(pd.DataFrame({"a": [1]}), [tmp_path / "t.txt"])
+
+
+def test_table_ii_caption_names_the_configured_setting():
+    from ssmobs.stages import _table_ii_setting
+
+    def entry(name, a, x0):
+        return {
+            "config": {"name": name, "model": "same", "omega": {"a": a}, "x0": x0, "T": 20, "K": 10}
+        }
+
+    assert _table_ii_setting([entry("s1", 0.9, 8), entry("s2", 0.9, 8)]) == (
+        "model Same, (a, x0) = (0.9, 8)"
+    )
+    assert _table_ii_setting([entry("s1", 0.7, 5)]) == "model Same, (a, x0) = (0.7, 5)"
+    assert "paper_outputs.tables_2_3" in _table_ii_setting(
+        [entry("s1", 0.9, 8), entry("s2", 0.7, 8)]
+    )
+    assert "paper_outputs.tables_2_3" in _table_ii_setting([])

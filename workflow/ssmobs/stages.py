@@ -438,6 +438,20 @@ def _maybe_json(path: PathLike | None) -> dict | None:
     return io.read_json(path) if path else None
 
 
+def _table_ii_setting(rows: list[dict]) -> str:
+    """The caption's setting, "model Same, (a, x0) = (0.9, 8)", when the rows share it."""
+    settings = set()
+    for r in rows:
+        sc = Scenario.from_config(r["config"])
+        a = dict(zip(sc.model.param_names, sc.omega)).get("a", float("nan"))
+        settings.add((sc.model.slug, float(a), tuple(float(v) for v in sc.x0)))
+    if len(settings) != 1:
+        return "the scenarios of paper_outputs.tables_2_3"
+    ((slug, a, x0),) = settings
+    x0_text = ", ".join(f"{v:g}" for v in x0)
+    return f"model {slug.replace('_', ' ').title()}, (a, x0) = ({a:g}, {x0_text})"
+
+
 def run_paper_tables(
     scenarios: list[dict],
     tables_2_3: list[str],
@@ -485,7 +499,7 @@ def run_paper_tables(
             tables.table_ii(t2_rows, paper),
             table2,
             "Table II: empirical mean, variance and MSE of (a, x0), "
-            "model Same, (a, x0) = (0.9, 8); ours (Stan + KDE), exact "
+            f"{_table_ii_setting(t2_rows)}; ours (Stan + KDE), exact "
             "and the paper's",
         ),
         "table3_coverage": (
