@@ -332,8 +332,9 @@ def test_too_many_jobs_refused_even_when_memory_fits():
         cfg.validate(c)
     msg = str(err.value)
     assert "job needs about" not in msg
-    assert "about 100013 jobs, more than limits.jobs = 20000" in msg
-    assert "scenario 's': 100003" in msg
+    assert "about 100016 jobs, more than limits.jobs = 20000" in msg
+    # trajectories, joint MAP, 100 000 Stan batches, gather, exact stage and its figure
+    assert "scenario 's': 100005" in msg
 
 
 def test_slurm_profile_raises_the_limits():
