@@ -79,3 +79,26 @@ def smoke_config() -> dict:
 
 
 SMOKE = ["--configfile", "config/smoke.yaml"]
+
+
+def slurm_profile_dry_run(*args: str) -> subprocess.CompletedProcess:
+    """`snakemake -n` in the repository with the SLURM profile and a placeholder account and
+    partition (what a user adds on the command line); stdout + stderr as text."""
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            "-n",
+            "--workflow-profile",
+            "config/profiles/slurm",
+            *args,
+            "--default-resources",
+            "slurm_account=acct",
+            "slurm_partition=part",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import REPO, SMOKE, make_workdir, snakemake
+from helpers import SMOKE, make_workdir, slurm_profile_dry_run, snakemake
 
 pytestmark = pytest.mark.workflow
 
@@ -92,24 +92,7 @@ def cluster_run(tmp_path_factory) -> tuple[Path, str]:
 def test_profile_sets_runtime_and_memory_of_every_job():
     """Account and partition on the command line replace the profile's default-resources
     whole; every submitted job must still get a time limit and a memory request."""
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "-n",
-            "--workflow-profile",
-            "config/profiles/slurm",
-            *SMOKE,
-            "--default-resources",
-            "slurm_account=acct",
-            "slurm_partition=part",
-        ],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    proc = slurm_profile_dry_run(*SMOKE)
     assert proc.returncode == 0, proc.stderr[-3000:]
     jobs = re.findall(r"rule (\w+):\n(?:.*\n)*?\s+resources: (.*)", proc.stdout + proc.stderr)
     rules = {rule for rule, _ in jobs} - {"all"}

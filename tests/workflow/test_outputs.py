@@ -4,14 +4,12 @@ the SLURM profile."""
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from helpers import REPO, SMOKE, snakemake
+from helpers import REPO, SMOKE, slurm_profile_dry_run, snakemake
 
 pytestmark = pytest.mark.workflow
 
@@ -150,25 +148,7 @@ def test_report_lists_every_table_and_figure(smoke_run):
 
 
 def test_slurm_profile_dry_run():
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "snakemake",
-            "-n",
-            "--workflow-profile",
-            "config/profiles/slurm",
-            "--configfile",
-            "config/paper.yaml",
-            "--default-resources",
-            "slurm_account=acct",
-            "slurm_partition=part",
-        ],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    proc = slurm_profile_dry_run("--configfile", "config/paper.yaml")
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = proc.stdout + proc.stderr
     assert "sample_nuts" in out and "This was a dry-run" in out
