@@ -333,8 +333,8 @@ def test_too_many_jobs_refused_even_when_memory_fits():
     msg = str(err.value)
     assert "job needs about" not in msg
     assert "about 100016 jobs, more than limits.jobs = 20000" in msg
-    # trajectories, joint MAP, 100 000 Stan batches, gather, exact stage and its figure
-    assert "scenario 's': 100005" in msg
+    # check, trajectories, joint MAP, 100 000 Stan batches, gather, exact stage and its figure
+    assert "scenario 's': 100006" in msg
 
 
 def test_slurm_profile_raises_the_limits():
@@ -428,4 +428,174 @@ def test_profiles_name_the_scenarios_of_the_papers_outputs(name):
     assert chosen["figure3"] == chosen["tables_2_3"]
     assert (chosen["figure4"] is None) == (
         "sep_ranwalk" not in {sc["model"] for sc in c["scenarios"]}
+    )
+
+
+# ------------------------------------------------- configs that silently mean something else
+def refused(conf: dict) -> str:
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(conf)
+    return str(err.value)
+
+
+@pytest.mark.parametrize(
+    "path,value,key",
+    [
+        (("scenarios", 0, "K"), 12.0, "scenarios[0].K = 12.0"),
+        (("scenarios", 0, "T"), 4.0, "scenarios[0].T = 4.0"),
+        (("scenarios", 0, "seed"), 1.0, "scenarios[0].seed = 1.0"),
+        (("scenarios", 0, "stan_batch_size"), 5.0, "scenarios[0].stan_batch_size = 5.0"),
+        (("stan", "chains"), 4.0, "stan.chains = 4.0"),
+        (("figure2", "K"), 5.0, "figure2.K = 5.0"),
+        (("k_selection", 0, "K_grid"), [10.0, 20], "k_selection[0].K_grid[0] = 10.0"),
+    ],
+    ids=lambda p: ".".join(map(str, p)) if isinstance(p, tuple) else None,
+)
+def test_float_for_an_integer_key_refused(path, value, key):
+    c = full_config()
+    target = c
+    for part in path[:-1]:
+        target = target[part]
+    target[path[-1]] = value
+    msg = refused(c)
+    whole = int(value[0] if isinstance(value, list) else value)
+    assert f"{key}: must be a whole number written without a decimal point ({whole})" in msg
+
+
+def test_unknown_paper_ref_refused_naming_the_known_keys():
+    msg = refused(with_(["scenarios", 0, "paper_ref"], "same_a09_T2"))
+    assert "scenarios[0] ('s').paper_ref = 'same_a09_T2': no such key in config/paper_values" in msg
+    assert "'same_a09_T20'" in msg and "'' (none)" in msg
+    assert cfg.validate(with_(["scenarios", 0, "paper_ref"], "same_a09_T20"))
+    assert cfg.validate(with_(["scenarios", 0, "paper_ref"], ""))
+
+
+def test_mu0_sweep_unknown_model_refused():
+    msg = refused({**base(), "mu0_sweep": {"models": ["sep", "nope"]}})
+    assert "mu0_sweep.models = ['sep', 'nope']: unknown model(s) ['nope']" in msg
+    assert "'sep_d2_p1'" in msg  # the allowed models are listed
+    # a known model no scenario uses only adds no rows (the default names Sep models)
+    assert cfg.validate({**base(), "mu0_sweep": {"models": ["sep_mult"]}})
+
+
+def mult(**entry) -> dict:
+    c = base()
+    c["scenarios"][0].update(model="sep_mult", omega={"a": 0.5}, prior="half_line", **entry)
+    return c
+
+
+def test_explicit_exact_true_on_a_model_not_linear_in_the_states_refused():
+    msg = refused(mult(exact=True))
+    assert "scenarios[0] ('s').exact = True: model 'sep_mult' is not linear in the states" in msg
+    assert "exact: false" in msg
+    assert "exact" not in cfg.validate(mult())["scenarios"][0]  # the default: not applicable
+    assert cfg.validate(mult(exact=False))["scenarios"][0]["exact"] is False
+    assert cfg.validate(with_(["scenarios", 0, "exact"], True))  # model same: linear
+
+
+@pytest.mark.parametrize("value", ["../x", "/abs/path", "a/../../b", "paper_figures/..", ".."])
+def test_outputs_dir_outside_the_working_directory_refused(value):
+    msg = refused({**base(), "outputs_dir": value})
+    assert f"outputs_dir = {value!r}: must be a relative path inside the working directory" in msg
+
+
+@pytest.mark.parametrize("value", ["paper_figures/mine", "out", "a/b..c/d", "./x"])
+def test_outputs_dir_inside_the_working_directory_accepted(value):
+    assert cfg.validate({**base(), "outputs_dir": value})["outputs_dir"] == value
+
+
+def test_scenario_names_differing_only_in_case_refused():
+    c = base()
+    c["scenarios"].append({**c["scenarios"][0], "name": "S"})
+    msg = refused(c)
+    assert "scenarios[1] ('S').name = 'S': differs from scenarios[0] ('s') only in case" in msg
+    c = base()
+    c["k_selection"] = [
+        {"name": n, "scenario": "s", "K_grid": [10, 20]} for n in ("same_T4", "SAME_T4")
+    ]
+    assert "k_selection[1] ('SAME_T4').name = 'SAME_T4': differs from" in refused(c)
+
+
+@pytest.mark.parametrize("section", ["scenarios", "k_selection"])
+def test_name_with_a_trailing_dot_refused(section):
+    c = base()
+    if section == "scenarios":
+        c["scenarios"][0]["name"] = "s."
+        c["scenarios"].append({**c["scenarios"][0], "name": "t"})
+    else:
+        c["k_selection"] = [{"name": "k.", "scenario": "s", "K_grid": [10, 20]}]
+    msg = refused(c)
+    assert f"{section}[0] (" in msg and ": ends with '.'" in msg
+
+
+def test_long_values_are_cut_in_messages():
+    msg = refused(with_(["scenarios", 0, "K"], "x" * 100_000))
+    assert "scenarios[0].K = 'xxxx" in msg and "(100002 characters)" in msg
+    assert "must be of type integer" in msg
+    assert len(msg) < 600
+
+
+def test_alias_expansion_of_a_million_values_refused_quickly():
+    import time
+
+    row = [1] * 1000
+    c = base()
+    c["stan"] = {"keep_draws": [row] * 1000}  # what YAML aliases give: one list, 1000 uses
+    start = time.perf_counter()
+    msg = refused(c)
+    assert time.perf_counter() - start < 5
+    assert "more than 100000 values" in msg and len(msg) < 300
+
+
+def test_oneof_failure_names_the_item_of_the_matching_form():
+    c = base()
+    c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [0, 8]}]
+    msg = refused(c)
+    assert "k_selection[0].K_grid[0] = 0: must be >= 1" in msg
+    assert "one of the forms" not in msg
+    c["k_selection"][0]["K_grid"] = {"step": 0, "last": 8}
+    assert "k_selection[0].K_grid.step = 0: must be >= 1" in refused(c)
+    assert "scenarios[0].x0[1] = 'a': must be of type number" in refused(
+        with_(["scenarios", 0, "x0"], [1.0, "a"])
+    )
+    assert "scenarios[0].x0 = True: must be one of the forms ['number', 'array']" in refused(
+        with_(["scenarios", 0, "x0"], True)
+    )
+
+
+def test_nested_values_from_the_command_line_are_read_as_yaml_scalars():
+    cli = pytest.importorskip("snakemake.cli")
+    given = cli.parse_config(
+        [
+            "stan={chains: 1, adapt_delta: 0.9, keep_draws: [1, 2]}",
+            "design={b_max: null}",
+            "convergence={treedepth_fails: true, max_divergences: 3}",
+            "scenarios=[{name: s, model: same, omega: {a: 0.9}, x0: 8, T: 4, K: 10, "
+            "stan: false, stan_init: 'true'}]",
+        ]
+    )
+    assert given["stan"]["chains"] == "1"  # what Snakemake hands over
+    c = cfg.validate(given)
+    assert c["stan"]["chains"] == 1 and c["stan"]["adapt_delta"] == 0.9
+    assert c["stan"]["keep_draws"] == [1, 2]
+    assert c["design"]["b_max"] is None
+    assert c["convergence"] == {**c["convergence"], "treedepth_fails": True, "max_divergences": 3}
+    sc = c["scenarios"][0]
+    assert (sc["omega"], sc["x0"], sc["T"], sc["K"], sc["stan"]) == ({"a": 0.9}, 8, 4, 10, False)
+    assert sc["stan_init"] == "true"  # a string key stays a string
+    msg = refused({**base(), **cli.parse_config(["stan={chains: 1.0, iter_warmup: many}"])})
+    assert "stan.chains = 1.0: must be a whole number written without a decimal point" in msg
+    assert "stan.iter_warmup = 'many': must be of type integer" in msg
+
+
+def test_check_config_files_refuses_duplicate_keys_in_snakemakes_config_files(tmp_path):
+    good, bad = tmp_path / "good.yaml", tmp_path / "bad.yaml"
+    good.write_text("stan: {chains: 2}\n")
+    bad.write_text("stan: {chains: 2}\nscenarios: []\nstan: {chains: 4}\n")
+    cfg.check_config_files([good])
+    with pytest.raises(RuntimeError) as err:
+        cfg.check_config_files([good, bad], error=RuntimeError)
+    assert str(err.value) == (
+        f"config file {bad}, line 3, column 1: key 'stan' appears twice in one mapping "
+        f"(also line 1); YAML would silently keep only the last value: remove one"
     )

@@ -126,3 +126,82 @@ def test_lock_of_a_running_snakemake_is_left_alone(tmp_path):
         for p in (proc, elsewhere):
             p.kill()
             p.wait()
+
+
+# ------------------------------------------------- configs that silently mean something else
+SCENARIO = "scenarios:\n  - name: s\n    model: same\n    omega: {a: 0.9}\n    x0: 8\n"
+
+
+def test_duplicate_key_in_one_mapping_gives_file_line_and_key(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(SCENARIO + "    T: 4\n    K: 12\n    K: 2\n")
+    assert message(path) == (
+        f"config file {path}, line 8, column 5: key 'K' appears twice in one mapping "
+        f"(also line 7); YAML would silently keep only the last value: remove one"
+    )
+
+
+def test_second_top_level_block_refused(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("stan:\n  chains: 2\n" + SCENARIO + "    T: 4\n    K: 2\nstan:\n  chains: 4\n")
+    msg = message(path)
+    assert msg.startswith(f"config file {path}, line 10, column 1: key 'stan' appears twice")
+    # the Snakefile's own reading of config/config.yaml goes through load_config_file
+    with pytest.raises(ConfigError, match="key 'stan' appears twice"):
+        preflight.load_config_file(path)
+
+
+def test_duplicate_key_in_a_flow_mapping_and_in_json_refused(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(SCENARIO + "    T: 4\n    K: 2\nstan: {chains: 2, chains: 4}\n")
+    assert "line 8, column 19: key 'chains' appears twice" in message(path)
+    path = tmp_path / "c.json"
+    path.write_text('{"scenarios": [], "scenarios": []}')
+    assert message(path) == (
+        f"config file {path}: key 'scenarios' appears twice in one JSON object; JSON "
+        f"readers silently keep only the last value: remove one"
+    )
+
+
+def test_merge_keys_and_tab_indented_json_still_read(tmp_path):
+    from ssmobs.config import parse_config_text
+
+    assert parse_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, y: 3}\n")["c"] == {"x": 1, "y": 3}
+    assert parse_config_text('{\n\t"stan": {\n\t\t"chains": 2\n\t}\n}') == {"stan": {"chains": 2}}
+
+
+def test_config_file_larger_than_5_mib_refused_before_parsing(tmp_path):
+    path = tmp_path / "big.yaml"
+    path.write_text(SCENARIO + "# padding\n" * 600_000)
+    msg = message(path)
+    assert msg.startswith(f"config file {path} has ") and "5 MiB" in msg
+    assert "\n" not in msg
+
+
+@pytest.mark.parametrize("levels", [6, 9], ids=["1e6", "1e9"])
+def test_yaml_alias_bomb_refused_quickly(tmp_path, levels):
+    lines = ["l0: &l0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    lines += [f"l{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 10)}]" for i in range(1, levels)]
+    path = tmp_path / "bomb.yaml"
+    path.write_text("\n".join(lines) + f"\n{SCENARIO}    T: 4\n    K: 2\n")
+    start = time.perf_counter()
+    msg = message(path)
+    assert time.perf_counter() - start < 5
+    assert msg == (
+        f"config file {path}, line 1, column 1: holds more than 100000 values once its "
+        f"YAML aliases (*name) are expanded; a config has a few hundred"
+    )
+
+
+def test_command_line_prints_the_duplicate_key(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(SCENARIO + "    T: 4\n    K: 12\n    K: 2\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+    )
+    assert proc.returncode == 1
+    assert proc.stderr.startswith(f"error: config file {path}, line 8, column 5: key 'K'")

@@ -4,8 +4,9 @@
 
 * reads CONFIGFILE and validates it (:func:`ssmobs.config.validate`, with the size budget),
   and prints one line per problem instead of Snakemake's traceback: a file that does not
-  exist, a YAML syntax error (file, line, column), an empty file or one without the
-  required key ``scenarios``;
+  exist or is larger than 5 MiB, a YAML syntax error or a key given twice in one mapping
+  (file, line, column), aliases that expand to too many values, an empty file or one
+  without the required key ``scenarios``;
 * with ``--unlock-stale``: when a killed run left Snakemake's lock in ``.snakemake/locks``
   and no Snakemake process runs in this directory, removes it with ``snakemake --unlock``
   (Snakemake would otherwise refuse to start).  Whether a process runs here is read from
@@ -21,32 +22,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from .config import ConfigError, validate
-
-README = "config/README.md"
+from .config import README, ConfigError, read_config_file, short_list, validate
 
 
 def load_config_file(path: str | os.PathLike) -> dict[str, Any]:
-    """The YAML mapping in ``path``; ConfigError with a one-line message otherwise."""
-    path = Path(path)
-    if not path.is_file():
-        what = "is a directory, not a file" if path.is_dir() else "does not exist"
-        raise ConfigError(f"config file {path} {what}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"config file {path} cannot be read: {err}") from None
-    try:
-        config = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        where = f", line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = ": ".join(str(p) for p in (err.context, err.problem) if p)
-        raise ConfigError(f"config file {path}{where}: YAML syntax error: {problem}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"config file {path}: YAML syntax error: {err}") from None
+    """The mapping in the config file ``path``, read strictly (:func:`read_config_file`:
+    size, YAML syntax, duplicate keys, alias expansion); ConfigError with a one-line
+    message otherwise."""
+    config = read_config_file(path)
     if config is None:
         raise ConfigError(
             f"config file {path} is empty; it needs at least the key 'scenarios' "
@@ -60,7 +43,7 @@ def load_config_file(path: str | os.PathLike) -> dict[str, Any]:
     if "scenarios" not in config:
         raise ConfigError(
             f"config file {path} has no key 'scenarios' (required: a list of "
-            f"scenarios; see {README}); its keys: {sorted(config)}"
+            f"scenarios; see {README}); its keys: {short_list(sorted(map(str, config)))}"
         )
     return config
 
