@@ -3,9 +3,12 @@ no files left behind, a compiled-program cache keyed by what determines the bina
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import re
 import stat
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -186,3 +189,130 @@ def test_columns_to_draws_column_major():
     assert d.params["m"][0, 1, 0, 2] == vals[0, 1, cols.index("m.1.3")]
     assert d.params["s"].shape == (2, 3)
     assert math.isclose(d.sample_stats["lp__"][1, 1], vals[1, 1, 0])
+
+
+def test_columns_to_draws_uses_stans_names_complex():
+    """Stan's names for complex values (``z.1.real``) are understood (stanio's parser)."""
+    cols = ["lp__", "z.1.real", "z.1.imag", "z.2.real", "z.2.imag"]
+    vals = np.arange(2 * 3 * len(cols), dtype=float).reshape(2, 3, len(cols))
+    d = columns_to_draws(cols, vals)
+    assert d.params["z"].shape == (2, 3, 2)
+    assert d.params["z"][1, 2, 1] == complex(vals[1, 2, 3], vals[1, 2, 4])
+    assert set(d.sample_stats) == {"lp__"}
+
+
+# ----------------------------------------------------------- driver exit codes, files
+def _run_exe(exe: str, *args: str) -> subprocess.CompletedProcess:
+    base = ["--seed", "1", "--chains", "1", "--warmup", "20", "--samples", "10"]
+    return subprocess.run([exe, *base, *args], capture_output=True, text=True)
+
+
+def test_driver_separates_unreadable_from_rejected_data(native, tmp_path):
+    """Exit 6: the data file cannot be opened or is not Stan JSON; 4: the model rejects
+    the data; 6 also for an init file that cannot be read."""
+    exe = native.compile(stan_file("same"))["exe_file"]
+    out = str(tmp_path / "draws.bin")
+    missing = _run_exe(exe, "--data", str(tmp_path / "absent.json"), "--output", out)
+    assert missing.returncode == 6, missing.stderr
+    assert "absent.json" in missing.stderr
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"T": 8, "z": [1, 2,')
+    parsed = _run_exe(exe, "--data", str(broken), "--output", out)
+    assert parsed.returncode == 6, parsed.stderr
+    rejected = tmp_path / "rejected.json"
+    rejected.write_text(json.dumps(dict(_data("same", {"a": 0.9}), a_lower=0.5, a_upper=0.2)))
+    judged = _run_exe(exe, "--data", str(rejected), "--output", out)
+    assert judged.returncode == 4, judged.stderr
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(_data("same", {"a": 0.9})))
+    init = _run_exe(exe, "--data", str(good), "--output", out, "--init", str(broken))
+    assert init.returncode == 6, init.stderr
+    assert not Path(out).exists()
+
+
+def test_unreadable_data_fails_the_job_not_the_trajectory(tmp_path, monkeypatch):
+    """A data file the driver cannot read raises BackendError (never a per-trajectory
+    record), unlike data the model rejects (ValueError)."""
+    backend = NativeBackend(tmp_root=tmp_path)
+    real_popen = subprocess.Popen
+
+    def popen_without_data(args, *rest, **kwargs):
+        if isinstance(args, list) and str(args[0]).endswith("/driver") and "--data" in args:
+            Path(args[args.index("--data") + 1]).unlink()  # swept under the driver
+        return real_popen(args, *rest, **kwargs)
+
+    monkeypatch.setattr(subprocess, "Popen", popen_without_data)
+    with pytest.raises(BackendError, match=r"exit code 6[\s\S]*cannot read .*data\.json"):
+        backend.sample(stan_file("same"), _data("same", {"a": 0.9}), 1, SMALL)
+
+
+def _draws_file(path: Path, header: str, values: np.ndarray, length: int | None = None) -> Path:
+    text = header.encode()
+    n = len(text) if length is None else length
+    path.write_bytes(
+        native_mod.MAGIC + n.to_bytes(4, "little") + text + values.astype("<f8").tobytes()
+    )
+    return path
+
+
+def test_draws_file_written_little_endian(native, tmp_path):
+    """The driver's file declares its byte order; header length and values are
+    little-endian (what the reader assumes on any host)."""
+    exe = native.compile(stan_file("same"))["exe_file"]
+    data = tmp_path / "data.json"
+    data.write_text(json.dumps(_data("same", {"a": 0.9})))
+    out = tmp_path / "draws.bin"
+    run = _run_exe(exe, "--data", str(data), "--output", str(out))
+    assert run.returncode == 0, run.stderr
+    raw = out.read_bytes()
+    n = int.from_bytes(raw[8:12], "little")
+    header = raw[12 : 12 + n].decode()
+    assert header.startswith("byteorder=little\nchains=1\ndraws=10\ncolumns=lp__,")
+    columns, values = native_mod.read_draws_file(out)
+    assert values.shape == (1, 10, len(columns))
+    stepsize = values[0, :, columns.index("stepsize__")]
+    assert np.all(stepsize > 0) and np.all(stepsize == stepsize[0])
+
+
+@pytest.mark.parametrize(
+    "header, length, field",
+    [
+        ("byteorder=little\nchains=2\ndraws=3\ncolumns=lp__,x\n", None, None),
+        ("chains=2\ndraws=3\ncolumns=lp__,x\n", None, "byteorder: missing"),
+        ("byteorder=big\nchains=2\ndraws=3\ncolumns=lp__,x\n", None, "byteorder: 'big'"),
+        ("byteorder=little\ndraws=3\ncolumns=lp__,x\n", None, "chains: missing"),
+        ("byteorder=little\nchains=two\ndraws=3\ncolumns=lp__,x\n", None, "chains: 'two'"),
+        ("byteorder=little\nchains=2\ndraws=0\ncolumns=lp__,x\n", None, "draws: '0'"),
+        ("byteorder=little\nchains=2\ndraws=-3\ncolumns=lp__,x\n", None, "draws: '-3'"),
+        ("byteorder=little\nchains=2\ndraws=3\n", None, "columns: missing"),
+        ("byteorder=little\nchains=2\ndraws=3\ncolumns=lp__,,x\n", None, "columns: empty"),
+        ("byteorder=little\nchains=2\ndraws=3\ncolumns=lp__,x\nx=1\n", None, "x: unknown"),
+        ("byteorder=little\nchains=2\nchains=2\ndraws=3\ncolumns=lp__,x\n", None, "chains: given"),
+        ("byteorder=little\nchains=2\ndraws=3\ncolumns=lp__,x\nnonsense\n", None, "header: line"),
+        ("byteorder=little\nchains=2\ndraws=4\ncolumns=lp__,x\n", None, "values: 96 bytes"),
+        ("byteorder=little\nchains=2\ndraws=3\ncolumns=lp__,x\n", 10**6, "header length"),
+    ],
+)
+def test_draws_file_header_checked(tmp_path, header, length, field):
+    values = np.arange(12, dtype=float)  # 2 chains x 3 draws x 2 columns
+    path = _draws_file(tmp_path / "draws.bin", header, values, length)
+    if field is None:
+        columns, arr = native_mod.read_draws_file(path)
+        assert columns == ["lp__", "x"]
+        np.testing.assert_array_equal(arr, values.reshape(2, 3, 2))
+        return
+    with pytest.raises(BackendError, match=re.escape(field)):
+        native_mod.read_draws_file(path)
+
+
+def test_draws_file_magic_and_truncation(tmp_path):
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(b"NOTDRAWS" + bytes(8))
+    with pytest.raises(BackendError, match="magic"):
+        native_mod.read_draws_file(bad)
+    bad.write_bytes(native_mod.MAGIC + b"\x01")
+    with pytest.raises(BackendError, match="header length"):
+        native_mod.read_draws_file(bad)
+    bad.write_bytes(native_mod.MAGIC + (2).to_bytes(4, "little") + b"\xff\xfe")
+    with pytest.raises(BackendError, match="header: not UTF-8"):
+        native_mod.read_draws_file(bad)

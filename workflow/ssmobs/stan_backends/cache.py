@@ -1,28 +1,45 @@
 """Where compiled Stan programs live, and sweeping what killed jobs leave behind.
 
 Compiled programs go to ``$SSMOBS_CACHE`` if set, else ``$XDG_CACHE_HOME/ssmobs`` (default
-``~/.cache/ssmobs``), one directory per backend and key; the key is a hash of everything
-that determines the binary (program text, Stan version, compiler and flags), never of the
+``~/.cache/ssmobs``), one directory per backend and key; the key is a hash of what
+determines the binary (program text, Stan version, flags; see each backend), never of the
 Python environment's path, so every virtual environment and every clone shares them.
 Deleting the directory clears the cache; programs are rebuilt on the next run.
+
+An entry is built in a temporary sibling directory (:func:`new_build_dir`) and renamed into
+place when complete (:func:`publish_entry`), so a directory under its final name is always
+finished: a killed build leaves only a temporary directory, swept by a later build.  The
+cache is meant to be shared: entries get the mode the umask allows (not ``mkdtemp``'s
+0700), and a cache that cannot be written raises :class:`~.base.BackendError` naming the
+directory (:func:`cache_writes`); a read-only cache that already holds the entries works.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import logging
 import os
 import shutil
+import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+from ..io import file_lock
+from .base import BackendError
 
 LOG = logging.getLogger("ssmobs.stan")
 
 #: temporary directories older than this (seconds) whose owner is gone are removed
 STALE_AGE_S = 3600.0
+#: the file every finished cache entry holds (written last, before the rename)
+BUILD_RECORD = "build.json"
+#: errno values meaning "this directory cannot be written" (read-only, permissions, full)
+UNWRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOSPC, errno.EDQUOT)
 
 
 def cache_root() -> Path:
@@ -32,6 +49,74 @@ def cache_root() -> Path:
         return Path(explicit)
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "ssmobs"
+
+
+def current_umask() -> int:
+    """The process's umask (from /proc on Linux, else set and restored)."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def shared_mode(executable: bool = True) -> int:
+    """Mode of a new directory or executable (0o777) or file (0o666) under the umask."""
+    return (0o777 if executable else 0o666) & ~current_umask()
+
+
+@contextlib.contextmanager
+def cache_writes(directory: Path) -> Iterator[None]:
+    """Turn "cannot write here" errors of the block into a BackendError that names
+    ``directory`` and says how to use another cache."""
+    try:
+        yield
+    except OSError as err:
+        if err.errno not in UNWRITABLE:
+            raise
+        raise BackendError(
+            f"cannot write the compiled-program cache {directory} "
+            f"({err.strerror or err}: {err.filename or directory}); point SSMOBS_CACHE "
+            f"elsewhere, at a writable directory (e.g. export SSMOBS_CACHE=/scratch/$USER/"
+            f"ssmobs-cache), or build the programs once where this cache is writable"
+        ) from err
+
+
+def entry_complete(cache_dir: Path, *files: str) -> bool:
+    """True when ``cache_dir`` is a finished entry: it has the build record and ``files``."""
+    return all((cache_dir / name).is_file() for name in (BUILD_RECORD, *files))
+
+
+@contextlib.contextmanager
+def build_lock(cache_dir: Path) -> Iterator[None]:
+    """Hold the exclusive lock for building ``cache_dir`` (``.<name>.lock`` beside it)."""
+    with contextlib.ExitStack() as stack:
+        with cache_writes(cache_dir.parent):
+            cache_dir.parent.mkdir(parents=True, exist_ok=True)
+            stack.enter_context(file_lock(cache_dir.parent / f".{cache_dir.name}.lock"))
+        yield
+
+
+def new_build_dir(cache_dir: Path) -> Path:
+    """A fresh temporary sibling of ``cache_dir`` to build into (stale ones are swept)."""
+    prefix = f".{cache_dir.name}.tmp-"
+    with cache_writes(cache_dir.parent):
+        cache_dir.parent.mkdir(parents=True, exist_ok=True)
+        sweep_stale(cache_dir.parent, prefix)
+        return Path(tempfile.mkdtemp(prefix=owned_tempdir_name(prefix), dir=cache_dir.parent))
+
+
+def publish_entry(work: Path, cache_dir: Path, record: dict[str, Any]) -> None:
+    """Write the build record into ``work``, give it the umask's mode and rename it to
+    ``cache_dir`` (replacing an unfinished directory of that name)."""
+    with cache_writes(cache_dir.parent):
+        (work / BUILD_RECORD).write_text(json.dumps(record, indent=1, default=str))
+        work.chmod(shared_mode())
+        if cache_dir.exists():  # an unfinished entry (no build record), e.g. an old layout
+            shutil.rmtree(cache_dir)
+        os.replace(work, cache_dir)
 
 
 def content_key(parts: dict[str, Any]) -> str:

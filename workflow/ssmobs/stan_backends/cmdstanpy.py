@@ -6,8 +6,10 @@ Compiling
     program into a cache directory keyed by everything that determines the binary: the
     program, the CmdStan installation's path and full version (from its makefile) and its
     ``make/local``, ``<cache_root>/cmdstan/<slug>-<key>/`` (:mod:`.cache`), and compiles
-    there once, under an exclusive lock.  The repository's ``stan/`` stays free of
-    executables.
+    once, under an exclusive lock, in a temporary sibling directory renamed into place when
+    the executable and the build record are complete: an entry under its final name is
+    always finished (a half-written executable of a killed build is never taken for one).
+    The repository's ``stan/`` stays free of executables.
 
 Sampling
     Each call writes the data JSON and CmdStan's CSV and console files into a temporary
@@ -40,10 +42,19 @@ from typing import Any
 
 import numpy as np
 
-from ..io import file_lock
 from . import SAMPLER_COLUMNS, quiet_loggers
 from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
-from .cache import cache_root, content_key, owned_tempdir_name, sweep_stale, tail
+from .cache import (
+    build_lock,
+    cache_root,
+    content_key,
+    entry_complete,
+    new_build_dir,
+    owned_tempdir_name,
+    publish_entry,
+    sweep_stale,
+    tail,
+)
 
 LOG = logging.getLogger("ssmobs.stan")
 
@@ -141,7 +152,8 @@ class CmdStanPyBackend:
 
         Marker keys: ``backend``, ``stan_file`` (the repository file), ``program_sha256``,
         ``model_name``, ``cache_dir``, ``exe_file``, ``cmdstan_path``, ``cmdstan_version``,
-        ``cmdstanpy_version``.  Raises RuntimeError when the program does not compile.
+        ``cmdstanpy_version``.  Raises RuntimeError when the program does not compile,
+        BackendError when the cache cannot be written.
         """
         import cmdstanpy
 
@@ -155,25 +167,38 @@ class CmdStanPyBackend:
         version_tag = ident["cmdstan_version"]
         slug = path.stem
         cache_dir = cache_root() / "cmdstan" / f"{slug}-{content_key({'program': sha, **ident})}"
-        copy = cache_dir / f"{slug}.stan"
-        exe = cache_dir / (slug + (".exe" if os.name == "nt" else ""))
-        if not exe.is_file():
-            with file_lock(cache_dir / ".lock"):
-                if not exe.is_file():
+        exe_name = slug + (".exe" if os.name == "nt" else "")
+        exe = cache_dir / exe_name
+        if not entry_complete(cache_dir, exe_name):
+            with build_lock(cache_dir):
+                if not entry_complete(cache_dir, exe_name):
                     LOG.info(
-                        "compiling %s with CmdStan %s in %s", path.name, version_tag, cache_dir
+                        "compiling %s with CmdStan %s into %s", path.name, version_tag, cache_dir
                     )
                     t0 = time.perf_counter()
-                    copy.write_text(code)
+                    work = new_build_dir(cache_dir)
                     try:
-                        with quiet_loggers(forward=("cmdstanpy",)):
-                            model = cmdstanpy.CmdStanModel(stan_file=str(copy))
-                    except Exception as err:
-                        raise RuntimeError(f"compiling {path} failed: {err}") from err
-                    assert model.exe_file is not None  # set by the compile above
-                    built = Path(model.exe_file)
-                    if built != exe:
-                        shutil.move(str(built), exe)
+                        copy = work / f"{slug}.stan"
+                        copy.write_text(code)
+                        try:
+                            with quiet_loggers(forward=("cmdstanpy",)):
+                                model = cmdstanpy.CmdStanModel(stan_file=str(copy))
+                        except Exception as err:
+                            raise RuntimeError(f"compiling {path} failed: {err}") from err
+                        if model.exe_file is None or not Path(model.exe_file).is_file():
+                            raise RuntimeError(f"compiling {path} gave no executable")
+                        built = Path(model.exe_file)
+                        if built != work / exe_name:
+                            shutil.move(str(built), work / exe_name)
+                        record = {
+                            "program": sha,
+                            **ident,
+                            "stan_file": str(path),
+                            "cmdstanpy_version": cmdstanpy.__version__,
+                        }
+                        publish_entry(work, cache_dir, record)
+                    finally:
+                        shutil.rmtree(work, ignore_errors=True)
                     LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
         marker = {
             "backend": self.name,

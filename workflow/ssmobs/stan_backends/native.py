@@ -10,19 +10,32 @@ Why
     same defaults), so a trajectory gives the same draws, bit for bit, on all three.
 
 Compiling
-    :meth:`NativeBackend.compile` runs ``stanc`` and ``g++`` once per (program text, driver
-    source, Stan version, compiler version, flags) into
-    ``<cache_root>/native/<slug>-<key>/`` (:mod:`.cache`), under an exclusive lock, in a
+    :meth:`NativeBackend.compile` runs ``stanc`` and ``g++`` once per :func:`build_key`
+    into ``<cache_root>/native/<slug>-<key>/`` (:mod:`.cache`), under an exclusive lock, in a
     temporary directory renamed into place when complete.  A stanc or compiler error raises
     RuntimeError with the tool's own message; nothing is written into the repository.
+
+Cached programs are self-contained
+    An entry holds the executable ``driver``, the shared libraries it needs from the wheel
+    (:data:`RUNTIME_LIBS`, i.e. TBB) copied beside it, and ``build.json`` (key, compiler
+    version, command).  The executable's RUNPATH is ``$ORIGIN`` only, so it finds the
+    copies wherever the entry is and whether or not the environment that built it still
+    exists; at run time it needs only the system's C and C++ runtime (glibc, libstdc++ at
+    least as new as the building compiler's, libgcc_s, libm).  Looking a program up runs
+    ``stanc --version`` from the wheel but never the C++ compiler, so a node without g++
+    uses programs built elsewhere (see :func:`build_key`).
 
 Sampling
     Data and inits go as JSON into a temporary directory (deleted afterwards, and swept
     when a killed job left one), the driver writes the draws in a binary layout (a short
-    text header, then float64 rows per chain) that NumPy maps without parsing.  Exit code 3
-    (initialisation failed, exception in the model) raises :class:`SamplingError`, 4 (data
-    rejected) ValueError, anything else (a missing library, a killed process)
-    :class:`BackendError` with the tail of the driver's messages.
+    text header, then little-endian float64 rows per chain) that NumPy maps without
+    parsing.  The driver runs in its own process group, killed with the group when the
+    call is interrupted (an exception, KeyboardInterrupt, SIGTERM; see :func:`run_driver`),
+    and on Linux it dies with its parent (``PR_SET_PDEATHSIG``).  Exit code 3
+    (initialisation failed, exception in the model) raises :class:`SamplingError`, 4 (the
+    model rejected the data) ValueError, anything else (6: an input file cannot be read or
+    parsed, a missing library, a killed process) :class:`BackendError` with the tail of the
+    driver's messages.
 """
 
 from __future__ import annotations
@@ -33,20 +46,35 @@ import logging
 import os
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
+import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import stanio
 
-from ..io import file_lock, json_default
+from ..io import json_default
 from . import SAMPLER_COLUMNS, log_captured
 from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
-from .cache import cache_root, content_key, owned_tempdir_name, sweep_stale, tail
+from .cache import (
+    BUILD_RECORD,
+    build_lock,
+    cache_root,
+    content_key,
+    entry_complete,
+    new_build_dir,
+    owned_tempdir_name,
+    publish_entry,
+    shared_mode,
+    sweep_stale,
+    tail,
+)
 
 LOG = logging.getLogger("ssmobs.stan")
 
@@ -68,10 +96,23 @@ CXXFLAGS: tuple[str, ...] = (
     "-Wno-ignored-attributes",
     "-Wno-deprecated-declarations",
 )
-#: binary draws file: magic bytes, then uint32 header length
+#: linker flags: the executable finds its libraries beside itself, wherever the entry is
+LDFLAGS: tuple[str, ...] = ("-Wl,--enable-new-dtags", "-Wl,-rpath,$ORIGIN")
+#: shared libraries of the wheel's ``lib/`` the executable needs (copied into the entry)
+RUNTIME_LIBS: tuple[str, ...] = ("libtbb.so.2",)
+#: the executable's name in a cache entry
+EXE_NAME = "driver"
+#: binary draws file: magic bytes, then uint32 header length (little-endian)
 MAGIC = b"SSMOBSD1"
+#: the fields of the draws file's header, all required
+HEADER_FIELDS: tuple[str, ...] = ("byteorder", "chains", "draws", "columns")
 #: driver exit codes (see driver.cpp)
-EXIT_SAMPLER_FAILED, EXIT_DATA_REJECTED = 3, 4
+EXIT_USAGE = 2
+EXIT_SAMPLER_FAILED = 3
+EXIT_DATA_REJECTED = 4
+EXIT_WRITE_FAILED = 5
+EXIT_INPUT_UNREADABLE = 6
+EXIT_ORPHANED = 7
 TMP_PREFIX = "ssmobs-native-"
 
 
@@ -105,66 +146,212 @@ def stan_version() -> str:
 
 
 @lru_cache(maxsize=1)
+def httpstan_version() -> str:
+    """The httpstan wheel's version (its Stan Math, TBB and headers), read, not run."""
+    import httpstan
+
+    return str(getattr(httpstan, "__version__", "unknown"))
+
+
 def compiler() -> str:
     """The C++ compiler (``$CXX``, default g++)."""
     return os.environ.get("CXX", "g++")
 
 
-@lru_cache(maxsize=1)
 def compiler_version() -> str:
+    """The compiler's version line (runs it: only when building)."""
     return _tool_version([compiler(), "--version"])
 
 
 def build_key(code: str) -> dict[str, str]:
-    """Everything that determines the executable (its hash names the cache directory)."""
+    """What determines the executable; its hash names the cache directory.
+
+    Program text, driver source, Stan version (``stanc --version`` of the wheel, which is
+    present wherever this package runs), httpstan version, compiler and linker flags and
+    the entry's layout.  Deliberately *not* the C++ compiler, neither its version nor its
+    path: the version can only be had by running the compiler and the path only by
+    finding it on PATH, and a lookup must work where there is no compiler (a cluster node
+    using programs built on the login node), which a key the node cannot compute would
+    defeat.  A finished program does not depend on the compiler still being there (it is
+    self-contained, see the module docstring), and programs built by different compilers
+    from the same sources run the same Stan service with IEEE arithmetic (no
+    ``-ffast-math``); the records are keyed by backend and Stan version, not by the
+    compiler, in any case.  The compiler's command, path and version are recorded in the
+    entry's ``build.json`` (and in the marker) instead; to rebuild with another compiler,
+    delete the cache.
+    """
     return {
         "program": content_key({"code": code}),
         "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
         "stan": stan_version(),
-        "compiler": compiler_version(),
-        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
+        "httpstan": httpstan_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + LDFLAGS),
+        "runtime_libs": ",".join(RUNTIME_LIBS),
     }
 
 
 def read_draws_file(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
-    """Column names and an array (chain, draw, column) from the driver's output."""
-    raw = Path(path).read_bytes()
-    if raw[:8] != MAGIC or len(raw) < 12:
-        raise BackendError(f"{path}: not a draws file of the native driver")
+    """Column names and an array (chain, draw, column) from the driver's output.
+
+    Layout (driver.cpp): ``MAGIC``, uint32 header length (little-endian), the header text
+    (``key=value`` lines: ``byteorder=little``, ``chains``, ``draws``, ``columns`` comma
+    separated), then chains x draws x columns little-endian float64.  Every field is
+    checked; a file that does not match raises BackendError naming the field.
+    """
+
+    def bad(field: str, why: str) -> BackendError:
+        return BackendError(f"{path}: draws file of the native driver: {field}: {why}")
+
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as err:
+        raise BackendError(f"{path}: cannot read the draws file: {err}") from err
+    if raw[:8] != MAGIC:
+        raise bad("magic", f"expected {MAGIC!r}, found {raw[:8]!r}")
+    if len(raw) < 12:
+        raise bad("header length", f"file ends after {len(raw)} bytes")
     n = int.from_bytes(raw[8:12], "little")
-    header = dict(line.split("=", 1) for line in raw[12 : 12 + n].decode().splitlines() if line)
-    chains, draws = int(header["chains"]), int(header["draws"])
+    if 12 + n > len(raw):
+        raise bad("header length", f"{n} bytes, but only {len(raw) - 12} follow")
+    try:
+        text = raw[12 : 12 + n].decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise bad("header", f"not UTF-8 text ({err})") from err
+    header: dict[str, str] = {}
+    for line in text.splitlines():
+        if not line:
+            continue
+        key, sep, value = line.partition("=")
+        if not sep:
+            raise bad("header", f"line {line!r} is not key=value")
+        if key not in HEADER_FIELDS:
+            raise bad(key, f"unknown field (expected {', '.join(HEADER_FIELDS)})")
+        if key in header:
+            raise bad(key, "given twice")
+        header[key] = value
+    for key in HEADER_FIELDS:
+        if key not in header:
+            raise bad(key, "missing")
+    if header["byteorder"] != "little":
+        raise bad("byteorder", f"{header['byteorder']!r}, expected 'little'")
+    counts = {}
+    for key in ("chains", "draws"):
+        value = header[key]
+        if not (value.isascii() and value.isdigit() and int(value) > 0):
+            raise bad(key, f"{value!r} is not a positive integer")
+        counts[key] = int(value)
     columns = header["columns"].split(",")
-    values = np.frombuffer(raw, dtype="<f8", offset=12 + n)
-    if values.size != chains * draws * len(columns):
-        raise BackendError(
-            f"{path}: {values.size} values, expected {chains} x {draws} x {len(columns)}"
+    if not all(columns):
+        raise bad("columns", f"empty column name in {header['columns']!r}")
+    if len(set(columns)) != len(columns):
+        raise bad("columns", "duplicate column names")
+    chains, draws = counts["chains"], counts["draws"]
+    size = len(raw) - 12 - n
+    expected = chains * draws * len(columns) * 8
+    if size != expected:
+        raise bad(
+            "values",
+            f"{size} bytes, expected {chains} chains x {draws} draws x {len(columns)} "
+            f"columns x 8 = {expected}",
         )
+    values = np.frombuffer(raw, dtype="<f8", offset=12 + n)
     return columns, values.reshape(chains, draws, len(columns))
 
 
 def columns_to_draws(columns: list[str], values: np.ndarray) -> Draws:
-    """Group Stan's flat columns (``x.1``, ``m.2.3``, column-major) into named arrays."""
-    groups: dict[str, list[tuple[tuple[int, ...], int]]] = {}
-    for j, col in enumerate(columns):
-        name, *idx = col.split(".")
-        groups.setdefault(name, []).append((tuple(int(i) for i in idx), j))
+    """Group Stan's flat columns (``x.1``, ``m.2.3``, column-major) into named arrays of
+    shape (chain, draw, *dims), by stanio's parser of Stan's output names."""
     params: dict[str, np.ndarray] = {}
     stats: dict[str, np.ndarray] = {}
-    lead = values.shape[:2]
-    for name, entries in groups.items():
-        if name in SAMPLER_COLUMNS:
-            stats[name] = np.ascontiguousarray(values[:, :, entries[0][1]])
-            continue
-        if not entries[0][0]:
-            params[name] = np.ascontiguousarray(values[:, :, entries[0][1]])
-            continue
-        shape = tuple(max(e[0][d] for e in entries) for d in range(len(entries[0][0])))
-        cols = [j for _, j in entries]  # Stan writes arrays column-major
-        flat = values[:, :, cols].reshape(lead + shape[::-1])
-        axes = tuple(range(2)) + tuple(range(len(shape) + 1, 1, -1))
-        params[name] = np.ascontiguousarray(np.transpose(flat, axes))
+    for name, var in stanio.parse_header(",".join(columns)).items():
+        arr = np.ascontiguousarray(var.extract_reshape(values))
+        (stats if name in SAMPLER_COLUMNS else params)[name] = arr
     return Draws(params=params, sample_stats=stats)
+
+
+class _Terminated(BaseException):
+    """SIGTERM arrived during :meth:`NativeBackend.sample` (see :func:`sigterm_unwinds`)."""
+
+
+@contextlib.contextmanager
+def sigterm_unwinds() -> Iterator[None]:
+    """Within the block, SIGTERM unwinds (so the driver is killed and temporaries removed)
+    and then terminates the process as it would have without the block.
+
+    Only in the main thread and only while SIGTERM has its default action: a handler
+    someone installed is left alone (it decides), as is an ignored SIGTERM.
+    """
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    ):
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise _Terminated()
+
+    signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    except _Terminated:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+        raise  # pragma: no cover - the signal ends the process
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL the child's process group (the child leads it) and reap the child."""
+    if proc.poll() is None:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    while True:
+        try:
+            proc.wait()
+            return
+        except KeyboardInterrupt:  # a second Ctrl-C: still reap the killed child
+            continue
+
+
+def run_driver(cmd: list[str]) -> tuple[int, str]:
+    """Run the driver in its own process group; return (exit code, stdout + stderr).
+
+    Any exception while it runs (KeyboardInterrupt, SIGTERM under
+    :func:`sigterm_unwinds`) kills the group before propagating, so no driver outlives the
+    call.  OSError when it cannot be started.
+    """
+    proc = subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        errors="replace",
+        process_group=0,
+    )
+    try:
+        out, _ = proc.communicate()
+    except BaseException:
+        _kill_group(proc)
+        raise
+    return proc.returncode, out or ""
+
+
+def _check_self_contained(exe: Path) -> None:
+    """Start the new executable without ``LD_LIBRARY_PATH`` (it must stop at its usage
+    check): BackendError when the loader cannot find a library beside it."""
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    try:
+        out = subprocess.run([str(exe)], capture_output=True, text=True, env=env, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        raise BackendError(f"the new native driver {exe} does not start: {err}") from err
+    if out.returncode != EXIT_USAGE:
+        raise BackendError(
+            f"the new native driver {exe} does not start on its own (exit code "
+            f"{out.returncode}):\n{tail(out.stderr or out.stdout)}"
+        )
 
 
 class NativeBackend:
@@ -193,8 +380,10 @@ class NativeBackend:
         """Build the program's executable in the cache (once); return its marker.
 
         Marker keys: ``backend``, ``stan_file``, ``program_sha256``, ``stan_version``,
-        ``compiler``, ``cache_dir``, ``exe_file``.  RuntimeError with stanc's or the
-        compiler's message when the program does not build.
+        ``compiler`` (the version line recorded at build time), ``cache_dir``,
+        ``exe_file``.  Finding a built program runs no compiler.  RuntimeError with stanc's
+        or the compiler's message when the program does not build; BackendError when the
+        cache cannot be written or the build cannot run (no compiler).
         """
         path = Path(stan_file).resolve()
         code = path.read_text()
@@ -203,18 +392,21 @@ class NativeBackend:
             return self._markers[memo]
         parts = build_key(code)
         cache_dir = cache_root() / "native" / f"{path.stem}-{content_key(parts)}"
-        exe = cache_dir / "driver"
-        if not exe.is_file():
-            cache_dir.parent.mkdir(parents=True, exist_ok=True)
-            with file_lock(cache_dir.parent / f".{cache_dir.name}.lock"):
-                if not exe.is_file():
+        exe = cache_dir / EXE_NAME
+        if not entry_complete(cache_dir, EXE_NAME):
+            with build_lock(cache_dir):
+                if not entry_complete(cache_dir, EXE_NAME):
                     self._build(path, code, cache_dir, parts)
+        try:
+            record = json.loads((cache_dir / BUILD_RECORD).read_text())
+        except (OSError, ValueError):
+            record = {}
         marker = {
             "backend": self.name,
             "stan_file": str(path),
             "program_sha256": parts["program"],
             "stan_version": parts["stan"],
-            "compiler": parts["compiler"],
+            "compiler": str(record.get("compiler_version", "unknown")),
             "cache_dir": str(cache_dir),
             "exe_file": str(exe),
         }
@@ -223,13 +415,9 @@ class NativeBackend:
 
     @staticmethod
     def _build(path: Path, code: str, cache_dir: Path, parts: dict[str, str]) -> None:
-        """stanc + g++ into a temporary sibling directory, renamed to ``cache_dir``."""
-        sweep_stale(cache_dir.parent, f".{cache_dir.name}.tmp-")
-        work = Path(
-            tempfile.mkdtemp(
-                prefix=owned_tempdir_name(f".{cache_dir.name}.tmp-"), dir=cache_dir.parent
-            )
-        )
+        """stanc + g++ into a temporary sibling directory, with the wheel's runtime
+        libraries copied beside the executable, renamed to ``cache_dir``."""
+        work = new_build_dir(cache_dir)
         try:
             t0 = time.perf_counter()
             LOG.info(
@@ -257,6 +445,8 @@ class NativeBackend:
                 msg = (stanc.stderr or stanc.stdout).replace(str(work / "program.stan"), str(path))
                 raise RuntimeError(f"stanc rejected {path}:\n{msg.strip()}")
             log_captured(f"stanc warnings for {path.name}", stanc.stderr)
+            cxx_version = compiler_version()  # BackendError when there is no compiler
+            exe = work / EXE_NAME
             cmd = [
                 compiler(),
                 *CXXFLAGS,
@@ -264,11 +454,11 @@ class NativeBackend:
                 f'-DSSMOBS_MODEL_HPP="{work / "model.hpp"}"',
                 f"-I{hdir / 'include'}",
                 "-o",
-                str(work / "driver"),
+                str(exe),
                 str(DRIVER_SOURCE),
                 f"-L{hdir / 'lib'}",
                 "-ltbb",
-                f"-Wl,-rpath,{hdir / 'lib'}",
+                *LDFLAGS,
             ]
             try:
                 cxx = subprocess.run(cmd, capture_output=True, text=True)
@@ -283,13 +473,22 @@ class NativeBackend:
                     f"{cxx.returncode}):\n" + "\n".join(errors[:20] or [tail(cxx.stderr)])
                 )
             log_captured(f"compiler for {path.name}", cxx.stderr)
-            (work / "build.json").write_text(
-                json.dumps({**parts, "stan_file": str(path), "command": cmd}, indent=1)
-            )
+            for lib in RUNTIME_LIBS:
+                shutil.copyfile(hdir / "lib" / lib, work / lib)
+                (work / lib).chmod(shared_mode())
+            _check_self_contained(exe)
             (work / "program.stan").unlink()
-            if cache_dir.exists():  # an incomplete directory without the executable
-                shutil.rmtree(cache_dir)
-            os.replace(work, cache_dir)
+            publish_entry(
+                work,
+                cache_dir,
+                {
+                    **parts,
+                    "compiler_version": cxx_version,
+                    "compiler_path": shutil.which(compiler()),
+                    "stan_file": str(path),
+                    "command": cmd,
+                },
+            )
             LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
         finally:
             shutil.rmtree(work, ignore_errors=True)
@@ -308,7 +507,20 @@ class NativeBackend:
         ``settings.workers`` chains run at once (threads of one process).  ``timings``:
         ``sample`` is the driver's wall time, ``sample_cpu`` its CPU time (user + system,
         from the child's rusage), ``convert`` reading the draws, ``total`` the method.
+        SIGTERM during the call kills the driver and removes the temporaries before the
+        process ends (:func:`sigterm_unwinds`).
         """
+        with sigterm_unwinds():
+            return self._sample(stan_file, data, seed, settings, inits)
+
+    def _sample(
+        self,
+        stan_file: str | os.PathLike,
+        data: Mapping[str, Any],
+        seed: int,
+        settings: SamplerSettings,
+        inits: list[dict] | None,
+    ) -> Draws:
         t_start = time.perf_counter()
         check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
@@ -338,6 +550,8 @@ class NativeBackend:
                 str(settings.max_treedepth),
                 "--threads",
                 str(min(settings.workers, settings.chains)),
+                "--parent-pid",
+                str(os.getpid()),
             ]
             for c, init in enumerate(inits or []):
                 init_file = tmp / f"init{c + 1}.json"
@@ -348,7 +562,7 @@ class NativeBackend:
             before = os.times()
             t0 = time.perf_counter()
             try:
-                proc = subprocess.run(cmd, capture_output=True, text=True)
+                returncode, output = run_driver(cmd)
             except OSError as err:
                 raise BackendError(
                     f"{label}: cannot start the native driver {marker['exe_file']}: {err}"
@@ -361,20 +575,25 @@ class NativeBackend:
                 + after.children_system
                 - before.children_system
             )
-            log_captured(f"native driver {label} (seed {seed})", proc.stderr)
-            if proc.returncode == EXIT_SAMPLER_FAILED:
-                raise SamplingError(f"{label} (seed {seed}): {tail(proc.stderr, 5)}")
-            if proc.returncode == EXIT_DATA_REJECTED:
-                raise ValueError(f"{label}: data rejected: {tail(proc.stderr, 5)}")
-            if proc.returncode != 0:
+            log_captured(f"native driver {label} (seed {seed})", output)
+            if returncode == EXIT_SAMPLER_FAILED:
+                raise SamplingError(f"{label} (seed {seed}): {tail(output, 5)}")
+            if returncode == EXIT_DATA_REJECTED:
+                raise ValueError(f"{label}: data rejected: {tail(output, 5)}")
+            if returncode != 0:
+                meaning = {
+                    EXIT_USAGE: ": bad arguments",
+                    EXIT_WRITE_FAILED: ": cannot write the draws",
+                    EXIT_INPUT_UNREADABLE: ": cannot open or parse a data or init file",
+                }.get(returncode, "")
                 why = (
-                    f"killed by signal {-proc.returncode}"
-                    if proc.returncode < 0
-                    else f"exit code {proc.returncode}"
+                    f"killed by signal {-returncode}"
+                    if returncode < 0
+                    else f"exit code {returncode}{meaning}"
                 )
                 raise BackendError(
                     f"{label}: the native driver {marker['exe_file']} "
-                    f"failed ({why}):\n{tail(proc.stderr)}"
+                    f"failed ({why}):\n{tail(output)}"
                 )
             t0 = time.perf_counter()
             if self.discard:

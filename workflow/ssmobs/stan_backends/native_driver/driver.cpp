@@ -7,16 +7,21 @@
 //
 //   driver --data data.json --output draws.bin --seed S --chains C --warmup W
 //          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
-//          [--init-radius R] [--discard]
+//          [--init-radius R] [--parent-pid P] [--discard]
 //
-// Output (little-endian): "SSMOBSD1" (8 bytes), uint32 header length L, L bytes of
-// header text "chains=C\ndraws=N\ncolumns=name1,name2,...\n", then for every chain in
-// order its N rows of len(columns) float64 values (row-major).  With --discard nothing
-// is written (the sampler's floor, for benchmarks).
+// Output, little-endian whatever the host: "SSMOBSD1" (8 bytes), uint32 header length L,
+// L bytes of header text "byteorder=little\nchains=C\ndraws=N\ncolumns=name1,name2,...\n",
+// then for every chain in order its N rows of len(columns) IEEE-754 float64 values
+// (row-major).  With --discard nothing is written (the sampler's floor, for benchmarks).
+//
+// With --parent-pid P (the caller's pid), on Linux the driver asks to be killed when its
+// parent dies (PR_SET_PDEATHSIG) and exits at once if P is already gone.
 //
 // Exit codes: 0 ok; 2 bad arguments; 3 the sampler failed on these data (initialisation
 // failed, exception in the model); 4 the data were rejected by the model's constructor;
-// 5 the output could not be written.
+// 5 the output could not be written; 6 a data or init file cannot be opened or is not
+// valid Stan JSON (an environment failure, not a property of the data); 7 the parent
+// given by --parent-pid was already gone.
 
 #include SSMOBS_MODEL_HPP
 
@@ -30,18 +35,40 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <cerrno>
+#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#ifdef __linux__
+#include <sys/prctl.h>
+#include <unistd.h>
+#endif
+
+static_assert(std::numeric_limits<double>::is_iec559 && sizeof(double) == 8,
+              "the draws file holds IEEE-754 binary64 values");
+
 namespace {
+
+enum ExitCode {
+  kOk = 0,
+  kUsage = 2,
+  kSamplerFailed = 3,
+  kDataRejected = 4,
+  kWriteFailed = 5,
+  kInputUnreadable = 6,
+  kOrphaned = 7,
+};
 
 std::mutex stderr_mutex;
 
@@ -91,6 +118,7 @@ struct Args {
   std::string data, output;
   std::vector<std::string> inits;
   unsigned int seed = 0;
+  long parent_pid = 0;
   int chains = 4, warmup = 1000, samples = 1000, max_depth = 10, threads = 1;
   double delta = 0.8, init_radius = 2.0;
   bool discard = false;
@@ -98,7 +126,7 @@ struct Args {
 
 [[noreturn]] void usage(const std::string& why) {
   std::cerr << "driver: " << why << "\n";
-  std::exit(2);
+  std::exit(kUsage);
 }
 
 Args parse(int argc, char** argv) {
@@ -123,6 +151,7 @@ Args parse(int argc, char** argv) {
       else if (k == "--threads") a.threads = std::stoi(v);
       else if (k == "--delta") a.delta = std::stod(v);
       else if (k == "--init-radius") a.init_radius = std::stod(v);
+      else if (k == "--parent-pid") a.parent_pid = std::stol(v);
       else usage("unknown option " + k);
     } catch (const std::exception&) {
       usage("bad value for " + k + ": " + v);
@@ -143,24 +172,51 @@ std::unique_ptr<stan::io::var_context> read_json(const std::string& path) {
   return std::make_unique<stan::json::json_data>(in);
 }
 
+bool host_is_little_endian() {
+  const std::uint32_t one = 1;
+  unsigned char first;
+  std::memcpy(&first, &one, 1);
+  return first == 1;
+}
+
+// Writes n doubles as little-endian binary64 (as they are on a little-endian host).
+bool write_doubles_le(std::FILE* f, const double* x, std::size_t n) {
+  if (host_is_little_endian()) return std::fwrite(x, sizeof(double), n, f) == n;
+  unsigned char buf[8 * 512];
+  for (std::size_t i = 0; i < n;) {
+    const std::size_t m = std::min<std::size_t>(512, n - i);
+    for (std::size_t k = 0; k < m; ++k) {
+      std::uint64_t bits;
+      std::memcpy(&bits, &x[i + k], 8);
+      for (int b = 0; b < 8; ++b) buf[8 * k + b] = static_cast<unsigned char>(bits >> (8 * b));
+    }
+    if (std::fwrite(buf, 8, m, f) != m) return false;
+    i += m;
+  }
+  return true;
+}
+
 bool write_output(const std::string& path, const std::vector<RowWriter>& writers,
                   int samples) {
   std::ostringstream header;
-  header << "chains=" << writers.size() << "\ndraws=" << samples << "\ncolumns=";
+  header << "byteorder=little\nchains=" << writers.size() << "\ndraws=" << samples
+         << "\ncolumns=";
   const auto& names = writers[0].names_;
   for (std::size_t j = 0; j < names.size(); ++j) header << (j ? "," : "") << names[j];
   header << "\n";
   const std::string text = header.str();
+  if (text.size() > std::numeric_limits<std::uint32_t>::max()) return false;
   std::FILE* f = std::fopen(path.c_str(), "wb");
   if (!f) return false;
   const std::uint32_t len = static_cast<std::uint32_t>(text.size());
-  bool ok = std::fwrite("SSMOBSD1", 1, 8, f) == 8 &&
-            std::fwrite(&len, sizeof(len), 1, f) == 1 &&
+  const unsigned char len_le[4] = {
+      static_cast<unsigned char>(len), static_cast<unsigned char>(len >> 8),
+      static_cast<unsigned char>(len >> 16), static_cast<unsigned char>(len >> 24)};
+  bool ok = std::fwrite("SSMOBSD1", 1, 8, f) == 8 && std::fwrite(len_le, 1, 4, f) == 4 &&
             std::fwrite(text.data(), 1, text.size(), f) == text.size();
   for (const auto& w : writers) {
     if (!ok) break;
-    ok = std::fwrite(w.values_.data(), sizeof(double), w.values_.size(), f) ==
-         w.values_.size();
+    ok = write_doubles_le(f, w.values_.data(), w.values_.size());
   }
   ok = (std::fclose(f) == 0) && ok;
   return ok;
@@ -171,27 +227,44 @@ bool write_output(const std::string& path, const std::vector<RowWriter>& writers
 int main(int argc, char** argv) {
   const Args a = parse(argc, argv);
 
+#ifdef __linux__
+  if (a.parent_pid > 0) {
+    // Die with the parent (SIGKILL when the thread that started us ends), and do not
+    // start sampling if it is gone already (we would have been reparented).
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (static_cast<long>(getppid()) != a.parent_pid) {
+      std::cerr << "driver: parent process " << a.parent_pid << " is gone\n";
+      return kOrphaned;
+    }
+  }
+#endif
+
+  // Reading the JSON files: a failure is the environment's (a file that is gone, not
+  // valid JSON), never the model's judgement of the data.
   std::unique_ptr<stan::io::var_context> data;
-  std::unique_ptr<stan::model::model_base> model;
+  std::vector<std::unique_ptr<stan::io::var_context>> inits;
+  std::string reading = a.data;
   try {
     data = read_json(a.data);
+    for (int c = 0; c < a.chains; ++c) {
+      if (a.inits.empty()) {
+        inits.emplace_back(std::make_unique<stan::io::empty_var_context>());
+      } else {
+        reading = a.inits[c];
+        inits.emplace_back(read_json(a.inits[c]));
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "cannot read " << reading << ": " << e.what() << "\n";
+    return kInputUnreadable;
+  }
+
+  std::unique_ptr<stan::model::model_base> model;
+  try {
     model.reset(&new_model(*data, a.seed, &std::cerr));
   } catch (const std::exception& e) {
     std::cerr << "data rejected: " << e.what() << "\n";
-    return 4;
-  }
-
-  std::vector<std::unique_ptr<stan::io::var_context>> inits;
-  try {
-    for (int c = 0; c < a.chains; ++c) {
-      if (a.inits.empty())
-        inits.emplace_back(std::make_unique<stan::io::empty_var_context>());
-      else
-        inits.emplace_back(read_json(a.inits[c]));
-    }
-  } catch (const std::exception& e) {
-    std::cerr << "inits rejected: " << e.what() << "\n";
-    return 2;
+    return kDataRejected;
   }
 
   std::vector<RowWriter> writers(a.chains);
@@ -232,17 +305,17 @@ int main(int argc, char** argv) {
     if (codes[c] != 0) {
       std::cerr << "chain " << c + 1 << " failed"
                 << (failures[c].empty() ? "" : ": " + failures[c]) << "\n";
-      return 3;
+      return kSamplerFailed;
     }
     if (writers[c].n_rows_ != static_cast<std::size_t>(a.samples)) {
       std::cerr << "chain " << c + 1 << " wrote " << writers[c].n_rows_ << " draws, "
                 << "expected " << a.samples << "\n";
-      return 3;
+      return kSamplerFailed;
     }
   }
   if (!a.discard && !write_output(a.output, writers, a.samples)) {
     std::cerr << "cannot write " << a.output << ": " << std::strerror(errno) << "\n";
-    return 5;
+    return kWriteFailed;
   }
-  return 0;
+  return kOk;
 }
