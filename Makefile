@@ -21,10 +21,13 @@ CONFIG ?= config/config.yaml
 # Before Snakemake: one line for a missing, empty or malformed config file, and removal of a
 # stale lock left by a killed run when no Snakemake process runs here (ssmobs/preflight.py).
 PREFLIGHT := $(BIN)/python -m ssmobs.preflight --unlock-stale
+# Every target resumes a killed run with the same command: --rerun-incomplete redoes the
+# jobs a kill left half done (their outputs are also written atomically).
+SNAKEMAKE := $(BIN)/snakemake --cores $(CORES) --rerun-incomplete
 
 run: setup
 	$(PREFLIGHT) $(CONFIG)
-	$(BIN)/snakemake --cores $(CORES) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
+	$(SNAKEMAKE) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
 
 # Style and types (ruff, snakefmt, mypy; settings in pyproject.toml); `make test` runs it first.
 lint: setup
@@ -38,11 +41,11 @@ test: setup lint
 
 smoke: setup
 	$(PREFLIGHT) config/smoke.yaml
-	$(BIN)/snakemake --cores $(CORES) --configfile config/smoke.yaml
+	$(SNAKEMAKE) --configfile config/smoke.yaml
 
 paper: setup
 	$(PREFLIGHT) config/paper.yaml
-	$(BIN)/snakemake --cores $(CORES) --configfile config/paper.yaml
+	$(SNAKEMAKE) --configfile config/paper.yaml
 
 # Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).
 TABLES_DIR := paper_figures/paper_settings
@@ -53,10 +56,9 @@ TABLES_NOTE ?=
 
 tables: setup
 	$(PREFLIGHT) config/tables.yaml
-	start=$$(date +%s); \
-	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete $(TABLES_TARGETS) --configfile config/tables.yaml && \
 	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) \
-		--started $$start --note "$(TABLES_NOTE)"
+		--command "make tables" --note "$(TABLES_NOTE)" -- \
+		$(SNAKEMAKE) $(TABLES_TARGETS) --configfile config/tables.yaml
 
 # One Section IV row at the paper's settings (issue 10), with a provenance file (committed).
 SECTION4_CONFIG := config/section4_sep_d2_p1.yaml
@@ -65,10 +67,9 @@ SECTION4_NOTE ?=
 
 section4: setup
 	$(PREFLIGHT) $(SECTION4_CONFIG)
-	start=$$(date +%s); \
-	$(BIN)/snakemake --cores $(CORES) --rerun-incomplete --configfile $(SECTION4_CONFIG) && \
 	$(BIN)/python -m ssmobs.provenance --config $(SECTION4_CONFIG) --outputs-dir $(SECTION4_DIR) \
-		--started $$start --command "make section4" --note "$(SECTION4_NOTE)"
+		--command "make section4" --note "$(SECTION4_NOTE)" -- \
+		$(SNAKEMAKE) --configfile $(SECTION4_CONFIG)
 
 clean:
 	rm -rf results .snakemake

@@ -1,14 +1,12 @@
 # ssmobs: observability of nonlinear Gaussian state space models (Hanebeck & Czado).
 #
-# Output scheme
-#   results/shared/...        artefacts shared by scenarios, keyed by exactly what they depend on
-#     design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc   (q = (d+p)T)
-#   results/{scenario}/...    one folder per rule for each configured scenario
-#     design_trajectories/trajectories.nc
-#     exact_marginal/K{K}/                   exact marginal posteriors at K (issue 11)
-#   results/k_selection/{name}/...   runs of the choice of K (Sec. IV.A)
-#   results/{scenario}/logs, results/shared/logs    one log per job
-#   paper_figures/            final tables and figures (see paper_figures/README.md)
+# Output scheme: every cached output lives under a key of everything that determines it
+# (config values, inputs' keys, code: ssmobs/cache_keys.py), with its log beside it
+#   results/shared/design_disturbances/<key>/q{q}_K{K}_{method}_seed{seed}.nc  (q = (d+p)T)
+#   results/{scenario}/<stage>/<key>/...     one folder per stage and key of each scenario
+#   results/k_selection/{name}/<key>/...     runs of the choice of K (Sec. IV.A)
+#   results/outputs/<outputs_dir>/*.key      what made each table and figure (stamps)
+#   <outputs_dir>/            final tables and figures (see paper_figures/README.md)
 #
 # Default config: config/config.yaml; others with --configfile config/smoke.yaml|paper.yaml.
 
@@ -42,9 +40,12 @@ include: "workflow/rules/joint_map.smk"
 include: "workflow/rules/k_selection.smk"
 include: "workflow/rules/stan.smk"
 include: "workflow/rules/exact_marginal.smk"
-include: "workflow/rules/figures.smk"
 include: "workflow/rules/outputs.smk"
+include: "workflow/rules/figures.smk"
 include: "workflow/rules/own_model.smk"
+
+
+remove_stale_stamps()
 
 
 rule all:

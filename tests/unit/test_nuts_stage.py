@@ -8,7 +8,7 @@ import logging
 import numpy as np
 import pytest
 from ssmobs import seeds
-from ssmobs.convergence import ConvergenceSettings
+from ssmobs.convergence import ConvergenceSettings, apply_thresholds
 from ssmobs.log import Progress
 from ssmobs.models import get_model
 from ssmobs.nuts_stage import records_to_frame, run_trajectories
@@ -229,7 +229,11 @@ def test_corrupted_or_stale_record_is_recomputed(scenario):
 def test_changed_settings_program_or_data_recompute(scenario):
     run(scenario, FakeBackend(), ks=[0, 1])
     backend = FakeBackend()
+    # a convergence threshold changes no draw: the tables apply it to the stored diagnostics
     run(scenario, backend, ks=[0, 1], convergence=ConvergenceSettings(rhat_max=1.05))
+    assert backend.calls == []
+    backend = FakeBackend()
+    run(scenario, backend, ks=[0, 1], convergence=ConvergenceSettings(implementation="arviz"))
     assert [c["k"] for c in backend.calls] == [0, 1]
     scenario["stan_file"].write_text("// changed program\n")
     backend = FakeBackend()
@@ -304,8 +308,12 @@ def test_frame_and_summary_from_stage_records(scenario):
     recs = run(scenario, FakeBackend({2: "bad", 1: "raise"}))
     frame = records_to_frame(recs, scenario["model"], T)
     assert len(frame) == K and frame["converged"].sum() == 4
-    assert len(frame.columns) == 7 + 6 + 3 * (T + 2)
+    # 7 record fields, 6 worst diagnostics, 3 x 3 per block (Omega, x0, states), 3 per Theta
+    assert len(frame.columns) == 7 + 6 + 9 + 3 * (T + 2)
     assert frame.loc[1, "status"] == "error" and np.isnan(frame.loc[1, "a_map"])
+    ok = frame[frame["status"] == "ok"]
+    assert np.isfinite(ok[["max_rhat_omega", "min_ess_bulk_x0", "min_ess_tail_states"]]).all(None)
+    assert (ok["max_rhat"] == ok[[f"max_rhat_{b}" for b in ("omega", "x0", "states")]].max(1)).all()
     out = stan_summary(frame, scenario["model"], [0.9], 8.0, scenario["x_true"])
     assert out["n_stan"] == 4 and out["ratio"] == pytest.approx(4 / 6)
     assert out["a_mean"] == pytest.approx(0.9, abs=0.01)
@@ -379,7 +387,8 @@ def batch(scenario, tmp_path):
     folder = tmp_path / "sample_nuts"
     recs = run(scenario, FakeBackend(), records_dir=folder / "records")
     table = folder / "batch0.parquet"
-    io.write_parquet(table, records_to_frame(recs, scenario["model"], T))
+    frame = apply_thresholds(records_to_frame(recs, scenario["model"], T), ConvergenceSettings())
+    io.write_parquet(table, frame)
     return table
 
 
@@ -387,7 +396,8 @@ def check(table, scenario):
     from ssmobs import io
     from ssmobs.stages import check_batch_records
 
-    check_batch_records(table, io.read_parquet(table), scenario["model"], T)
+    frame = io.read_parquet(table)
+    check_batch_records(table, frame, scenario["model"], T, table.parent / "records", {})
 
 
 def test_intact_records_pass_the_check(batch, scenario):
@@ -413,7 +423,7 @@ def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle
         path.unlink()
     elif damage == "edit":
         rec = json.loads(path.read_text())
-        rec["converged"] = not rec["converged"]
+        rec["map"][0] += 1.0
         path.write_text(json.dumps(rec))
     else:
         path.write_text((batch.parent / "records" / "k00003.json").read_text())
@@ -431,18 +441,32 @@ def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
     from ssmobs.stages import changed_batch_records
 
     records = batch.parent / "records"
-    assert changed_batch_records(batch) is None
-    assert changed_batch_records(batch.parent / "batch9.parquet") is None  # not run yet
+    assert changed_batch_records(batch, records) is None
+    assert changed_batch_records(batch.parent / "batch9.parquet", records) is None  # not run yet
     later = batch.stat().st_mtime_ns + 10**9
     os.utime(records / "k00004.json", ns=(later, later))  # e.g. truncated after the batch ran
-    msg = changed_batch_records(batch)
+    msg = changed_batch_records(batch, records)
     assert msg.startswith(f"{batch}: the record of trajectory k=4 ")
     assert "was changed after this table was written; this batch must be rerun" in msg
     # only the k the table was built from count (e.g. after a change of stan.batch_size)
     small = batch.parent / "batch1.parquet"
     io.write_parquet(small, io.read_parquet(batch).iloc[:3])
     os.utime(small, ns=(later - 10, later - 10))
-    assert changed_batch_records(small) is None
+    assert changed_batch_records(small, records) is None
     (records / "k00001.json").unlink()
-    assert "trajectory k=1" in changed_batch_records(batch)
-    assert "is missing" in changed_batch_records(batch)
+    assert "trajectory k=1" in changed_batch_records(batch, records)
+    assert "is missing" in changed_batch_records(batch, records)
+
+
+def test_thresholds_are_applied_to_stored_diagnostics_with_the_failing_block(scenario):
+    """A table under other thresholds needs no sampling, and says which block failed."""
+    recs = run(scenario, FakeBackend())
+    frame = records_to_frame(recs, scenario["model"], T)
+    strict = apply_thresholds(frame, ConvergenceSettings(ess_bulk_min=1e9))
+    assert not strict["converged"].any()
+    assert all("ess_bulk" in c.split(",") for c in strict["failed_checks"])
+    assert all("ess_bulk: min bulk-ESS" in r for r in strict["reason"])
+    assert set(strict["failing_blocks"]) == {"omega,x0,states"}
+    loose = apply_thresholds(strict, ConvergenceSettings(ess_bulk_min=1.0, ess_tail_min=1.0))
+    assert loose["converged"].all() and set(loose["failing_blocks"]) == {""}
+    assert set(loose["reason"]) == {""}

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from helpers import REPO
+from helpers import REPO, SMOKE_OUT, only
 
 pytestmark = pytest.mark.workflow
 
@@ -23,10 +23,11 @@ def test_exact_stage_outputs(smoke_run):
 
     for sc in _smoke()["scenarios"]:
         model = get_model(sc["model"])
-        out = smoke_run / "results" / sc["name"] / "exact_marginal" / f"K{sc['K']}"
-        assert (out / "summary.json").exists() == model.linear_in_states
+        found = list(smoke_run.glob(f"results/{sc['name']}/exact_marginal/*/summary.json"))
+        assert len(found) == int(model.linear_in_states)
         if not model.linear_in_states:
             continue
+        out = found[0].parent
         frame = pd.read_parquet(out / "marginal_map.parquet")
         info = json.loads((out / "summary.json").read_text())
         assert frame["k"].tolist() == list(range(sc["K"]))
@@ -39,13 +40,11 @@ def test_exact_stage_outputs(smoke_run):
 
 
 def test_exact_column_in_the_tables(smoke_run):
-    figs = smoke_run / "paper_figures"
+    figs = smoke_run / SMOKE_OUT
     t2 = pd.read_csv(figs / "table2_joint_vs_marginal.csv")
     marg = t2[t2["estimator"] == "marginal MAP"]
     assert {"a_exact", "x0_exact"} <= set(t2.columns)
-    summ = json.loads(
-        (smoke_run / "results" / "same_T4" / "exact_marginal" / "K12" / "summary.json").read_text()
-    )
+    summ = json.loads(only(smoke_run, "results/same_T4/exact_marginal/*/summary.json").read_text())
     mean_row = marg[marg["statistic"] == "mean"].iloc[0]
     assert mean_row["a_exact"] == pytest.approx(summ["a_mean"])
     assert t2.loc[t2["estimator"] == "joint MAP", "a_exact"].isna().all()
@@ -64,5 +63,5 @@ def test_exact_vs_stan_figure(smoke_run):
         if sc.get("stan", True) and get_model(sc["model"]).linear_in_states:
             for ext in ("pdf", "png"):
                 assert (
-                    smoke_run / "paper_figures" / f"fig_exact_vs_stan_{sc['name']}.{ext}"
+                    smoke_run / SMOKE_OUT / f"fig_exact_vs_stan_{sc['name']}.{ext}"
                 ).stat().st_size > 2000

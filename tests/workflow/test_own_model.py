@@ -3,7 +3,7 @@
 The tutorial's listings are the repository's files (so the tutorial cannot drift from the
 code), its check command passes, its quick run on the smoke profile writes the table and
 figure, and the two mistakes it shows stop the run with the message it quotes, before any
-design trajectory of the model is written.
+NUTS run of the model.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ import sys
 
 import pandas as pd
 import pytest
-from helpers import REPO, make_workdir, snakemake
+from helpers import REPO, make_workdir, only, snakemake
 
 pytestmark = pytest.mark.workflow
 
 TUTORIAL = REPO / "docs" / "your-own-model.md"
-TARGET = "paper_figures/ours_stoch_vol_observability.png"
+TARGET = "paper_figures/smoke/ours_stoch_vol_observability.png"
 
 
 def listing(path: str) -> str:
@@ -76,12 +76,31 @@ def test_step_check_command(fresh):
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
 
 
-def test_step_quick_run_on_smoke_profile(fresh):
-    snakemake(fresh, "--cores", "2", TARGET, "--configfile", "config/smoke.yaml")
-    frame = pd.read_csv(fresh / "paper_figures" / "ours_stoch_vol_observability.csv")
+def test_step_quick_run_on_smoke_profile(smoke_run):
+    """`make smoke` (the session's smoke run) writes the study's table beside the others."""
+    frame = pd.read_csv(smoke_run / "paper_figures/smoke/ours_stoch_vol_observability.csv")
     assert frame["T"].tolist() == [5]
     assert {"K_max_ratio", "K_stan_ratio", "joint_not_ok", "stan_failed_checks"} <= set(frame)
-    assert (fresh / "results" / "shared" / "check_model" / "stoch_vol.json").is_file()
+    assert list(smoke_run.glob("results/stoch_vol_T5/check_model/*.json"))
+
+
+def test_step_study_command_makes_every_output(tmp_path):
+    """The tutorial's study command is one command for every output of a config (issue 19:
+    it once ran only check_model and reported success): here on a one-scenario study."""
+    import yaml
+
+    work = make_workdir(tmp_path)
+    conf = yaml.safe_load((work / "config" / "stoch_vol.yaml").read_text())
+    conf["outputs_dir"] = "paper_figures/mine"
+    conf["scenarios"] = [{**conf["scenarios"][0], "T": 4, "K": 2}]
+    conf["observability_studies"] = [{"name": "mine", "scenarios": [conf["scenarios"][0]["name"]]}]
+    conf["stan"] = {**conf.get("stan", {}), "chains": 2, "iter_warmup": 100, "iter_sampling": 100}
+    (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
+    # what `make run CONFIG=config/mine.yaml` runs after its set-up: no target named
+    snakemake(work, "--cores", "2", "--rerun-incomplete", "--configfile", "config/mine.yaml")
+    out = work / "paper_figures" / "mine"
+    for name in ("ours_mine_observability.csv", "section4_summary.csv", "fig2_design_points.png"):
+        assert (out / name).stat().st_size > 0, name
 
 
 def test_mistake_swapped_stan_parameters(tmp_path):
@@ -94,13 +113,13 @@ def test_mistake_swapped_stan_parameters(tmp_path):
     stan.write_text(code.replace(phi + sigma, sigma + phi))
     proc = snakemake(work, "--cores", "1", TARGET, "--configfile", "config/smoke.yaml", check=False)
     assert proc.returncode != 0
-    log = (work / "results" / "shared" / "logs" / "check_model" / "stoch_vol.log").read_text()
+    log = only(work, "results/stoch_vol_T5/check_model_stan/*.log").read_text()
     assert (
         "the parameters block declares ['sigma', 'phi', 'x0', 'x'], but the Python model "
         "'stoch_vol' (param_names = ['phi', 'sigma']) needs exactly ['phi', 'sigma', 'x0', "
         "'x'] in this order"
     ) in log
-    assert not (work / "results" / "stoch_vol_T5" / "design_trajectories").exists()
+    assert not (work / "results" / "stoch_vol_T5" / "sample_nuts").exists()  # no NUTS run
 
 
 def test_mistake_copied_module_keeps_the_old_slug(tmp_path):

@@ -1,4 +1,5 @@
 # Glue: config validation, target lists, input functions, wildcard constraints.
+import os
 import re
 import sys
 from pathlib import Path
@@ -11,6 +12,10 @@ from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
+from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
+
+# Snakemake reads --configfile files itself and keeps the last of two duplicate keys
+ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
 
 try:
     ssmobs_config.validate(config)  # also finds and checks every model module
@@ -25,12 +30,33 @@ except ValueError as err:
 
 #: where the tables and figures go (config key outputs_dir)
 OUT = config["outputs_dir"]
+
+
+def committed_outputs_guard(out, configfiles):
+    """Stop when ``out`` holds the committed outputs of another profile (its provenance.json
+    names another config file): no profile overwrites another one's committed results."""
+    import json
+
+    prov = Path(out) / "provenance.json"
+    if not prov.is_file():
+        return
+    owner = json.loads(prov.read_text()).get("config_file")
+    mine = [os.path.relpath(Path(f).resolve(), REPO) for f in configfiles]
+    if owner and owner not in mine:
+        raise WorkflowError(
+            f"outputs_dir = {out!r} holds the committed outputs of {owner} "
+            f"({prov}); this run's config ({', '.join(mine) or 'config/config.yaml'}) "
+            f"must write its own outputs_dir (set outputs_dir in its config file)"
+        )
+
+
+REPO = Path(workflow.basedir)
+committed_outputs_guard(OUT, workflow.configfiles or ["config/config.yaml"])
 SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 #: the same entries as typed objects (the rules pass the plain entries above as params)
 SCENARIO_OBJECTS = {name: Scenario.from_config(sc) for name, sc in SCENARIOS.items()}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 STUDIES = {st["name"]: st for st in config["observability_studies"]}
-REPO = Path(workflow.basedir)
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
 MU0_SCENARIOS = [
@@ -46,36 +72,132 @@ EXACT_SCENARIOS = [n for n, sc in SCENARIO_OBJECTS.items() if sc.exact_applies]
 EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
+#: every output's content key (ssmobs/cache_keys.py): outputs live under results/.../<key>/
+KEYS = CacheKeys(config, STAN_BACKEND, repo=REPO)
+#: the design sets of this config's design settings and code
+DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
+#: stamp files (results/outputs/...) of the tables and figures, with their current keys
+STAMPS = {}
+
+# Jobs run the package of this checkout, not the one `pip install -e` pointed at elsewhere.
+os.environ["PYTHONPATH"] = os.pathsep.join(
+    [str(REPO / "workflow")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+)
+
+
+def expect_key(kind, name, key):
+    """What the key wildcard ``key`` of ``kind`` describes; stops on a key of another config."""
+    try:
+        return KEYS.lookup(kind, name, key)
+    except UnknownKeyError as err:
+        raise WorkflowError(str(err)) from None
+
+
+def batch_size(name):
+    return SCENARIO_OBJECTS[name].batch_size(config["stan"])
+
+
+VERIFIED = set()
+
+
+def trajectories_path(name, K=None):
+    """The design trajectories of a scenario at K (its own K by default).  A file that no
+    longer matches its checksum (damage that kept its time) is removed here, before the
+    DAG is built, so it is made again."""
+    path = f"results/{name}/design_trajectories/{KEYS.trajectories(name, K)}/trajectories.nc"
+    if path not in VERIFIED and workflow.is_main_process:
+        VERIFIED.add(path)
+        from ssmobs.io import checksum_problem
+
+        problem = checksum_problem(path)
+        if problem:
+            logger.warning(f"{problem}: it is made again")
+            Path(path).unlink()
+    return path
+
+
+def check_path(name, stan=False):
+    """The report of the model check of a scenario (Python alone, or against Stan)."""
+    stage = "check_model_stan" if stan else "check_model"
+    return f"results/{name}/{stage}/{KEYS.check_model(name, stan)}.json"
+
+
+def joint_dir(name):
+    return f"results/{name}/joint_map/{KEYS.joint_map(name)}"
+
+
 def joint_summary(name):
-    return f"results/{name}/joint_map/summary.json"
+    return f"{joint_dir(name)}/summary.json"
+
+
+def program_marker(model):
+    return f"results/shared/stan/{STAN_BACKEND}/{model}/{KEYS.program(model)}.json"
+
+
+def records_dir(name):
+    return f"results/{name}/sample_nuts/records/{KEYS.nuts_records(name)}"
+
+
+def draws_dir(name):
+    return f"results/{name}/draws/{KEYS.nuts_records(name)}"
+
+
+def batch_dir(name):
+    return f"results/{name}/sample_nuts/{KEYS.nuts_batches(name, batch_size(name))}"
+
+
+def gather_dir(name):
+    return f"results/{name}/gather_nuts/{KEYS.gather(name, batch_size(name))}"
 
 
 def stan_summary(name):
-    return f"results/{name}/gather_nuts/summary.json"
+    return f"{gather_dir(name)}/summary.json"
+
+
+def stan_table(name):
+    return f"{gather_dir(name)}/marginal_map.parquet"
+
+
+def exact_dir(name, K):
+    return f"results/{name}/exact_marginal/{KEYS.exact(name, K)}"
 
 
 def exact_table(name, K):
-    return f"results/{name}/exact_marginal/K{K}/marginal_map.parquet"
+    return f"{exact_dir(name, K)}/marginal_map.parquet"
 
 
 def exact_summary_path(name):
     """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
-    return (
-        f"results/{name}/exact_marginal/K{SCENARIO_OBJECTS[name].exact_trajectories}/summary.json"
-    )
+    return f"{exact_dir(name, SCENARIO_OBJECTS[name].exact_trajectories)}/summary.json"
 
 
-def exact_trajectories(wildcards):
-    """The scenario's design trajectories when K is its own K, else those at K."""
-    sc = SCENARIOS[wildcards.scenario]
-    if int(wildcards.K) == sc["K"]:
-        return f"results/{wildcards.scenario}/design_trajectories/trajectories.nc"
-    return f"results/{wildcards.scenario}/exact_marginal/K{wildcards.K}/trajectories.nc"
+def ksel_points_dir(ksel):
+    return f"results/k_selection/{ksel}/{KEYS.k_selection_points(ksel)}"
 
 
-def exact_disturbances(wildcards):
-    sc = SCENARIO_OBJECTS[wildcards.scenario]
-    return disturbance_path(sc.disturbance_dim, wildcards.K, sc.method, sc.seed)
+def stamp(name, inputs=(), params=None):
+    """The stamp file of a table or figure rule, ``name`` possibly a pattern with wildcards.
+
+    A stamp holds the key of what made the rule's files in outputs_dir (keyed inputs, the
+    content of other inputs, params, code; registered with :func:`register_stamp`).  A
+    stamp of another key is removed before the DAG is built, so the rule reruns even where
+    file times and .snakemake/ say nothing (e.g. a config edited back to an earlier one)."""
+    return f"results/outputs/{OUT}/{name}.key"
+
+
+def register_stamp(name, inputs, params):
+    STAMPS[stamp(name)] = KEYS.output(f"{OUT}/{name}", inputs, params)
+
+
+def stamp_key(wildcards, output):
+    """The ``key`` param of a table or figure rule (its stamp's content)."""
+    return STAMPS[output.stamp]
+
+
+def keyed_input(kind, name, key, paths):
+    """``paths`` after checking that ``key`` (a wildcard) is one this config produces."""
+    expect_key(kind, name, key)
+    return paths
 
 
 wildcard_constraints:
@@ -90,18 +212,11 @@ wildcard_constraints:
     batch=r"\d+",
     backend="native|cmdstanpy|pystan",
     model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
+    key=r"[0-9a-f]{12}",
 
 
 def disturbance_path(q, K, method, seed):
-    return f"results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc"
-
-
-def model_check(wildcards):
-    """The check of the scenario's model (rule check_model), needed before its trajectories.
-
-    ancient: a check rerun because a scenario of the model was added (new check case) must
-    not make the trajectories of the other scenarios out of date."""
-    return ancient(f"results/shared/check_model/{SCENARIOS[wildcards.scenario]['model']}.json")
+    return f"{DESIGN_DIR}/q{q}_K{K}_{method}_seed{seed}.nc"
 
 
 def study_scenarios(name):
@@ -109,48 +224,43 @@ def study_scenarios(name):
     return [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
 
 
-def scenario_disturbances(wildcards):
+def trajectory_inputs(wildcards):
+    """The design disturbances and the model check behind one set of design trajectories."""
+    K = expect_key("trajectories", wildcards.scenario, wildcards.key)["K"]
     sc = SCENARIO_OBJECTS[wildcards.scenario]
-    return disturbance_path(sc.disturbance_dim, sc.K, sc.method, sc.seed)
+    return {
+        "disturbances": disturbance_path(sc.disturbance_dim, K, sc.method, sc.seed),
+        "checked": check_path(wildcards.scenario),
+    }
 
 
-def k_selection_disturbances(wildcards):
-    from ssmobs.k_selection import set_seed
-
-    q = SCENARIO_OBJECTS[KSEL[wildcards.ksel]["scenario"]].disturbance_dim
-    seed = set_seed(int(wildcards.seed), int(wildcards.K), wildcards.sets)
-    return disturbance_path(q, wildcards.K, wildcards.method, seed)
-
-
-def k_selection_points(ks):
-    """Every (method, sets, seed, K_i) summary of one k_selection entry (design: first seed)."""
+def k_selection_grids(name):
+    """Every (method, sets, seed) grid of one k_selection entry (design: first seed)."""
+    ks = KSEL[name]
     out = []
     for method in ks["methods"]:
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
         for sets in ks["sets"]:
             for seed in seeds:
-                out += [
-                    f"results/k_selection/{ks['name']}/{method}_{sets}_seed{seed}/K{K}.json"
-                    for K in ks["K_grid"]
-                ]
+                out.append(f"{ksel_points_dir(name)}/{method}_{sets}_seed{seed}.json")
     return out
 
 
-def nuts_batches(wildcards):
-    """The batch tables of a scenario; stops the run, naming the batch to rerun, when a
-    record was changed or deleted after its finished batch table was written (a stat per
-    record: a damaged record must not go unnoticed until its batch reruns)."""
+def nuts_batches(name):
+    """The batch tables of a scenario.  A batch whose records were damaged, deleted or
+    changed after its table was written (or whose kept draws are gone) loses its table
+    here, before the DAG is built, so that batch reruns: it recomputes exactly the damaged
+    records and reuses every valid one."""
     from ssmobs.stages import batches, changed_batch_records
 
-    sc = SCENARIO_OBJECTS[wildcards.scenario]
-    ranges = batches(sc.K, sc.batch_size(config["stan"]))
-    tables = [
-        f"results/{wildcards.scenario}/sample_nuts/batch{b}.parquet" for b in range(len(ranges))
-    ]
-    for table in tables:
-        problem = changed_batch_records(table)
-        if problem:
-            raise WorkflowError(problem)
+    ranges = batches(SCENARIO_OBJECTS[name].K, batch_size(name))
+    tables = [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
+    if workflow.is_main_process:
+        for table in tables:
+            problem = changed_batch_records(table, records_dir(name), draws_dir(name))
+            if problem:
+                logger.warning(f"{problem}: this batch reruns")
+                Path(table).unlink(missing_ok=True)
     return tables
 
 
@@ -159,16 +269,23 @@ def figure2_disturbances(wildcards=None):
     return disturbance_path(2, f2["K"], "design", f2["seed"])
 
 
+def remove_stale_stamps():
+    """Remove every stamp whose key is not the current one (see :func:`stamp`); in the
+    process that plans the run (not again in cluster jobs)."""
+    if not workflow.is_main_process:
+        return
+    for path, key in STAMPS.items():
+        try:
+            if Path(path).read_text().strip() != key:
+                Path(path).unlink()
+        except FileNotFoundError:
+            pass
+
+
 def all_targets():
-    targets = [f"results/{name}/design_trajectories/trajectories.nc" for name in SCENARIOS]
-    targets += [
-        f"results/{name}/joint_map/summary.json"
-        for name, sc in SCENARIOS.items()
-        if sc["joint_map"]
-    ]
-    targets += [
-        f"results/{name}/gather_nuts/summary.json" for name, sc in SCENARIOS.items() if sc["stan"]
-    ]
+    targets = [trajectories_path(name) for name in SCENARIOS]
+    targets += [joint_summary(name) for name, sc in SCENARIOS.items() if sc["joint_map"]]
+    targets += [stan_summary(name) for name, sc in SCENARIOS.items() if sc["stan"]]
     for name in KSEL:
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
@@ -200,4 +317,5 @@ def all_targets():
         targets += expand(f"{OUT}/table_mu0_sweep.{{ext}}", ext=["csv", "md", "tex"])
     if STAN_SCENARIOS:
         targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}", ext=["csv", "md", "tex"])
+    targets += list(STAMPS)
     return targets

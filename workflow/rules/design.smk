@@ -4,11 +4,11 @@
 rule design_disturbances:
     """K point-symmetric LCD design disturbances of N(0, I_q) (or a random baseline), shared by scenarios."""
     output:
-        "results/shared/design_disturbances/q{q}_K{K}_{method}_seed{seed}.nc",
+        f"{DESIGN_DIR}/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.nc",
     log:
-        "results/shared/logs/design_disturbances/q{q}_K{K}_{method}_seed{seed}.log",
+        f"{DESIGN_DIR}/logs/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.log",
     benchmark:
-        "results/shared/benchmarks/design_disturbances/q{q}_K{K}_{method}_seed{seed}.tsv"
+        f"{DESIGN_DIR}/benchmarks/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.tsv"
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1
@@ -22,20 +22,24 @@ rule design_disturbances:
 
 
 rule design_trajectories:
-    """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1))."""
+    """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1)), at
+    its K or at the exact stage's K (the key says which)."""
     input:
-        scenario_disturbances,
-        checked=model_check,
+        unpack(trajectory_inputs),
     output:
-        "results/{scenario}/design_trajectories/trajectories.nc",
+        trajectories="results/{scenario}/design_trajectories/{key}/trajectories.nc",
+        checksum="results/{scenario}/design_trajectories/{key}/trajectories.nc.sha256",
     log:
-        "results/{scenario}/logs/design_trajectories.log",
+        "results/{scenario}/design_trajectories/{key}/design_trajectories.log",
     conda:
         "../../envs/ssmobs.yaml"
     resources:
         mem_mb=2000,
         runtime=10,
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
+        scenario=lambda wc: {
+            **SCENARIOS[wc.scenario],
+            "K": expect_key("trajectories", wc.scenario, wc.key)["K"],
+        },
     script:
         "../scripts/design_trajectories.py"

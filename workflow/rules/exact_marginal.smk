@@ -2,36 +2,19 @@
 # for the scenarios whose model is linear in the states.
 
 
-rule exact_design_trajectories:
-    """Design trajectories of a scenario at the exact stage's K (when it differs from K)."""
-    input:
-        exact_disturbances,
-    output:
-        "results/{scenario}/exact_marginal/K{K}/trajectories.nc",
-    log:
-        "results/{scenario}/logs/exact_marginal/design_trajectories_K{K}.log",
-    conda:
-        "../../envs/ssmobs.yaml"
-    resources:
-        mem_mb=2000,
-        runtime=10,
-    params:
-        scenario=lambda wc: {**SCENARIOS[wc.scenario], "K": int(wc.K)},
-    script:
-        "../scripts/design_trajectories.py"
-
-
 rule exact_marginal:
     """Exact marginal MAP, 5 %/95 % quantiles and Definition 3 per trajectory, and the summary."""
     input:
-        trajectories=exact_trajectories,
+        trajectories=lambda wc: trajectories_path(
+            wc.scenario, expect_key("exact", wc.scenario, wc.key)["K"]
+        ),
     output:
-        table="results/{scenario}/exact_marginal/K{K}/marginal_map.parquet",
-        summary="results/{scenario}/exact_marginal/K{K}/summary.json",
+        table="results/{scenario}/exact_marginal/{key}/marginal_map.parquet",
+        summary="results/{scenario}/exact_marginal/{key}/summary.json",
     log:
-        "results/{scenario}/logs/exact_marginal/K{K}.log",
+        "results/{scenario}/exact_marginal/{key}/exact_marginal.log",
     benchmark:
-        "results/{scenario}/benchmarks/exact_marginal/K{K}.tsv"
+        "results/{scenario}/exact_marginal/{key}/benchmark.tsv"
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1

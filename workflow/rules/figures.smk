@@ -1,6 +1,8 @@
 # Every figure of paper_figures/ (the paper's Figures 2-4 and ours); the figure of the choice
 # of K comes with its rule select_k (k_selection.smk), the observability studies' with theirs.
 
+register_stamp("figure_design_points", [figure2_disturbances()], config["figure2"])
+
 
 rule figure_design_points:
     """Figure 2: five design disturbances of N(0, I_2) and the resulting (x~_1, z~_1) of model Same."""
@@ -11,57 +13,87 @@ rule figure_design_points:
             f"{OUT}/fig2_design_points.pdf", caption="../report/fig2.rst", category="Figures"
         ),
         png=f"{OUT}/fig2_design_points.png",
+        stamp=stamp("figure_design_points"),
     log:
-        "results/shared/logs/figure_design_points.log",
+        f"results/outputs/{OUT}/logs/figure_design_points.log",
     conda:
         "../../envs/ssmobs.yaml"
     params:
         figure=config["figure2"],
+        key=stamp_key,
     script:
         "../scripts/figure_design_points.py"
+
+
+FIGURE3_INPUTS = {
+    "joint": [f"{joint_dir(n)}/joint_map.parquet" for n in FIGURE3_SCENARIOS],
+    "marginal": [stan_table(n) for n in FIGURE3_SCENARIOS],
+}
+register_stamp(
+    "figure_joint_vs_marginal",
+    [*FIGURE3_INPUTS["joint"], *FIGURE3_INPUTS["marginal"]],
+    [SCENARIOS[n] for n in FIGURE3_SCENARIOS],
+)
 
 
 rule figure_joint_vs_marginal:
     """Figure 3: joint- vs marginal-MAP estimates of (a, x0) of the scenarios of paper_outputs.figure3."""
     input:
-        joint=[f"results/{n}/joint_map/joint_map.parquet" for n in FIGURE3_SCENARIOS],
-        marginal=[f"results/{n}/gather_nuts/marginal_map.parquet" for n in FIGURE3_SCENARIOS],
+        **FIGURE3_INPUTS,
     output:
         figure=report(
             multiext(f"{OUT}/fig3_joint_vs_marginal", ".pdf", ".png"),
             caption="../report/fig3.rst",
             category="Figures",
         ),
+        stamp=stamp("figure_joint_vs_marginal"),
     log:
-        "results/shared/logs/figure_joint_vs_marginal.log",
+        f"results/outputs/{OUT}/logs/figure_joint_vs_marginal.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
         scenarios=[SCENARIOS[n] for n in FIGURE3_SCENARIOS],
+        key=stamp_key,
     script:
         "../scripts/figure_joint_vs_marginal.py"
+
+
+if FIGURE4_SCENARIO:
+    register_stamp(
+        f"figure_profile_posterior_{FIGURE4_SCENARIO}",
+        [trajectories_path(FIGURE4_SCENARIO)],
+        {"scenario": SCENARIOS[FIGURE4_SCENARIO], "grid": config["figure4"]},
+    )
 
 
 rule figure_profile_posterior:
     """Figure 4: profile posterior of (a, x0) for trajectory k = 1 of paper_outputs.figure4."""
     input:
-        "results/{scenario}/design_trajectories/trajectories.nc",
+        lambda wc: trajectories_path(wc.scenario),
     output:
         figure=report(
             multiext(f"{OUT}/fig4_profile_posterior_{{scenario}}", ".pdf", ".png"),
             caption="../report/fig4.rst",
             category="Figures",
         ),
+        stamp=stamp("figure_profile_posterior_{scenario}"),
     log:
-        "results/{scenario}/logs/figure_profile_posterior.log",
+        f"results/outputs/{OUT}/logs/figure_profile_posterior_{{scenario}}.log",
     conda:
         "../../envs/ssmobs.yaml"
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         grid=config["figure4"],
+        key=stamp_key,
     script:
         "../scripts/figure_profile_posterior.py"
+
+
+# its input is a stamped table: the table's key keys the figure
+register_stamp(
+    "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[stamp("paper_tables")]
+)
 
 
 rule figure_observability:
@@ -74,32 +106,48 @@ rule figure_observability:
             caption="../report/observability.rst",
             category="Figures",
         ),
+        stamp=stamp("figure_observability"),
     log:
-        "results/shared/logs/figure_observability.log",
+        f"results/outputs/{OUT}/logs/figure_observability.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        key=stamp_key,
     script:
         "../scripts/figure_observability.py"
+
+
+def exact_vs_stan_inputs(name):
+    return {"stan": stan_table(name), "exact": exact_table(name, SCENARIOS[name]["K"])}
+
+
+for _name in EXACT_VS_STAN_SCENARIOS:
+    register_stamp(
+        f"figure_exact_vs_stan_{_name}",
+        list(exact_vs_stan_inputs(_name).values()),
+        SCENARIOS[_name],
+    )
 
 
 rule figure_exact_vs_stan:
     """Stan + KDE marginal MAP against the exact one, trajectory by trajectory."""
     input:
-        stan="results/{scenario}/gather_nuts/marginal_map.parquet",
-        exact=lambda wc: exact_table(wc.scenario, SCENARIOS[wc.scenario]["K"]),
+        unpack(lambda wc: exact_vs_stan_inputs(wc.scenario)),
     output:
         figure=report(
             multiext(f"{OUT}/fig_exact_vs_stan_{{scenario}}", ".pdf", ".png"),
             caption="../report/exact_vs_stan.rst",
             category="Figures",
         ),
+        stamp=stamp("figure_exact_vs_stan_{scenario}"),
     log:
-        "results/{scenario}/logs/figure_exact_vs_stan.log",
+        f"results/outputs/{OUT}/logs/figure_exact_vs_stan_{{scenario}}.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
+        key=stamp_key,
     script:
         "../scripts/figure_exact_vs_stan.py"

@@ -5,15 +5,15 @@
 rule joint_map:
     """Joint MAP by a primal barrier method and the checks of Sec. III.B for every trajectory."""
     input:
-        "results/{scenario}/design_trajectories/trajectories.nc",
+        lambda wc: keyed_input("joint_map", wc.scenario, wc.key, trajectories_path(wc.scenario)),
     output:
-        table="results/{scenario}/joint_map/joint_map.parquet",
-        theta="results/{scenario}/joint_map/theta_hat.nc",
-        summary="results/{scenario}/joint_map/summary.json",
+        table="results/{scenario}/joint_map/{key}/joint_map.parquet",
+        theta="results/{scenario}/joint_map/{key}/theta_hat.nc",
+        summary="results/{scenario}/joint_map/{key}/summary.json",
     log:
-        "results/{scenario}/logs/joint_map.log",
+        "results/{scenario}/joint_map/{key}/joint_map.log",
     benchmark:
-        "results/{scenario}/benchmarks/joint_map.tsv"
+        "results/{scenario}/joint_map/{key}/benchmark.tsv"
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1
@@ -27,10 +27,19 @@ rule joint_map:
         "../scripts/joint_map.py"
 
 
+MU0_INPUTS = [trajectories_path(n) for n in MU0_SCENARIOS]
+MU0_PARAMS = {
+    "scenarios": [SCENARIOS[n] for n in MU0_SCENARIOS],
+    "settings": config["joint_map"],
+    "mu0_per_T": config["mu0_sweep"]["mu0_per_T"],
+}
+register_stamp("table_mu0_sweep", [*MU0_INPUTS, "config/paper_values.yaml"], MU0_PARAMS)
+
+
 rule joint_map_mu0_sweep:
     """|K^max|/K of the Sep models over barrier starts mu_0 (the gradient-balance rule first)."""
     input:
-        trajectories=[f"results/{n}/design_trajectories/trajectories.nc" for n in MU0_SCENARIOS],
+        trajectories=MU0_INPUTS,
         paper_values="config/paper_values.yaml",
     output:
         table=report(
@@ -38,8 +47,9 @@ rule joint_map_mu0_sweep:
             caption="../report/mu0_sweep.rst",
             category="Tables",
         ),
+        stamp=stamp("table_mu0_sweep"),
     log:
-        "results/shared/logs/joint_map_mu0_sweep.log",
+        f"results/outputs/{OUT}/logs/joint_map_mu0_sweep.log",
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1
@@ -47,8 +57,7 @@ rule joint_map_mu0_sweep:
         mem_mb=4000,
         runtime=120,
     params:
-        scenarios=[SCENARIOS[n] for n in MU0_SCENARIOS],
-        settings=config["joint_map"],
-        mu0_per_T=config["mu0_sweep"]["mu0_per_T"],
+        **MU0_PARAMS,
+        key=stamp_key,
     script:
         "../scripts/joint_map_mu0_sweep.py"

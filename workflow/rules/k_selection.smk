@@ -1,32 +1,49 @@
-# The choice of K by relative differences (Sec. IV.A): one joint-MAP summary V_{K_i} per
-# K_i, method, set variant and seed; the RD rule over them; the table of the choices.
+# The choice of K by relative differences (Sec. IV.A): one job per grid (method, set variant,
+# seed) scoring V_{K_i} for every K_i; the RD rule over them; the table of the choices.
 
 
-rule k_selection_point:
-    """Joint-MAP summary V_{K_i} for one K_i, disturbance method, set variant and seed (Sec. IV.A)."""
-    input:
-        k_selection_disturbances,
+rule k_selection_grid:
+    """Joint-MAP summaries V_{K_i} for every K_i of one disturbance method, set variant and
+    seed (Sec. IV.A); the sets are made in the job, every point is cached as it finishes."""
     output:
-        "results/k_selection/{ksel}/{method}_{sets}_seed{seed}/K{K}.json",
+        "results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.json",
     log:
-        "results/k_selection/{ksel}/logs/{method}_{sets}_seed{seed}_K{K}.log",
+        "results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.log",
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1
     resources:
         mem_mb=4000,
-        runtime=60,
+        runtime=120,
     params:
-        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
+        scenario=lambda wc: keyed_input(
+            "k_selection_points", wc.ksel, wc.key, SCENARIOS[KSEL[wc.ksel]["scenario"]]
+        ),
         settings=config["joint_map"],
+        K_grid=lambda wc: KSEL[wc.ksel]["K_grid"],
+        design=config["design"],
+        design_dir=DESIGN_DIR,
+        points=lambda wc, output: output[0][: -len(".json")],
     script:
-        "../scripts/k_selection_point.py"
+        "../scripts/k_selection_grid.py"
+
+
+def select_k_params(name):
+    return {"ksel": KSEL[name], "scenario": SCENARIOS[KSEL[name]["scenario"]]}
+
+
+for _name in KSEL:
+    register_stamp(
+        f"select_k_{_name}",
+        [*k_selection_grids(_name), "config/paper_values.yaml"],
+        select_k_params(_name),
+    )
 
 
 rule select_k:
     """The smallest K_i whose V_{K_i} agrees with all larger K_j within (c1, c2), per method."""
     input:
-        points=lambda wc: k_selection_points(KSEL[wc.ksel]),
+        grids=lambda wc: k_selection_grids(wc.ksel),
         paper_values="config/paper_values.yaml",
     output:
         json="results/k_selection/{ksel}/selection.json",
@@ -36,32 +53,44 @@ rule select_k:
             caption="../report/k_convergence.rst",
             category="Figures",
         ),
+        stamp=stamp("select_k_{ksel}"),
     log:
-        "results/k_selection/{ksel}/logs/select_k.log",
+        "results/k_selection/{ksel}/select_k.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        ksel=lambda wc: KSEL[wc.ksel],
-        scenario=lambda wc: SCENARIOS[KSEL[wc.ksel]["scenario"]],
+        ksel=lambda wc: select_k_params(wc.ksel)["ksel"],
+        scenario=lambda wc: select_k_params(wc.ksel)["scenario"],
+        key=stamp_key,
     script:
         "../scripts/select_k.py"
+
+
+SELECTIONS = [f"results/k_selection/{name}/selection.json" for name in KSEL]
+# the selections are stamped files: their stamps' keys key the table
+register_stamp(
+    "table_k_selection", SELECTIONS, [STAMPS[stamp(f"select_k_{name}")] for name in KSEL]
+)
 
 
 rule table_k_selection:
     """Chosen K for every k_selection entry, method and seed, beside the paper's K."""
     input:
-        [f"results/k_selection/{name}/selection.json" for name in KSEL],
+        SELECTIONS,
     output:
         table=report(
             multiext(f"{OUT}/table_k_selection", ".csv", ".md", ".tex"),
             caption="../report/k_selection.rst",
             category="Tables",
         ),
+        stamp=stamp("table_k_selection"),
     log:
-        "results/shared/logs/table_k_selection.log",
+        f"results/outputs/{OUT}/logs/table_k_selection.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
+    params:
+        key=stamp_key,
     script:
         "../scripts/table_k_selection.py"

@@ -1,13 +1,34 @@
 # Stage 4: the paper's tables in paper_figures/ (ours beside the paper's values); figures: figures.smk.
 
+PAPER_TABLES_INPUTS = {
+    "joint": [joint_summary(n) for n in JOINT_SCENARIOS],
+    "marginal": [stan_summary(n) for n in STAN_SCENARIOS],
+    "exact": [exact_summary_path(n) for n in EXACT_SCENARIOS],
+    "paper_values": "config/paper_values.yaml",
+}
+PAPER_TABLES_PARAMS = {
+    "scenarios": config["scenarios"],
+    "tables_2_3": TABLE_II_SCENARIOS,
+    "joint_names": JOINT_SCENARIOS,
+    "marginal_names": STAN_SCENARIOS,
+    "exact_names": EXACT_SCENARIOS,
+}
+register_stamp(
+    "paper_tables",
+    [
+        *PAPER_TABLES_INPUTS["joint"],
+        *PAPER_TABLES_INPUTS["marginal"],
+        *PAPER_TABLES_INPUTS["exact"],
+        "config/paper_values.yaml",
+    ],
+    PAPER_TABLES_PARAMS,
+)
+
 
 rule paper_tables:
     """Tables II, III and the Section IV summary as CSV, Markdown and LaTeX."""
     input:
-        joint=[joint_summary(n) for n in JOINT_SCENARIOS],
-        marginal=[stan_summary(n) for n in STAN_SCENARIOS],
-        exact=[exact_summary_path(n) for n in EXACT_SCENARIOS],
-        paper_values="config/paper_values.yaml",
+        **PAPER_TABLES_INPUTS,
     output:
         table2=report(
             multiext(f"{OUT}/table2_joint_vs_marginal", ".csv", ".md", ".tex"),
@@ -25,38 +46,46 @@ rule paper_tables:
             caption="../report/section4.rst",
             category="Tables",
         ),
+        stamp=stamp("paper_tables"),
     log:
-        "results/shared/logs/paper_tables.log",
+        f"results/outputs/{OUT}/logs/paper_tables.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenarios=config["scenarios"],
-        tables_2_3=TABLE_II_SCENARIOS,
-        joint_names=JOINT_SCENARIOS,
-        marginal_names=STAN_SCENARIOS,
-        exact_names=EXACT_SCENARIOS,
+        **PAPER_TABLES_PARAMS,
+        key=stamp_key,
     script:
         "../scripts/paper_tables.py"
+
+
+SENSITIVITY_INPUTS = [stan_table(n) for n in STAN_SCENARIOS]
+register_stamp(
+    "convergence_sensitivity",
+    SENSITIVITY_INPUTS,
+    {"scenarios": STAN_SCENARIOS, "convergence": config["convergence"]},
+)
 
 
 rule convergence_sensitivity:
     """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted."""
     input:
-        tables=[f"results/{n}/gather_nuts/marginal_map.parquet" for n in STAN_SCENARIOS],
+        tables=SENSITIVITY_INPUTS,
     output:
         table=report(
             multiext(f"{OUT}/table_convergence_sensitivity", ".csv", ".md", ".tex"),
             caption="../report/convergence_sensitivity.rst",
             category="Tables",
         ),
+        stamp=stamp("convergence_sensitivity"),
     log:
-        "results/shared/logs/convergence_sensitivity.log",
+        f"results/outputs/{OUT}/logs/convergence_sensitivity.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
         scenarios=STAN_SCENARIOS,
         convergence=config["convergence"],
+        key=stamp_key,
     script:
         "../scripts/convergence_sensitivity.py"

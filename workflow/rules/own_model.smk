@@ -3,52 +3,108 @@
 
 
 rule check_model:
-    """Python model against Stan program: shapes, derivatives, log density, prior bounds."""
+    """The Python model at one scenario's true values under every prior variant: shapes,
+    finite values, derivatives (before its design trajectories)."""
     input:
-        module="workflow/ssmobs/models/{model}.py",
-        stan="stan/{model}.stan",
+        module=lambda wc: keyed_input(
+            "check_model",
+            wc.scenario,
+            wc.key,
+            f"workflow/ssmobs/models/{SCENARIOS[wc.scenario]['model']}.py",
+        ),
     output:
-        "results/shared/check_model/{model}.json",
+        "results/{scenario}/check_model/{key}.json",
     log:
-        "results/shared/logs/check_model/{model}.log",
+        "results/{scenario}/check_model/{key}.log",
     conda:
         "../../envs/ssmobs.yaml"
     resources:
         mem_mb=4000,
         runtime=30,
     params:
-        scenarios=lambda wc: [sc for sc in config["scenarios"] if sc["model"] == wc.model],
-        stan=lambda wc: any(sc["stan"] for sc in config["scenarios"] if sc["model"] == wc.model),
+        model=lambda wc: SCENARIOS[wc.scenario]["model"],
+        scenarios=lambda wc: [SCENARIOS[wc.scenario]],
+        stan=False,
     script:
         "../scripts/check_model.py"
+
+
+rule check_model_stan:
+    """The Python model against its Stan program at one scenario's true values under every
+    prior variant: parameter order, log density, prior bounds (before its NUTS runs)."""
+    input:
+        module=lambda wc: keyed_input(
+            "check_model_stan",
+            wc.scenario,
+            wc.key,
+            f"workflow/ssmobs/models/{SCENARIOS[wc.scenario]['model']}.py",
+        ),
+        stan=lambda wc: f"stan/{SCENARIOS[wc.scenario]['model']}.stan",
+    output:
+        "results/{scenario}/check_model_stan/{key}.json",
+    log:
+        "results/{scenario}/check_model_stan/{key}.log",
+    conda:
+        "../../envs/ssmobs.yaml"
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        model=lambda wc: SCENARIOS[wc.scenario]["model"],
+        scenarios=lambda wc: [SCENARIOS[wc.scenario]],
+        stan=True,
+    script:
+        "../scripts/check_model.py"
+
+
+def study_inputs(name):
+    scs = study_scenarios(name)
+    return {
+        "joint": [joint_summary(sc["name"]) for sc in scs if sc["joint_map"]],
+        "stan": [stan_summary(sc["name"]) for sc in scs if sc["stan"]],
+        "stan_tables": [stan_table(sc["name"]) for sc in scs if sc["stan"]],
+    }
+
+
+def study_params(name):
+    scs = study_scenarios(name)
+    return {
+        "study": STUDIES[name],
+        "scenarios": scs,
+        "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
+        "stan_names": [sc["name"] for sc in scs if sc["stan"]],
+        "stan_settings": config["stan"],
+    }
+
+
+for _name in STUDIES:
+    register_stamp(
+        f"observability_study_{_name}",
+        [p for paths in study_inputs(_name).values() for p in paths],
+        study_params(_name),
+    )
 
 
 rule observability_study:
     """|K^max|/K and |K^Stan|/K of one model over T: table and figure in paper_figures/."""
     input:
-        joint=lambda wc: [
-            joint_summary(sc["name"]) for sc in study_scenarios(wc.study) if sc["joint_map"]
-        ],
-        stan=lambda wc: [stan_summary(sc["name"]) for sc in study_scenarios(wc.study) if sc["stan"]],
-        stan_tables=lambda wc: [
-            f"results/{sc['name']}/gather_nuts/marginal_map.parquet"
-            for sc in study_scenarios(wc.study)
-            if sc["stan"]
-        ],
+        unpack(lambda wc: study_inputs(wc.study)),
     output:
         csv=f"{OUT}/ours_{{study}}_observability.csv",
         md=f"{OUT}/ours_{{study}}_observability.md",
         png=f"{OUT}/ours_{{study}}_observability.png",
+        stamp=stamp("observability_study_{study}"),
     log:
-        "results/shared/logs/observability_study/{study}.log",
+        f"results/outputs/{OUT}/logs/observability_study/{{study}}.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        study=lambda wc: STUDIES[wc.study],
-        scenarios=lambda wc: study_scenarios(wc.study),
-        joint_names=lambda wc: [sc["name"] for sc in study_scenarios(wc.study) if sc["joint_map"]],
-        stan_names=lambda wc: [sc["name"] for sc in study_scenarios(wc.study) if sc["stan"]],
+        study=lambda wc: study_params(wc.study)["study"],
+        scenarios=lambda wc: study_params(wc.study)["scenarios"],
+        joint_names=lambda wc: study_params(wc.study)["joint_names"],
+        stan_names=lambda wc: study_params(wc.study)["stan_names"],
         stan_settings=config["stan"],
+        key=stamp_key,
     script:
         "../scripts/observability_study.py"

@@ -4,11 +4,11 @@
 rule build_stan_model:
     """Compile stan/<model>.stan once with the configured backend (native, cmdstanpy, PyStan)."""
     input:
-        lambda wc: str(REPO / "stan" / f"{wc.model}.stan"),
+        lambda wc: keyed_input("program", wc.model, wc.key, f"stan/{wc.model}.stan"),
     output:
-        "results/shared/stan/{backend}/{model}.json",
+        "results/shared/stan/{backend}/{model}/{key}.json",
     log:
-        "results/shared/logs/build_stan_model/{backend}/{model}.log",
+        "results/shared/stan/{backend}/{model}/{key}.log",
     conda:
         "../../envs/ssmobs.yaml"
     resources:
@@ -23,14 +23,17 @@ rule build_stan_model:
 rule sample_nuts:
     """NUTS for one batch of trajectories; one record per trajectory, resumable."""
     input:
-        trajectories="results/{scenario}/design_trajectories/trajectories.nc",
-        marker=lambda wc: f"results/shared/stan/{STAN_BACKEND}/{SCENARIOS[wc.scenario]['model']}.json",
+        trajectories=lambda wc: keyed_input(
+            "nuts_batches", wc.scenario, wc.key, trajectories_path(wc.scenario)
+        ),
+        marker=lambda wc: program_marker(SCENARIOS[wc.scenario]["model"]),
+        checked=lambda wc: check_path(wc.scenario, stan=True),
     output:
-        "results/{scenario}/sample_nuts/batch{batch}.parquet",
+        "results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
     log:
-        "results/{scenario}/logs/sample_nuts/batch{batch}.log",
+        "results/{scenario}/sample_nuts/{key}/batch{batch}.log",
     benchmark:
-        "results/{scenario}/benchmarks/sample_nuts/batch{batch}.tsv"
+        "results/{scenario}/sample_nuts/{key}/benchmark_batch{batch}.tsv"
     group:
         "nuts"
     conda:
@@ -38,31 +41,36 @@ rule sample_nuts:
     threads: 1
     resources:
         mem_mb=3000,
-        runtime=lambda wc: 10 + 2 * SCENARIO_OBJECTS[wc.scenario].batch_size(config["stan"]),
+        runtime=lambda wc: 10 + 2 * batch_size(wc.scenario),
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         stan=config["stan"],
         backend=STAN_BACKEND,
         convergence=config["convergence"],
-        records="results/{scenario}/sample_nuts/records",
-        draws="results/{scenario}/draws",
+        records=lambda wc: records_dir(wc.scenario),
+        draws=lambda wc: draws_dir(wc.scenario),
     script:
         "../scripts/sample_nuts.py"
 
 
 rule gather_nuts:
-    """All trajectories of a scenario: |K^Stan|, marginal-MAP mean/var/MSE, coverage, bias."""
+    """All trajectories of a scenario: |K^Stan| under the configured convergence checks,
+    marginal-MAP mean/var/MSE, coverage, bias."""
     input:
-        trajectories="results/{scenario}/design_trajectories/trajectories.nc",
-        batches=nuts_batches,
+        trajectories=lambda wc: keyed_input(
+            "gather", wc.scenario, wc.key, trajectories_path(wc.scenario)
+        ),
+        batches=lambda wc: nuts_batches(wc.scenario),
     output:
-        table="results/{scenario}/gather_nuts/marginal_map.parquet",
-        summary="results/{scenario}/gather_nuts/summary.json",
+        table="results/{scenario}/gather_nuts/{key}/marginal_map.parquet",
+        summary="results/{scenario}/gather_nuts/{key}/summary.json",
     log:
-        "results/{scenario}/logs/gather_nuts.log",
+        "results/{scenario}/gather_nuts/{key}/gather_nuts.log",
     conda:
         "../../envs/ssmobs.yaml"
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
+        convergence=config["convergence"],
+        records=lambda wc: records_dir(wc.scenario),
     script:
         "../scripts/gather_nuts.py"

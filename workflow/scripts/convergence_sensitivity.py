@@ -1,6 +1,6 @@
 """Rule convergence_sensitivity: |K^Stan| under R-hat 1.01/1.05, tree depth warned/counted."""
 
-from ssmobs import log
+from ssmobs import io, log
 from ssmobs.stages import run_convergence_sensitivity
 
 log.setup(snakemake.log[0])
@@ -10,3 +10,5 @@ run_convergence_sensitivity(
     p.convergence,
     list(snakemake.output.table),
 )
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

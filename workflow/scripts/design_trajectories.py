@@ -7,7 +7,8 @@ from ssmobs.trajectories import make_trajectories, write_trajectories
 logger = log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 sc = Scenario.from_config(snakemake.params.scenario)
-matrix, attrs = io.read_disturbances(snakemake.input[0], q=sc.disturbance_dim, K=sc.K)
+matrix, attrs = io.read_disturbances(snakemake.input.disturbances, q=sc.disturbance_dim, K=sc.K)
 traj = make_trajectories(sc, matrix, provenance=attrs)
 logger.info("scenario %s: %d trajectories of length %d", sc.name, traj.K, traj.T)
-write_trajectories(snakemake.output[0], traj)
+write_trajectories(snakemake.output.trajectories, traj)
+io.write_checksum(snakemake.output.trajectories)

@@ -9,3 +9,5 @@ f2 = snakemake.params.figure
 matrix, _ = io.read_disturbances(snakemake.input[0], q=2, K=f2["K"])
 figure_design_points(matrix, f2["a"], f2["x0"], [snakemake.output.pdf, snakemake.output.png])
 logger.info("wrote %s and %s", snakemake.output.pdf, snakemake.output.png)
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

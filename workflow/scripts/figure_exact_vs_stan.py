@@ -1,6 +1,6 @@
 """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one."""
 
-from ssmobs import log
+from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages import run_figure_exact_vs_stan
 
@@ -12,3 +12,5 @@ stats = run_figure_exact_vs_stan(
     list(snakemake.output.figure),
 )
 logger.info("Stan + KDE vs exact: %s", stats)
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

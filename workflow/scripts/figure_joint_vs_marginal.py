@@ -13,3 +13,5 @@ run_figure_joint_vs_marginal(
     dict(zip(names, snakemake.input.marginal, strict=True)),
     list(snakemake.output.figure),
 )
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

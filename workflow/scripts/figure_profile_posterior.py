@@ -12,3 +12,5 @@ run_figure_profile_posterior(
     snakemake.params.grid,
     list(snakemake.output.figure),
 )
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

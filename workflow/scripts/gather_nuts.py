@@ -10,6 +10,8 @@ run_gather_nuts(
     snakemake.input.trajectories,
     list(snakemake.input.batches),
     Scenario.from_config(snakemake.params.scenario),
+    snakemake.params.convergence,
+    snakemake.params.records,
     snakemake.output.table,
     snakemake.output.summary,
 )

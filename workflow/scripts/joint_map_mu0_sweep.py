@@ -1,6 +1,6 @@
 """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts."""
 
-from ssmobs import log
+from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages import run_joint_map_mu0_sweep
 
@@ -15,3 +15,5 @@ run_joint_map_mu0_sweep(
     snakemake.input.paper_values,
     list(snakemake.output.table),
 )
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -1,6 +1,6 @@
 """Rule observability_study: one model's |K^max|/K and |K^Stan|/K over T."""
 
-from ssmobs import log
+from ssmobs import io, log
 from ssmobs.observability_study import run_observability_study
 from ssmobs.scenario import Scenario
 
@@ -17,3 +17,5 @@ run_observability_study(
     snakemake.output.png,
     stan_settings=p.stan_settings,
 )
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -6,3 +6,5 @@ from ssmobs.stages import run_table_k_selection
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 run_table_k_selection(list(snakemake.input), list(snakemake.output.table))
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

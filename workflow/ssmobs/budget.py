@@ -163,20 +163,15 @@ def estimates(config: dict) -> list[JobEstimate]:
         q = (model.obs_dim + model.state_dim) * T
         who = f"k_selection '{ks['name']}'"
         sizes = f"largest K_i = {K}, T = {T}, q = {q}"
-        for method in ks["methods"]:
-            out.append(
-                JobEstimate(
-                    who,
-                    "design_disturbances",
-                    disturbance_bytes(q, K, method),
-                    sizes + f", {method}",
-                )
-            )
+        # one job per grid makes its sets and scores them, one K_i after the other
         out.append(
             JobEstimate(
                 who,
-                "k_selection_point",
-                trajectories_bytes(q, K) + joint_map_bytes(model, T, K, jm["chunk_size"]),
+                "k_selection_grid",
+                max(
+                    max(disturbance_bytes(q, K, method) for method in ks["methods"]),
+                    trajectories_bytes(q, K) + joint_map_bytes(model, T, K, jm["chunk_size"]),
+                ),
                 sizes,
             )
         )
@@ -205,7 +200,6 @@ def estimates(config: dict) -> list[JobEstimate]:
 
 def job_counts(config: dict) -> dict[str, int]:
     """Number of jobs of the run, by what makes them (shared files counted once)."""
-    from .k_selection import set_seed
 
     counts: dict[str, int] = {}
     disturbances: set[tuple] = set()
@@ -213,7 +207,7 @@ def job_counts(config: dict) -> dict[str, int]:
         model = MODELS[sc["model"]]
         q = (model.obs_dim + model.state_dim) * sc["T"]
         disturbances.add((q, sc["K"], sc["method"], sc["seed"]))
-        n = 1 + int(sc["joint_map"])
+        n = 2 + int(sc["joint_map"])  # check_model (one per scenario), design_trajectories
         if sc["stan"]:
             batch = sc.get("stan_batch_size") or config["stan"]["batch_size"]
             n += math.ceil(sc["K"] / batch) + 1
@@ -221,7 +215,8 @@ def job_counts(config: dict) -> dict[str, int]:
             n += 1 + int(bool(sc["stan"]))  # exact_marginal, figure_exact_vs_stan
             exact_K = sc.get("exact_K") or sc["K"]
             if exact_K != sc["K"]:
-                n += 1  # exact_design_trajectories
+                n += 1  # design_trajectories at the exact stage's K
+                n += int(bool(sc["stan"]))  # exact_marginal at K too, for the figure
                 disturbances.add((q, exact_K, sc["method"], sc["seed"]))
         counts[f"scenario '{sc['name']}'"] = n
     scenarios = {sc["name"]: sc for sc in config["scenarios"]}
@@ -229,21 +224,14 @@ def job_counts(config: dict) -> dict[str, int]:
         sc = scenarios.get(ks["scenario"])
         if sc is None:
             continue
-        model = MODELS[sc["model"]]
-        q = (model.obs_dim + model.state_dim) * sc["T"]
         sets = ks.get("sets") or ["nested"]
         runs = sum(1 if m == "design" else len(ks["seeds"]) for m in ks["methods"]) * len(sets)
-        for m in ks["methods"]:
-            for seed in ks["seeds"][:1] if m == "design" else ks["seeds"]:
-                disturbances.update(
-                    (q, K, m, set_seed(seed, K, variant)) for K in ks["K_grid"] for variant in sets
-                )
-        counts[f"k_selection '{ks['name']}'"] = runs * len(ks["K_grid"]) + 1
+        # one k_selection_grid job per (method, set variant, seed), which makes its own
+        # sets, and select_k
+        counts[f"k_selection '{ks['name']}'"] = runs + 1
     counts["design disturbance sets"] = len(disturbances) + 1  # + Figure 2's
-    counts["Stan programs, model checks, tables and figures"] = (
-        len({sc["model"] for sc in config["scenarios"] if sc["stan"]})
-        + len({sc["model"] for sc in config["scenarios"]})
-        + FIXED_JOBS
+    counts["Stan programs, tables and figures"] = (
+        len({sc["model"] for sc in config["scenarios"] if sc["stan"]}) + FIXED_JOBS
     )
     return counts
 

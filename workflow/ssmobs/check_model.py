@@ -87,6 +87,19 @@ def default_cases(model: StateSpaceModel) -> list[CheckCase]:
     return [c for c in cases if not model.check_true_values(c.omega, c.x0, c.prior)]
 
 
+def prior_variant_cases(model: StateSpaceModel, case: CheckCase) -> list[CheckCase]:
+    """``case``'s true values with the default prior and each allowed variant of each
+    parameter in turn (prior bounds are per parameter, so every bound is compared): the
+    check of a scenario does not depend on which prior the scenario picks, and changing
+    the prior needs no new check (and no new design trajectories)."""
+    cases = [CheckCase(case.omega, case.x0, None)]
+    for name in model.param_names:
+        for variant in model.allowed_priors[name]:
+            if variant != model.default_prior[name]:
+                cases.append(CheckCase(case.omega, case.x0, {name: variant}))
+    return [c for c in cases if not model.check_true_values(c.omega, c.x0, c.prior)]
+
+
 def cases_from_scenarios(scenarios: Sequence[Mapping[str, Any]], slug: str) -> list[CheckCase]:
     """One case per distinct (omega, x0, prior) of the config's scenarios of this model."""
     out: list[CheckCase] = []
@@ -489,13 +502,15 @@ def run_check_model(
     stan: bool = True,
     stan_path: str | Path | None = None,
 ) -> CheckReport:
-    """Rule check_model: check the model for the default cases and every configured case;
-    write the report; raise :class:`ModelCheckError` listing every problem."""
+    """Rule check_model: check the model for the default cases and the true values of every
+    configured case under every prior variant (:func:`prior_variant_cases`); write the
+    report; raise :class:`ModelCheckError` listing every problem."""
     model = get_model(slug)
     cases = default_cases(model)
-    for case in cases_from_scenarios(scenarios, slug):
-        if case not in cases:
-            cases.append(case)
+    for scenario_case in cases_from_scenarios(scenarios, slug):
+        for case in prior_variant_cases(model, scenario_case):
+            if case not in cases:
+                cases.append(case)
     report = check_model(slug, cases, stan=stan, stan_path=stan_path)
     if report.problems:
         raise ModelCheckError(
@@ -526,12 +541,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     cases = default_cases(model)
     if args.configfile:
-        import yaml
-
-        from .config import ConfigError, validate
+        from .config import ConfigError, read_config_file, validate
 
         try:
-            config = validate(yaml.safe_load(Path(args.configfile).read_text()))
+            config = validate(read_config_file(args.configfile))
         except ConfigError as err:
             print(f"error: {err}", file=sys.stderr)
             return 2

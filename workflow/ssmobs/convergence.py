@@ -241,6 +241,74 @@ def converged_under(
     return out
 
 
+def _threshold_message(check: str, worst: Mapping[str, Any], settings: ConvergenceSettings) -> str:
+    """One line for a failed threshold check (the form :func:`check_convergence` uses)."""
+    names = (
+        "n_divergent",
+        "max_rhat",
+        "min_ess_bulk",
+        "min_ess_tail",
+        "min_ebfmi",
+        "n_treedepth_hits",
+    )
+    v = {k: (math.nan if worst.get(k) is None else float(worst[k])) for k in names}
+    if check == "divergences":
+        return (
+            f"divergences: {v['n_divergent']:.0f} divergent transitions after warmup, "
+            f"allowed {settings.max_divergences}"
+        )
+    if check == "rhat":
+        return f"rhat: max rank R-hat {v['max_rhat']:.4g} >= {settings.rhat_max}"
+    if check == "ess_bulk":
+        return f"ess_bulk: min bulk-ESS {v['min_ess_bulk']:.4g} < {settings.ess_bulk_min}"
+    if check == "ess_tail":
+        return f"ess_tail: min tail-ESS {v['min_ess_tail']:.4g} < {settings.ess_tail_min}"
+    if check == "ebfmi":
+        return f"ebfmi: min E-BFMI over chains {v['min_ebfmi']:.4g} < {settings.ebfmi_min}"
+    return f"treedepth: {v['n_treedepth_hits']:.0f} draws hit the max tree depth"
+
+
+def apply_thresholds(table: pandas.DataFrame, settings: ConvergenceSettings) -> pandas.DataFrame:
+    """The per-trajectory table with ``converged``, ``failed_checks`` and ``reason`` decided
+    by ``settings`` from the stored worst diagnostics (:func:`threshold_failures`).
+
+    Records are keyed without the thresholds (a threshold changes no draw), so the tables
+    built from them apply the configured thresholds here; failures that are no threshold
+    (non-finite draws, KDE, sampling errors, exceptions) are kept with their reasons.
+    """
+    out = table.copy()
+    converged, failed_col, reasons = [], [], []
+    for row in table.to_dict("records"):
+        old = [c for c in str(row.get("failed_checks") or "").split(",") if c]
+        other = [c for c in old if c not in THRESHOLD_CHECKS]
+        kept = [
+            part
+            for part in str(row.get("reason") or "").split("; ")
+            if part and part.split(":", 1)[0] not in THRESHOLD_CHECKS
+        ]
+        if row.get("status", "ok") != "ok":
+            converged.append(False)
+            failed_col.append(",".join(old))
+            reasons.append(str(row.get("reason") or ""))
+            continue
+        thr = threshold_failures(row, settings)
+        failed = [c for c in (*CHECKS, "kde", "exception") if c in other or c in thr]
+        failed += [c for c in other if c not in failed]
+        messages = [_threshold_message(c, row, settings) for c in thr] + [
+            p for p in kept if p != "not converged"
+        ]
+        converged.append(not failed)
+        failed_col.append(",".join(failed))
+        reasons.append("" if not failed else "; ".join(messages) or "not converged")
+    out["converged"] = np.array(converged, dtype=bool)
+    out["failed_checks"] = failed_col
+    out["reason"] = reasons
+    out["failing_blocks"] = [
+        ",".join(failing_blocks(row, settings)) for row in table.to_dict("records")
+    ]
+    return out
+
+
 #: the variants of the sensitivity table: (column, R-hat threshold, tree depth counted)
 SENSITIVITY_VARIANTS = (
     ("rhat1.01_treedepth_warns", 1.01, False),
@@ -278,6 +346,60 @@ def sensitivity_table(
     return pd.DataFrame(
         rows, columns=["scenario", "K", "K_stan_run", *[v[0] for v in SENSITIVITY_VARIANTS]]
     )
+
+
+#: the blocks of Theta whose diagnostics every record keeps: Omega, x0, the states x_1..x_T
+BLOCKS = ("omega", "x0", "states")
+#: the per-block diagnostics (worst over the block's components)
+BLOCK_STATS = ("max_rhat", "min_ess_bulk", "min_ess_tail")
+
+
+def block_of(name: str) -> str:
+    """The block of a component name of :func:`stack_params` (``a``, ``x0[1]``, ``x[3]``)."""
+    base = name.split("[", 1)[0]
+    return "x0" if base == "x0" else "states" if base == "x" else "omega"
+
+
+def block_diagnostics(names: list[str], diag: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """Worst R-hat, bulk- and tail-ESS per block of Theta (:data:`BLOCKS`), so a reader sees
+    whether Omega itself, x0 or only the states failed (NaN for an empty block)."""
+    kinds = np.array([block_of(n) for n in names])
+    out: dict[str, Any] = {}
+    for block in BLOCKS:
+        sel = kinds == block
+        if not sel.any():
+            out[block] = dict.fromkeys(BLOCK_STATS, math.nan)
+            continue
+        rhat = np.asarray(diag["rhat"], float)[sel]
+        bulk = np.asarray(diag["ess_bulk"], float)[sel]
+        tail = np.asarray(diag["ess_tail"], float)[sel]
+        out[block] = {
+            "max_rhat": float(np.nan if np.isnan(rhat).any() else rhat.max()),
+            "min_ess_bulk": float(np.nan if np.isnan(bulk).any() else bulk.min()),
+            "min_ess_tail": float(np.nan if np.isnan(tail).any() else tail.min()),
+        }
+    return out
+
+
+def failing_blocks(row: Mapping[str, Any], settings: ConvergenceSettings) -> list[str]:
+    """The blocks whose R-hat or ESS fail ``settings`` (from a table's per-block columns)."""
+    out = []
+    for block in BLOCKS:
+        rhat = row.get(f"max_rhat_{block}")
+        bulk = row.get(f"min_ess_bulk_{block}")
+        tail = row.get(f"min_ess_tail_{block}")
+        if rhat is None or bulk is None or tail is None:
+            continue
+        rhat, bulk, tail = float(rhat), float(bulk), float(tail)
+        if math.isnan(rhat) and math.isnan(bulk) and math.isnan(tail):
+            continue
+        if not (
+            rhat < settings.rhat_max
+            and bulk >= settings.ess_bulk_min
+            and tail >= settings.ess_tail_min
+        ):
+            out.append(block)
+    return out
 
 
 # --------------------------------------------------------------------------- main entry
@@ -380,6 +502,7 @@ def check_convergence(
         else:
             warns.append(text)
 
+    blocks = block_diagnostics(names, diag)
     failed = [c for c in CHECKS if c in failed]
     # one rule for the thresholds: the same function re-evaluates stored records
     worst = {
@@ -410,4 +533,5 @@ def check_convergence(
         "n_nonfinite": n_nonfinite,
         "n_chains": int(n_chains),
         "n_draws": int(n_draws),
+        "blocks": blocks,
     }

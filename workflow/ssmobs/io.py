@@ -141,6 +141,39 @@ def write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's bytes (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def checksum_path(path: str | os.PathLike) -> Path:
+    """The checksum file written beside ``path`` by :func:`write_checksum`."""
+    path = Path(path)
+    return path.with_name(path.name + ".sha256")
+
+
+def write_checksum(path: str | os.PathLike) -> None:
+    """Write ``<path>.sha256``: lets the workflow see damage that keeps a file's time."""
+    write_text(checksum_path(path), file_sha256(path) + "\n")
+
+
+def checksum_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` does not match its ``.sha256`` file, or None (also when either is
+    missing: a missing output is Snakemake's business)."""
+    try:
+        expected = checksum_path(path).read_text().strip()
+        actual = file_sha256(path)
+    except FileNotFoundError:
+        return None
+    if actual != expected:
+        return f"{path} does not match its checksum (damaged or changed after it was written)"
+    return None
+
+
 def json_default(obj: Any) -> Any:
     """JSON form of NumPy scalars and arrays and of paths (for ``json.dumps(default=...)``)."""
     if isinstance(obj, np.generic):

@@ -31,11 +31,13 @@ Record format (JSON, one file per k; ``record_cache.RECORD_VERSION``)::
     reason           None when converged, else one line per failed check / the exception
     diagnostics      worst values (max_rhat, min_ess_bulk, min_ess_tail, n_divergent,
                      n_treedepth_hits, min_ebfmi, ebfmi per chain, ...; see
-                     check_convergence), or None when sampling failed
+                     check_convergence) with ``blocks``: R-hat and both ESS per block
+                     (omega, x0, states), or None when sampling failed
     theta_names      model.theta_names(T)
     map, q5, q95     lists in theta_names order (marginal MAP, Eq. (11); quantiles, Eq. (12)),
                      or None when they could not be computed
     init             "random" | "true"
+    draws_sha256     SHA-256 of the kept draws file (only when the draws were kept)
     backend          backend name
     timings          seconds: sample_call (wall time of backend.sample), backend (the
                      backend's own breakdown, e.g. transfer), prepare, diagnostics, marginal,
@@ -59,7 +61,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import io
-from .convergence import ConvergenceSettings, check_convergence, to_inference_data
+from .convergence import (
+    BLOCK_STATS,
+    BLOCKS,
+    ConvergenceSettings,
+    check_convergence,
+    to_inference_data,
+)
 from .log import Progress
 from .marginal_map import KDEError, marginal_summary
 from .record_cache import (
@@ -226,6 +234,7 @@ def _one_trajectory(
         if keep_draws is not None:
             try:
                 _write_draws(keep_draws, draws, rec)
+                rec["draws_sha256"] = io.file_sha256(keep_draws)
             except Exception as err:  # noqa: BLE001 - a lost copy of the draws is no failure
                 LOG.warning("k=%d: could not keep draws at %s: %s", k, keep_draws, err)
             timings["keep_draws"] = time.perf_counter() - t4
@@ -241,6 +250,14 @@ def _one_trajectory(
     timings["overhead_cpu"] = time.process_time() - c0 - sample_cpu
     rec["timings"] = timings
     return rec
+
+
+def _draws_intact(path: Path, rec: dict[str, Any]) -> bool:
+    """The kept draws file exists and matches the checksum its record holds."""
+    if not path.exists():
+        return False
+    expected = rec.get("draws_sha256")
+    return expected is None or io.file_sha256(path) == expected
 
 
 def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
@@ -352,10 +369,10 @@ def run_trajectories(
             rec is not None
             and k in keep
             and draws_dir is not None  # checked above: keep needs draws_dir
-            and not draws_path(draws_dir, k).exists()
+            and not _draws_intact(draws_path(draws_dir, k), rec)
         ):
             LOG.info(
-                "recomputing k=%d: its draws are to be kept but %s is missing",
+                "recomputing k=%d: its draws are to be kept but %s is missing or damaged",
                 k,
                 draws_path(draws_dir, k),
             )
@@ -422,7 +439,9 @@ def records_to_frame(
 
     Columns: ``k`` (int), ``scenario``, ``stan_seed``, ``status``, ``converged`` (bool),
     ``failed_checks`` (comma-separated names, "" when none), ``reason`` ("" when none),
-    the worst diagnostics :data:`DIAGNOSTIC_COLUMNS` (NaN when sampling failed), then for
+    the worst diagnostics :data:`DIAGNOSTIC_COLUMNS` (NaN when sampling failed), the same
+    per block ``max_rhat_omega``, ``min_ess_bulk_x0``, ... (:data:`~ssmobs.convergence.BLOCKS`;
+    the tables add ``failing_blocks``), then for
     every component of ``model.theta_names(T)`` (Omega, x0, x1..xT): ``<name>_map``,
     ``<name>_q5``, ``<name>_q95`` (NaN when not computed).  We chose wide columns (3 |Theta|
     of them, 306 for T = 100) because every metric reads whole columns and Parquet stores
@@ -450,6 +469,13 @@ def records_to_frame(
             v = d.get(c)
             vals.append(math.nan if v is None else float(v))
         cols[c] = np.array(vals, dtype=float)
+    for part in BLOCKS:  # R-hat and ESS per block of Theta (Omega, x0, states)
+        for stat in BLOCK_STATS:
+            vals = []
+            for r in recs:
+                v = ((r.get("diagnostics") or {}).get("blocks") or {}).get(part, {}).get(stat)
+                vals.append(math.nan if v is None else float(v))
+            cols[f"{stat}_{part}"] = np.array(vals, dtype=float)
     block = {s: np.full((m, n), np.nan) for s in ("map", "q5", "q95")}
     for i, r in enumerate(recs):
         if r.get("theta_names") is not None and list(r["theta_names"]) != names:

@@ -1,8 +1,11 @@
 """Provenance of a committed reproduction: when, from which commit, on what machine, with
 which Stan backend, how long, and with which config.
 
-``python -m ssmobs.provenance --config C --outputs-dir D --started EPOCH`` writes
-``D/provenance.json`` after a run (``make tables`` calls it).
+``python -m ssmobs.provenance --config C --outputs-dir D -- COMMAND ...`` runs the command
+(the make targets pass their Snakemake call) and, when it succeeds, writes
+``D/provenance.json`` with its wall and CPU time and whether it started from an empty
+``results/`` (a committed output must be exactly what its recorded commit produces).
+``--started EPOCH`` instead of a command records a run made before.
 """
 
 from __future__ import annotations
@@ -17,9 +20,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from . import io
+from .config import read_config_file
 
 
 def _git(*args: str) -> str:
@@ -61,12 +63,24 @@ def backend_info(config: dict[str, Any]) -> dict[str, str]:
     return dict(get_backend(name).identity())
 
 
+def results_empty(results: str | os.PathLike = "results") -> bool:
+    """True when ``results/`` does not exist or holds nothing."""
+    path = Path(results)
+    return not path.exists() or not any(path.iterdir())
+
+
 def provenance(
-    config_path: str | os.PathLike, started: float, finished: float, command: str, note: str = ""
+    config_path: str | os.PathLike,
+    started: float,
+    finished: float,
+    command: str,
+    note: str = "",
+    cpu_seconds: float | None = None,
+    from_empty_results: bool | None = None,
 ) -> dict[str, Any]:
     """The provenance record of one run of ``config_path`` (see the module docstring)."""
     text = Path(config_path).read_text()
-    config = yaml.safe_load(text)
+    config = read_config_file(config_path)  # duplicate keys refused
     return {
         "date_utc": dt.datetime.fromtimestamp(finished, dt.timezone.utc).isoformat(
             timespec="seconds"
@@ -76,6 +90,8 @@ def provenance(
         "machine": machine(),
         "stan": backend_info(config),
         "wall_seconds": round(finished - started, 1),
+        "cpu_seconds": None if cpu_seconds is None else round(cpu_seconds, 1),
+        "started_from_empty_results": from_empty_results,
         "command": command,
         "note": note,
         "config_file": str(config_path),
@@ -84,17 +100,37 @@ def provenance(
     }
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    import resource
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", required=True)
     parser.add_argument("--outputs-dir", required=True)
-    parser.add_argument("--started", type=float, required=True, help="start, Unix seconds")
+    parser.add_argument("--started", type=float, help="start of a run made before, Unix seconds")
     parser.add_argument("--command", default="make tables")
     parser.add_argument("--note", default="", help="e.g. what an earlier, resumed run did")
+    parser.add_argument("run", nargs=argparse.REMAINDER, help="-- the command to run")
     args = parser.parse_args(argv)
-    record = provenance(args.config, args.started, time.time(), args.command, args.note)
+    run = args.run[1:] if args.run[:1] == ["--"] else args.run
+    cpu = None
+    empty = None
+    if run:
+        empty = results_empty()
+        started = time.time()
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        code = subprocess.call(run)
+        if code != 0:
+            return code
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the run's whole process tree
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    elif args.started is not None:
+        started = args.started
+    else:
+        parser.error("give --started or a command after --")
+    record = provenance(args.config, started, time.time(), args.command, args.note, cpu, empty)
     io.write_json(Path(args.outputs_dir) / "provenance.json", record)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

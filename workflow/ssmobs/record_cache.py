@@ -4,9 +4,11 @@ Every trajectory k of the NUTS stage (:mod:`ssmobs.nuts_stage`, record format in
 docstring) is stored as ``records_dir/k{k:05d}.json``.  A rerun reuses a record only when
 its key matches (:func:`record_key`): scenario, k, seed, Stan seed, the Stan program's hash
 (:func:`program_hash`), the hash of every setting that determines the record
-(:func:`settings_hash`: sampler, convergence thresholds, init, prior bounds, true values,
-the KDE estimator), the backend with its Stan version (:func:`backend_identity`) and the
-data's checksum.  Kept draws go to ``draws_dir/k{k:05d}.nc`` (:func:`draws_path`).
+(:func:`settings_hash`: sampler, the diagnostics' implementation, init, prior bounds, true
+values, the KDE estimator; not the convergence thresholds, which the tables apply), the
+backend with its Stan version (:func:`backend_identity`) and the data's checksum.  The
+records folder itself is keyed by the code that makes records (:mod:`ssmobs.cache_keys`).
+Kept draws go to ``draws_dir/k{k:05d}.nc`` (:func:`draws_path`).
 """
 
 from __future__ import annotations
@@ -33,7 +35,9 @@ if TYPE_CHECKING:
 LOG = logging.getLogger("ssmobs.nuts")
 
 #: version of the record format; records of another version are recomputed
-RECORD_VERSION = 1
+#: (2: keyed without the convergence thresholds, which the tables apply to the stored
+#: diagnostics; R-hat and ESS per block of Theta; the checksum of kept draws)
+RECORD_VERSION = 2
 #: keys every record has (checked when a record is read back)
 RECORD_KEYS = (
     "record_version",
@@ -96,7 +100,8 @@ def settings_hash(
         "model": model.slug,
         "T": int(T),
         "sampler": sampler_d,
-        "convergence": asdict(convergence),
+        # the thresholds change no record: tables apply them (convergence.apply_thresholds)
+        "diagnostics": convergence.implementation,
         "init": init,
         "bounds": {
             "lower": np.asarray(bounds.lower, float).tolist(),

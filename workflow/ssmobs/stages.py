@@ -97,7 +97,7 @@ def run_k_selection_point(
     out: PathLike,
     sets: str = "independent",
 ) -> dict:
-    """Rule k_selection_point: joint-MAP summary of one K_i of the choice of K (Sec. IV.A).
+    """One point of rule k_selection_grid: the joint-MAP summary of one K_i (Sec. IV.A).
 
     ``seed`` is the run's seed; the set itself was drawn with
     :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
@@ -114,6 +114,71 @@ def run_k_selection_point(
     )
     io.write_json(out, info)
     return info
+
+
+def disturbance_set(
+    path: PathLike, q: int, K: int, method: str, seed: int, design_cfg: dict
+) -> tuple[np.ndarray, dict]:
+    """The disturbance set cached at ``path`` (the file rule design_disturbances writes),
+    made here when it is missing or damaged: the choice of K makes its many small sets in
+    the job that scores them instead of one Snakemake job each."""
+    from .design_disturbances import design_disturbances
+
+    path = Path(path)
+    for attempt in range(2):
+        try:
+            return io.read_disturbances(path, q=q, K=K)
+        except (FileNotFoundError, io.CorruptFileError):
+            if attempt:
+                raise
+        with io.file_lock(path.parent / ".locks" / f"{path.name}.lock"):
+            try:  # another job may have made it meanwhile
+                return io.read_disturbances(path, q=q, K=K)
+            except (FileNotFoundError, io.CorruptFileError):
+                pass
+            logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, method, seed)
+            result = design_disturbances(q, K, method, seed, b_max=design_cfg["b_max"])
+            io.write_disturbances(path, result)
+    raise AssertionError("unreachable")
+
+
+def run_k_selection_grid(
+    design_dir: PathLike,
+    scenario: Scenario,
+    K_grid: list[int],
+    method: str,
+    seed: int,
+    sets: str,
+    settings: dict,
+    design_cfg: dict,
+    points_dir: PathLike,
+    out: PathLike,
+) -> list[dict]:
+    """Rule k_selection_grid: V_{K_i} for every K_i of one grid (method, set variant, seed).
+
+    Each point is cached on its own in ``points_dir/K<K_i>.json`` as soon as it is done (a
+    rerun after a kill computes only the missing ones), each set in ``design_dir``."""
+    from .k_selection import set_seed
+
+    progress = Progress(f"choice of K {scenario.name} {method} {sets} seed {seed}", len(K_grid))
+    rows = []
+    for K in K_grid:
+        point = Path(points_dir) / f"K{K}.json"
+        info = None
+        if point.exists():
+            try:
+                info = io.read_json(point, required=["K_i", "method", "seed"])
+            except io.CorruptFileError as err:
+                logger.warning("recomputing: %s", err)
+        if info is None:
+            s = set_seed(seed, K, sets)
+            path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
+            disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
+            info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
+        rows.append(info)
+        progress.update()
+    io.write_json(out, {"points": rows})
+    return rows
 
 
 def mu0_sweep_rows(traj: Any, prior: Any, settings: dict, mu0_per_T: list[float]) -> list[dict]:
@@ -242,7 +307,7 @@ def run_sample_batch(
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
     interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
     """
-    from .convergence import ConvergenceSettings
+    from .convergence import ConvergenceSettings, apply_thresholds
     from .nuts_stage import records_to_frame, run_trajectories
     from .stan_backends import get_backend, stan_file
     from .trajectories import read_trajectories
@@ -273,12 +338,8 @@ def run_sample_batch(
         draws_dir=draws_dir,
         progress=progress,
     )
-    io.write_parquet(out, records_to_frame(records, model, traj.T))
-
-
-def batch_records_dir(batch_table: PathLike) -> Path:
-    """The records folder of a batch table: ``results/<scenario>/sample_nuts/records``."""
-    return Path(batch_table).parent / "records"
+    settings = ConvergenceSettings(**convergence_cfg)
+    io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
 
 
 def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
@@ -287,17 +348,21 @@ def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
     )
 
 
-def changed_batch_records(batch_table: PathLike) -> str | None:
+def changed_batch_records(
+    batch_table: PathLike, records_dir: PathLike, draws_dir: PathLike | None = None
+) -> str | None:
     """Why the finished batch table ``batch_table`` no longer matches its records, or None.
 
-    Reads only the table's ``k`` column and the records' file times (cheap enough for every
-    DAG build): a record of one of those k that is missing or newer than the table was
-    damaged, edited or deleted after the batch ran.  None when the table does not exist
-    (the batch is still to run) or cannot be read (gather_nuts reports that).
+    Reads only the table's ``k`` column, the records' file times and the kept draws'
+    checksums (cheap enough for every DAG build): a record of one of those k that is
+    missing or newer than the table was damaged, edited or deleted after the batch ran; a
+    kept draws file that is missing or differs from the checksum its record holds was
+    damaged.  None when the table does not exist (the batch is still to run) or cannot be
+    read (gather_nuts reports that).
     """
     import pyarrow.parquet as pq
 
-    from .record_cache import record_path
+    from .record_cache import draws_path, record_path
 
     table = Path(batch_table)
     try:
@@ -305,9 +370,8 @@ def changed_batch_records(batch_table: PathLike) -> str | None:
         ks = pq.read_table(table, columns=["k"]).column("k").to_pylist()
     except Exception:  # noqa: BLE001 - missing or unreadable: not this check's business
         return None
-    folder = batch_records_dir(table)
     for k in ks:
-        path = record_path(folder, k)
+        path = record_path(records_dir, k)
         try:
             changed = path.stat().st_mtime_ns > written
         except FileNotFoundError:
@@ -320,6 +384,15 @@ def changed_batch_records(batch_table: PathLike) -> str | None:
                     f"changed after this table was written",
                 )
             )
+        if draws_dir is None:
+            continue
+        draws = draws_path(draws_dir, k)
+        try:
+            expected = (io.read_json(path) or {}).get("draws_sha256")
+        except io.CorruptFileError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} is damaged"))
+        if expected and (not draws.exists() or io.file_sha256(draws) != expected):
+            return str(_damaged_batch(table, f"the kept draws {draws} are missing or damaged"))
     return None
 
 
@@ -328,6 +401,8 @@ def check_batch_records(
     frame: pandas.DataFrame,
     model: StateSpaceModel,
     T: int,
+    records_dir: PathLike,
+    convergence_cfg: dict,
 ) -> None:
     """The per-trajectory records a batch table was built from are all there, parse and
     give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
@@ -337,13 +412,13 @@ def check_batch_records(
     :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
     batch recomputes the damaged records only and reuses every valid one.
     """
+    from .convergence import ConvergenceSettings, apply_thresholds
     from .nuts_stage import records_to_frame
     from .record_cache import RECORD_KEYS, record_path
 
     def damaged(what: str) -> io.CorruptFileError:
         return _damaged_batch(batch_table, what)
 
-    records_dir = batch_records_dir(batch_table)
     recs = []
     for k in frame["k"].tolist():
         path = record_path(records_dir, k)
@@ -357,7 +432,9 @@ def check_batch_records(
             raise damaged(f"the record {path} is of trajectory k={rec['k']}, not k={k}")
         recs.append(rec)
     try:
-        rebuilt = records_to_frame(recs, model, T)
+        rebuilt = apply_thresholds(
+            records_to_frame(recs, model, T), ConvergenceSettings(**convergence_cfg)
+        )
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise damaged(f"its records under {records_dir} do not form a table ({err})") from None
     if list(rebuilt.columns) != list(frame.columns) or len(rebuilt) != len(frame):
@@ -375,10 +452,16 @@ def run_gather_nuts(
     trajectories: PathLike,
     batch_tables: list[PathLike],
     scenario: Scenario,
+    convergence_cfg: dict,
+    records_dir: PathLike,
     table: PathLike,
     summary: PathLike,
 ) -> dict:
-    """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary."""
+    """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
+
+    The batch tables hold the configured convergence checks applied to the records'
+    diagnostics (:func:`ssmobs.convergence.apply_thresholds`), so other thresholds rebuild
+    the tables without new sampling."""
     import pandas as pd
 
     from .stan_metrics import stan_summary
@@ -387,7 +470,7 @@ def run_gather_nuts(
     traj = read_trajectories(trajectories)
     frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
     for path, batch_frame in zip(batch_tables, frames):
-        check_batch_records(path, batch_frame, traj.model, traj.T)
+        check_batch_records(path, batch_frame, traj.model, traj.T, records_dir, convergence_cfg)
     frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
     if frame["k"].tolist() != list(range(traj.K)):
@@ -580,7 +663,7 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
 def run_select_k(
     ksel: dict,
     scenario: Scenario,
-    points: list[PathLike],
+    grids: list[PathLike],
     paper_values: PathLike,
     out_json: PathLike,
     out_csv: PathLike,
@@ -594,7 +677,7 @@ def run_select_k(
     from .k_selection import choose_k
     from .tables import load_paper_values
 
-    summaries = [io.read_json(p, required=["K_i", "method", "seed"]) for p in points]
+    summaries = [row for p in grids for row in io.read_json(p, required=["points"])["points"]]
     paper = load_paper_values(paper_values).get(scenario.paper_ref, {}) or {}
     long_rows, choices = choose_k(summaries, scenario.model, ksel, scenario.name, paper)
     frame = pd.DataFrame(long_rows)
@@ -706,7 +789,6 @@ def run_exact_marginal(
         scenario=scenario.name,
         model=model.slug,
         T=traj.T,
-        seconds=seconds,
         grid=result.info,
         prior=list(bounds.variants),
     )

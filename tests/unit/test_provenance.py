@@ -1,0 +1,38 @@
+"""Provenance of committed outputs: a run's wall and CPU time and its starting state."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pytest
+from ssmobs import provenance
+
+pytestmark = pytest.mark.unit
+
+CONFIG = "outputs_dir: out\nstan: {backend: pystan}\nscenarios: []\n"
+
+
+def test_a_command_is_run_and_its_provenance_written(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.yaml").write_text(CONFIG)
+    burn = "import time; t = time.process_time()\nwhile time.process_time() - t < 0.3: pass"
+    code = provenance.main(
+        ["--config", "c.yaml", "--outputs-dir", "out", "--", sys.executable, "-c", burn]
+    )
+    assert code == 0
+    record = json.loads((tmp_path / "out" / "provenance.json").read_text())
+    assert record["started_from_empty_results"] is True
+    assert record["cpu_seconds"] >= 0.2
+    assert record["wall_seconds"] >= record["cpu_seconds"] - 0.1
+    assert record["config_file"] == "c.yaml"
+
+
+def test_a_failed_command_writes_no_provenance(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.yaml").write_text(CONFIG)
+    (tmp_path / "results" / "x").mkdir(parents=True)
+    args = ["--config", "c.yaml", "--outputs-dir", "out", "--", sys.executable, "-c", "exit(3)"]
+    assert provenance.main(args) == 3
+    assert not (tmp_path / "out").exists()
+    assert not provenance.results_empty(tmp_path / "results")

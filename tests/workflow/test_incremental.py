@@ -1,0 +1,294 @@
+"""Incremental runs equal fresh runs: the mutation suite of issue 19.
+
+From one finished run of a tiny config, each case applies one edit (a config value, a
+model's module, a Stan program, a stage's code), reruns the same command and checks that
+
+(a) the rerun exits 0,
+(b) every table and summary is byte-identical to a fresh run of the edited config in an
+    empty ``results/`` (same keyed paths, same bytes), and
+(c) the rules that ran are the ones the edit touches (e.g. a convergence threshold reruns
+    no NUTS sampling, a joint-MAP setting no Stan job).
+
+Reverting an edit finds the earlier outputs again, also without ``.snakemake/``.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from helpers import make_workdir, snakemake
+
+pytestmark = [pytest.mark.workflow, pytest.mark.slow]
+
+CONFIG = "config/mutation.yaml"
+OUT = "paper_figures/mutation"
+ARGS = ["--cores", "2", "--rerun-incomplete", "--configfile", CONFIG]
+
+BASE = {
+    "outputs_dir": OUT,
+    "scenarios": [
+        {
+            "name": "same_T4",
+            "model": "same",
+            "omega": {"a": 0.9},
+            "x0": 8,
+            "T": 4,
+            "K": 4,
+            "prior": "restricted",
+            "paper_ref": "same_a09_T4",
+        }
+    ],
+    "paper_outputs": {"tables_2_3": ["same_T4"], "figure3": ["same_T4"], "figure4": None},
+    "k_selection": [],
+    "observability_studies": [],
+    "stan": {"chains": 2, "iter_warmup": 150, "iter_sampling": 150, "batch_size": 2},
+    "convergence": {"ess_bulk_min": 50, "ess_tail_min": 50},
+}
+
+#: the files compared between an incremental and a fresh run (tables, summaries, keyed data)
+COMPARED = [
+    f"{OUT}/*.csv",
+    f"{OUT}/*.md",
+    f"{OUT}/*.tex",
+    "results/*/design_trajectories/*/trajectories.nc",
+    "results/*/joint_map/*/*.parquet",
+    "results/*/joint_map/*/summary.json",
+    "results/*/sample_nuts/*/batch*.parquet",
+    "results/*/gather_nuts/*/*.parquet",
+    "results/*/gather_nuts/*/summary.json",
+    "results/*/exact_marginal/*/*.parquet",
+    "results/*/exact_marginal/*/summary.json",
+]
+
+EVERY_STAGE = {
+    "design_trajectories",
+    "joint_map",
+    "sample_nuts",
+    "gather_nuts",
+    "exact_marginal",
+    "paper_tables",
+}
+
+
+def _set(path: str, value):
+    def edit(conf: dict) -> None:
+        node = conf
+        *parents, last = path.split(".")
+        for p in parents:
+            node = node[int(p)] if p.isdigit() else node.setdefault(p, {})
+        node[last] = value
+
+    return edit
+
+
+def _append(relpath: str, text: str):
+    def edit(work: Path) -> None:
+        f = work / relpath
+        f.write_text(f.read_text() + text)
+
+    return edit
+
+
+#: name -> (config edit or None, file edit or None, rules that must run, rules that must not)
+CASES = {
+    "omega": (
+        _set("scenarios.0.omega.a", 0.8),
+        None,
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "x0": (_set("scenarios.0.x0", 7), None, EVERY_STAGE, {"design_disturbances"}),
+    "T": (_set("scenarios.0.T", 5), None, EVERY_STAGE | {"design_disturbances"}, set()),
+    "K": (
+        _set("scenarios.0.K", 3),
+        None,
+        EVERY_STAGE | {"design_disturbances"},
+        {"check_model", "build_stan_model"},
+    ),
+    "seed": (
+        _set("scenarios.0.seed", 2),
+        None,
+        EVERY_STAGE | {"design_disturbances"},
+        {"check_model", "build_stan_model"},
+    ),
+    "prior": (
+        _set("scenarios.0.prior", "unrestricted"),
+        None,
+        {"joint_map", "sample_nuts", "gather_nuts", "exact_marginal", "paper_tables"},
+        {"design_trajectories", "design_disturbances", "check_model", "check_model_stan"},
+    ),
+    "convergence threshold": (
+        _set("convergence.rhat_max", 1.05),
+        None,
+        {"sample_nuts", "gather_nuts", "paper_tables"},
+        {"design_trajectories", "joint_map", "exact_marginal", "check_model", "check_model_stan"},
+    ),
+    "stan setting": (
+        _set("stan.iter_sampling", 160),
+        None,
+        {"sample_nuts", "gather_nuts", "paper_tables"},
+        {"design_trajectories", "joint_map", "exact_marginal", "check_model", "check_model_stan"},
+    ),
+    "joint-MAP setting": (
+        _set("joint_map.grad_tol", 2e-5),
+        None,
+        {"joint_map", "paper_tables"},
+        {"design_trajectories", "sample_nuts", "gather_nuts", "exact_marginal"},
+    ),
+    "exact stage code": (
+        None,
+        _append("workflow/ssmobs/exact_marginal.py", "\n# an edit of the exact stage\n"),
+        {"exact_marginal", "paper_tables"},
+        {"design_trajectories", "joint_map", "sample_nuts"},
+    ),
+    "model module": (
+        None,
+        _append("workflow/ssmobs/models/same.py", "\n# an edit of the model\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "Stan program": (
+        None,
+        _append("stan/same.stan", "\n// an edit of the Stan program\n"),
+        {"build_stan_model", "check_model_stan", "sample_nuts", "gather_nuts", "paper_tables"},
+        {"check_model", "design_trajectories", "joint_map", "exact_marginal"},
+    ),
+}
+
+
+def write_config(work: Path, edit=None) -> None:
+    conf = yaml.safe_load(yaml.safe_dump(BASE))
+    if edit is not None:
+        edit(conf)
+    (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+
+
+def rules_run(proc) -> set[str]:
+    """Names of the rules whose jobs ran, from Snakemake's log."""
+    text = proc.stdout + proc.stderr
+    return set(re.findall(r"^(?:local)?rule (\w+):$", text, flags=re.M)) - {"all"}
+
+
+def compared_files(work: Path) -> dict[str, bytes]:
+    out = {}
+    for pattern in COMPARED:
+        for f in sorted(work.glob(pattern)):
+            out[str(f.relative_to(work))] = f.read_bytes()
+    return out
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory) -> Path:
+    """One finished run of the tiny config (the baseline every case starts from)."""
+    work = make_workdir(tmp_path_factory.mktemp("mutation_base"))
+    write_config(work)
+    snakemake(work, *ARGS)
+    return work
+
+
+def run_both(*workdirs: Path) -> list[subprocess.CompletedProcess]:
+    """The same command in each workdir at once (their serial chains share the 2 cores)."""
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "snakemake", *ARGS],
+            cwd=w,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for w in workdirs
+    ]
+    done = []
+    for w, proc in zip(workdirs, procs):
+        out, err = proc.communicate(timeout=3600)
+        assert proc.returncode == 0, f"{w}: {out[-2000:]}\n{err[-4000:]}"
+        done.append(subprocess.CompletedProcess(proc.args, proc.returncode, out, err))
+    return done
+
+
+def _copy(src: Path, dest: Path) -> Path:
+    shutil.copytree(src, dest, symlinks=True, ignore=shutil.ignore_patterns("locks"))
+    return dest
+
+
+def assert_fresh_equal(incremental: Path, fresh: Path) -> None:
+    """Every compared file of the fresh run exists in the incremental run, byte for byte."""
+    want = compared_files(fresh)
+    assert want, "the fresh run wrote nothing to compare"
+    have = compared_files(incremental)
+    missing = sorted(set(want) - set(have))
+    assert not missing, f"not in the incremental run (other keys?): {missing[:5]}"
+    differ = sorted(name for name in want if want[name] != have[name])
+    assert not differ, f"differ from a fresh run: {differ}"
+
+
+@pytest.mark.parametrize("case", list(CASES), ids=list(CASES))
+def test_an_edit_reruns_what_it_touches_and_equals_a_fresh_run(base, tmp_path, case):
+    config_edit, file_edit, must_run, must_not_run = CASES[case]
+    work = _copy(base, tmp_path / "incremental")
+    fresh = make_workdir(tmp_path / "fresh")
+    for w in (work, fresh):
+        write_config(w, config_edit)
+        if file_edit is not None:
+            file_edit(w)
+    proc, _ = run_both(work, fresh)
+    ran = rules_run(proc)
+    assert must_run <= ran, f"did not rerun {sorted(must_run - ran)} (ran {sorted(ran)})"
+    assert not (must_not_run & ran), f"reran {sorted(must_not_run & ran)}"
+    if case == "convergence threshold":  # the batch tables are rebuilt from stored records
+        new = set(work.glob("results/same_T4/sample_nuts/*/*.log")) - {
+            work / p.relative_to(base) for p in base.glob("results/same_T4/sample_nuts/*/*.log")
+        }
+        assert new and all("0 trajectories to sample" in p.read_text() for p in new)
+    again = snakemake(work, *ARGS, "-n")
+    assert "Nothing to be done" in again.stdout + again.stderr
+    assert_fresh_equal(work, fresh)
+
+
+@pytest.mark.parametrize("metadata", [True, False], ids=["with metadata", "without .snakemake"])
+def test_reverting_an_edit_finds_the_earlier_outputs(base, tmp_path, metadata):
+    """Edit, run, edit back, run: the tables are the baseline's again, recomputing only the
+    tables (stamps, not file times or Snakemake's metadata, tell them stale)."""
+    work = _copy(base, tmp_path / "revert")
+    write_config(work, _set("scenarios.0.omega.a", 0.8))
+    snakemake(work, *ARGS)
+    write_config(work)
+    if not metadata:
+        shutil.rmtree(work / ".snakemake")
+    proc = snakemake(work, *ARGS)
+    ran = rules_run(proc)
+    assert "paper_tables" in ran
+    assert not ({"design_trajectories", "joint_map", "sample_nuts"} & ran), ran
+    assert_fresh_equal(work, base)
+    tables = {f.name: f.read_bytes() for f in (base / OUT).glob("*.csv")}
+    assert tables and all((work / OUT / n).read_bytes() == b for n, b in tables.items())
+
+
+def test_profiles_share_no_output(base, tmp_path):
+    """Two configs with the same scenario name but another K share no trajectories, and
+    each keeps its own tables (issue 19, items 7 and 9)."""
+    work = _copy(base, tmp_path / "profiles")
+    other = yaml.safe_load(yaml.safe_dump(BASE))
+    other["outputs_dir"] = "paper_figures/other"
+    other["scenarios"][0]["K"] = 6
+    (work / "config" / "other.yaml").write_text(yaml.safe_dump(other))
+    proc = snakemake(work, "-n", "--cores", "2", "--configfile", "config/other.yaml")
+    assert "design_trajectories" in rules_run(proc)
+    before = {f.name: f.read_bytes() for f in (work / OUT).iterdir()}
+    snakemake(work, "--cores", "2", "--configfile", "config/other.yaml")
+    assert {f.name: f.read_bytes() for f in (work / OUT).iterdir()} == before
+    assert len(list(work.glob("results/same_T4/design_trajectories/*/trajectories.nc"))) == 2
+
+
+def test_committed_outputs_of_another_profile_are_refused(base, tmp_path):
+    work = _copy(base, tmp_path / "guard")
+    (work / OUT / "provenance.json").write_text('{"config_file": "config/tables.yaml"}\n')
+    proc = snakemake(work, *ARGS, "-n", check=False)
+    assert proc.returncode != 0
+    assert "holds the committed outputs of config/tables.yaml" in proc.stdout + proc.stderr

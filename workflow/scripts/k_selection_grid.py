@@ -1,0 +1,21 @@
+"""Rule k_selection_grid: V_{K_i} of the choice of K for every K_i of one grid (Sec. IV.A)."""
+
+from ssmobs import io, log
+from ssmobs.scenario import Scenario
+from ssmobs.stages import run_k_selection_grid
+
+log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+wc, p = snakemake.wildcards, snakemake.params
+run_k_selection_grid(
+    p.design_dir,
+    Scenario.from_config(p.scenario),
+    list(p.K_grid),
+    wc.method,
+    int(wc.seed),
+    wc.sets,
+    dict(p.settings),
+    dict(p.design),
+    p.points,
+    snakemake.output[0],
+)

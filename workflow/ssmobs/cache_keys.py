@@ -1,0 +1,421 @@
+"""Content keys of the workflow's cached outputs: every output is keyed by what determines it.
+
+Each stage's outputs live under ``results/.../<key>/``, where ``<key>`` is 12 hex digits of
+a SHA-256 over everything that determines them (the rule of the cache):
+
+- the config values the stage reads (a scenario's model, Omega, x0, T, K, method, seed,
+  prior, the stage's settings block),
+- the keys of the stage's inputs (so a change upstream moves every output downstream),
+- the code: the model's module, its Stan program, and the source of the package modules
+  the stage runs (:data:`STAGE_MODULES`, closed over their imports inside the package by
+  :func:`module_closure`), so an edit of a log-density term or of a stage's numerics
+  gives new keys and a recomputation, never an old result.
+
+A key path that exists holds exactly what its key describes, whatever the files' times
+and whatever ``.snakemake/`` holds; a path that does not exist is computed.  Editing the
+config back to an earlier state finds the earlier outputs again.  Every key's payload is
+written beside nothing and hashed only; :meth:`CacheKeys.describe` returns it for a person
+(``python -m ssmobs.cache_keys --configfile ...`` prints them).
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import hashlib
+import json
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+#: the package's own directory (``workflow/ssmobs``)
+PACKAGE_DIR = Path(__file__).resolve().parent
+#: the repository (or workflow copy) this package belongs to
+REPO_DIR = PACKAGE_DIR.parents[1]
+#: hex digits of a key
+KEY_LENGTH = 12
+
+#: the package modules each stage runs (relative to the package; their imports inside the
+#: package are added by :func:`module_closure`).  ``stages.py`` is the glue that reads and
+#: writes every stage's files; it is hashed alone (its lazy imports reach every module).
+STAGE_MODULES: dict[str, tuple[str, ...]] = {
+    "design": ("design_disturbances.py",),
+    "trajectories": ("trajectories.py", "scenario.py"),
+    "check_model": ("check_model.py",),
+    "joint_map": ("joint_map.py", "scenario.py"),
+    "k_selection": (
+        "k_selection.py",
+        "joint_map.py",
+        "trajectories.py",
+        "design_disturbances.py",
+    ),
+    "program": ("stan_backends/__init__.py",),
+    "nuts_records": ("nuts_stage.py", "stan_backends/__init__.py"),
+    "nuts_batches": ("nuts_stage.py",),
+    "gather": ("stan_metrics.py", "convergence.py", "nuts_stage.py"),
+    "exact": ("exact_marginal.py",),
+    "outputs": ("tables.py", "figures.py", "binomial.py", "profile_posterior.py"),
+}
+#: files outside the package's import graph that a stage's results depend on
+STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
+    "program": ("stan_backends/native_driver/driver.cpp",),
+    "nuts_records": ("stan_backends/native_driver/driver.cpp",),
+}
+#: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
+OUTPUT_SCRIPTS = (
+    "paper_tables",
+    "convergence_sensitivity",
+    "joint_map_mu0_sweep",
+    "select_k",
+    "table_k_selection",
+    "observability_study",
+    "figure_design_points",
+    "figure_joint_vs_marginal",
+    "figure_profile_posterior",
+    "figure_observability",
+    "figure_exact_vs_stan",
+)
+STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
+    "design": ("design_disturbances",),
+    "trajectories": ("design_trajectories",),
+    "check_model": ("check_model",),
+    "joint_map": ("joint_map",),
+    "k_selection": ("k_selection_grid",),
+    "program": ("build_stan_model",),
+    "nuts_records": ("sample_nuts",),
+    "nuts_batches": ("sample_nuts",),
+    "gather": ("gather_nuts",),
+    "exact": ("exact_marginal",),
+    "outputs": OUTPUT_SCRIPTS,
+}
+#: modules that only log, plan or describe and never change a number or a file's content
+NEUTRAL_MODULES: frozenset[str] = frozenset(
+    {"log.py", "budget.py", "preflight.py", "config.py", "provenance.py"}
+)
+
+
+# --------------------------------------------------------------------------- hashing
+def digest(payload: Any) -> str:
+    """:data:`KEY_LENGTH` hex digits of SHA-256 over canonical JSON of ``payload``."""
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=_json_default)
+    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
+
+
+def _json_default(obj: Any) -> Any:
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    if isinstance(obj, Mapping):
+        return dict(obj)
+    if isinstance(obj, (set, frozenset, tuple)):
+        return sorted(obj) if isinstance(obj, (set, frozenset)) else list(obj)
+    raise TypeError(f"cannot key a {type(obj).__name__}: {obj!r}")
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 (16 hex digits) of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+def _module_file(name: str, package_dir: Path) -> Path | None:
+    """The file of module ``name`` (dotted, relative to the package), or None."""
+    base = package_dir.joinpath(*name.split(".")) if name else package_dir
+    if base.with_suffix(".py").is_file():
+        return base.with_suffix(".py")
+    if (base / "__init__.py").is_file():
+        return base / "__init__.py"
+    return None
+
+
+def _imports(path: Path, package_dir: Path) -> set[Path]:
+    """Package modules that ``path`` imports (relative imports, anywhere in the file)."""
+    rel = path.relative_to(package_dir)
+    parts = list(rel.with_suffix("").parts)
+    pkg = parts[:-1] if rel.name != "__init__.py" else parts[:-1]
+    found: set[Path] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                if not (node.module or "").startswith("ssmobs"):
+                    continue
+                anchor: list[str] = []
+                module = (node.module or "").split(".")[1:]
+            else:
+                anchor = pkg[: len(pkg) - (node.level - 1)] if node.level > 1 else pkg
+                module = (node.module or "").split(".") if node.module else []
+            base = ".".join([*anchor, *module])
+            target = _module_file(base, package_dir)
+            if target is not None:
+                found.add(target)
+            for alias in node.names:  # "from . import io": io is a module
+                sub = _module_file(".".join(p for p in (base, alias.name) if p), package_dir)
+                if sub is not None:
+                    found.add(sub)
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("ssmobs."):
+                    target = _module_file(".".join(alias.name.split(".")[1:]), package_dir)
+                    if target is not None:
+                        found.add(target)
+    return found
+
+
+@functools.cache
+def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
+    """``entries`` and every package module they import, directly or not (sorted relative
+    paths), without :data:`NEUTRAL_MODULES`."""
+    todo = [package_dir / e for e in entries]
+    seen: set[Path] = set()
+    while todo:
+        path = todo.pop()
+        if path in seen or not path.is_file():
+            continue
+        if str(path.relative_to(package_dir)) in NEUTRAL_MODULES:
+            continue  # neither hashed nor followed
+        seen.add(path)
+        todo.extend(_imports(path, package_dir) - seen)
+    return tuple(sorted(str(p.relative_to(package_dir)) for p in seen))
+
+
+def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
+    """File -> hash of the code a stage runs: its module closure, its extra files,
+    ``stages.py`` (the glue that writes its outputs) and its rule scripts.  The rule files
+    (``workflow/rules/*.smk``) are not hashed: what they decide (paths, params) is keyed."""
+    files = set(module_closure(STAGE_MODULES[stage], package_dir))
+    files |= set(STAGE_EXTRA_FILES.get(stage, ())) | {"stages.py"}
+    out = {f: file_digest(package_dir / f) for f in sorted(files)}
+    for script in STAGE_SCRIPTS[stage]:
+        path = package_dir.parent / "scripts" / f"{script}.py"
+        out[f"scripts/{script}.py"] = file_digest(path)
+    return out
+
+
+# --------------------------------------------------------------------------- the keys
+def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
+    return {n: entry.get(n) for n in names}
+
+
+#: the scenario fields that determine its design trajectories
+TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
+#: ... its joint MAP (beside the trajectories)
+JOINT_MAP_FIELDS = ("prior", "joint_map_start")
+#: ... its NUTS records (beside the trajectories); the name enters Stan's seed
+NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
+#: the NUTS settings that determine a record (batch_size and keep_draws only group them)
+SAMPLER_FIELDS = ("chains", "iter_warmup", "iter_sampling", "adapt_delta", "max_treedepth")
+
+
+class UnknownKeyError(KeyError):
+    """A keyed path was asked for whose key the current config does not produce."""
+
+
+class CacheKeys:
+    """Every key of one validated config (see the module docstring), with a lookup from
+    (kind, name, key) back to what it describes, for the rules' wildcards."""
+
+    def __init__(
+        self,
+        config: Mapping[str, Any],
+        backend: str,
+        repo: Path = REPO_DIR,
+        package_dir: Path = PACKAGE_DIR,
+    ) -> None:
+        self.config = config
+        self.backend = backend
+        self.repo = Path(repo)
+        self.package_dir = Path(package_dir)
+        self.scenarios = {sc["name"]: sc for sc in config["scenarios"]}
+        self.k_selections = {ks["name"]: ks for ks in config["k_selection"]}
+        self._payloads: dict[str, dict[str, Any]] = {}
+        self._lookup: dict[tuple[str, str, str], dict[str, Any]] = {}
+
+    # ------------------------------------------------------------------ helpers
+    @functools.cache  # noqa: B019 - one object per parse of the workflow
+    def code(self, stage: str) -> dict[str, str]:
+        return code_digest(stage, self.package_dir)
+
+    @functools.cache  # noqa: B019
+    def model_code(self, model: str) -> dict[str, str]:
+        """The model's Python module (its Stan program keys what it determines:
+        :meth:`stan_program`)."""
+        return {f"models/{model}.py": file_digest(self.package_dir / "models" / f"{model}.py")}
+
+    def stan_program(self, model: str) -> str:
+        return file_digest(self.repo / "stan" / f"{model}.stan")
+
+    def _key(self, kind: str, name: str, payload: dict[str, Any], **about: Any) -> str:
+        key = digest(payload)
+        self._payloads[f"{kind}:{name}:{key}"] = payload
+        self._lookup[(kind, name, key)] = about
+        return key
+
+    def lookup(self, kind: str, name: str, key: str) -> dict[str, Any]:
+        """What key ``key`` of ``kind`` for ``name`` describes (e.g. ``{"K": 300}``);
+        raises :class:`UnknownKeyError` when the current config does not produce it."""
+        try:
+            return self._lookup[(kind, name, key)]
+        except KeyError:
+            raise UnknownKeyError(
+                f"{kind} key {key} of {name!r} is not one the current config produces "
+                f"(an output of an earlier config was asked for by its path)"
+            ) from None
+
+    def describe(self) -> dict[str, dict[str, Any]]:
+        """Every key computed so far with its payload (what it is keyed by)."""
+        return dict(self._payloads)
+
+    # ------------------------------------------------------------------ stages
+    @functools.cached_property
+    def design(self) -> str:
+        """The design sets' settings and code (Sec. III.A); q, K, method, seed are in the
+        file name."""
+        return self._key(
+            "design", "shared", {"design": self.config["design"], "code": self.code("design")}
+        )
+
+    def check_model(self, name: str, stan: bool = False) -> str:
+        """The model check at a scenario's true values: the Python model alone (gates the
+        design trajectories) or against the Stan program (gates the NUTS runs).  Every
+        prior variant is checked, so the prior is no part of the key."""
+        sc = self.scenarios[name]
+        payload: dict[str, Any] = {
+            "case": _pick(sc, ("model", "omega", "x0")),
+            "model_code": self.model_code(sc["model"]),
+            "code": self.code("check_model"),
+        }
+        if stan:
+            payload["stan"] = self.stan_program(sc["model"])
+        return self._key("check_model_stan" if stan else "check_model", name, payload)
+
+    def trajectories(self, name: str, K: int | None = None) -> str:
+        sc = self.scenarios[name]
+        K = int(sc["K"] if K is None else K)
+        payload = {
+            "scenario": _pick(sc, TRAJECTORY_FIELDS),
+            "K": K,
+            "design": self.design,
+            "model_code": self.model_code(sc["model"]),
+            "code": self.code("trajectories"),
+        }
+        return self._key("trajectories", name, payload, K=K)
+
+    def joint_map(self, name: str) -> str:
+        sc = self.scenarios[name]
+        payload = {
+            "trajectories": self.trajectories(name),
+            "scenario": _pick(sc, JOINT_MAP_FIELDS),
+            "settings": self.config["joint_map"],
+            "code": self.code("joint_map"),
+        }
+        return self._key("joint_map", name, payload)
+
+    def program(self, model: str) -> str:
+        """The compiled-program marker of ``model`` for the configured backend."""
+        payload = {
+            "backend": self.backend,
+            "stan": self.stan_program(model),
+            "code": self.code("program"),
+        }
+        return self._key("program", model, payload)
+
+    def nuts_records(self, name: str) -> str:
+        """Everything that determines a trajectory's NUTS record (not the thresholds of
+        the convergence checks: they are applied to the stored diagnostics by gather)."""
+        sc = self.scenarios[name]
+        stan = self.config["stan"]
+        payload = {
+            "trajectories": self.trajectories(name),
+            "scenario": _pick(sc, NUTS_FIELDS),
+            "sampler": _pick(stan, SAMPLER_FIELDS),
+            "diagnostics": self.config["convergence"].get("implementation", "vectorized"),
+            "program": self.program(sc["model"]),
+            "model_code": self.model_code(sc["model"]),
+            "code": self.code("nuts_records"),
+        }
+        return self._key("nuts_records", name, payload)
+
+    def nuts_batches(self, name: str, batch_size: int) -> str:
+        payload = {
+            "records": self.nuts_records(name),
+            "batch_size": int(batch_size),
+            "keep_draws": sorted(self.config["stan"]["keep_draws"]),
+            "convergence": self.config["convergence"],
+            "code": self.code("nuts_batches"),
+        }
+        return self._key("nuts_batches", name, payload)
+
+    def gather(self, name: str, batch_size: int) -> str:
+        payload = {
+            "batches": self.nuts_batches(name, batch_size),
+            "code": self.code("gather"),
+        }
+        return self._key("gather", name, payload)
+
+    def exact(self, name: str, K: int) -> str:
+        sc = self.scenarios[name]
+        payload = {
+            "trajectories": self.trajectories(name, K),
+            "prior": sc.get("prior"),
+            "code": self.code("exact"),
+        }
+        return self._key("exact", name, payload, K=int(K))
+
+    def k_selection_points(self, ksel: str) -> str:
+        """The joint-MAP summaries V_{K_i} of one k_selection entry (Sec. IV.A)."""
+        ks = self.k_selections[ksel]
+        sc = self.scenarios[ks["scenario"]]
+        payload = {
+            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior", "joint_map_start")),
+            "settings": self.config["joint_map"],
+            "design": self.design,
+            "model_code": self.model_code(sc["model"]),
+            "code": self.code("k_selection"),
+        }
+        return self._key("k_selection_points", ksel, payload)
+
+    def output(self, name: str, inputs: Iterable[str], params: Any) -> str:
+        """A table or figure of ``outputs_dir``: its keyed inputs, its parameters and the
+        code of the tables and figures."""
+        files = sorted(str(p) for p in inputs)
+        payload = {
+            "inputs": files,
+            # inputs the workflow does not make (config/paper_values.yaml) by their content;
+            # the others (keyed results, stamped tables) are keyed by their paths and stamps
+            "contents": {
+                p: file_digest(self.repo / p)
+                for p in files
+                if p.startswith("config/") and (self.repo / p).is_file()
+            },
+            "params": params,
+            "code": self.code("outputs"),
+        }
+        return self._key("output", name, payload)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print every key of a config with what it is keyed by (JSON)."""
+    import argparse
+
+    from .config import validate
+    from .preflight import load_config_file
+
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--configfile", default="config/config.yaml")
+    parser.add_argument("--backend", default="native")
+    args = parser.parse_args(argv)
+    config = load_config_file(args.configfile)
+    validate(config)
+    keys = CacheKeys(config, args.backend)
+    for name, sc in keys.scenarios.items():
+        keys.trajectories(name)
+        if sc.get("joint_map"):
+            keys.joint_map(name)
+        if sc.get("stan"):
+            keys.nuts_records(name)
+    for ksel in keys.k_selections:
+        keys.k_selection_points(ksel)
+    print(json.dumps(keys.describe(), indent=1, sort_keys=True))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
