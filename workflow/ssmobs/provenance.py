@@ -77,6 +77,7 @@ def provenance(
     note: str = "",
     cpu_seconds: float | None = None,
     from_empty_results: bool | None = None,
+    outputs_dir: str | os.PathLike = "",
 ) -> dict[str, Any]:
     """The provenance record of one run of ``config_path`` (see the module docstring)."""
     text = Path(config_path).read_text()
@@ -86,7 +87,10 @@ def provenance(
             timespec="seconds"
         ),
         "commit": _git("rev-parse", "HEAD"),
-        "uncommitted_changes": bool(_git("status", "--porcelain", "--untracked-files=no")),
+        # changes to tracked files other than the outputs this run writes
+        "uncommitted_changes": bool(
+            _git("status", "--porcelain", "--untracked-files=no", "--", ".", f":!{outputs_dir}")
+        ),
         "machine": machine(),
         "stan": backend_info(config),
         "wall_seconds": round(finished - started, 1),
@@ -127,7 +131,9 @@ def main(argv: list[str] | None = None) -> int:
         started = args.started
     else:
         parser.error("give --started or a command after --")
-    record = provenance(args.config, started, time.time(), args.command, args.note, cpu, empty)
+    record = provenance(
+        args.config, started, time.time(), args.command, args.note, cpu, empty, args.outputs_dir
+    )
     io.write_json(Path(args.outputs_dir) / "provenance.json", record)
     return 0
 
