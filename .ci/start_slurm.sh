@@ -41,7 +41,7 @@ if [[ ${1:-start} == stop ]]; then
 fi
 [[ ${1:-start} == start ]] || die "usage: $0 [start|stop]"
 [[ $(id -u) == 0 ]] || die "needs root (slurmd starts jobs as their user)"
-for cmd in munged slurmctld slurmd sinfo scontrol; do
+for cmd in munged slurmctld slurmd sinfo scontrol sbatch squeue; do
   command -v "$cmd" >/dev/null || die "'$cmd' not found: apt-get install slurm-wlm munge"
 done
 
