@@ -332,9 +332,9 @@ def test_too_many_jobs_refused_even_when_memory_fits():
         cfg.validate(c)
     msg = str(err.value)
     assert "job needs about" not in msg
-    assert "about 100016 jobs, more than limits.jobs = 20000" in msg
-    # check, trajectories, joint MAP, 100 000 Stan batches, gather, exact stage and its figure
-    assert "scenario 's': 100006" in msg
+    assert "about 100017 jobs, more than limits.jobs = 20000" in msg
+    # 2 checks, trajectories, joint MAP, 100 000 Stan batches, gather, exact stage and figure
+    assert "scenario 's': 100007" in msg
 
 
 def test_slurm_profile_raises_the_limits():

@@ -21,6 +21,7 @@ COPY = ["Snakefile", "workflow", "config", "stan", "envs", "profiles"]
 
 def make_workdir(dest: Path) -> Path:
     """A copy of the workflow in ``dest`` (so runs never write into the repository)."""
+    dest.mkdir(parents=True, exist_ok=True)
     for name in COPY:
         src = REPO / name
         if src.is_dir():

@@ -76,6 +76,17 @@ EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 KEYS = CacheKeys(config, STAN_BACKEND, repo=REPO)
 #: the design sets of this config's design settings and code
 DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
+# Every key up front: a cluster job plans only its own job and looks its key up directly.
+for _name, _sc in SCENARIO_OBJECTS.items():
+    KEYS.check_model(_name)
+    KEYS.check_model(_name, stan=True)
+    KEYS.joint_map(_name)
+    KEYS.program(_sc.model.slug)
+    KEYS.gather(_name, _sc.batch_size(config["stan"]))  # and its batches, records, trajectories
+    for _K in {_sc.K, _sc.exact_trajectories}:
+        KEYS.exact(_name, _K)  # and the trajectories at K
+for _name in KSEL:
+    KEYS.k_selection_points(_name)
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
 STAMPS = {}
 
@@ -247,21 +258,34 @@ def k_selection_grids(name):
 
 
 def nuts_batches(name):
-    """The batch tables of a scenario.  A batch whose records were damaged, deleted or
-    changed after its table was written (or whose kept draws are gone) loses its table
-    here, before the DAG is built, so that batch reruns: it recomputes exactly the damaged
-    records and reuses every valid one."""
-    from ssmobs.stages import batches, changed_batch_records
+    """The batch tables of a scenario's Stan stage."""
+    from ssmobs.stages import batches
 
     ranges = batches(SCENARIO_OBJECTS[name].K, batch_size(name))
-    tables = [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
-    if workflow.is_main_process:
-        for table in tables:
+    return [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
+
+
+def repair_damaged_batches():
+    """Remove the table of every batch whose records were damaged, deleted or changed after
+    it was written (or whose kept draws no longer match their checksum), before the DAG is
+    built (Snakemake takes stock of the files then), so that batch reruns: it recomputes
+    exactly the damaged records and reuses every valid one.  A batch table deleted by hand
+    reruns too."""
+    from ssmobs.stages import changed_batch_records
+
+    if not workflow.is_main_process:
+        return
+    for name in STAN_SCENARIOS:
+        for table in nuts_batches(name):
             problem = changed_batch_records(table, records_dir(name), draws_dir(name))
+            if not Path(table).exists() and Path(stan_summary(name)).exists():
+                problem = f"{table} was deleted"
             if problem:
                 logger.warning(f"{problem}: this batch reruns")
-                Path(table).unlink(missing_ok=True)
-    return tables
+                # Snakemake does not remake a missing intermediate file whose consumers are
+                # up to date: the scenario's gathered table goes too, so both are remade
+                for path in (table, stan_summary(name), stan_table(name)):
+                    Path(path).unlink(missing_ok=True)
 
 
 def figure2_disturbances(wildcards=None):

@@ -52,7 +52,8 @@ def make_trajectories(
         "seed": scenario.seed,
         "omega": json.dumps(dict(zip(model.param_names, scenario.omega.tolist()))),
         "x0": json.dumps(scenario.x0.tolist()),
-        "prior": json.dumps(scenario.prior_config),
+        # no prior: the trajectories do not depend on it (rule of the cache: a file holds
+        # only what its key determines, so a new prior reuses them byte for byte)
     }
     if provenance:
         attrs.update(
