@@ -13,6 +13,7 @@ from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
+from ssmobs.preflight import use_package_of  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
@@ -91,9 +92,7 @@ for _name in KSEL:
 STAMPS = {}
 
 # Jobs run the package of this checkout, not the one `pip install -e` pointed at elsewhere.
-os.environ["PYTHONPATH"] = os.pathsep.join(
-    [str(REPO / "workflow")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-)
+use_package_of(REPO / "workflow")
 
 
 def expect_key(kind, name, key):
@@ -286,6 +285,34 @@ def repair_damaged_batches():
                 # up to date: the scenario's gathered table goes too, so both are remade
                 for path in (table, stan_summary(name), stan_table(name)):
                     Path(path).unlink(missing_ok=True)
+
+
+def select_k_params(name):
+    return {"ksel": KSEL[name], "scenario": SCENARIOS[KSEL[name]["scenario"]]}
+
+
+def exact_vs_stan_inputs(name):
+    return {"stan": stan_table(name), "exact": exact_table(name, SCENARIOS[name]["K"])}
+
+
+def study_inputs(name):
+    scs = study_scenarios(name)
+    return {
+        "joint": [joint_summary(sc["name"]) for sc in scs if sc["joint_map"]],
+        "stan": [stan_summary(sc["name"]) for sc in scs if sc["stan"]],
+        "stan_tables": [stan_table(sc["name"]) for sc in scs if sc["stan"]],
+    }
+
+
+def study_params(name):
+    scs = study_scenarios(name)
+    return {
+        "study": STUDIES[name],
+        "scenarios": scs,
+        "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
+        "stan_names": [sc["name"] for sc in scs if sc["stan"]],
+        "stan_settings": config["stan"],
+    }
 
 
 def figure2_disturbances(wildcards=None):

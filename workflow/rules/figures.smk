@@ -118,10 +118,6 @@ rule figure_observability:
         "../scripts/figure_observability.py"
 
 
-def exact_vs_stan_inputs(name):
-    return {"stan": stan_table(name), "exact": exact_table(name, SCENARIOS[name]["K"])}
-
-
 for _name in EXACT_VS_STAN_SCENARIOS:
     register_stamp(
         f"figure_exact_vs_stan_{_name}",

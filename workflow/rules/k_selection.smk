@@ -28,10 +28,6 @@ rule k_selection_grid:
         "../scripts/k_selection_grid.py"
 
 
-def select_k_params(name):
-    return {"ksel": KSEL[name], "scenario": SCENARIOS[KSEL[name]["scenario"]]}
-
-
 for _name in KSEL:
     register_stamp(
         f"select_k_{_name}",

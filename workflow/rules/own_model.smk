@@ -57,26 +57,6 @@ rule check_model_stan:
         "../scripts/check_model.py"
 
 
-def study_inputs(name):
-    scs = study_scenarios(name)
-    return {
-        "joint": [joint_summary(sc["name"]) for sc in scs if sc["joint_map"]],
-        "stan": [stan_summary(sc["name"]) for sc in scs if sc["stan"]],
-        "stan_tables": [stan_table(sc["name"]) for sc in scs if sc["stan"]],
-    }
-
-
-def study_params(name):
-    scs = study_scenarios(name)
-    return {
-        "study": STUDIES[name],
-        "scenarios": scs,
-        "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
-        "stan_names": [sc["name"] for sc in scs if sc["stan"]],
-        "stan_settings": config["stan"],
-    }
-
-
 for _name in STUDIES:
     register_stamp(
         f"observability_study_{_name}",

@@ -160,3 +160,10 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def use_package_of(workflow_dir: str | os.PathLike) -> None:
+    """Put ``workflow_dir`` first on the PYTHONPATH that Snakemake's jobs inherit, so they
+    run this checkout's package, not the one an editable install points at elsewhere."""
+    rest = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(workflow_dir), *rest])

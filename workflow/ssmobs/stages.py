@@ -121,25 +121,21 @@ def disturbance_set(
 ) -> tuple[np.ndarray, dict]:
     """The disturbance set cached at ``path`` (the file rule design_disturbances writes),
     made here when it is missing or damaged: the choice of K makes its many small sets in
-    the job that scores them instead of one Snakemake job each."""
+    the job that scores them instead of one Snakemake job each.  Under a file lock, so two
+    jobs never make the same set, and the temporaries a killed maker left are swept."""
     from .design_disturbances import design_disturbances
 
     path = Path(path)
-    for attempt in range(2):
+    with io.file_lock(path.parent / ".locks" / f"{path.name}.lock"):
+        io.sweep_temporaries([path])  # no maker runs: we hold the lock
         try:
             return io.read_disturbances(path, q=q, K=K)
         except (FileNotFoundError, io.CorruptFileError):
-            if attempt:
-                raise
-        with io.file_lock(path.parent / ".locks" / f"{path.name}.lock"):
-            try:  # another job may have made it meanwhile
-                return io.read_disturbances(path, q=q, K=K)
-            except (FileNotFoundError, io.CorruptFileError):
-                pass
-            logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, method, seed)
-            result = design_disturbances(q, K, method, seed, b_max=design_cfg["b_max"])
-            io.write_disturbances(path, result)
-    raise AssertionError("unreachable")
+            pass
+        logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, method, seed)
+        result = design_disturbances(q, K, method, seed, b_max=design_cfg["b_max"])
+        io.write_disturbances(path, result)
+    return io.read_disturbances(path, q=q, K=K)
 
 
 def run_k_selection_grid(
