@@ -186,7 +186,7 @@ def test_damaged_kept_draws_are_recomputed(smoke_run, tmp_path):
     size = draws.stat().st_size
     _truncate_keeping_time(draws, 300)
     proc = snakemake(workdir, "--cores", "2", *SMOKE)
-    assert "kept draws" in proc.stdout + proc.stderr
+    assert "this batch reruns" in proc.stdout + proc.stderr
     assert draws.stat().st_size == size
     assert_same_tables(smoke_run, workdir)
 

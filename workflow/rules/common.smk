@@ -121,7 +121,7 @@ def trajectories_path(name, K=None):
 
         problem = checksum_problem(path)
         if problem:
-            logger.warning(f"{problem}: it is made again")
+            logger.warning(f"does not match its checksum, made again: {path}")
             Path(path).unlink()
     return path
 
@@ -280,7 +280,7 @@ def repair_damaged_batches():
             if not Path(table).exists() and Path(stan_summary(name)).exists():
                 problem = f"{table} was deleted"
             if problem:
-                logger.warning(f"{problem}: this batch reruns")
+                logger.warning(f"this batch reruns: {problem.split('; this batch')[0]}")
                 # Snakemake does not remake a missing intermediate file whose consumers are
                 # up to date: the scenario's gathered table goes too, so both are remade
                 for path in (table, stan_summary(name), stan_table(name)):
