@@ -188,12 +188,14 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
             out = tmp_path / f"{sets}_K{K}.json"
             info = run_k_selection_point(path, sc, K, "random", 3, {}, out, sets=sets)
             assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3, set_seed(3, K, sets))
-            points.append(out)
+            points.append(info)
+    grid = tmp_path / "grid.json"  # what rule k_selection_grid writes
+    io.write_json(grid, {"points": points})
     ksel = {"name": "t", "c1": 0.5, "c2": 2.0}
     res = run_select_k(
         ksel,
         sc,
-        points,
+        [grid],
         "config/paper_values.yaml",
         tmp_path / "sel.json",
         tmp_path / "v.csv",
@@ -255,13 +257,13 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
         info = {"K_i": K, "method": "random", "seed": 1, "sets": "independent", "ratio": 1.0}
         for c in model.theta_names(0):
             info.update({f"{c}_mean": 1.0, f"{c}_var": 1.0, f"{c}_lvar_mean": 1.0})
-        io.write_json(tmp_path / f"K{K}.json", info)
-        pts.append(tmp_path / f"K{K}.json")
+        pts.append(info)
+    io.write_json(tmp_path / "grid.json", {"points": pts})
     for (c1, c2), shown in (((0.01, 0.03), "2500-4500"), ((0.01, 0.01), "")):
         res = run_select_k(
             {"name": "t", "c1": c1, "c2": c2},
             sc,
-            pts,
+            [tmp_path / "grid.json"],
             "config/paper_values.yaml",
             tmp_path / "s.json",
             tmp_path / "v.csv",
@@ -270,3 +272,26 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
         row = res["choices"][0]
         assert row["K_paper_range"] == shown and row["K_chosen"] == 100
         assert row["c_paper"] == ("(0.01, 0.03)" if shown else "")
+
+
+def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
+    """Rule k_selection_grid: the sets are made in the job (as rule design_disturbances would
+    write them), every point is cached as it finishes, and a rerun reuses them."""
+    import json
+
+    from ssmobs.stages import run_k_selection_grid
+
+    sc = Scenario.from_config(
+        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4, "K": 8}
+    )
+    args = (tmp_path / "design", sc, [8, 16], "random", 1, "nested", {}, {"b_max": None})
+    (tmp_path / "design").mkdir()
+    rows = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid.json")
+    assert [r["K_i"] for r in rows] == [8, 16]
+    assert len(list((tmp_path / "design").glob("q8_K*_random_seed*.nc"))) == 2
+    assert json.loads((tmp_path / "grid.json").read_text())["points"] == rows
+    stamp = {p: p.stat().st_mtime_ns for p in (tmp_path / "points").glob("K*.json")}
+    assert len(stamp) == 2
+    again = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid2.json")
+    assert again == rows
+    assert {p: p.stat().st_mtime_ns for p in stamp} == stamp
