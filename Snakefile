@@ -46,6 +46,7 @@ include: "workflow/rules/own_model.smk"
 
 
 remove_stale_stamps()
+repair_damaged_trajectories()
 repair_damaged_batches()
 
 

@@ -107,23 +107,9 @@ def batch_size(name):
     return SCENARIO_OBJECTS[name].batch_size(config["stan"])
 
 
-VERIFIED = set()
-
-
 def trajectories_path(name, K=None):
-    """The design trajectories of a scenario at K (its own K by default).  A file that no
-    longer matches its checksum (damage that kept its time) is removed here, before the
-    DAG is built, so it is made again."""
-    path = f"results/{name}/design_trajectories/{KEYS.trajectories(name, K)}/trajectories.nc"
-    if path not in VERIFIED and workflow.is_main_process:
-        VERIFIED.add(path)
-        from ssmobs.io import checksum_problem
-
-        problem = checksum_problem(path)
-        if problem:
-            logger.warning(f"does not match its checksum, made again: {path}")
-            Path(path).unlink()
-    return path
+    """The design trajectories of a scenario at K (its own K by default)."""
+    return f"results/{name}/design_trajectories/{KEYS.trajectories(name, K)}/trajectories.nc"
 
 
 def check_path(name, stan=False):
@@ -185,7 +171,7 @@ def ksel_points_dir(ksel):
     return f"results/k_selection/{ksel}/{KEYS.k_selection_points(ksel)}"
 
 
-def stamp(name, inputs=(), params=None):
+def stamp(name):
     """The stamp file of a table or figure rule, ``name`` possibly a pattern with wildcards.
 
     A stamp holds the key of what made the rule's files in outputs_dir (keyed inputs, the
@@ -274,9 +260,10 @@ def repair_damaged_batches():
 
     if not workflow.is_main_process:
         return
+    keep = config["stan"]["keep_draws"]
     for name in STAN_SCENARIOS:
         for table in nuts_batches(name):
-            problem = changed_batch_records(table, records_dir(name), draws_dir(name))
+            problem = changed_batch_records(table, records_dir(name), draws_dir(name), keep)
             if not Path(table).exists() and Path(stan_summary(name)).exists():
                 problem = f"{table} was deleted"
             if problem:
@@ -318,6 +305,21 @@ def study_params(name):
 def figure2_disturbances(wildcards=None):
     f2 = config["figure2"]
     return disturbance_path(2, f2["K"], "design", f2["seed"])
+
+
+def repair_damaged_trajectories():
+    """Remove every design-trajectory file that no longer matches its checksum (damage that
+    kept its time), before the DAG is built, so it is made again."""
+    from ssmobs.io import checksum_problem
+
+    if not workflow.is_main_process:
+        return
+    for name, sc in SCENARIO_OBJECTS.items():
+        for K in {sc.K, sc.exact_trajectories}:
+            path = trajectories_path(name, K)
+            if checksum_problem(path):
+                logger.warning(f"does not match its checksum, made again: {path}")
+                Path(path).unlink()
 
 
 def remove_stale_stamps():

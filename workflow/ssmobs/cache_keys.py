@@ -28,6 +28,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from . import io
+
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
 #: the repository (or workflow copy) this package belongs to
@@ -97,23 +99,13 @@ NEUTRAL_MODULES: frozenset[str] = frozenset(
 # --------------------------------------------------------------------------- hashing
 def digest(payload: Any) -> str:
     """:data:`KEY_LENGTH` hex digits of SHA-256 over canonical JSON of ``payload``."""
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=_json_default)
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=io.json_default)
     return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
-
-
-def _json_default(obj: Any) -> Any:
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if isinstance(obj, Mapping):
-        return dict(obj)
-    if isinstance(obj, (set, frozenset, tuple)):
-        return sorted(obj) if isinstance(obj, (set, frozenset)) else list(obj)
-    raise TypeError(f"cannot key a {type(obj).__name__}: {obj!r}")
 
 
 def file_digest(path: str | Path) -> str:
     """SHA-256 (16 hex digits) of a file's bytes."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+    return io.file_sha256(path)[:16]
 
 
 def _module_file(name: str, package_dir: Path) -> Path | None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -345,14 +346,18 @@ def _damaged_batch(batch_table: PathLike, what: str) -> io.CorruptFileError:
 
 
 def changed_batch_records(
-    batch_table: PathLike, records_dir: PathLike, draws_dir: PathLike | None = None
+    batch_table: PathLike,
+    records_dir: PathLike,
+    draws_dir: PathLike | None = None,
+    keep_draws: Iterable[int] = (),
 ) -> str | None:
     """Why the finished batch table ``batch_table`` no longer matches its records, or None.
 
-    Reads only the table's ``k`` column, the records' file times and the kept draws'
-    checksums (cheap enough for every DAG build): a record of one of those k that is
-    missing or newer than the table was damaged, edited or deleted after the batch ran; a
-    kept draws file that is missing or differs from the checksum its record holds was
+    Reads only the table's ``k`` column, the records' file times and, for the
+    ``keep_draws`` trajectories, the kept draws' checksums (cheap enough for every DAG
+    build): a record of one of those k that is missing or newer than the table was
+    damaged, edited or deleted after the batch ran; a kept draws file that is missing or
+    differs from the checksum its record holds was
     damaged.  None when the table does not exist (the batch is still to run) or cannot be
     read (gather_nuts reports that).
     """
@@ -361,6 +366,7 @@ def changed_batch_records(
     from .record_cache import draws_path, record_path
 
     table = Path(batch_table)
+    keep = {int(k) for k in keep_draws}
     try:
         written = table.stat().st_mtime_ns
         ks = pq.read_table(table, columns=["k"]).column("k").to_pylist()
@@ -380,8 +386,8 @@ def changed_batch_records(
                     f"changed after this table was written",
                 )
             )
-        if draws_dir is None:
-            continue
+        if draws_dir is None or k not in keep:
+            continue  # only the records of kept draws are read (this runs on every DAG build)
         draws = draws_path(draws_dir, k)
         try:
             expected = (io.read_json(path) or {}).get("draws_sha256")
