@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint test smoke paper tables section4 clean
+.PHONY: setup run lint docs test smoke paper tables section4 clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,12 +29,19 @@ run: setup
 	$(PREFLIGHT) $(CONFIG)
 	$(SNAKEMAKE) $(if $(filter config/config.yaml,$(CONFIG)),,--configfile $(CONFIG))
 
-# Style and types (ruff, snakefmt, mypy; settings in pyproject.toml); `make test` runs it first.
-lint: setup
+# Style and types (ruff, snakefmt, mypy; settings in pyproject.toml) and the documentation
+# site, built strictly (a broken link fails); `make test` runs it first.
+lint: setup docs
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/snakefmt --check Snakefile workflow/rules
 	$(BIN)/mypy
+
+# The documentation site (mkdocs.yml, docs/) into site/; the configuration reference page
+# must be the one the schema gives (`python -m ssmobs.config_reference` rewrites it).
+docs: setup
+	$(BIN)/python -m ssmobs.config_reference --check
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 test: setup lint
 	$(BIN)/pytest

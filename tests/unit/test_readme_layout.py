@@ -1,4 +1,4 @@
-"""The README's rule diagram and layout section name what the tree holds."""
+"""The README's rule diagram and the layout page of the docs name what the tree holds."""
 
 from __future__ import annotations
 
@@ -7,11 +7,13 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 README = (REPO / "README.md").read_text()
+#: the repository layout, a page of the documentation site
+LAYOUT_PAGE = (REPO / "docs" / "reference" / "layout.md").read_text()
 
 
-def _section(start: str, end: str) -> str:
-    i = README.index(start)
-    return README[i : README.index(end, i + len(start))]
+def _section(start: str, end: str, text: str = README) -> str:
+    i = text.index(start)
+    return text[i : text.index(end, i + len(start))]
 
 
 def test_diagram_names_every_rule():
@@ -27,15 +29,15 @@ def test_diagram_names_every_rule():
 
 
 def test_layout_names_every_module_and_rule_file():
-    layout = _section("## Layout", "\n## ")
+    layout = _section("```\n", "```\n", LAYOUT_PAGE)
     package = REPO / "workflow" / "ssmobs"
     modules = {p.stem for p in package.glob("*.py")} - {"__init__"}
     missing = {m for m in modules if not re.search(rf"\b{m}\.py\b", layout)}
-    assert missing == set(), "modules missing from the README's layout section"
+    assert missing == set(), "modules missing from docs/reference/layout.md"
     for pkg in ("models", "stan_backends"):
         assert f"{pkg}/" in layout
     named = set(re.findall(r"\b(\w+)\.py\b", layout)) - {"rule"}
     assert named <= modules | {"base", "log_posterior"}, "layout names modules that do not exist"
     for smk in (REPO / "workflow" / "rules").glob("*.smk"):
         stem = smk.stem.replace("common", "common.smk")
-        assert stem in layout, f"rule file {smk.name} missing from the layout section"
+        assert stem in layout, f"rule file {smk.name} missing from docs/reference/layout.md"
