@@ -563,6 +563,40 @@ def test_oneof_failure_names_the_item_of_the_matching_form():
     )
 
 
+@pytest.mark.parametrize(
+    "path,value,message",
+    [
+        (
+            ("scenarios", 0, "stan_init"),
+            True,
+            "scenarios[0].stan_init = True: allowed values are ['random', 'true'] "
+            "(write 'true' in quotes: unquoted, YAML reads true as a boolean, not text)",
+        ),
+        (
+            ("scenarios", 0, "method"),
+            5,
+            "scenarios[0].method = 5: allowed values are ['design', 'random', 'antithetic']",
+        ),
+        (
+            ("k_selection", 0, "methods"),
+            ["design", None],
+            "k_selection[0].methods[1] = None: allowed values are "
+            "['design', 'random', 'antithetic']",
+        ),
+    ],
+    ids=["stan_init", "method", "methods"],
+)
+def test_a_value_of_the_wrong_type_for_an_enum_gets_one_message(path, value, message):
+    c = base()
+    c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20]}]
+    target = c
+    for part in path[:-1]:
+        target = target[part]
+    target[path[-1]] = value
+    msg = refused(c)
+    assert msg == f"invalid configuration:\n  - {message}"
+
+
 def test_nested_values_from_the_command_line_are_read_as_yaml_scalars():
     cli = pytest.importorskip("snakemake.cli")
     given = cli.parse_config(

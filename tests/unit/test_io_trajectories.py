@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 
 import numpy as np
@@ -23,6 +24,34 @@ def test_atomic_path_leaves_nothing_on_error(tmp_path):
             raise RuntimeError("killed")
     assert not target.exists()
     assert os.listdir(tmp_path) == []
+
+
+def _fail(code: int):
+    def fail(*args, **kwargs):
+        raise OSError(code, os.strerror(code))
+
+    return fail
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EROFS, errno.EACCES])
+@pytest.mark.parametrize("step", ["mkstemp", "write", "fsync", "replace"])
+def test_a_failed_write_names_the_file_and_keeps_the_errno(tmp_path, monkeypatch, step, code):
+    import pandas as pd
+
+    target = tmp_path / "sub" / "out.parquet"
+    if step == "mkstemp":
+        monkeypatch.setattr(io.tempfile, "mkstemp", _fail(code))
+    elif step == "write":
+        monkeypatch.setattr(pd.DataFrame, "to_parquet", _fail(code))
+    else:
+        monkeypatch.setattr(io.os, step, _fail(code))
+    with pytest.raises(OSError) as err:
+        io.write_parquet(target, pd.DataFrame({"x": [1.0]}))
+    assert err.value.errno == code
+    assert str(target) in str(err.value) and os.strerror(code) in str(err.value)
+    assert isinstance(err.value.__cause__, OSError) and err.value.__cause__.errno == code
+    assert isinstance(err.value, PermissionError) == (code == errno.EACCES)
+    assert not target.exists() and io.temporaries(target) == []
 
 
 def test_json_round_trip_and_corruption(tmp_path):

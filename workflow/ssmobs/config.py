@@ -271,7 +271,9 @@ def _branch_errors(error: jsonschema.ValidationError) -> list[jsonschema.Validat
     if len(forms) != 1:
         return []
     return sorted(
-        (e for e in error.context or [] if e.schema_path and e.schema_path[0] == forms[0]),
+        _without_shadowed_type_errors(
+            e for e in error.context or [] if e.schema_path and e.schema_path[0] == forms[0]
+        ),
         key=lambda e: list(e.absolute_path),
     )
 
@@ -299,7 +301,7 @@ def _describe(error: jsonschema.ValidationError) -> list[str]:
             ]
         return [f"{key} = {value}: must be of type {error.validator_value}"]
     if v == "enum":
-        return [f"{key} = {value}: allowed values are {error.validator_value}"]
+        return [f"{key} = {value}: allowed values are {error.validator_value}{_quote_hint(error)}"]
     if v == "pattern":
         return [f"{key} = {value}: must match {error.validator_value}"]
     if v == "oneOf":
@@ -309,6 +311,42 @@ def _describe(error: jsonschema.ValidationError) -> list[str]:
         kinds = [s.get("type") for s in error.validator_value]
         return [f"{key} = {value}: must be one of the forms {kinds}"]
     return [f"{key} = {value}: {_cut(error.message)}"]
+
+
+def _yaml_spelling(value: Any) -> tuple[str, str] | None:
+    """How a boolean, null or number that YAML read from plain text is written, and what
+    YAML took it for; None for other values."""
+    if isinstance(value, bool):
+        return ("true" if value else "false"), "boolean"
+    if value is None:
+        return "null", "null"
+    if isinstance(value, (int, float)):
+        return repr(value), "number"
+    return None
+
+
+def _quote_hint(error: jsonschema.ValidationError) -> str:
+    """For an ``enum`` of strings that holds the text of a non-string value (``stan_init:
+    true`` read as a boolean): how to write it as a string; else ''."""
+    read = _yaml_spelling(error.instance)
+    if read is None or read[0] not in error.validator_value:
+        return ""
+    spelling, kind = read
+    return f" (write {spelling!r} in quotes: unquoted, YAML reads {spelling} as a {kind}, not text)"
+
+
+def _without_shadowed_type_errors(
+    errors: Iterable[jsonschema.ValidationError],
+) -> list[jsonschema.ValidationError]:
+    """``errors`` less each ``type`` error of a value whose ``enum`` error (same value, same
+    schema) is there too: the list of allowed values says all, in one message."""
+    errors = list(errors)
+    enums = {(tuple(e.absolute_path), id(e.schema)) for e in errors if e.validator == "enum"}
+    return [
+        e
+        for e in errors
+        if not (e.validator == "type" and (tuple(e.absolute_path), id(e.schema)) in enums)
+    ]
 
 
 def _key(path: tuple) -> str:
@@ -395,7 +433,8 @@ def schema_problems(instance: Any, schema: dict) -> list[str]:
     """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
     the schema's defaults into ``instance`` (in place)."""
     errors = sorted(
-        _validator_class()(schema).iter_errors(instance), key=lambda e: list(e.absolute_path)
+        _without_shadowed_type_errors(_validator_class()(schema).iter_errors(instance)),
+        key=lambda e: list(e.absolute_path),
     )
     return [d for e in errors for d in _describe(e)]
 

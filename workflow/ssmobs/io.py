@@ -66,30 +66,47 @@ def _temporary_suffix(path: Path, suffix: str | None) -> str:
     return suffix or path.suffix or ".tmp"
 
 
+def write_error(path: str | os.PathLike, err: OSError) -> OSError:
+    """``err`` (raised while writing ``path``) as an OSError whose message names ``path``,
+    with the same errno (so the same subclass, e.g. PermissionError for EACCES): a full or
+    read-only disk otherwise reports "[Errno 28] No space left on device" and no file."""
+    reason = err.strerror or str(err) or type(err).__name__
+    message = f"cannot write {path}: {reason}"
+    return OSError(err.errno, message) if err.errno is not None else OSError(message)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it to ``path`` on success.
 
     The temporary is ``.<name>.<8 random characters><suffix>`` (see
     :func:`sweep_temporaries`).  Before the rename it gets the mode the umask implies
-    (``mkstemp`` creates it 0600, and the mode would survive the rename).
+    (``mkstemp`` creates it 0600, and the mode would survive the rename).  An OSError
+    while writing (ENOSPC, EROFS, EACCES, ...) is raised again naming ``path``
+    (:func:`write_error`), chained to the original.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=_temporary_suffix(path, suffix), dir=path.parent
-    )
-    os.close(fd)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=_temporary_suffix(path, suffix), dir=path.parent
+        )
+        os.close(fd)
+    except OSError as err:
+        raise write_error(path, err) from err
     tmp_path = Path(tmp)
     try:
-        yield tmp_path
-        with open(tmp_path, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp_path, file_mode())
-        os.replace(tmp_path, path)
+        try:
+            yield tmp_path
+            with open(tmp_path, "rb") as fh:
+                os.fsync(fh.fileno())
+            os.chmod(tmp_path, file_mode())
+            os.replace(tmp_path, path)
+        except OSError as err:
+            raise write_error(path, err) from err
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        with contextlib.suppress(OSError):  # e.g. the disk became read-only: keep the cause
+            tmp_path.unlink(missing_ok=True)
 
 
 def temporaries(path: str | os.PathLike, suffix: str | None = None) -> list[Path]:
