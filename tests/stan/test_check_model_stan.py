@@ -1,14 +1,23 @@
 """The model check against compiled Stan, for every model found by slug (not a fixed list).
 
 Each broken Stan program below differs from stan/stoch_vol.stan in one place, the kind of
-mistake a user makes; the check must name it.  Needs PyStan compilation (about a minute per
-program on first use; cached afterwards).
+mistake a user makes; the check must name it.  The check evaluates Stan's log density with
+the native driver (one compile per program, shared with sampling; about a minute per program
+on first use, cached afterwards); PyStan's ``log_prob`` is the oracle it is compared with.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
-from ssmobs.check_model import CheckCase, check_model, stan_problems
+from ssmobs.check_model import (
+    CheckCase,
+    _sample_theta,
+    _stan_point,
+    check_model,
+    stan_density,
+    stan_problems,
+)
 from ssmobs.models import MODELS, get_model
 from ssmobs.stan_backends import stan_file
 
@@ -51,6 +60,24 @@ def test_log_density_that_differs_is_named(tmp_path):
     )
     assert len(problems) == 1
     assert "differs from the Python log posterior by more than a constant" in problems[0]
+    # the difference is located: it moves with the states and the data, not with Omega
+    assert "moves with x_1..x_T, the data z:" in problems[0]
+    assert "look at the observation term" in problems[0]
+
+
+def test_transition_that_differs_is_located(tmp_path):
+    # the transition's mean ignores phi: a term in Omega and the states, not in the data
+    path = _broken(
+        tmp_path,
+        "x ~ normal(mu + phi * (append_row(x0, head(x, T - 1)) - mu), sigma);",
+        "x ~ normal(mu + 0.5 * (append_row(x0, head(x, T - 1)) - mu), sigma);",
+    )
+    (msg,) = stan_problems(
+        get_model("stoch_vol"), path, CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0])
+    )
+    assert "moves with Omega (phi, sigma), x0, x_1..x_T:" in msg
+    assert "the data z" not in msg
+    assert "look at the transition term at t = 1" in msg
 
 
 def test_agreeing_program_gives_no_problem_for_configured_case():
@@ -62,3 +89,33 @@ def test_agreeing_program_gives_no_problem_for_configured_case():
         seed=3,
     )
     assert problems == []
+
+
+def test_native_log_density_equals_pystan_oracle():
+    # the same points, inside and outside the support: equal up to PyStan's dropped constants
+    model = get_model("stoch_vol")
+    case = CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], {"sigma": "restricted"})
+    theta, z, bounds = _sample_theta(model, case, 7, 5, np.random.default_rng(1))
+    points = [_stan_point(model, th, 7) for th in theta]
+    points += [{**points[0], "sigma": 1.2}, {**points[0], "phi": -1.5}]
+    data = model.stan_data(z, bounds)
+    values = {}
+    for backend in ("native", "pystan"):
+        with stan_density(stan_file("stoch_vol"), data, backend) as density:
+            assert density.param_names == ["phi", "sigma", "x0", "x"]
+            assert density.dims == [[], [], [], [7]]
+            values[backend] = density.evaluate(points)
+    native, pystan = values["native"], values["pystan"]
+    assert native[-2:] == [None, None] and pystan[-2:] == [None, None]
+    gap = np.array(native[:-2]) - np.array(pystan[:-2])
+    np.testing.assert_allclose(gap, gap[0], rtol=0, atol=1e-9)
+    assert abs(gap[0] - (-7 * np.log(2 * np.pi))) < 1e-9  # 2 x 7 normal densities' constants
+
+
+def test_program_that_does_not_compile_is_a_problem(tmp_path):
+    path = _broken(tmp_path, "x ~ normal(", "x ~ nromal(")
+    (msg,) = stan_problems(
+        get_model("stoch_vol"), path, CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0])
+    )
+    assert "building the program with the Python model's data failed" in msg
+    assert "nromal" in msg

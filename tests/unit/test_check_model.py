@@ -11,12 +11,16 @@ from ssmobs.check_model import (
     cases_from_scenarios,
     declared_names,
     default_cases,
+    default_values,
     python_problems,
+    simulate_problems,
     stan_block,
     stan_source_problems,
 )
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.base import StateSpaceModel
+from ssmobs.models.sep_d2_p1 import SepD2P1
+from ssmobs.models.stoch_vol import StochVol
 from ssmobs.stan_backends import stan_file
 
 pytestmark = pytest.mark.unit
@@ -120,3 +124,55 @@ def test_cases_from_scenarios_deduplicate():
     ] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
     cases = cases_from_scenarios(scs, "stoch_vol")
     assert cases == [CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], None)]
+
+
+def test_default_values_are_distinct_and_valid():
+    for slug in sorted(MODELS):
+        model = get_model(slug)
+        omega, x0 = default_values(model)
+        values = list(omega.values()) + x0
+        assert len(set(values)) == len(values), slug
+        assert model.check_true_values(omega, x0) == [], slug
+
+
+class SwappedSimulateD2P1(SepD2P1):
+    """A user's slip: a and b exchanged in simulate only (terms and Stan are right)."""
+
+    def simulate(self, omega, x0, eta, eps):
+        a, b, c = omega
+        return super().simulate(np.array([b, a, c]), x0, eta, eps)
+
+
+class SwappedSimulateStochVol(StochVol):
+    def simulate(self, omega, x0, eta, eps):
+        phi, sigma = omega
+        return super().simulate(np.array([sigma, phi]), x0, eta, eps)
+
+
+@pytest.mark.parametrize(
+    ("model", "term"),
+    [(SwappedSimulateD2P1(), "observation"), (SwappedSimulateStochVol(), "transition")],
+)
+def test_swapped_parameters_in_simulate_are_named(model, term):
+    case = default_cases(model)[0]
+    assert python_problems(model, case) == []  # shapes and derivatives cannot see it
+    problems = simulate_problems(model, case)
+    assert problems and f"simulate does not match the {term} term" in problems[0]
+    assert "check the order of the parameters in simulate" in problems[0]
+
+
+def test_simulate_with_wrong_noise_scale_is_named():
+    class WrongScale(StochVol):
+        def simulate(self, omega, x0, eta, eps):
+            x, z = super().simulate(omega, x0, eta, eps)
+            return x, 1.1 * z
+
+    (msg,) = simulate_problems(WrongScale(), default_cases(WrongScale())[0])
+    assert "does not match the observation term" in msg
+
+
+@pytest.mark.parametrize("slug", sorted(MODELS))
+def test_every_model_simulates_what_its_terms_say(slug):
+    model = get_model(slug)
+    for case in default_cases(model):
+        assert simulate_problems(model, case) == []

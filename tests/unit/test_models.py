@@ -251,3 +251,29 @@ def test_paper_true_values_are_valid(slug):
 def test_unknown_model_lists_the_known_ones():
     with pytest.raises(ValueError, match="known models"):
         get_model("nope")
+
+
+@pytest.mark.parametrize(
+    ("slug", "omega", "x0", "T", "words"),
+    [
+        ("sep_ranwalk", {"a": 1e6}, [8.0], 4, "true value a=1e+06 is too large: |a| <= 10000"),
+        ("same", {"a": 0.5}, [1e300], 4, "true value x0=1e+300 is too large"),
+        ("sep_mult", {"a": 200.0}, [8.0], 100, "reach |x_t| or |z_t| = 20008 within T=100 steps"),
+    ],
+)
+def test_extreme_true_values_are_refused_with_the_value(slug, omega, x0, T, words):
+    (msg,) = get_model(slug).check_true_values(omega, x0, T=T)
+    assert words in msg
+    assert "double precision" in msg
+
+
+def test_extreme_values_stop_the_config_before_any_job():
+    from ssmobs.config import ConfigError, validate
+
+    config = {
+        "scenarios": [
+            {"name": "rw", "model": "sep_ranwalk", "omega": {"a": 1e6}, "x0": 8, "T": 4, "K": 2}
+        ]
+    }
+    with pytest.raises(ConfigError, match=r"a=1e\+06 is too large"):
+        validate(config)

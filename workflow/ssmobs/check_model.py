@@ -11,7 +11,8 @@ comparison of the two is only meaningful when both encode the same log posterior
 2. Stan source, without compiling: the ``parameters`` block declares exactly
    ``(*param_names, x0, x)`` in this order, and the ``data`` block declares ``T``, ``z`` and
    the prior bounds ``<name>_lower`` / ``<name>_upper`` of every parameter.
-3. Compiled Stan (PyStan ``log_prob``, the model block without Jacobian): parameter names
+3. Compiled Stan (the native driver's ``--log-density`` mode, or PyStan's ``log_prob``;
+   the model block without Jacobian): parameter names
    and shapes; log density equal to the Python one up to one additive constant at random
    points inside the support; the support itself equal to Python's (points just inside
    every finite prior bound are accepted, points just outside and points violating a model
@@ -28,12 +29,14 @@ import json
 import re
 import sys
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sympy as sp
 
 from .models import StateSpaceModel, get_model
 from .models.log_posterior import in_support, log_posterior, neg2_log_posterior
@@ -73,18 +76,20 @@ class CheckReport:
 
 
 # ----------------------------------------------------------------------------- cases
+def default_values(model: StateSpaceModel) -> tuple[dict[str, float], list[float]]:
+    """True values of the default cases: a distinct value per parameter, evenly spaced in
+    (0.3, 0.7) (inside every prior variant's support and the paper's constraints), so that
+    swapped parameters change the numbers; x0 distinct from them (0.75, 1.0, ...)."""
+    m = model.n_params
+    omega = {n: round(0.3 + 0.4 * (j + 1) / (m + 1), 6) for j, n in enumerate(model.param_names)}
+    return omega, [0.75 + 0.25 * i for i in range(model.state_dim)]
+
+
 def default_cases(model: StateSpaceModel) -> list[CheckCase]:
-    """Cases when no config is given: every parameter at 0.5 (a value every variant and
-    the paper's constraints accept), with the default prior and each allowed variant of
-    each parameter in turn, so that every prior bound the model can produce is compared."""
-    omega = {n: 0.5 for n in model.param_names}
-    x0 = [0.5] * model.state_dim
-    cases = [CheckCase(omega, x0, None)]
-    for name in model.param_names:
-        for variant in model.allowed_priors[name]:
-            if variant != model.default_prior[name]:
-                cases.append(CheckCase(omega, x0, {name: variant}))
-    return [c for c in cases if not model.check_true_values(c.omega, c.x0, c.prior)]
+    """Cases when no config is given: :func:`default_values` with the default prior and
+    each allowed variant of each parameter in turn, so that every prior bound the model
+    can produce is compared."""
+    return prior_variant_cases(model, CheckCase(*default_values(model)))
 
 
 def prior_variant_cases(model: StateSpaceModel, case: CheckCase) -> list[CheckCase]:
@@ -221,6 +226,97 @@ def python_problems(
     return problems
 
 
+# ---------------------------------------------------------------------- 1b. simulate vs terms
+def _whitening_functions(model: StateSpaceModel) -> tuple[Any, Any]:
+    """Lambdified gradient and Hessian of the observation term in z_t and of the
+    transition term in x_t (each Gaussian, Eq. (1)): for a term (v - m)' S^-1 (v - m) +
+    log det S, g = 2 S^-1 (v - m) and H = 2 S^-1, so g' H^-1 g / 2 is the squared norm of
+    the standardized disturbance that produced v, whatever square root of S simulates it."""
+    m, p, d = model.n_params, model.state_dim, model.obs_dim
+    w = list(sp.symbols(f"w0:{m}"))
+    xp, xt, zt = (
+        list(sp.symbols(f"xp0:{p}")),
+        list(sp.symbols(f"x0:{p}")),
+        list(sp.symbols(f"z0:{d}")),
+    )
+
+    def derivs(expr: sp.Expr, wrt: list[sp.Symbol]) -> list[sp.Expr]:
+        grad = [sp.diff(expr, v) for v in wrt]
+        return grad + [sp.diff(g, v) for g in grad for v in wrt]
+
+    obs = sp.lambdify(w + xt + zt, derivs(model.obs_term(w, xt, zt), zt), modules="numpy")
+    trans = sp.lambdify(w + xp + xt, derivs(model.trans_term(w, xp, xt), xt), modules="numpy")
+    return obs, trans
+
+
+def _squared_norms(func: Any, args: list[np.ndarray], n: int) -> np.ndarray:
+    """g' H^-1 g / 2 for each point of the broadcast ``args``, from ``func``'s list
+    (n gradient entries, then the n x n Hessian row by row); NaN where H is singular."""
+    shape = np.broadcast(*args).shape
+    with np.errstate(all="ignore"):
+        raw = [np.broadcast_to(np.asarray(v, dtype=float), shape) for v in func(*args)]
+    g = np.stack(raw[:n], axis=-1)
+    H = np.stack(raw[n:], axis=-1).reshape(shape + (n, n))
+    out = np.full(shape, np.nan)
+    ok = np.isfinite(H).all(axis=(-2, -1)) & np.isfinite(g).all(axis=-1)
+    ok[ok] = np.abs(np.linalg.det(H[ok])) > 0
+    out[ok] = 0.5 * np.einsum(
+        "...i,...i->...", g[ok], np.linalg.solve(H[ok], g[ok][..., None])[..., 0]
+    )
+    return out
+
+
+def simulate_problems(
+    model: StateSpaceModel, case: CheckCase, T: int = 5, seed: int = 0, rtol: float = 1e-8
+) -> list[str]:
+    """``simulate`` against the model's own terms: trajectories simulated from known
+    disturbances must give exactly those disturbances' squared norms back through the
+    observation term (eps_t) and the transition term (eta_t).  Catches a simulator whose
+    parameters are swapped or whose equations differ from the log posterior's."""
+    rng = np.random.default_rng(seed)
+    K, p, d = 3, model.state_dim, model.obs_dim
+    omega = model.omega_array(case.omega)
+    x0 = np.asarray(case.x0, dtype=float)
+    eta, eps = rng.standard_normal((K, T, p)), rng.standard_normal((K, T, d))
+    x, z = (np.asarray(a, dtype=float) for a in model.simulate(omega, x0, eta, eps))
+    prev = np.concatenate([np.broadcast_to(x0, (K, 1, p)), x[:, :-1]], axis=1)
+    obs, trans = _whitening_functions(model)
+    w = [np.full((K, T), v) for v in omega]
+    problems = []
+    for term, func, args, noise, n in (
+        (
+            "observation",
+            obs,
+            w + [x[..., i] for i in range(p)] + [z[..., j] for j in range(d)],
+            eps,
+            d,
+        ),
+        (
+            "transition",
+            trans,
+            w + [prev[..., i] for i in range(p)] + [x[..., i] for i in range(p)],
+            eta,
+            p,
+        ),
+    ):
+        got = _squared_norms(func, args, n)
+        want = np.sum(noise**2, axis=-1)
+        err = np.abs(got - want) / (1.0 + want)
+        if not np.all(err <= rtol):  # NaN (singular Hessian) counts as a mismatch
+            k, t = np.unravel_index(
+                int(np.nanargmax(np.where(np.isnan(err), np.inf, err))), err.shape
+            )
+            name = "eps" if term == "observation" else "eta"
+            problems.append(
+                f"simulate does not match the {term} term: at t={t + 1} of a trajectory simulated "
+                f"with |{name}_t|^2 = {want[k, t]:.6g}, the {term} term gives back "
+                f"{got[k, t]:.6g} at the same true values ({case.label()}); check the order of "
+                f"the parameters in simulate (param_names = {list(model.param_names)}) and its "
+                f"equations against {'obs_term' if term == 'observation' else 'trans_term'}"
+            )
+    return problems
+
+
 # ----------------------------------------------------------------------------- 2. Stan source
 def _strip_comments(code: str) -> str:
     code = re.sub(r"/\*.*?\*/", " ", code, flags=re.S)
@@ -307,22 +403,137 @@ def _stan_point(model: StateSpaceModel, theta: np.ndarray, T: int) -> dict:
     return point
 
 
-def _stan_log_prob(post, point: dict) -> float | None:
-    """Stan's log density (model block, no Jacobian) at a constrained point; None if Stan
-    rejects the point (outside its declared bounds)."""
-    try:
-        upars = post.unconstrain_pars(point)
-    except RuntimeError:
-        return None
-    try:
-        value = post.log_prob(upars, adjust_transform=False)
-    except RuntimeError:
-        return None
-    return float(value) if np.isfinite(value) else None
+#: Backends that evaluate Stan's log density for the check: the native driver's
+#: ``--log-density`` mode (default: the program compiled once for sampling serves the
+#: check) and PyStan's ``log_prob`` (the oracle of the tests).
+CHECK_BACKENDS = ("native", "pystan")
+
+
+@dataclass
+class StanDensity:
+    """Stan's log density of one program with one data set: the model block without
+    Jacobian, at constrained points; None where Stan rejects a point (outside its bounds,
+    or a constraint of the program fails)."""
+
+    param_names: list[str]
+    dims: list[list[int]]
+    evaluate: Callable[[list[dict]], list[float | None]]
+
+    def at(self, point: dict) -> float | None:
+        return self.evaluate([point])[0]
+
+
+@contextmanager
+def stan_density(stan_path: Path, data: dict, backend: str = "native") -> Iterator[StanDensity]:
+    """Build the program for ``data`` with ``backend`` (one of :data:`CHECK_BACKENDS`).
+
+    ValueError when the program rejects the data (or cannot be built for them)."""
+    if backend == "native":
+        from .stan_backends.base import BackendError
+        from .stan_backends.native import NativeBackend
+
+        native = NativeBackend()
+        try:
+            head = native.log_density(stan_path, data, [])
+        except BackendError:
+            raise
+        except RuntimeError as err:  # stanc or the compiler rejects the program
+            raise ValueError(str(err)) from err
+
+        def native_values(points: list[dict]) -> list[float | None]:
+            return native.log_density(stan_path, data, points).values
+
+        yield StanDensity(head.param_names, head.dims, native_values)
+    elif backend == "pystan":
+        import stan
+
+        from .stan_backends.pystan import PyStanBackend
+
+        with PyStanBackend().session(stan_path):
+            try:
+                # mypy resolves `stan` to the repository's stan/ folder (pystan has no stubs)
+                post = stan.build(stan_path.read_text(), data=data)  # type: ignore[attr-defined]
+            except Exception as err:  # noqa: BLE001 - PyStan raises bare exceptions
+                raise ValueError(f"{type(err).__name__}: {err}") from err
+
+            def pystan_values(points: list[dict]) -> list[float | None]:
+                out: list[float | None] = []
+                for point in points:
+                    try:
+                        value = post.log_prob(post.unconstrain_pars(point), adjust_transform=False)
+                    except RuntimeError:
+                        out.append(None)
+                        continue
+                    out.append(float(value) if np.isfinite(value) else None)
+                return out
+
+            yield StanDensity(list(post.param_names), [list(d) for d in post.dims], pystan_values)
+    else:
+        raise ValueError(f"check backend {backend!r}: allowed {list(CHECK_BACKENDS)}")
 
 
 def _fmt(omega: np.ndarray, names: Sequence[str]) -> str:
     return ", ".join(f"{n}={v:.6g}" for n, v in zip(names, omega))
+
+
+def _locate_difference(
+    model: StateSpaceModel,
+    stan_path: Path,
+    density: StanDensity,
+    theta: np.ndarray,
+    z: np.ndarray,
+    bounds: Any,
+    rng: np.random.Generator,
+    rtol: float,
+    backend: str,
+) -> str:
+    """Which block of Theta (Omega and its components, x0, x_1..x_T) and which term of the
+    log posterior (2) a difference Stan - Python depends on: change one block (or the data
+    z) at a time from a base point and see whether the difference moves."""
+    T = z.shape[0]
+    m, p = model.n_params, model.state_dim
+    base = theta[0]
+
+    def gap(point: np.ndarray, dens: StanDensity = density, z_: np.ndarray = z) -> float | None:
+        s = dens.at(_stan_point(model, point, T))
+        return None if s is None else s - float(log_posterior(model, point, z_, bounds))
+
+    ref = gap(base)
+    if ref is None:
+        return "Stan rejects the base point"
+
+    def moves(point: np.ndarray, dens: StanDensity = density, z_: np.ndarray = z) -> bool:
+        g = gap(point, dens, z_)
+        return g is not None and abs(g - ref) > rtol * max(1.0, abs(ref)) * 10
+
+    changed = []
+    for j, name in enumerate(model.param_names):
+        point = base.copy()
+        point[j] = theta[1, j]
+        if in_support(model, point[None, :m], bounds)[0] and moves(point):
+            changed.append(name)
+    point = base.copy()
+    point[m : m + p] += 0.3
+    x0_moves = moves(point)
+    point = base.copy()
+    point[m + p :] += rng.normal(0.0, 0.3, size=point.size - m - p)
+    x_moves = moves(point)
+    z2 = z + rng.normal(0.0, 0.3, size=z.shape)
+    with stan_density(stan_path, model.stan_data(z2, bounds), backend) as density2:
+        z_moves = moves(base, density2, z2)
+    blocks = [f"Omega ({', '.join(changed)})"] if changed else []
+    blocks += ["x0"] * x0_moves + ["x_1..x_T"] * x_moves + ["the data z"] * z_moves
+    if z_moves:
+        term = "the observation term (the only one with z)"
+    elif x0_moves:
+        term = "the transition term at t = 1 or the initial state's prior"
+    elif x_moves:
+        term = "the transition term (the states move it, the data do not)"
+    elif changed:
+        term = "the prior of Omega or a normalising term in Omega alone (e.g. log(1 - a^2))"
+    else:
+        return "no single block moves the difference alone"
+    return f"the difference moves with {', '.join(blocks)}: look at {term}"
 
 
 def stan_problems(
@@ -333,37 +544,31 @@ def stan_problems(
     n_points: int = 6,
     seed: int = 0,
     rtol: float = 1e-8,
+    backend: str = "native",
 ) -> list[str]:
     """Compiled Stan against Python for one case: names, shapes, log density, support."""
-    import stan
-
-    from .stan_backends.pystan import PyStanBackend
-
     problems: list[str] = []
     rng = np.random.default_rng(seed)
     theta, z, bounds = _sample_theta(model, case, T, n_points, rng)
     data = model.stan_data(z, bounds)
     names = model.param_names
     where = f"({case.label()})"
-    with PyStanBackend().session(stan_path):
+    with ExitStack() as stack:
         try:
-            # mypy resolves `stan` to the repository's stan/ folder (pystan has no stubs)
-            post = stan.build(stan_path.read_text(), data=data)  # type: ignore[attr-defined]
-        except Exception as err:  # noqa: BLE001 - reported as a problem
+            density = stack.enter_context(stan_density(stan_path, data, backend))
+        except ValueError as err:
             return [
                 f"{stan_path.name}: building the program with the Python model's data "
-                f"failed {where} (rejected data, or a PyStan/httpstan error): "
-                f"{type(err).__name__}: {err}"
+                f"failed {where} (the program rejects the data): {err}"
             ]
         want = expected_parameters(model)
-        got = list(post.param_names)
-        if got != want:
+        if density.param_names != want:
             return [
-                f"{stan_path.name}: compiled parameters are {got}, the Python model needs "
-                f"{want} in this order"
+                f"{stan_path.name}: compiled parameters are {density.param_names}, the Python "
+                f"model needs {want} in this order"
             ]
         p = model.state_dim
-        dims = dict(zip(post.param_names, post.dims))
+        dims = dict(zip(density.param_names, density.dims))
         want_dims = {
             **{n: [] for n in names},
             "x0": [] if p == 1 else [p],
@@ -374,7 +579,7 @@ def stan_problems(
             return [f"{stan_path.name}: parameter shapes (Stan, expected) {bad} for T={T}, p={p}"]
         # log density inside the support: equal up to one additive constant
         py = np.array([float(log_posterior(model, th, z, bounds)) for th in theta])
-        st = [_stan_log_prob(post, _stan_point(model, th, T)) for th in theta]
+        st = density.evaluate([_stan_point(model, th, T) for th in theta])
         for th, s in zip(theta, st):
             if s is None:
                 problems.append(
@@ -384,7 +589,7 @@ def stan_problems(
                 )
         if problems:
             return problems
-        diff = np.array(st) - py
+        diff = np.array(st, dtype=float) - py
         scale = np.maximum(1.0, np.abs(py))
         off = np.abs(diff - diff[0]) / scale
         if off.max() > rtol:
@@ -393,7 +598,10 @@ def stan_problems(
                 f"{stan_path.name}: log density differs from the Python log posterior by more "
                 f"than a constant {where}: Stan - Python = {diff[0]:.10g} at "
                 f"{_fmt(theta[0], names)}"
-                f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ)"
+                f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ); "
+                + _locate_difference(
+                    model, stan_path, density, theta, z, bounds, rng, rtol, backend
+                )
             )
             return problems
         const = diff[0]
@@ -408,27 +616,28 @@ def stan_problems(
                 inside, outside = base.copy(), base.copy()
                 inside[j] = bound + sign * step
                 outside[j] = bound - sign * step
+                s_in, s_out = density.evaluate(
+                    [_stan_point(model, inside, T), _stan_point(model, outside, T)]
+                )
                 if in_support(model, inside[None, : model.n_params], bounds)[0]:
-                    s = _stan_log_prob(post, _stan_point(model, inside, T))
-                    if s is None:
+                    if s_in is None:
                         problems.append(
                             f"{stan_path.name}: Stan rejects {name}={inside[j]:.6g}, just inside "
                             f"the Python prior's {side} bound {bound:g} {where}; declare "
                             f"<lower={name}_lower, upper={name}_upper> on {name}"
                         )
                     elif (
-                        abs(s - float(log_posterior(model, inside, z, bounds)) - const)
-                        > rtol * max(1.0, abs(s)) * 10
+                        abs(s_in - float(log_posterior(model, inside, z, bounds)) - const)
+                        > rtol * max(1.0, abs(s_in)) * 10
                     ):
                         problems.append(
                             f"{stan_path.name}: log density differs by more than a "
                             f"constant at {name}={inside[j]:.6g} {where}"
                         )
-                s = _stan_log_prob(post, _stan_point(model, outside, T))
-                if s is not None:
+                if s_out is not None:
                     problems.append(
                         f"{stan_path.name}: Stan accepts {name}={outside[j]:.6g} (log density "
-                        f"{s:.6g}), outside the Python prior's {side} bound {bound:g} "
+                        f"{s_out:.6g}), outside the Python prior's {side} bound {bound:g} "
                         f"('{bounds.variants[j]}' {where}); Stan does not share this prior "
                         f"bound: declare <lower={name}_lower, upper={name}_upper> on {name}"
                     )
@@ -437,16 +646,15 @@ def stan_problems(
         hi = np.where(np.isfinite(bounds.upper), bounds.upper, 3.0)
         cand = lo + (hi - lo) * rng.uniform(0.01, 0.99, size=(400, model.n_params))
         violating = cand[~in_support(model, cand, bounds)][:3]
-        for om in violating:
-            point = np.concatenate([om, base[model.n_params :]])
-            s = _stan_log_prob(post, _stan_point(model, point, T))
+        points = [np.concatenate([om, base[model.n_params :]]) for om in violating]
+        for om, s in zip(violating, density.evaluate([_stan_point(model, pt, T) for pt in points])):
             if s is not None:
                 problems.append(
                     f"{stan_path.name}: Stan accepts {_fmt(om, names)}, which "
                     f"violates a support constraint of the Python model "
                     f"({', '.join(model.constraint_text) or 'support_constraints'})"
                 )
-    return problems
+        return problems
 
 
 # ----------------------------------------------------------------------------- driver
@@ -457,6 +665,7 @@ def check_model(
     stan_path: str | Path | None = None,
     T: int = 6,
     seed: int | None = None,
+    backend: str = "native",
 ) -> CheckReport:
     """Every check of this module for one model; the report lists each problem found.
 
@@ -474,10 +683,12 @@ def check_model(
         problems = model.check_true_values(case.omega, case.x0, case.prior)
         if not problems:
             problems = python_problems(model, case, T=T, seed=seed + i)
+        if not problems:
+            problems = simulate_problems(model, case, T=T, seed=seed + i)
         report.problems += [f"[python, {case.label()}] {p}" for p in problems]
     report.checks.append(
-        f"python: simulator shapes, initial_states, gradient and Hessian vs "
-        f"finite differences ({len(cases)} case(s))"
+        f"python: simulator shapes, initial_states, gradient and Hessian vs finite "
+        f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))"
     )
     if report.problems or not stan:
         return report
@@ -487,7 +698,7 @@ def check_model(
     if report.problems:
         return report
     for i, case in enumerate(cases):
-        report.problems += stan_problems(model, path, case, T=T, seed=seed + i)
+        report.problems += stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
     report.checks.append(
         f"stan compiled: names, shapes, log density up to a constant, support "
         f"bounds ({len(cases)} case(s))"
@@ -533,6 +744,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="also check every (omega, x0, prior) of this config's scenarios of the model",
     )
     parser.add_argument("--no-stan", action="store_true", help="Python checks only")
+    parser.add_argument(
+        "--backend",
+        choices=CHECK_BACKENDS,
+        default="native",
+        help="what evaluates Stan's log density (default: the native driver)",
+    )
     args = parser.parse_args(argv)
     try:
         model = get_model(args.slug)
@@ -549,7 +766,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"error: {err}", file=sys.stderr)
             return 2
         cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug) if c not in cases]
-    report = check_model(args.slug, cases, stan=not args.no_stan)
+    report = check_model(args.slug, cases, stan=not args.no_stan, backend=args.backend)
     for line in report.checks:
         print(f"checked  {line}")
     if report.problems:

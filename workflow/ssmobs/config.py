@@ -468,7 +468,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             )
             continue
         model = MODELS[sc["model"]]
-        for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior")):
+        for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior"), T=sc["T"]):
             problems.append(f"{where}: {_cut(msg, 2 * MAX_REPR)}")
         if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
             problems.append(

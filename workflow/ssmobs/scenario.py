@@ -95,7 +95,7 @@ class Scenario:
                 problems = [f"model = {sc['model']!r}: unknown model; allowed: {sorted(MODELS)}"]
             else:
                 problems = MODELS[sc["model"]].check_true_values(
-                    sc["omega"], sc["x0"], sc.get("prior")
+                    sc["omega"], sc["x0"], sc.get("prior"), T=sc["T"]
                 )
         if problems:
             raise ConfigError(f"invalid {where}:\n  - " + "\n  - ".join(problems))

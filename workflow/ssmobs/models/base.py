@@ -37,6 +37,13 @@ import sympy as sp
 PRIOR_VARIANTS: tuple[str, ...] = ("restricted", "unrestricted", "half_line")
 
 
+#: Largest |true value| and |noise-free state or observation| a scenario may have: the terms
+#: of -2 log pi then stay below about 1e8, so double precision keeps 8 significant digits in
+#: the differences that the joint MAP's Newton steps and the model check compare.
+MAX_MAGNITUDE = 1e4
+MAGNITUDE_REASON = "beyond it double precision cannot resolve the log posterior's differences"
+
+
 class ModelDefinitionError(ValueError):
     """A model module breaks the model contract; the message names the file and the problem."""
 
@@ -267,8 +274,13 @@ class StateSpaceModel:
         omega_true: Mapping[str, float] | Sequence[float],
         x0_true: Sequence[float] | float,
         prior: str | Mapping[str, str] | None = None,
+        T: int | None = None,
     ) -> list[str]:
-        """Problems with true values (empty list when valid): each names key, value and range."""
+        """Problems with true values (empty list when valid): each names key, value and range.
+
+        Magnitudes are bounded by :data:`MAX_MAGNITUDE`: true values, and with ``T`` the
+        noise-free trajectory (Eq. (1) with eta = eps = 0) they produce.
+        """
         problems: list[str] = []
         try:
             omega = self.omega_array(omega_true)
@@ -282,6 +294,14 @@ class StateSpaceModel:
             )
         if not np.all(np.isfinite(omega)) or not np.all(np.isfinite(x0)):
             problems.append("true values must be finite numbers")
+            return problems
+        for name, value in [*zip(self.param_names, omega), *(("x0", v) for v in x0)]:
+            if abs(value) > MAX_MAGNITUDE:
+                problems.append(
+                    f"true value {name}={value:g} is too large: |{name}| <= {MAX_MAGNITUDE:g} "
+                    f"({MAGNITUDE_REASON})"
+                )
+        if problems:
             return problems
         for i, name in enumerate(self.param_names):
             if name in self.unit_interval_params and not abs(omega[i]) < 1:
@@ -314,6 +334,17 @@ class StateSpaceModel:
                 problems.append(
                     f"true value {name}={omega[i]} lies outside the support "
                     f"({bounds.lower[i]}, {bounds.upper[i]}) of its prior '{bounds.variants[i]}'"
+                )
+        if T is not None and not problems:
+            zeros = (np.zeros((1, T, self.state_dim)), np.zeros((1, T, self.obs_dim)))
+            with np.errstate(all="ignore"):
+                x, z = self.simulate(omega, x0, *zeros)
+            peak = float(np.max(np.abs(np.concatenate([np.ravel(x), np.ravel(z)]))))
+            if not peak <= MAX_MAGNITUDE:
+                problems.append(
+                    f"true values {dict(zip(self.param_names, omega.tolist()))}, "
+                    f"x0={x0.tolist()} reach |x_t| or |z_t| = {peak:g} within T={T} steps "
+                    f"without noise; allowed: <= {MAX_MAGNITUDE:g} ({MAGNITUDE_REASON})"
                 )
         return problems
 

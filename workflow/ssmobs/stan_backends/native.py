@@ -52,6 +52,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -354,6 +355,40 @@ def _check_self_contained(exe: Path) -> None:
         )
 
 
+@dataclass
+class LogDensities:
+    """What the driver's ``--log-density`` mode wrote: the parameters' names and shapes,
+    and per point the log density and gradient (None where the model rejects the point)."""
+
+    param_names: list[str]
+    dims: list[list[int]]
+    values: list[float | None]
+    gradients: list[list[float] | None]
+    messages: list[str]
+
+    @classmethod
+    def parse(cls, text: str) -> LogDensities:
+        out = cls([], [], [], [], [])
+        for line in text.splitlines():
+            kind, _, rest = line.partition(" ")
+            if kind == "param":
+                name, *sizes = rest.split()
+                out.param_names.append(name)
+                out.dims.append([int(n) for n in sizes])
+            elif kind == "ok":
+                lp, *grad = (float(v) for v in rest.split())
+                out.values.append(lp if np.isfinite(lp) else None)
+                out.gradients.append(grad)
+                out.messages.append("")
+            elif kind == "rejected":
+                out.values.append(None)
+                out.gradients.append(None)
+                out.messages.append(rest)
+            else:
+                raise BackendError(f"unexpected line in the driver's log-density output: {line!r}")
+        return out
+
+
 class NativeBackend:
     """Stan backend on our own driver (see the module docstring).
 
@@ -492,6 +527,40 @@ class NativeBackend:
             LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
         finally:
             shutil.rmtree(work, ignore_errors=True)
+
+    # ------------------------------------------------------------------ log density
+    def log_density(
+        self, stan_file: str | os.PathLike, data: Mapping[str, Any], points: list[dict]
+    ) -> LogDensities:
+        """The model block's log density (no Jacobian, constants kept) and its gradient on
+        the unconstrained scale at each point (constrained values, Stan's names), by the
+        program's executable in its ``--log-density`` mode: one compile serves sampling and
+        the model check.  ValueError when the data are rejected; BackendError otherwise."""
+        marker = self.compile(stan_file)
+        label = Path(marker["stan_file"]).name
+        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
+        try:
+            (tmp / "data.json").write_text(json.dumps(dict(data), default=json_default))
+            cmd = [marker["exe_file"], "--log-density", "--data", str(tmp / "data.json")]
+            for i, point in enumerate(points):
+                (tmp / f"point{i}.json").write_text(json.dumps(dict(point), default=json_default))
+                cmd += ["--init", str(tmp / f"point{i}.json")]
+            cmd += ["--output", str(tmp / "values.txt"), "--parent-pid", str(os.getpid())]
+            try:
+                returncode, output = run_driver(cmd)
+            except OSError as err:
+                raise BackendError(f"{label}: cannot start {marker['exe_file']}: {err}") from err
+            if returncode == EXIT_DATA_REJECTED:
+                raise ValueError(f"{label}: data rejected: {tail(output, 5)}")
+            if returncode != 0:
+                raise BackendError(
+                    f"{label}: the native driver's log-density mode failed (exit code "
+                    f"{returncode}):\n{tail(output)}"
+                )
+            return LogDensities.parse((tmp / "values.txt").read_text())
+        finally:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(tmp)
 
     # ------------------------------------------------------------------ sample
     def sample(

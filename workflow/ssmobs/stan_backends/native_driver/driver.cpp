@@ -8,6 +8,14 @@
 //   driver --data data.json --output draws.bin --seed S --chains C --warmup W
 //          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
 //          [--init-radius R] [--parent-pid P] [--discard]
+//   driver --log-density --data data.json --output values.txt --init point.json ...
+//
+// With --log-density no sampling is done: for every --init file (a point on the
+// constrained scale, Stan JSON) the driver writes the model block's log density without
+// Jacobian and without dropping constants, and its gradient on the unconstrained scale,
+// or that the model rejects the point.  Text output, one line each:
+//   "param <name> <dim>..."  for every parameter, in the program's order, then per point
+//   "ok <log density> <gradient>..."  or  "rejected <Stan's message on one line>".
 //
 // Output, little-endian whatever the host: "SSMOBSD1" (8 bytes), uint32 header length L,
 // L bytes of header text "byteorder=little\nchains=C\ndraws=N\ncolumns=name1,name2,...\n",
@@ -30,6 +38,7 @@
 #include <stan/callbacks/writer.hpp>
 #include <stan/io/empty_var_context.hpp>
 #include <stan/io/json/json_data.hpp>
+#include <stan/model/log_prob_grad.hpp>
 #include <stan/math/prim/core/init_threadpool_tbb.hpp>
 #include <stan/services/sample/hmc_nuts_diag_e_adapt.hpp>
 
@@ -121,7 +130,7 @@ struct Args {
   long parent_pid = 0;
   int chains = 4, warmup = 1000, samples = 1000, max_depth = 10, threads = 1;
   double delta = 0.8, init_radius = 2.0;
-  bool discard = false;
+  bool discard = false, log_density = false;
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -135,6 +144,10 @@ Args parse(int argc, char** argv) {
     std::string k = argv[i];
     if (k == "--discard") {
       a.discard = true;
+      continue;
+    }
+    if (k == "--log-density") {
+      a.log_density = true;
       continue;
     }
     if (i + 1 >= argc) usage("missing value after " + k);
@@ -161,8 +174,12 @@ Args parse(int argc, char** argv) {
   if (a.output.empty() && !a.discard) usage("--output (or --discard) is required");
   if (a.chains < 1 || a.samples < 1 || a.warmup < 0 || a.threads < 1 || a.max_depth < 1)
     usage("chains, samples, threads, max-depth must be >= 1 and warmup >= 0");
-  if (!a.inits.empty() && static_cast<int>(a.inits.size()) != a.chains)
+  if (a.log_density) {
+    if (a.output.empty()) usage("--log-density needs --output");
+    a.chains = static_cast<int>(a.inits.size());
+  } else if (!a.inits.empty() && static_cast<int>(a.inits.size()) != a.chains) {
     usage("give one --init per chain or none");
+  }
   return a;
 }
 
@@ -222,6 +239,47 @@ bool write_output(const std::string& path, const std::vector<RowWriter>& writers
   return ok;
 }
 
+std::string one_line(std::string text) {
+  std::replace(text.begin(), text.end(), '\n', ' ');
+  return text;
+}
+
+// --log-density: the log density and gradient at every point (see the file's header).
+int write_log_densities(const stan::model::model_base& model,
+                        const std::vector<std::unique_ptr<stan::io::var_context>>& points,
+                        const std::string& path) {
+  std::ostringstream out;
+  out.precision(17);
+  std::vector<std::string> names;
+  std::vector<std::vector<size_t>> dims;
+  model.get_param_names(names, false, false);
+  model.get_dims(dims, false, false);
+  for (std::size_t j = 0; j < names.size(); ++j) {
+    out << "param " << names[j];
+    for (auto n : dims[j]) out << ' ' << n;
+    out << '\n';
+  }
+  for (const auto& point : points) {
+    std::vector<double> params_r, gradient;
+    std::vector<int> params_i;
+    std::ostringstream msgs;
+    try {
+      model.transform_inits(*point, params_i, params_r, &msgs);
+      const double lp = stan::model::log_prob_grad<false, false>(model, params_r, params_i,
+                                                                  gradient, &msgs);
+      out << "ok " << lp;
+      for (double g : gradient) out << ' ' << g;
+      out << '\n';
+    } catch (const std::exception& e) {
+      out << "rejected " << one_line(e.what()) << '\n';
+    }
+  }
+  std::ofstream file(path);
+  file << out.str();
+  file.close();
+  return file ? kOk : kWriteFailed;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -265,6 +323,12 @@ int main(int argc, char** argv) {
   } catch (const std::exception& e) {
     std::cerr << "data rejected: " << e.what() << "\n";
     return kDataRejected;
+  }
+
+  if (a.log_density) {
+    const int code = write_log_densities(*model, inits, a.output);
+    if (code != kOk) std::cerr << "cannot write " << a.output << ": " << std::strerror(errno) << "\n";
+    return code;
   }
 
   std::vector<RowWriter> writers(a.chains);
