@@ -26,7 +26,7 @@ from ssmobs import config as cfg
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.nuts_stage import run_trajectories
 from ssmobs.scenario import Scenario
-from ssmobs.stages import sampler_settings
+from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends import get_backend, stan_file
 from ssmobs.trajectories import make_trajectories
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import copy
 import shutil
 from pathlib import Path
@@ -9,7 +10,10 @@ from pathlib import Path
 import pytest
 import yaml
 from ssmobs.cache_keys import (
+    NEUTRAL_MODULES,
     PACKAGE_DIR,
+    STAGE_MODULES,
+    STAGE_SCRIPTS,
     CacheKeys,
     UnknownKeyError,
     code_digest,
@@ -44,9 +48,130 @@ def test_module_closure_follows_imports_and_skips_neutral_modules():
     assert "nuts_stage.py" not in closure
 
 
-def test_code_digest_names_its_script_and_the_glue():
+def test_code_digest_names_its_script_and_its_own_glue():
     code = code_digest("joint_map")
-    assert "scripts/joint_map.py" in code and "stages.py" in code
+    assert "scripts/joint_map.py" in code and "stages/joint_map.py" in code
+    assert not {"stages/outputs.py", "stages/stan.py", "stages/exact.py"} & set(code)
+
+
+def _write(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return root
+
+
+def test_module_closure_of_named_functions_follows_only_the_code_they_run(tmp_path):
+    """``"module.py:f"``: the module's top level, f and the functions f calls; imports under
+    ``if TYPE_CHECKING:`` run nowhere; the packages' ``__init__.py`` run on import."""
+    pkg = _write(
+        tmp_path / "pkg",
+        {
+            "__init__.py": "",
+            "a.py": "",
+            "b.py": "",
+            "c.py": "",
+            "d.py": "",
+            "typing_only.py": "",
+            "sub/__init__.py": "",
+            "sub/glue.py": (
+                "from typing import TYPE_CHECKING\n"
+                "from .. import a\n"
+                "if TYPE_CHECKING:\n"
+                "    from .. import typing_only\n"
+                "def f():\n"
+                "    from ..b import x\n"
+                "    return helper()\n"
+                "def helper():\n"
+                "    from ..c import y\n"
+                "def g():\n"
+                "    from ..d import z\n"
+            ),
+        },
+    )
+    base = {"__init__.py", "a.py", "sub/__init__.py", "sub/glue.py"}
+    assert set(module_closure(("sub/glue.py:f",), pkg)) == base | {"b.py", "c.py"}
+    assert set(module_closure(("sub/glue.py:g",), pkg)) == base | {"d.py"}
+    assert set(module_closure(("sub/glue.py",), pkg)) == base | {"b.py", "c.py", "d.py"}
+    with pytest.raises(ValueError, match="no function"):
+        module_closure(("sub/glue.py:nope",), pkg)
+    with pytest.raises(FileNotFoundError, match="no such module"):
+        module_closure(("gone.py",), pkg)
+
+
+@pytest.mark.parametrize(
+    ("stage", "runs", "does_not_run"),
+    [
+        ("design", {"stages/design.py", "design_disturbances.py"}, {"trajectories.py"}),
+        ("trajectories", {"stages/design.py", "trajectories.py"}, {"design_disturbances.py"}),
+        (
+            "joint_map",
+            {"stages/joint_map.py", "joint_map.py", "trajectories.py"},
+            {"stages/outputs.py", "stages/k_selection.py", "tables.py", "figures.py"},
+        ),
+        (
+            "k_selection",
+            {"stages/k_selection.py", "stages/design.py", "stages/joint_map.py", "k_selection.py"},
+            {"stages/outputs.py", "tables.py", "figures.py"},
+        ),
+        (
+            "program",
+            {"stages/stan.py", "stan_backends/__init__.py"},
+            {"nuts_stage.py", "record_cache.py", "stan_metrics.py", "trajectories.py"},
+        ),
+        (
+            "nuts_records",
+            {"stages/stan.py", "nuts_stage.py", "record_cache.py", "trajectories.py"},
+            {"stan_metrics.py", "stages/outputs.py", "tables.py", "joint_map.py"},
+        ),
+        ("gather", {"stages/stan.py", "record_cache.py", "stan_metrics.py"}, {"tables.py"}),
+        (
+            "exact",
+            {"stages/exact.py", "exact_marginal.py", "stan_metrics.py"},
+            {"nuts_stage.py", "joint_map.py", "stages/stan.py"},
+        ),
+        (
+            "outputs",
+            {"stages/outputs.py", "tables.py", "figures.py", "observability_study.py"},
+            {"stages/stan.py", "stages/exact.py", "nuts_stage.py", "exact_marginal.py"},
+        ),
+    ],
+)
+def test_each_stage_closure_holds_the_code_it_runs_and_none_it_does_not(stage, runs, does_not_run):
+    closure = set(module_closure(STAGE_MODULES[stage]))
+    assert runs <= closure
+    assert not does_not_run & closure
+    assert not set(NEUTRAL_MODULES) & closure
+
+
+def _script_imports(script: str) -> list[tuple[str, list[str]]]:
+    """(module file relative to the package, imported names) of a rule script's imports."""
+    path = REPO / "workflow" / "scripts" / f"{script}.py"
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("ssmobs"):
+            parts = (node.module or "").split(".")[1:]
+            if parts:
+                out.append(("/".join(parts) + ".py", [a.name for a in node.names]))
+            else:  # from ssmobs import io, log
+                out += [(f"{a.name}.py", []) for a in node.names]
+    return out
+
+
+@pytest.mark.parametrize("stage", sorted(STAGE_SCRIPTS))
+def test_what_a_stage_script_calls_is_in_its_stage_key(stage):
+    """Every package module a stage's script imports is hashed into the stage's key, and a
+    function it imports from a stage module is one the stage's entry follows."""
+    closure = set(module_closure(STAGE_MODULES[stage]))
+    entries = dict(e.partition(":")[::2] for e in STAGE_MODULES[stage])
+    for script in STAGE_SCRIPTS[stage]:
+        for module, names in _script_imports(script):
+            if module in NEUTRAL_MODULES:
+                continue
+            assert module in closure, f"{script}.py imports {module}, not in the {stage} key"
+            functions = entries.get(module)
+            if functions:  # an entry of named functions
+                assert set(names) <= set(functions.split(",")), (script, names, functions)
 
 
 @pytest.mark.parametrize(
@@ -96,18 +221,48 @@ def test_exact_key_knows_its_K():
         k.lookup("exact", "same_T4", "0123456789ab")
 
 
+#: every key of one scenario of the smoke profile (outputs: the code of the tables and figures)
+ALL_STAGES = {
+    "design",
+    "trajectories",
+    "joint_map",
+    "k_selection",
+    "program",
+    "nuts_records",
+    "nuts_batches",
+    "gather",
+    "exact",
+    "outputs",
+}
+#: the stages downstream of the design trajectories
+FROM_TRAJECTORIES = {"trajectories", "joint_map", "nuts_records", "nuts_batches", "gather", "exact"}
+
+
 @pytest.mark.parametrize(
-    ("edit", "changed", "unchanged"),
+    ("edit", "changed"),
     [
-        ("ssmobs/models/same.py", {"trajectories", "joint_map", "nuts_records", "exact"}, set()),
-        ("ssmobs/exact_marginal.py", {"exact"}, {"trajectories", "joint_map", "nuts_records"}),
-        ("ssmobs/joint_map.py", {"joint_map"}, {"trajectories", "nuts_records", "exact"}),
-        ("ssmobs/log.py", set(), {"trajectories", "joint_map", "nuts_records", "exact"}),
+        ("ssmobs/models/same.py", FROM_TRAJECTORIES | {"k_selection"}),
+        ("ssmobs/exact_marginal.py", {"exact"}),
+        ("ssmobs/joint_map.py", {"joint_map", "k_selection", "outputs"}),
+        ("ssmobs/log.py", set()),
+        ("ssmobs/stages/design.py", {"design", "k_selection"} | FROM_TRAJECTORIES),
+        ("ssmobs/stages/joint_map.py", {"joint_map", "k_selection", "outputs"}),
+        ("ssmobs/stages/k_selection.py", {"k_selection"}),
+        ("ssmobs/stages/stan.py", {"program", "nuts_records", "nuts_batches", "gather"}),
+        ("ssmobs/stages/exact.py", {"exact"}),
+        ("ssmobs/stages/outputs.py", {"outputs"}),
+        ("ssmobs/record_cache.py", {"nuts_records", "nuts_batches", "gather"}),
+        ("ssmobs/stan_metrics.py", {"gather", "exact"}),
+        ("ssmobs/tables.py", {"outputs"}),
+        ("scripts/sample_nuts.py", {"nuts_records", "nuts_batches", "gather"}),
+        ("scripts/paper_tables.py", {"outputs"}),
     ],
 )
-def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed, unchanged):
+def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
     """An edit of a model's module or a stage's code moves that stage's outputs (and those
-    downstream); an edit of logging moves none."""
+    downstream) and no other: an edit of a table's glue (stages/outputs.py) reruns no
+    sampling, an edit of the Stan glue (stages/stan.py) no joint MAP; an edit of logging
+    moves none."""
     work = tmp_path / "workflow"
     shutil.copytree(
         REPO / "workflow", work, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
@@ -118,10 +273,16 @@ def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed, un
     def all_keys():
         k = keys(conf, repo=tmp_path, package_dir=work / "ssmobs")
         return {
+            "design": k.design,
             "trajectories": k.trajectories("same_T4"),
             "joint_map": k.joint_map("same_T4"),
+            "k_selection": k.k_selection_points("same_T4"),
+            "program": k.program("same"),
             "nuts_records": k.nuts_records("same_T4"),
+            "nuts_batches": k.nuts_batches("same_T4", 4),
+            "gather": k.gather("same_T4", 4),
             "exact": k.exact("same_T4", 12),
+            "outputs": k.output("paper_figures/smoke/table", [], {}),
         }
 
     module_closure.cache_clear()
@@ -130,8 +291,8 @@ def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed, un
     f.write_text(f.read_text() + "\n# an edit\n")
     module_closure.cache_clear()
     after = all_keys()
+    assert set(before) == ALL_STAGES
     assert {s for s in before if before[s] != after[s]} == changed
-    assert not {s for s in unchanged if before[s] != after[s]}
 
 
 def test_stan_program_keys_the_records_and_the_stan_check_only(tmp_path):

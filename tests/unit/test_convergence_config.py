@@ -14,7 +14,7 @@ from ssmobs.convergence import (
     sensitivity_table,
     threshold_failures,
 )
-from ssmobs.stages import run_convergence_sensitivity
+from ssmobs.stages.outputs import run_convergence_sensitivity
 from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
 
 pytestmark = pytest.mark.unit

@@ -321,7 +321,7 @@ def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
 
 def test_summary_has_the_stan_stage_keys():
     import pandas as pd
-    from ssmobs.stages import exact_summary
+    from ssmobs.stages.exact import exact_summary
     from ssmobs.stan_metrics import stan_summary
 
     model = get_model("same")

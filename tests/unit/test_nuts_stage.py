@@ -394,7 +394,7 @@ def batch(scenario, tmp_path):
 
 def check(table, scenario):
     from ssmobs import io
-    from ssmobs.stages import check_batch_records
+    from ssmobs.record_cache import check_batch_records
 
     frame = io.read_parquet(table)
     check_batch_records(table, frame, scenario["model"], T, table.parent / "records", {})
@@ -438,7 +438,7 @@ def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
     import os
 
     from ssmobs import io
-    from ssmobs.stages import changed_batch_records
+    from ssmobs.record_cache import changed_batch_records
 
     records = batch.parent / "records"
     assert changed_batch_records(batch, records) is None

@@ -34,10 +34,14 @@ def test_layout_names_every_module_and_rule_file():
     modules = {p.stem for p in package.glob("*.py")} - {"__init__"}
     missing = {m for m in modules if not re.search(rf"\b{m}\.py\b", layout)}
     assert missing == set(), "modules missing from docs/reference/layout.md"
-    for pkg in ("models", "stan_backends"):
+    for pkg in ("models", "stan_backends", "stages"):
         assert f"{pkg}/" in layout
+    stages = {p.stem for p in (package / "stages").glob("*.py")} - {"__init__"}
+    missing = {m for m in stages if not re.search(rf"\b{m}\.py\b", layout)}
+    assert missing == set(), "stage modules (stages/) missing from docs/reference/layout.md"
     named = set(re.findall(r"\b(\w+)\.py\b", layout)) - {"rule"}
-    assert named <= modules | {"base", "log_posterior"}, "layout names modules that do not exist"
+    known = modules | stages | {"base", "log_posterior"}
+    assert named <= known, "layout names modules that do not exist"
     for smk in (REPO / "workflow" / "rules").glob("*.smk"):
         stem = smk.stem.replace("common", "common.smk")
         assert stem in layout, f"rule file {smk.name} missing from docs/reference/layout.md"

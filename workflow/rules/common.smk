@@ -10,7 +10,6 @@ from ssmobs import config as ssmobs_config  # noqa: E402
 from ssmobs.config import ConfigError  # noqa: E402
 from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.scenario import Scenario  # noqa: E402
-from ssmobs import stages  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.preflight import use_package_of  # noqa: E402
@@ -244,7 +243,7 @@ def k_selection_grids(name):
 
 def nuts_batches(name):
     """The batch tables of a scenario's Stan stage."""
-    from ssmobs.stages import batches
+    from ssmobs.stages.stan import batches
 
     ranges = batches(SCENARIO_OBJECTS[name].K, batch_size(name))
     return [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
@@ -256,7 +255,7 @@ def repair_damaged_batches():
     built (Snakemake takes stock of the files then), so that batch reruns: it recomputes
     exactly the damaged records and reuses every valid one.  A batch table deleted by hand
     reruns too."""
-    from ssmobs.stages import changed_batch_records
+    from ssmobs.record_cache import changed_batch_records
 
     if not workflow.is_main_process:
         return

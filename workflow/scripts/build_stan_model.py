@@ -1,7 +1,7 @@
 """Rule build_stan_model: compile one Stan program once."""
 
 from ssmobs import log
-from ssmobs.stages import run_build_stan_model
+from ssmobs.stages.stan import run_build_stan_model
 
 log.setup(snakemake.log[0])
 run_build_stan_model(snakemake.wildcards.model, snakemake.params.backend, snakemake.output[0])

@@ -1,7 +1,7 @@
 """Rule convergence_sensitivity: |K^Stan| under R-hat 1.01/1.05, tree depth warned/counted."""
 
 from ssmobs import io, log
-from ssmobs.stages import run_convergence_sensitivity
+from ssmobs.stages.outputs import run_convergence_sensitivity
 
 log.setup(snakemake.log[0])
 p = snakemake.params

@@ -2,7 +2,7 @@
 
 from ssmobs import log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_exact_marginal
+from ssmobs.stages.exact import run_exact_marginal
 
 log.setup(snakemake.log[0])
 run_exact_marginal(

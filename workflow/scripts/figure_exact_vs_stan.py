@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_figure_exact_vs_stan
+from ssmobs.stages.outputs import run_figure_exact_vs_stan
 
 logger = log.setup(snakemake.log[0])
 stats = run_figure_exact_vs_stan(

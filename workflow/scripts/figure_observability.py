@@ -1,7 +1,7 @@
 """Rule figure_observability: |K^max|/K and |K^Stan|/K of every scenario."""
 
 from ssmobs import io, log
-from ssmobs.stages import run_figure_observability
+from ssmobs.stages.outputs import run_figure_observability
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_figure_profile_posterior
+from ssmobs.stages.outputs import run_figure_profile_posterior
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_joint_map
+from ssmobs.stages.joint_map import run_joint_map
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

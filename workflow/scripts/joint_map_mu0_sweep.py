@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_joint_map_mu0_sweep
+from ssmobs.stages.outputs import run_joint_map_mu0_sweep
 
 log.setup(snakemake.log[0])
 p = snakemake.params

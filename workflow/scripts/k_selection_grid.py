@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_k_selection_grid
+from ssmobs.stages.k_selection import run_k_selection_grid
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

@@ -1,7 +1,7 @@
 """Rule paper_tables: Tables II, III and the Section IV summary."""
 
 from ssmobs import io, log
-from ssmobs.stages import run_paper_tables
+from ssmobs.stages.outputs import run_paper_tables
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

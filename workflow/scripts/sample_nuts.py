@@ -2,7 +2,7 @@
 
 from ssmobs import log
 from ssmobs.scenario import Scenario
-from ssmobs.stages import run_sample_batch
+from ssmobs.stages.stan import run_sample_batch
 
 log.setup(snakemake.log[0])
 p = snakemake.params

@@ -1,7 +1,7 @@
 """Rule table_k_selection: chosen K per entry, method and seed."""
 
 from ssmobs import io, log
-from ssmobs.stages import run_table_k_selection
+from ssmobs.stages.outputs import run_table_k_selection
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

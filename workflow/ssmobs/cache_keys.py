@@ -7,9 +7,10 @@ a SHA-256 over everything that determines them (the rule of the cache):
   prior, the stage's settings block),
 - the keys of the stage's inputs (so a change upstream moves every output downstream),
 - the code: the model's module, its Stan program, and the source of the package modules
-  the stage runs (:data:`STAGE_MODULES`, closed over their imports inside the package by
-  :func:`module_closure`), so an edit of a log-density term or of a stage's numerics
-  gives new keys and a recomputation, never an old result.
+  the stage runs (:data:`STAGE_MODULES`: its glue in :mod:`ssmobs.stages`, closed over its
+  imports inside the package by :func:`module_closure`), so an edit of a log-density term
+  or of a stage's numerics gives new keys and a recomputation, never an old result; an
+  edit of code a stage does not run (a figure's glue) leaves its keys alone.
 
 A key path that exists holds exactly what its key describes, whatever the files' times
 and whatever ``.snakemake/`` holds; a path that does not exist is computed.  Editing the
@@ -37,26 +38,25 @@ REPO_DIR = PACKAGE_DIR.parents[1]
 #: hex digits of a key
 KEY_LENGTH = 12
 
-#: the package modules each stage runs (relative to the package; their imports inside the
-#: package are added by :func:`module_closure`).  ``stages.py`` is the glue that reads and
-#: writes every stage's files; it is hashed alone (its lazy imports reach every module).
+#: the code each stage runs, as entries of :func:`module_closure`: a package module (its
+#: imports followed anywhere in the file), or ``"stages/<stage>.py:f,g"`` for the functions
+#: ``f``, ``g`` of a stage module (:mod:`ssmobs.stages`), whose imports are followed at the
+#: module's top level and inside those functions and the module's functions they call only,
+#: so that e.g. compiling a program does not run the gathered summary's code.
 STAGE_MODULES: dict[str, tuple[str, ...]] = {
-    "design": ("design_disturbances.py",),
-    "trajectories": ("trajectories.py", "scenario.py"),
+    # the sets k_selection_grid makes (disturbance_set) lie beside the design's own
+    "design": ("stages/design.py:run_design_disturbances,disturbance_set",),
+    "trajectories": ("stages/design.py:run_design_trajectories",),
     "check_model": ("check_model.py",),
-    "joint_map": ("joint_map.py", "scenario.py"),
-    "k_selection": (
-        "k_selection.py",
-        "joint_map.py",
-        "trajectories.py",
-        "design_disturbances.py",
-    ),
-    "program": ("stan_backends/__init__.py",),
-    "nuts_records": ("nuts_stage.py", "stan_backends/__init__.py"),
-    "nuts_batches": ("nuts_stage.py",),
-    "gather": ("stan_metrics.py", "convergence.py", "nuts_stage.py"),
-    "exact": ("exact_marginal.py",),
-    "outputs": ("tables.py", "figures.py", "binomial.py", "profile_posterior.py"),
+    "joint_map": ("stages/joint_map.py:run_joint_map",),
+    "k_selection": ("stages/k_selection.py:run_k_selection_grid",),
+    "program": ("stages/stan.py:run_build_stan_model",),
+    "nuts_records": ("stages/stan.py:run_sample_batch", "record_cache.py"),
+    "nuts_batches": ("stages/stan.py:run_sample_batch",),
+    "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
+    "exact": ("stages/exact.py",),
+    # every stamped table and figure; observability_study's script calls its module itself
+    "outputs": ("stages/outputs.py", "observability_study.py"),
 }
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
@@ -118,13 +118,68 @@ def _module_file(name: str, package_dir: Path) -> Path | None:
     return None
 
 
-def _imports(path: Path, package_dir: Path) -> set[Path]:
-    """Package modules that ``path`` imports (relative imports, anywhere in the file)."""
+def _is_type_checking(node: ast.If) -> bool:
+    """``if TYPE_CHECKING:`` or ``if typing.TYPE_CHECKING:`` (its body is never run)."""
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _walk(nodes: Iterable[ast.AST]) -> list[ast.AST]:
+    """``nodes`` and every node under them, without the bodies of ``if TYPE_CHECKING:``."""
+    out: list[ast.AST] = []
+    todo = list(nodes)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            todo.extend(node.orelse)
+            continue
+        out.append(node)
+        todo.extend(ast.iter_child_nodes(node))
+    return out
+
+
+_FUNCTION_DEFS = (ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def _runtime_nodes(tree: ast.Module, functions: frozenset[str] | None) -> list[ast.AST]:
+    """The nodes of a module that run: all of them (``functions`` None), or the module's
+    top level (with its functions' decorators and defaults) and the bodies of ``functions``
+    and of every function of the module they name, directly or not."""
+    if functions is None:
+        return _walk(tree.body)
+    defs = {n.name: n for n in tree.body if isinstance(n, _FUNCTION_DEFS)}
+    unknown = sorted(functions - set(defs))
+    if unknown:
+        raise ValueError(f"no function(s) {unknown} at the top level of the module")
+    top: list[ast.AST] = [n for n in tree.body if not isinstance(n, _FUNCTION_DEFS)]
+    for d in defs.values():  # run when the module is imported
+        top += [*d.decorator_list, *d.args.defaults]
+        top += [v for v in d.args.kw_defaults if v is not None]
+    nodes = _walk(top)
+    todo = [*functions, *(n.id for n in nodes if isinstance(n, ast.Name) and n.id in defs)]
+    done: set[str] = set()
+    while todo:
+        name = todo.pop()
+        if name in done:
+            continue
+        done.add(name)
+        body = _walk(defs[name].body)
+        nodes += body
+        todo += [n.id for n in body if isinstance(n, ast.Name) and n.id in defs]
+    return nodes
+
+
+def _imports(path: Path, package_dir: Path, functions: frozenset[str] | None = None) -> set[Path]:
+    """Package modules that ``path`` imports where its code runs (:func:`_runtime_nodes`:
+    relative and ``ssmobs.`` imports at the top level and inside functions, not those under
+    ``if TYPE_CHECKING:``)."""
     rel = path.relative_to(package_dir)
-    parts = list(rel.with_suffix("").parts)
-    pkg = parts[:-1] if rel.name != "__init__.py" else parts[:-1]
+    pkg = list(rel.with_suffix("").parts)[:-1]
     found: set[Path] = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in _runtime_nodes(tree, functions):
         if isinstance(node, ast.ImportFrom):
             if node.level == 0:
                 if not (node.module or "").startswith("ssmobs"):
@@ -151,29 +206,61 @@ def _imports(path: Path, package_dir: Path) -> set[Path]:
     return found
 
 
+def _packages(path: Path, package_dir: Path) -> set[Path]:
+    """The ``__init__.py`` of every package ``path`` lies in (run when it is imported)."""
+    found = set()
+    for parent in path.parents:
+        if parent != package_dir and package_dir not in parent.parents:
+            break
+        init = parent / "__init__.py"
+        if init.is_file():
+            found.add(init)
+    return found
+
+
+def _entry(entry: str, package_dir: Path) -> tuple[Path, frozenset[str] | None]:
+    """``"module.py"`` or ``"module.py:f,g"`` as (file, functions or None for all)."""
+    name, _, functions = entry.partition(":")
+    path = package_dir / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such module of the package (entry {entry!r})")
+    return path, (frozenset(functions.split(",")) if functions else None)
+
+
 @functools.cache
 def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
-    """``entries`` and every package module they import, directly or not (sorted relative
-    paths), without :data:`NEUTRAL_MODULES`."""
-    todo = [package_dir / e for e in entries]
-    seen: set[Path] = set()
+    """The modules that ``entries`` (``"module.py"`` or ``"stages/x.py:f,g"``, see
+    :data:`STAGE_MODULES`) run: the entries, every package module they import, directly or
+    not, and the ``__init__.py`` of their packages (sorted relative paths), without
+    :data:`NEUTRAL_MODULES`.  A module reached by an import is followed whole."""
+    todo = [_entry(e, package_dir) for e in entries]
+    whole: set[Path] = set()
+    partial: dict[Path, frozenset[str]] = {}
     while todo:
-        path = todo.pop()
-        if path in seen or not path.is_file():
+        path, functions = todo.pop()
+        if path in whole or not path.is_file():
             continue
         if str(path.relative_to(package_dir)) in NEUTRAL_MODULES:
             continue  # neither hashed nor followed
-        seen.add(path)
-        todo.extend(_imports(path, package_dir) - seen)
-    return tuple(sorted(str(p.relative_to(package_dir)) for p in seen))
+        if functions is None:
+            whole.add(path)
+        else:
+            functions -= partial.get(path, frozenset())
+            if not functions:
+                continue
+            partial[path] = partial.get(path, frozenset()) | functions
+        found = _imports(path, package_dir, functions) | _packages(path, package_dir)
+        todo.extend((p, None) for p in found)
+    return tuple(sorted(str(p.relative_to(package_dir)) for p in whole | set(partial)))
 
 
 def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
-    """File -> hash of the code a stage runs: its module closure, its extra files,
-    ``stages.py`` (the glue that writes its outputs) and its rule scripts.  The rule files
-    (``workflow/rules/*.smk``) are not hashed: what they decide (paths, params) is keyed."""
+    """File -> hash of the code a stage runs: its module closure (its stage module in
+    :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
+    extra files and its rule scripts.  The rule files (``workflow/rules/*.smk``) are not
+    hashed: what they decide (paths, params) is keyed."""
     files = set(module_closure(STAGE_MODULES[stage], package_dir))
-    files |= set(STAGE_EXTRA_FILES.get(stage, ())) | {"stages.py"}
+    files |= set(STAGE_EXTRA_FILES.get(stage, ()))
     out = {f: file_digest(package_dir / f) for f in sorted(files)}
     for script in STAGE_SCRIPTS[stage]:
         path = package_dir.parent / "scripts" / f"{script}.py"

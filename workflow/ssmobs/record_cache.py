@@ -9,6 +9,10 @@ values, the KDE estimator; not the convergence thresholds, which the tables appl
 backend with its Stan version (:func:`backend_identity`) and the data's checksum.  The
 records folder itself is keyed by the code that makes records (:mod:`ssmobs.cache_keys`).
 Kept draws go to ``draws_dir/k{k:05d}.nc`` (:func:`draws_path`).
+
+A batch table of the Stan stage is checked against the records it was built from: cheaply
+before every DAG build (:func:`changed_batch_records`, which the workflow's repair of damaged
+batches calls) and fully by gather_nuts (:func:`check_batch_records`).
 """
 
 from __future__ import annotations
@@ -28,6 +32,8 @@ from . import io, seeds
 from .marginal_map import GRID_PER_BW
 
 if TYPE_CHECKING:
+    import pandas
+
     from .convergence import ConvergenceSettings
     from .models.base import PriorBounds, StateSpaceModel
     from .stan_backends.base import SamplerSettings
@@ -200,3 +206,113 @@ def load_records(records_dir: str | Path, ks: Iterable[int]) -> list[dict[str, A
         rec = io.read_json(path, required=RECORD_KEYS)
         out.append(rec)
     return out
+
+
+# --------------------------------------------------------------------------- batch tables
+def _damaged_batch(batch_table: str | os.PathLike, what: str) -> io.CorruptFileError:
+    return io.CorruptFileError(
+        f"{batch_table}: {what}; this batch must be rerun (only damaged records are recomputed)"
+    )
+
+
+def changed_batch_records(
+    batch_table: str | os.PathLike,
+    records_dir: str | os.PathLike,
+    draws_dir: str | os.PathLike | None = None,
+    keep_draws: Iterable[int] = (),
+) -> str | None:
+    """Why the finished batch table ``batch_table`` no longer matches its records, or None.
+
+    Reads only the table's ``k`` column, the records' file times and, for the
+    ``keep_draws`` trajectories, the kept draws' checksums (cheap enough for every DAG
+    build): a record of one of those k that is missing or newer than the table was
+    damaged, edited or deleted after the batch ran; a kept draws file that is missing or
+    differs from the checksum its record holds was
+    damaged.  None when the table does not exist (the batch is still to run) or cannot be
+    read (gather_nuts reports that).
+    """
+    import pyarrow.parquet as pq
+
+    table = Path(batch_table)
+    keep = {int(k) for k in keep_draws}
+    try:
+        written = table.stat().st_mtime_ns
+        ks = pq.read_table(table, columns=["k"]).column("k").to_pylist()
+    except Exception:  # noqa: BLE001 - missing or unreadable: not this check's business
+        return None
+    for k in ks:
+        path = record_path(records_dir, k)
+        try:
+            changed = path.stat().st_mtime_ns > written
+        except FileNotFoundError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} ({path}) is missing"))
+        if changed:
+            return str(
+                _damaged_batch(
+                    table,
+                    f"the record of trajectory k={k} ({path}) was "
+                    f"changed after this table was written",
+                )
+            )
+        if draws_dir is None or k not in keep:
+            continue  # only the records of kept draws are read (this runs on every DAG build)
+        draws = draws_path(draws_dir, k)
+        try:
+            expected = (io.read_json(path) or {}).get("draws_sha256")
+        except io.CorruptFileError:
+            return str(_damaged_batch(table, f"the record of trajectory k={k} is damaged"))
+        if expected and (not draws.exists() or io.file_sha256(draws) != expected):
+            return str(_damaged_batch(table, f"the kept draws {draws} are missing or damaged"))
+    return None
+
+
+def check_batch_records(
+    batch_table: str | os.PathLike,
+    frame: pandas.DataFrame,
+    model: StateSpaceModel,
+    T: int,
+    records_dir: str | os.PathLike,
+    convergence_cfg: dict,
+) -> None:
+    """The per-trajectory records a batch table was built from are all there, parse and
+    give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
+
+    Run by gather_nuts (the workflow also stops before it when a record is newer than its
+    table, :func:`changed_batch_records`).  Raises
+    :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
+    batch recomputes the damaged records only and reuses every valid one.
+    """
+    # imported here: nuts_stage imports this module
+    from .convergence import ConvergenceSettings, apply_thresholds
+    from .nuts_stage import records_to_frame
+
+    def damaged(what: str) -> io.CorruptFileError:
+        return _damaged_batch(batch_table, what)
+
+    recs = []
+    for k in frame["k"].tolist():
+        path = record_path(records_dir, k)
+        if not path.exists():
+            raise damaged(f"the record of trajectory k={k} ({path}) is missing")
+        try:
+            rec = io.read_json(path, required=RECORD_KEYS)
+        except io.CorruptFileError as err:
+            raise damaged(f"the record of trajectory k={k} is damaged ({err.args[0]})") from None
+        if rec["k"] != k:
+            raise damaged(f"the record {path} is of trajectory k={rec['k']}, not k={k}")
+        recs.append(rec)
+    try:
+        rebuilt = apply_thresholds(
+            records_to_frame(recs, model, T), ConvergenceSettings(**convergence_cfg)
+        )
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise damaged(f"its records under {records_dir} do not form a table ({err})") from None
+    if list(rebuilt.columns) != list(frame.columns) or len(rebuilt) != len(frame):
+        raise damaged(f"its records under {records_dir} give other columns or rows")
+    if not rebuilt.equals(frame):
+        bad = [
+            int(k)
+            for k, (_, a), (_, b) in zip(frame["k"], rebuilt.iterrows(), frame.iterrows())
+            if not a.equals(b)
+        ]
+        raise damaged(f"the records of trajectories k={bad} ({records_dir}) differ from it")

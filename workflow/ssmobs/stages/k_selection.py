@@ -1,0 +1,92 @@
+"""Glue of the choice of K (Sec. IV.A; rule k_selection_grid in
+``workflow/rules/k_selection.smk``): the joint-MAP summaries V_{K_i} of every K_i of a grid.
+
+The rules that read them, select_k and table_k_selection, write stamped outputs: their glue
+is in :mod:`ssmobs.stages.outputs`.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .. import io
+from ..log import Progress
+from . import PathLike
+
+if TYPE_CHECKING:
+    from ..scenario import Scenario
+
+logger = logging.getLogger("ssmobs")
+
+
+def run_k_selection_point(
+    disturbances: PathLike,
+    scenario: Scenario,
+    K: int,
+    method: str,
+    seed: int,
+    settings: dict,
+    out: PathLike,
+    sets: str = "independent",
+) -> dict:
+    """One point of rule k_selection_grid: the joint-MAP summary of one K_i (Sec. IV.A).
+
+    ``seed`` is the run's seed; the set itself was drawn with
+    :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
+    """
+    from ..k_selection import set_seed
+    from ..trajectories import make_trajectories
+    from .joint_map import joint_map_of
+
+    sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
+    matrix, attrs = io.read_disturbances(disturbances, q=sc.disturbance_dim, K=K)
+    traj = make_trajectories(sc, matrix, provenance=attrs)
+    _, _, info, _ = joint_map_of(traj, sc.prior, settings)
+    info.update(
+        K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed, scenario=scenario.name
+    )
+    io.write_json(out, info)
+    return info
+
+
+def run_k_selection_grid(
+    design_dir: PathLike,
+    scenario: Scenario,
+    K_grid: list[int],
+    method: str,
+    seed: int,
+    sets: str,
+    settings: dict,
+    design_cfg: dict,
+    points_dir: PathLike,
+    out: PathLike,
+) -> list[dict]:
+    """Rule k_selection_grid: V_{K_i} for every K_i of one grid (method, set variant, seed).
+
+    Each point is cached on its own in ``points_dir/K<K_i>.json`` as soon as it is done (a
+    rerun after a kill computes only the missing ones), each set in ``design_dir``
+    (:func:`ssmobs.stages.design.disturbance_set`)."""
+    from ..k_selection import set_seed
+    from .design import disturbance_set
+
+    progress = Progress(f"choice of K {scenario.name} {method} {sets} seed {seed}", len(K_grid))
+    rows = []
+    for K in K_grid:
+        point = Path(points_dir) / f"K{K}.json"
+        info = None
+        if point.exists():
+            try:
+                info = io.read_json(point, required=["K_i", "method", "seed"])
+            except io.CorruptFileError as err:
+                logger.warning("recomputing: %s", err)
+        if info is None:
+            s = set_seed(seed, K, sets)
+            path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
+            disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
+            info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
+        rows.append(info)
+        progress.update()
+    io.write_json(out, {"points": rows})
+    return rows

@@ -1,0 +1,142 @@
+"""Glue of the Stan stage (Sec. III.C; rules in ``workflow/rules/stan.smk``): the compiled
+program, NUTS for one batch of trajectories, and the scenario's gathered table and summary.
+
+The checks that a batch table still matches its records are in :mod:`ssmobs.record_cache`.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+from .. import io
+from ..log import Progress
+from . import PathLike
+
+if TYPE_CHECKING:
+    from ..scenario import Scenario
+    from ..stan_backends.base import SamplerSettings
+
+logger = logging.getLogger("ssmobs")
+
+
+def batches(K: int, batch_size: int) -> list[range]:
+    """Contiguous trajectory ranges of the Stan jobs: a pure function of (K, batch_size)."""
+    return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
+
+
+def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
+    """The NUTS settings of config block ``stan`` (``threads``: parallel chain processes)."""
+    from ..stan_backends.base import SamplerSettings
+
+    return SamplerSettings(
+        chains=stan_cfg["chains"],
+        iter_warmup=stan_cfg["iter_warmup"],
+        iter_sampling=stan_cfg["iter_sampling"],
+        adapt_delta=stan_cfg["adapt_delta"],
+        max_treedepth=stan_cfg["max_treedepth"],
+        workers=max(1, threads),
+    )
+
+
+def run_build_stan_model(model: str, backend: str, out: PathLike) -> dict:
+    """Rule build_stan_model: compile stan/<model>.stan once; write the backend's marker."""
+    from ..stan_backends import get_backend, stan_file
+
+    marker = get_backend(backend).compile(stan_file(model))
+    io.write_json(out, marker)
+    return marker
+
+
+def run_sample_batch(
+    trajectories: PathLike,
+    marker: PathLike,
+    scenario: Scenario,
+    stan_cfg: dict,
+    convergence_cfg: dict,
+    batch: int,
+    records_dir: PathLike,
+    draws_dir: PathLike,
+    out: PathLike,
+    threads: int = 1,
+) -> None:
+    """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories.
+
+    Each trajectory's record is written on its own as soon as it is done; a rerun after an
+    interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
+    """
+    from ..convergence import ConvergenceSettings, apply_thresholds
+    from ..nuts_stage import records_to_frame, run_trajectories
+    from ..stan_backends import get_backend, stan_file
+    from ..trajectories import read_trajectories
+
+    traj = read_trajectories(trajectories)
+    model = traj.model
+    backend_name = io.read_json(marker, required=["backend"])["backend"]
+    ks = list(batches(traj.K, scenario.batch_size(stan_cfg))[batch])
+    bounds = model.prior_bounds(traj.omega, scenario.prior)
+    progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
+    records = run_trajectories(
+        model,
+        get_backend(backend_name),
+        stan_file(model.slug),
+        traj.z,
+        traj.x,
+        ks,
+        bounds,
+        traj.omega,
+        traj.x0,
+        scenario.name,
+        scenario.seed,
+        sampler=sampler_settings(stan_cfg, threads),
+        convergence=ConvergenceSettings(**convergence_cfg),
+        init=scenario.stan_init,
+        records_dir=records_dir,
+        keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
+        draws_dir=draws_dir,
+        progress=progress,
+    )
+    settings = ConvergenceSettings(**convergence_cfg)
+    io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
+
+
+def run_gather_nuts(
+    trajectories: PathLike,
+    batch_tables: list[PathLike],
+    scenario: Scenario,
+    convergence_cfg: dict,
+    records_dir: PathLike,
+    table: PathLike,
+    summary: PathLike,
+) -> dict:
+    """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
+
+    The batch tables hold the configured convergence checks applied to the records'
+    diagnostics (:func:`ssmobs.convergence.apply_thresholds`), so other thresholds rebuild
+    the tables without new sampling; each is checked against its records first
+    (:func:`ssmobs.record_cache.check_batch_records`)."""
+    import pandas as pd
+
+    from ..record_cache import check_batch_records
+    from ..stan_metrics import stan_summary
+    from ..trajectories import read_trajectories
+
+    traj = read_trajectories(trajectories)
+    frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
+    for path, batch_frame in zip(batch_tables, frames):
+        check_batch_records(path, batch_frame, traj.model, traj.T, records_dir, convergence_cfg)
+    frame = pd.concat(frames, ignore_index=True)
+    frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
+    if frame["k"].tolist() != list(range(traj.K)):
+        raise io.CorruptFileError(
+            f"batch tables of scenario {scenario.name} do not cover "
+            f"k = 0..{traj.K - 1} exactly once"
+        )
+    info = stan_summary(frame, traj.model, traj.omega, traj.x0, traj.x)
+    info.update(
+        scenario=scenario.name, model=traj.model.slug, T=traj.T, stan_init=scenario.stan_init
+    )
+    logger.info("scenario %s: |K^Stan| = %s of %d", scenario.name, info["n_stan"], traj.K)
+    io.write_parquet(table, frame)
+    io.write_json(summary, info)
+    return info
