@@ -4,6 +4,7 @@ from ssmobs import io, log
 from ssmobs.stages.outputs import run_convergence_sensitivity
 
 log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p = snakemake.params
 run_convergence_sensitivity(
     dict(zip(p.scenarios, snakemake.input.tables, strict=True)),

@@ -5,6 +5,7 @@ from ssmobs.scenario import Scenario
 from ssmobs.stages.outputs import run_figure_exact_vs_stan
 
 logger = log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 stats = run_figure_exact_vs_stan(
     Scenario.from_config(snakemake.params.scenario),
     snakemake.input.stan,

@@ -5,6 +5,7 @@ from ssmobs.observability_study import run_observability_study
 from ssmobs.scenario import Scenario
 
 log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 p, inp = snakemake.params, snakemake.input
 run_observability_study(
     p.study,
