@@ -1,0 +1,122 @@
+"""Settings defined once: every key of a config block that has a settings dataclass is a
+field of it with the same default, type and allowed values (workflow/schemas/config.schema.yaml
+against JointMapSettings, SamplerSettings and ConvergenceSettings)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import pytest
+from ssmobs import config as cfg
+from ssmobs.cache_keys import SAMPLER_FIELDS
+from ssmobs.convergence import ConvergenceSettings
+from ssmobs.joint_map import JointMapSettings
+from ssmobs.stages.stan import sampler_settings
+from ssmobs.stan_backends.base import SamplerSettings
+
+pytestmark = pytest.mark.unit
+
+SCHEMA = cfg.load_schema()["properties"]
+#: config block -> (its dataclass, the block's keys that are not settings of it: what they
+#: are for instead)
+BLOCKS: dict[str, tuple[type, dict[str, str]]] = {
+    "joint_map": (JointMapSettings, {}),
+    "stan": (
+        SamplerSettings,
+        {
+            "backend": "which backend samples (stan_backends.resolve_backend)",
+            "batch_size": "trajectories per Snakemake job (groups the records)",
+            "keep_draws": "which draws are written (groups the records)",
+        },
+    ),
+    "convergence": (ConvergenceSettings, {}),
+}
+#: JSON schema type -> the annotation of the dataclass field
+TYPES = {"integer": "int", "number": "float", "string": "str", "boolean": "bool"}
+
+
+def _fields(cls: type) -> dict[str, dataclasses.Field]:
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
+def _settings(block: str, values: dict[str, Any]) -> Any:
+    cls = BLOCKS[block][0]
+    if cls is JointMapSettings:
+        return JointMapSettings.from_mapping(values)
+    return cls(**values)
+
+
+def _keys(block: str) -> dict[str, dict]:
+    """The block's schema keys that are settings of its dataclass."""
+    own = BLOCKS[block][1]
+    return {k: v for k, v in SCHEMA[block]["properties"].items() if k not in own}
+
+
+@pytest.mark.parametrize("block", sorted(BLOCKS))
+def test_every_schema_key_is_a_field_with_the_same_default_and_type(block):
+    cls, own = BLOCKS[block]
+    fields = _fields(cls)
+    assert set(own) <= set(SCHEMA[block]["properties"]), "a workflow key left the schema"
+    for key, spec in _keys(block).items():
+        assert key in fields, f"{block}.{key} is in the schema but not a field of {cls.__name__}"
+        field = fields[key]
+        assert spec["default"] == field.default, (
+            f"{block}.{key}: schema default {spec['default']!r}, "
+            f"{cls.__name__}.{key} default {field.default!r}"
+        )
+        assert TYPES[spec["type"]] == field.type, f"{block}.{key}: {spec['type']} vs {field.type}"
+
+
+@pytest.mark.parametrize("block", sorted(BLOCKS))
+def test_every_allowed_value_of_the_schema_is_one_the_dataclass_accepts(block):
+    for key, spec in _keys(block).items():
+        for value in spec.get("enum", []):
+            assert getattr(_settings(block, {key: value}), key) == value
+        if "enum" in spec:
+            with pytest.raises(ValueError, match=key):
+                _settings(block, {key: "not-a-choice"})
+
+
+def test_the_joint_map_settings_refuse_what_the_schema_refuses():
+    """JointMapSettings checks its values itself (it is also built outside the workflow):
+    a value just outside a schema bound is refused there too."""
+    for key, spec in _keys("joint_map").items():
+        if "exclusiveMinimum" in spec:
+            outside = spec["exclusiveMinimum"]
+        elif "minimum" in spec:
+            outside = spec["minimum"] - 1
+        else:
+            continue
+        with pytest.raises(ValueError, match=key):
+            JointMapSettings.from_mapping({key: outside})
+
+
+def test_the_default_config_gives_the_default_settings():
+    conf = cfg.validate(
+        {
+            "scenarios": [
+                {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+            ]
+        }
+    )
+    assert JointMapSettings.from_mapping(conf["joint_map"]) == JointMapSettings()
+    assert ConvergenceSettings(**conf["convergence"]) == ConvergenceSettings()
+    assert sampler_settings(conf["stan"]) == SamplerSettings()
+
+
+def test_the_scenario_start_of_the_joint_map_is_the_settings_start():
+    """``start_states`` is set per scenario (``joint_map_start``, Sec. III.B), not in the
+    joint_map block: same default and the same choices."""
+    spec = SCHEMA["scenarios"]["items"]["properties"]["joint_map_start"]
+    assert "start_states" not in SCHEMA["joint_map"]["properties"]
+    assert spec["default"] == JointMapSettings().start_states
+    for value in spec["enum"]:
+        assert JointMapSettings(start_states=value).start_states == value
+
+
+def test_the_records_are_keyed_by_every_sampler_setting_but_the_workers():
+    """Cache keys (ssmobs.cache_keys) and record keys leave out only ``workers``, which
+    schedules chains and changes no draw."""
+    assert set(SAMPLER_FIELDS) == set(_fields(SamplerSettings)) - {"workers"}
+    assert set(SAMPLER_FIELDS) <= set(SCHEMA["stan"]["properties"])
