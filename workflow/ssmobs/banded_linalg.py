@@ -283,7 +283,7 @@ def lanczos(
     fresh = np.random.default_rng(n)
     q = v0 / np.linalg.norm(v0, axis=1, keepdims=True)
 
-    def orth(w, Qj):
+    def orth(w: np.ndarray, Qj: np.ndarray) -> np.ndarray:
         for _ in range(2):  # "twice is enough"
             w = w - (((w[:, None, :] @ np.swapaxes(Qj, 1, 2)) @ Qj)[:, 0])
         return w

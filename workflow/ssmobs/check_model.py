@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from .models import StateSpaceModel, get_model
+from .models import PriorBounds, StateSpaceModel, get_model
 from .models.log_posterior import in_support, log_posterior, neg2_log_posterior
 
 
@@ -120,7 +120,9 @@ def cases_from_scenarios(scenarios: Sequence[Mapping[str, Any]], slug: str) -> l
     return out
 
 
-def _random_omega(model: StateSpaceModel, bounds, rng: np.random.Generator, n: int) -> np.ndarray:
+def _random_omega(
+    model: StateSpaceModel, bounds: PriorBounds, rng: np.random.Generator, n: int
+) -> np.ndarray:
     """n points strictly inside the prior box and the model constraints."""
     lo = np.where(np.isfinite(bounds.lower), bounds.lower, bounds.upper - 3.0)
     hi = np.where(np.isfinite(bounds.upper), bounds.upper, bounds.lower + 3.0)

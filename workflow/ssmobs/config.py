@@ -14,7 +14,7 @@ import functools
 import json
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -229,10 +229,17 @@ def _is_integer(checker: Any, instance: Any) -> bool:
 _TYPE_CHECKER = jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("integer", _is_integer)
 
 
-def _with_defaults(validator_class):
+def _with_defaults(
+    validator_class: type[jsonschema.protocols.Validator],
+) -> type[jsonschema.protocols.Validator]:
     validate_props = validator_class.VALIDATORS["properties"]
 
-    def set_defaults(validator, properties, instance, schema):
+    def set_defaults(
+        validator: jsonschema.protocols.Validator,
+        properties: dict[str, Any],
+        instance: Any,
+        schema: dict[str, Any],
+    ) -> Iterator[jsonschema.ValidationError]:
         if isinstance(instance, dict):
             for key, sub in properties.items():
                 if "default" in sub and key not in instance:

@@ -45,8 +45,9 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -105,7 +106,9 @@ def kalman_marginal(
         return _kalman_general(F, Q, H, R, z, smooth)
 
 
-def _kalman_p1(f, q, h, r, z, smooth):
+def _kalman_p1(
+    f: np.ndarray, q: np.ndarray, h: np.ndarray, r: np.ndarray, z: np.ndarray, smooth: bool
+) -> KalmanMarginal:
     T, d = z.shape[-2:]
     hr = h / r  # (..., d)
     hrh = sum(h[..., i] * hr[..., i] for i in range(d))
@@ -153,7 +156,7 @@ def _kalman_p1(f, q, h, r, z, smooth):
     return KalmanMarginal(neg2, mean, var)
 
 
-def _inv(A):
+def _inv(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of (..., 2, 2) matrices in closed form."""
     det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
     out = np.empty(np.shape(A))
@@ -164,7 +167,9 @@ def _inv(A):
     return out, det
 
 
-def _kalman_general(F, Q, H, R, z, smooth):
+def _kalman_general(
+    F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, z: np.ndarray, smooth: bool
+) -> KalmanMarginal:
     p = F.shape[-1]
     if p != 2:
         raise NotImplementedError("the exact marginal is implemented for p = 1 and p = 2")
@@ -382,13 +387,15 @@ def _interior(bounds: PriorBounds) -> np.ndarray:
     )
 
 
-def _logp_u(model, axes, u, z, bounds):
+def _logp_u(
+    model: StateSpaceModel, axes: _Axes, u: np.ndarray, z: np.ndarray, bounds: PriorBounds
+) -> tuple[np.ndarray, np.ndarray]:
     """log density in grid coordinates u (Jacobian included) and log p(Omega|z) itself."""
     lp = log_posterior_omega(model, axes.omega(u), z, bounds)
     return lp + axes.log_jacobian(u), lp
 
 
-def _chunks(K: int, per_traj: int, limit: int):
+def _chunks(K: int, per_traj: int, limit: int) -> Iterator[slice]:
     step = max(1, limit // max(per_traj, 1))
     for s in range(0, K, step):
         yield slice(s, min(K, s + step))
@@ -423,7 +430,9 @@ def _interior_local_maxima(lp: np.ndarray, m: int) -> np.ndarray:
     return out.reshape(K, *lp.shape[1:])
 
 
-def _coarse_search(model, axes, z, bounds, settings):
+def _coarse_search(
+    model: StateSpaceModel, axes: _Axes, z: np.ndarray, bounds: PriorBounds, settings: ExactSettings
+) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``n_starts`` highest interior local maxima of the coarse grid per trajectory
     (K, n_starts, m) (NaN where fewer), and the grid spacing (m,)."""
     m = model.n_params
@@ -435,7 +444,8 @@ def _coarse_search(model, axes, z, bounds, settings):
     starts = np.full((K, ns, m), np.nan)
     for sl in _chunks(K, grid.shape[0] * z.shape[1], settings.chunk_elements * 8):
         _, lp = _logp_u(model, axes, grid[None, :, :], z[sl, None], bounds)  # (Kc, G)
-        lp = lp.reshape((lp.shape[0],) + (n,) * m)
+        # cast: numpy's stubs give reshape() of a tuple[int, ...] a 0-d shape type
+        lp = cast(np.ndarray, lp.reshape((lp.shape[0],) + (n,) * m))
         loc = _interior_local_maxima(lp, m).reshape(lp.shape[0], -1)
         masked = np.where(loc, lp.reshape(lp.shape[0], -1), -np.inf)
         top = np.argsort(-masked, axis=1)[:, :ns]
@@ -445,7 +455,15 @@ def _coarse_search(model, axes, z, bounds, settings):
     return starts, spacing
 
 
-def _modes(model, axes, z, bounds, starts, spacing, settings):
+def _modes(
+    model: StateSpaceModel,
+    axes: _Axes,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    starts: np.ndarray,
+    spacing: np.ndarray,
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Newton from every start; distinct proper local maxima per trajectory.
 
     Returns the highest mode u (K, m) (NaN if none), its Hessian, the number of distinct
@@ -471,11 +489,22 @@ def _modes(model, axes, z, bounds, starts, spacing, settings):
     fbest = np.where(ok, f, -np.inf)
     best = fbest.argmax(1)
     rows = np.arange(K)
-    u_best = np.where(ok.any(1)[:, None], u[rows, best], np.nan)
+    # cast: numpy's stubs type any(axis) as a scalar or an array
+    u_best = np.where(cast(np.ndarray, ok.any(1))[:, None], u[rows, best], np.nan)
     return u_best, H[rows, best], n_distinct, fbest[rows, best]
 
 
-def _valley_limits(model, axes, z, bounds, u, H, slopes, cut, settings):
+def _valley_limits(
+    model: StateSpaceModel,
+    axes: _Axes,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    u: np.ndarray,
+    H: np.ndarray,
+    slopes: tuple[np.ndarray, np.ndarray],
+    cut: tuple[np.ndarray, np.ndarray],
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Box limits that keep the interior mode's basin, and the size of what they cut off.
 
     Toward each boundary flagged in ``cut`` = (cut_lower, cut_upper) (K, m) - where the
@@ -538,7 +567,9 @@ def _valley_limits(model, axes, z, bounds, u, H, slopes, cut, settings):
 
 
 # ====================================================================== step 2: Newton
-def _fd_derivatives(f, u, h):
+def _fd_derivatives(
+    f: Callable[[np.ndarray], np.ndarray], u: np.ndarray, h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Value, gradient and Hessian of f at u (K, m) by central differences with steps h (m,)."""
     K, m = u.shape
     pts = [u]
@@ -570,7 +601,15 @@ def _fd_derivatives(f, u, h):
     return f0, g, H
 
 
-def _newton(model, axes, z, bounds, u0, spacing, settings):
+def _newton(
+    model: StateSpaceModel,
+    axes: _Axes,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    u0: np.ndarray,
+    spacing: np.ndarray,
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Maximise log p(Omega|z) (no Jacobian) over u from u0 (K, m).
 
     Newton steps (gradient steps where the Hessian is not negative definite), at most one
@@ -581,7 +620,7 @@ def _newton(model, axes, z, bounds, u0, spacing, settings):
     K, m = u0.shape
     h = spacing * 1e-3
 
-    def f(points):
+    def f(points: np.ndarray) -> np.ndarray:
         _, lp = _logp_u(model, axes, points, z[:, None], bounds)
         return lp
 
@@ -634,7 +673,17 @@ def _trapezoid_weights(n: int) -> np.ndarray:
     return w
 
 
-def _fine_grid(model, axes, z, bounds, centre, sd, lim_lo, lim_hi, settings):
+def _fine_grid(
+    model: StateSpaceModel,
+    axes: _Axes,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    centre: np.ndarray,
+    sd: np.ndarray,
+    lim_lo: np.ndarray,
+    lim_hi: np.ndarray,
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """log density (Jacobian included) on the per-trajectory boxes centre ± box_sd sd,
     within [lim_lo, lim_hi] (K, m), widened while a face carries non-negligible density."""
     K, m = centre.shape
@@ -686,7 +735,9 @@ def _fine_grid(model, axes, z, bounds, centre, sd, lim_lo, lim_hi, settings):
     return out_lp, lo_box, hi_box, truncated
 
 
-def _marginal_omega(axes, lpu, lo_box, hi_box, settings):
+def _marginal_omega(
+    axes: _Axes, lpu: np.ndarray, lo_box: np.ndarray, hi_box: np.ndarray, settings: ExactSettings
+) -> tuple[np.ndarray, np.ndarray]:
     """Marginal MAP (Omega scale) and 5 %/95 % quantiles of every Omega component."""
     K = lpu.shape[0]
     m = lpu.ndim - 1
@@ -750,7 +801,16 @@ def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 # ====================================================================== step 4: states
-def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
+def _state_mixtures(
+    model: StateSpaceModel,
+    axes: _Axes,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    lpu: np.ndarray,
+    lo_box: np.ndarray,
+    hi_box: np.ndarray,
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray]:
     """Marginal MAP and quantiles of x_0..x_T: mixtures over the thinned Omega grid.
 
     Node g of the thinned grid carries weight w_g ∝ p(Omega_g | z) x (trapezoid weight)
@@ -788,6 +848,7 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
     q = np.empty((K, n_states, len(QUANTILES)))
     for sl in _chunks(K, grid.shape[1] * n_states * 6, settings.chunk_elements):
         km = kalman_marginal(model, axes.omega(grid[sl]), z[sl, None], smooth=True)
+        assert km.mean is not None and km.var is not None  # smooth=True
         kc = km.mean.shape[0]
         mean = km.mean.reshape((kc,) + (ns,) * m + (n_states,))
         var = km.var.reshape(mean.shape)
@@ -814,7 +875,13 @@ def _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings):
     return est, q
 
 
-def _mixture_mode_quantiles(w, mean, sd, settings, sd_mode=None):
+def _mixture_mode_quantiles(
+    w: np.ndarray,
+    mean: np.ndarray,
+    sd: np.ndarray,
+    settings: ExactSettings,
+    sd_mode: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Mode and quantiles of sum_g w_g N(mean_g, sd_g^2) along axis 1.
 
     Weights are sorted (heaviest first); ``sd_mode`` (default ``sd``) are the component

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -12,9 +13,11 @@ from . import io
 
 if TYPE_CHECKING:
     import pandas
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 
-def _plt():
+def _plt() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -25,7 +28,7 @@ def _plt():
     return plt
 
 
-def save_figure(fig, paths: Sequence[str | os.PathLike]) -> None:
+def save_figure(fig: Figure, paths: Sequence[str | os.PathLike]) -> None:
     """Save one figure to several formats atomically (format from each path's suffix).
 
     PDF metadata dates are removed so that reruns give identical bytes.
@@ -38,7 +41,9 @@ def save_figure(fig, paths: Sequence[str | os.PathLike]) -> None:
             fig.savefig(tmp, format=ext, dpi=150, bbox_inches="tight", metadata=meta)
 
 
-def _gauss_contours(ax, mean: np.ndarray, cov: np.ndarray, span: float = 3.2, levels: int = 6):
+def _gauss_contours(
+    ax: Axes, mean: np.ndarray, cov: np.ndarray, span: float = 3.2, levels: int = 6
+) -> None:
     sd = np.sqrt(np.diag(cov))
     gx = np.linspace(mean[0] - span * sd[0], mean[0] + span * sd[0], 200)
     gy = np.linspace(mean[1] - span * sd[1], mean[1] + span * sd[1], 200)

@@ -90,7 +90,7 @@ much -2 pi changed; ``ridge_test`` says which decides (see :class:`JointMapSetti
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -339,7 +339,13 @@ class _ProgressLike(Protocol):
 
 # =========================================================================== Newton direction
 def _damped_newton_direction(
-    A, C, Dd, Dl, g, settings: JointMapSettings, tau_hint: np.ndarray | None = None
+    A: np.ndarray,
+    C: np.ndarray,
+    Dd: np.ndarray,
+    Dl: np.ndarray,
+    g: np.ndarray,
+    settings: JointMapSettings,
+    tau_hint: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Newton direction d = -(H + tau I)^{-1} g with the smallest tried tau making H + tau I PD.
 
@@ -495,7 +501,7 @@ def _optimize(
     tau_last = np.zeros(K)
     eps = np.finfo(float).eps
 
-    def grad_p(g, bg, mu_a):
+    def grad_p(g: np.ndarray, bg: np.ndarray, mu_a: np.ndarray) -> np.ndarray:
         gp = g.copy()
         gp[:, :m] += mu_a[:, None] * bg
         return gp
@@ -593,7 +599,15 @@ def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
-def _classify_chunk(model, z, theta, mu, stop, barrier, settings) -> dict[str, np.ndarray]:
+def _classify_chunk(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    theta: np.ndarray,
+    mu: np.ndarray,
+    stop: np.ndarray,
+    barrier: _Barrier,
+    settings: JointMapSettings,
+) -> dict[str, np.ndarray]:
     """Checks of Sec. III.B for one chunk (ridge re-optimisation included)."""
     K, n = theta.shape
     m = model.n_params
@@ -631,7 +645,7 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings) -> dict[str, n
     reason = np.full(K, "", dtype=object)
     undecided = np.ones(K, dtype=bool)
 
-    def assign(mask, st, why):
+    def assign(mask: np.ndarray, st: str, why: str | Callable[[np.intp], str]) -> None:
         nonlocal undecided
         hit = mask & undecided
         status[hit] = st
@@ -710,7 +724,13 @@ def _classify_chunk(model, z, theta, mu, stop, barrier, settings) -> dict[str, n
 
 
 def _ridge_check(
-    model, z, theta, f_hat, v, barrier, settings
+    model: StateSpaceModel,
+    z: np.ndarray,
+    theta: np.ndarray,
+    f_hat: np.ndarray,
+    v: np.ndarray,
+    barrier: _Barrier,
+    settings: JointMapSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Re-optimise from Theta_hat + h v (or - h v if that leaves the support).
 

@@ -6,6 +6,7 @@ import logging
 import sys
 import time
 from pathlib import Path
+from types import TracebackType
 
 LOGGER_NAME = "ssmobs"
 
@@ -28,7 +29,7 @@ def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logg
     for noisy in ("matplotlib", "h5py", "asyncio", "httpstan", "aiohttp", "PIL"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
 
-    def _hook(exc_type, exc, tb):
+    def _hook(exc_type: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
         logging.getLogger(LOGGER_NAME).error("uncaught exception", exc_info=(exc_type, exc, tb))
         sys.__excepthook__(exc_type, exc, tb)
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+import numpy.typing as npt
 import sympy as sp
 
 #: prior variants for a parameter Omega_i (Sec. II.A Example 1 and Sec. IV.E):
@@ -62,7 +63,7 @@ class PriorBounds:
         return np.all((omega > self.lower) & (omega < self.upper), axis=-1)
 
 
-def ar1_states(coef: np.ndarray | float, x0: np.ndarray, eta: np.ndarray) -> np.ndarray:
+def ar1_states(coef: npt.ArrayLike, x0: np.ndarray, eta: np.ndarray) -> np.ndarray:
     """States of X_t = c X_{t-1} + sqrt(1 - c^2) eta_t (component-wise c), t = 1..T.
 
     ``coef`` is a scalar or (p,), ``x0`` (p,), ``eta`` (K, T, p); returns (K, T, p).

@@ -9,6 +9,8 @@ The paper gives no true values for this model; the configs choose a^2 + b^2 < 1.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import sympy as sp
 
@@ -27,16 +29,20 @@ class SepD1P2(StateSpaceModel):
     constraint_text = ("a^2 + b^2 < 1",)
     linear_in_states = True
 
-    def support_constraints(self, omega):
+    def support_constraints(self, omega: Sequence[sp.Symbol]) -> list[sp.Expr]:
         a, b = omega[0], omega[1]
         return [1 - a**2 - b**2]
 
-    def obs_term(self, omega, x, z):
+    def obs_term(
+        self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol], z: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         (a, b, _, _), (x1, x2), (zt,) = omega, x, z
         s2 = 1 - a**2 - b**2
         return (zt - a * x1 - b * x2) ** 2 / s2 + sp.log(s2)
 
-    def trans_term(self, omega, x_prev, x):
+    def trans_term(
+        self, omega: Sequence[sp.Symbol], x_prev: Sequence[sp.Symbol], x: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         (_, _, c, d), (p1, p2), (x1, x2) = omega, x_prev, x
         return (
             (x1 - c * p1) ** 2 / (1 - c**2)
@@ -45,7 +51,7 @@ class SepD1P2(StateSpaceModel):
             + sp.log(1 - d**2)
         )
 
-    def initial_states(self, omega, z):
+    def initial_states(self, omega: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Start of x_1..x_T for the joint MAP (Sec. III.B) when d = 1 < p = 2.
 
         The paper's start "x_t = z_t" needs d == p; here both state components start at the
@@ -56,7 +62,9 @@ class SepD1P2(StateSpaceModel):
         z = np.asarray(z, dtype=float)
         return np.repeat(z, 2, axis=2)
 
-    def state_space_matrices(self, omega):
+    def state_space_matrices(
+        self, omega: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         omega = np.asarray(omega, dtype=float)
         a, b, c, d = (omega[..., i] for i in range(4))
         zero = np.zeros_like(c)
@@ -65,7 +73,9 @@ class SepD1P2(StateSpaceModel):
         H = np.stack([a, b], axis=-1)[..., None, :]
         return F, Q, H, (1 - a**2 - b**2)[..., None]
 
-    def simulate(self, omega, x0, eta, eps):
+    def simulate(
+        self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray, eps: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         a, b, c, d = omega
         x = ar1_states([c, d], x0, eta)
         z = (a * x[:, :, :1] + b * x[:, :, 1:]) + np.sqrt(1 - a**2 - b**2) * eps

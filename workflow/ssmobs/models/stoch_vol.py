@@ -17,6 +17,8 @@ Sec. IV.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import sympy as sp
 
@@ -37,18 +39,22 @@ class StochVol(StateSpaceModel):
     #: fixed level mu of the log-variance (see the module docstring)
     mu: float = 0.0
 
-    def obs_term(self, omega, x, z):
+    def obs_term(
+        self, omega: Sequence[sp.Symbol], x: Sequence[sp.Symbol], z: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         # z_t | x_t ~ N(0, exp(x_t)): -2 log f = z_t^2 exp(-x_t) + x_t + const
         (_, _), (xt,), (zt,) = omega, x, z
         return zt**2 * sp.exp(-xt) + xt
 
-    def trans_term(self, omega, x_prev, x):
+    def trans_term(
+        self, omega: Sequence[sp.Symbol], x_prev: Sequence[sp.Symbol], x: Sequence[sp.Symbol]
+    ) -> sp.Expr:
         # x_t | x_{t-1} ~ N(mu + phi (x_{t-1} - mu), sigma^2)
         (phi, sigma), (xp,), (xt,) = omega, x_prev, x
         mean = self.mu + phi * (xp - self.mu)
         return (xt - mean) ** 2 / sigma**2 + 2 * sp.log(sigma)
 
-    def initial_states(self, omega, z):
+    def initial_states(self, omega: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Start of x_1..x_T for the joint MAP (Sec. III.B): here z_t is a return, not a
         noisy state, so the paper's start x_t = z_t does not apply.  Every state starts at
         x_t = log(mean_t z_t^2), the log-variance of the whole trajectory (data only, like
@@ -57,7 +63,9 @@ class StochVol(StateSpaceModel):
         level = np.log(np.mean(z**2, axis=1, keepdims=True))
         return np.broadcast_to(level, z.shape).copy()
 
-    def simulate(self, omega, x0, eta, eps):
+    def simulate(
+        self, omega: np.ndarray, x0: np.ndarray, eta: np.ndarray, eps: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         phi, sigma = omega
         K, T, _ = eta.shape
         x = np.empty((K, T, 1))
