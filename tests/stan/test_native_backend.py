@@ -26,7 +26,7 @@ from ssmobs.stan_backends import (
     stan_file,
 )
 from ssmobs.stan_backends import native as native_mod
-from ssmobs.stan_backends.native import NativeBackend, columns_to_draws
+from ssmobs.stan_backends.native import LogDensities, NativeBackend, columns_to_draws
 from test_backends import _data  # the same small data sets as the other backend tests
 
 pytestmark = pytest.mark.stan
@@ -177,6 +177,37 @@ def test_missing_library_fails_the_job_not_the_trajectory(tmp_path):
             records_dir=records,
         )
     assert not record_path(records, 0).exists()
+
+
+def test_log_density_output_parsed():
+    text = (
+        "param a\nparam x 3 2\nok -1.5 0.25 -2\nrejected lub_free: a is 2, but must be in [0, 1]\n"
+        "ok -inf 0\n"
+    )
+    out = LogDensities.parse(text)
+    assert out.param_names == ["a", "x"] and out.dims == [[], [3, 2]]
+    assert out.values == [-1.5, None, None]
+    assert out.gradients[0] == [0.25, -2.0] and out.gradients[1] is None
+    assert out.messages[1].startswith("lub_free: a is 2")
+    with pytest.raises(BackendError, match="unexpected line"):
+        LogDensities.parse("nonsense\n")
+
+
+def test_log_density_mode_rejects_points_outside_and_keeps_constants(native, tmp_path):
+    data = _data("same", {"a": 0.5}, T=6)
+    model = get_model("same")
+    point = {"a": 0.5, "x0": 8.0, "x": [1.0] * 6}
+    out = native.log_density(stan_file("same"), data, [point, {**point, "a": 1.5}])
+    assert out.param_names == ["a", "x0", "x"] and out.dims == [[], [], [6]]
+    assert out.values[1] is None and "a" in out.messages[1]
+    theta = np.array([0.5, 8.0] + [1.0] * 6)
+    bounds = model.prior_bounds({"a": 0.5})
+    from ssmobs.models.log_posterior import log_posterior
+
+    z = np.asarray(data["z"], dtype=float).reshape(6, 1)
+    py = float(log_posterior(model, theta, z, bounds))
+    # Stan keeps every normal's constant: 2 T of them, -log(2 pi) / 2 each
+    assert out.values[0] - py == pytest.approx(-6 * math.log(2 * math.pi), abs=1e-9)
 
 
 def test_columns_to_draws_column_major():

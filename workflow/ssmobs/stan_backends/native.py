@@ -12,7 +12,10 @@ Why
 Compiling
     :meth:`NativeBackend.compile` runs ``stanc`` and ``g++`` once per :func:`build_key`
     into ``<cache_root>/native/<slug>-<key>/`` (:mod:`.cache`), under an exclusive lock, in a
-    temporary directory renamed into place when complete.  A stanc or compiler error raises
+    temporary directory renamed into place when complete.  The driver is compiled once into
+    an object file of its own (:func:`driver_object`, ``<cache_root>/native/driver-<key>/``)
+    and linked with each program's object file, so a program costs one compile of the
+    stanc-generated C++ only (as CmdStan's ``main.o``).  A stanc or compiler error raises
     RuntimeError with the tool's own message; nothing is written into the repository.
 
 Cached programs are self-contained
@@ -103,6 +106,8 @@ LDFLAGS: tuple[str, ...] = ("-Wl,--enable-new-dtags", "-Wl,-rpath,$ORIGIN")
 RUNTIME_LIBS: tuple[str, ...] = ("libtbb.so.2",)
 #: the executable's name in a cache entry
 EXE_NAME = "driver"
+#: the driver's object file in its own cache entry (:func:`driver_object`)
+DRIVER_OBJECT = "driver.o"
 #: binary draws file: magic bytes, then uint32 header length (little-endian)
 MAGIC = b"SSMOBSD1"
 #: the fields of the draws file's header, all required
@@ -183,12 +188,62 @@ def build_key(code: str) -> dict[str, str]:
     """
     return {
         "program": content_key({"code": code}),
+        "objects": "driver.o + model.o",
         "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
         "stan": stan_version(),
         "httpstan": httpstan_version(),
         "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + LDFLAGS),
         "runtime_libs": ",".join(RUNTIME_LIBS),
     }
+
+
+def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
+    """Run the C++ compiler; RuntimeError with its error lines when it fails or cannot run."""
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as err:
+        raise RuntimeError(
+            f"compiling {what} failed: cannot run the C++ compiler {compiler()!r}: {err}"
+        ) from err
+    if out.returncode != 0:
+        errors = [ln for ln in out.stderr.splitlines() if "error" in ln]
+        raise RuntimeError(
+            f"compiling {what} failed ({compiler()} exit {out.returncode}):\n"
+            + "\n".join(errors[:20] or [tail(out.stderr)])
+        )
+    return out
+
+
+def _compile_flags() -> list[str]:
+    return [*CXXFLAGS, *("-D" + d for d in DEFINES), f"-I{httpstan_dir() / 'include'}"]
+
+
+def driver_object() -> Path:
+    """The driver compiled once into ``driver.o`` (cached, keyed by the driver's source, the
+    Stan version and the flags); every program's executable links it."""
+    parts = {
+        "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
+        "stan": stan_version(),
+        "httpstan": httpstan_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
+    }
+    cache_dir = cache_root() / "native" / f"driver-{content_key(parts)}"
+    if not entry_complete(cache_dir, DRIVER_OBJECT):
+        with build_lock(cache_dir):
+            if not entry_complete(cache_dir, DRIVER_OBJECT):
+                work = new_build_dir(cache_dir)
+                try:
+                    t0 = time.perf_counter()
+                    LOG.info("compiling the native driver once into %s", cache_dir)
+                    cmd = [compiler(), *_compile_flags(), "-c", str(DRIVER_SOURCE)]
+                    cmd += ["-o", str(work / DRIVER_OBJECT)]
+                    cxx_version = compiler_version()
+                    log_captured("compiler for driver.cpp", run_compiler(cmd, "driver.cpp").stderr)
+                    publish_entry(work, cache_dir, {**parts, "compiler_version": cxx_version})
+                    LOG.info("compiled the native driver in %.1f s", time.perf_counter() - t0)
+                finally:
+                    shutil.rmtree(work, ignore_errors=True)
+    return cache_dir / DRIVER_OBJECT
 
 
 def read_draws_file(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
@@ -481,33 +536,15 @@ class NativeBackend:
                 raise RuntimeError(f"stanc rejected {path}:\n{msg.strip()}")
             log_captured(f"stanc warnings for {path.name}", stanc.stderr)
             cxx_version = compiler_version()  # BackendError when there is no compiler
+            driver_o = driver_object()
             exe = work / EXE_NAME
-            cmd = [
-                compiler(),
-                *CXXFLAGS,
-                *("-D" + d for d in DEFINES),
-                f'-DSSMOBS_MODEL_HPP="{work / "model.hpp"}"',
-                f"-I{hdir / 'include'}",
-                "-o",
-                str(exe),
-                str(DRIVER_SOURCE),
-                f"-L{hdir / 'lib'}",
-                "-ltbb",
-                *LDFLAGS,
-            ]
-            try:
-                cxx = subprocess.run(cmd, capture_output=True, text=True)
-            except OSError as err:
-                raise RuntimeError(
-                    f"compiling {path} failed: cannot run the C++ compiler {compiler()!r}: {err}"
-                ) from err
-            if cxx.returncode != 0:
-                errors = [ln for ln in cxx.stderr.splitlines() if "error" in ln]
-                raise RuntimeError(
-                    f"compiling {path} failed ({compiler()} exit "
-                    f"{cxx.returncode}):\n" + "\n".join(errors[:20] or [tail(cxx.stderr)])
-                )
-            log_captured(f"compiler for {path.name}", cxx.stderr)
+            model_cmd = [compiler(), *_compile_flags(), "-x", "c++", "-c"]
+            model_cmd += [str(work / "model.hpp"), "-o", str(work / "model.o")]
+            log_captured(f"compiler for {path.name}", run_compiler(model_cmd, str(path)).stderr)
+            link_cmd = [compiler(), str(driver_o), str(work / "model.o"), "-o", str(exe)]
+            link_cmd += [f"-L{hdir / 'lib'}", "-ltbb", *LDFLAGS]
+            log_captured(f"linker for {path.name}", run_compiler(link_cmd, str(path)).stderr)
+            (work / "model.o").unlink()
             for lib in RUNTIME_LIBS:
                 shutil.copyfile(hdir / "lib" / lib, work / lib)
                 (work / lib).chmod(shared_mode())
@@ -521,7 +558,7 @@ class NativeBackend:
                     "compiler_version": cxx_version,
                     "compiler_path": shutil.which(compiler()),
                     "stan_file": str(path),
-                    "command": cmd,
+                    "command": [model_cmd, link_cmd],
                 },
             )
             LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)

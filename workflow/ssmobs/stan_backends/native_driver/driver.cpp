@@ -2,8 +2,8 @@
 // data set, with the same service call and arguments as CmdStan and PyStan, and writes
 // the post-warmup draws in a binary layout NumPy reads without parsing.
 //
-// Compiled together with a stanc-generated model (included as SSMOBS_MODEL_HPP) by
-// ssmobs.stan_backends.native.  Usage:
+// Compiled once into an object file and linked with each stanc-generated model's own
+// object file (which defines new_model) by ssmobs.stan_backends.native.  Usage:
 //
 //   driver --data data.json --output draws.bin --seed S --chains C --warmup W
 //          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
@@ -31,8 +31,7 @@
 // valid Stan JSON (an environment failure, not a property of the data); 7 the parent
 // given by --parent-pid was already gone.
 
-#include SSMOBS_MODEL_HPP
-
+#include <stan/model/model_base.hpp>
 #include <stan/callbacks/interrupt.hpp>
 #include <stan/callbacks/logger.hpp>
 #include <stan/callbacks/writer.hpp>
@@ -63,6 +62,10 @@
 #include <sys/prctl.h>
 #include <unistd.h>
 #endif
+
+// Defined by the stanc-generated model (its own translation unit).
+stan::model::model_base& new_model(stan::io::var_context& data_context, unsigned int seed,
+                                   std::ostream* msg_stream);
 
 static_assert(std::numeric_limits<double>::is_iec559 && sizeof(double) == 8,
               "the draws file holds IEEE-754 binary64 values");
