@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint docs test smoke paper tables section4 clean
+.PHONY: setup run lint docs test test-slow smoke paper tables section4 clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,8 +43,13 @@ docs: setup
 	$(BIN)/python -m ssmobs.config_reference --check
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
+# `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
+# damage tests, the cluster runs); `make test-slow` runs those (CI runs both).
 test: setup lint
-	$(BIN)/pytest
+	$(BIN)/pytest -m "not slow"
+
+test-slow: setup
+	$(BIN)/pytest -m slow
 
 smoke: setup
 	$(PREFLIGHT) config/smoke.yaml
