@@ -470,3 +470,57 @@ def test_thresholds_are_applied_to_stored_diagnostics_with_the_failing_block(sce
     loose = apply_thresholds(strict, ConvergenceSettings(ess_bulk_min=1.0, ess_tail_min=1.0))
     assert loose["converged"].all() and set(loose["failing_blocks"]) == {""}
     assert set(loose["reason"]) == {""}
+
+
+class _Sampled(Exception):
+    """Raised by the stub of run_trajectories: the job got as far as sampling."""
+
+
+def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path, monkeypatch):
+    """A killed sample_nuts job leaves temporaries of single records and draws in the folders
+    all batches share; the next job of that batch removes its own, not other batches'."""
+    import ssmobs.nuts_stage
+    from ssmobs.scenario import Scenario
+    from ssmobs.stages.stan import run_sample_batch
+    from ssmobs.trajectories import make_trajectories, write_trajectories
+
+    sc = Scenario.from_config(
+        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 3, "K": 4}
+    )
+    write_trajectories(tmp_path / "t.nc", make_trajectories(sc, np.zeros((6, 4))))
+    (tmp_path / "marker.json").write_text(json.dumps({"backend": "native"}))
+    records, draws = tmp_path / "records", tmp_path / "draws"
+    records.mkdir()
+    draws.mkdir()
+    ours = [records / ".k00002.json.abcd1234.json", draws / ".k00003.nc.abcd1234.nc"]
+    other = records / ".k00000.json.abcd1234.json"  # batch 0's: its job may be running
+    for path in [*ours, other]:
+        path.write_text("half written")
+
+    def stub(*args, **kwargs):
+        raise _Sampled
+
+    monkeypatch.setattr(ssmobs.nuts_stage, "run_trajectories", stub)
+    stan_cfg = {
+        "batch_size": 2,
+        "keep_draws": [],
+        "chains": 1,
+        "iter_warmup": 10,
+        "iter_sampling": 10,
+        "adapt_delta": 0.8,
+        "max_treedepth": 10,
+    }
+    with pytest.raises(_Sampled):
+        run_sample_batch(
+            tmp_path / "t.nc",
+            tmp_path / "marker.json",
+            sc,
+            stan_cfg,
+            {},
+            1,
+            records,
+            draws,
+            tmp_path / "batch1.parquet",
+        )
+    assert not any(p.exists() for p in ours)
+    assert other.exists()

@@ -67,6 +67,7 @@ def run_sample_batch(
     """
     from ..convergence import ConvergenceSettings, apply_thresholds
     from ..nuts_stage import records_to_frame, run_trajectories
+    from ..record_cache import draws_path, record_path
     from ..stan_backends import get_backend, stan_file
     from ..trajectories import read_trajectories
 
@@ -74,6 +75,10 @@ def run_sample_batch(
     model = traj.model
     backend_name = io.read_json(marker, required=["backend"])["backend"]
     ks = list(batches(traj.K, scenario.batch_size(stan_cfg))[batch])
+    # the shared folders' files of this batch: no other job writes them
+    io.sweep_temporaries(
+        [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
+    )
     bounds = model.prior_bounds(traj.omega, scenario.prior)
     progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
     records = run_trajectories(
