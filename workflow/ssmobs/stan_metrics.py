@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .estimator_moments import estimator_moments
+
 if TYPE_CHECKING:
     from .models.base import StateSpaceModel
 
@@ -92,12 +94,8 @@ def stan_summary(
         est = _col(frame, f"{name}_map")[conv]
         q5 = _col(frame, f"{name}_q5")[conv]
         q95 = _col(frame, f"{name}_q95")[conv]
-        mean = _mean(est)
         out[f"{name}_true"] = float(truth)
-        out[f"{name}_mean"] = mean
-        out[f"{name}_var"] = float(np.var(est, ddof=1)) if est.size > 1 else math.nan
-        out[f"{name}_bias"] = mean - float(truth)
-        out[f"{name}_mse"] = _mean((est - truth) ** 2)
+        out.update({f"{name}_{s}": v for s, v in estimator_moments(est, truth).items()})
         out[f"{name}_cover90"] = _mean(((q5 < truth) & (truth < q95)).astype(float))
 
     # states x_1..x_T: names[m + p:] are time-major (t = 1..T, component i = 1..p)
