@@ -25,6 +25,7 @@ rule ``check_model`` runs it for every model a config uses, before any design tr
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 import sys
@@ -229,6 +230,7 @@ def python_problems(
 
 
 # ---------------------------------------------------------------------- 1b. simulate vs terms
+@functools.cache
 def _whitening_functions(model: StateSpaceModel) -> tuple[Any, Any]:
     """Lambdified gradient and Hessian of the observation term in z_t and of the
     transition term in x_t (each Gaussian, Eq. (1)): for a term (v - m)' S^-1 (v - m) +

@@ -197,6 +197,11 @@ def build_key(code: str) -> dict[str, str]:
     }
 
 
+def write_json_file(path: Path, obj: Mapping[str, Any]) -> None:
+    """A data, init or point file in Stan's JSON (NumPy values converted)."""
+    path.write_text(json.dumps(dict(obj), default=json_default))
+
+
 def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     """Run the C++ compiler; RuntimeError with its error lines when it fails or cannot run."""
     try:
@@ -565,6 +570,21 @@ class NativeBackend:
         finally:
             shutil.rmtree(work, ignore_errors=True)
 
+    @contextlib.contextmanager
+    def _run_dir(self, data: Mapping[str, Any]) -> Iterator[Path]:
+        """A temporary directory holding ``data.json`` for one driver call, removed after
+        it (and, on first use, the directories of killed earlier processes swept)."""
+        if not self._swept:
+            sweep_stale(self.tmp_root, TMP_PREFIX)
+            self._swept = True
+        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
+        try:
+            write_json_file(tmp / "data.json", data)
+            yield tmp
+        finally:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(tmp)
+
     # ------------------------------------------------------------------ log density
     def log_density(
         self, stan_file: str | os.PathLike, data: Mapping[str, Any], points: list[dict]
@@ -575,12 +595,10 @@ class NativeBackend:
         the model check.  ValueError when the data are rejected; BackendError otherwise."""
         marker = self.compile(stan_file)
         label = Path(marker["stan_file"]).name
-        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
-        try:
-            (tmp / "data.json").write_text(json.dumps(dict(data), default=json_default))
+        with self._run_dir(data) as tmp:
             cmd = [marker["exe_file"], "--log-density", "--data", str(tmp / "data.json")]
             for i, point in enumerate(points):
-                (tmp / f"point{i}.json").write_text(json.dumps(dict(point), default=json_default))
+                write_json_file(tmp / f"point{i}.json", point)
                 cmd += ["--init", str(tmp / f"point{i}.json")]
             cmd += ["--output", str(tmp / "values.txt"), "--parent-pid", str(os.getpid())]
             try:
@@ -595,9 +613,6 @@ class NativeBackend:
                     f"{returncode}):\n{tail(output)}"
                 )
             return LogDensities.parse((tmp / "values.txt").read_text())
-        finally:
-            with contextlib.suppress(OSError):
-                shutil.rmtree(tmp)
 
     # ------------------------------------------------------------------ sample
     def sample(
@@ -631,13 +646,8 @@ class NativeBackend:
         check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
         label = Path(marker["stan_file"]).name
-        if not self._swept:
-            sweep_stale(self.tmp_root, TMP_PREFIX)
-            self._swept = True
-        tmp = Path(tempfile.mkdtemp(prefix=owned_tempdir_name(TMP_PREFIX), dir=self.tmp_root))
-        try:
+        with self._run_dir(data) as tmp:
             data_file = tmp / "data.json"
-            data_file.write_text(json.dumps(dict(data), default=json_default))
             cmd = [
                 marker["exe_file"],
                 "--data",
@@ -661,7 +671,7 @@ class NativeBackend:
             ]
             for c, init in enumerate(inits or []):
                 init_file = tmp / f"init{c + 1}.json"
-                init_file.write_text(json.dumps(dict(init), default=json_default))
+                write_json_file(init_file, init)
                 cmd += ["--init", str(init_file)]
             out_file = tmp / "draws.bin"
             cmd += ["--discard"] if self.discard else ["--output", str(out_file)]
@@ -710,9 +720,6 @@ class NativeBackend:
             else:
                 draws = columns_to_draws(*read_draws_file(out_file))
             t_convert = time.perf_counter() - t0
-        finally:
-            with contextlib.suppress(OSError):
-                shutil.rmtree(tmp)
         draws.timings = {
             "sample": t_sample,
             "sample_cpu": cpu,
