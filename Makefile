@@ -44,7 +44,7 @@ docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
-# damage tests, the cluster runs); `make test-slow` runs those (CI runs both).
+# damage tests, the cluster runs, the PyStan smoke run); `make test-slow` runs those (CI runs both).
 test: setup lint
 	$(BIN)/pytest -m "not slow"
 

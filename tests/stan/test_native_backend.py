@@ -26,7 +26,8 @@ from ssmobs.stan_backends import (
     stan_file,
 )
 from ssmobs.stan_backends import native as native_mod
-from ssmobs.stan_backends.native import LogDensities, NativeBackend, columns_to_draws
+from ssmobs.stan_backends.cache import BUILD_RECORD
+from ssmobs.stan_backends.native import EXE_NAME, LogDensities, NativeBackend, columns_to_draws
 from test_backends import _data  # the same small data sets as the other backend tests
 
 pytestmark = pytest.mark.stan
@@ -119,9 +120,23 @@ def test_cache_keyed_by_program_not_environment(native, tmp_path, monkeypatch):
     assert NativeBackend().compile(copy)["cache_dir"] == marker["cache_dir"]
     copy.write_text(stan_file("same").read_text() + "\n// changed\n")
     monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "cache"))
+    # the build itself is tested on a fresh cache in test_native_cache.py; here only
+    # which entry a changed program is built into (a recording build saves a compile)
+    built: list[Path] = []
+
+    def record_build(path: Path, code: str, cache_dir: Path, parts: dict) -> None:
+        built.append(cache_dir)
+        cache_dir.mkdir(parents=True)
+        for name in (BUILD_RECORD, EXE_NAME):
+            (cache_dir / name).write_text("{}")
+
+    monkeypatch.setattr(NativeBackend, "_build", staticmethod(record_build))
     other = NativeBackend().compile(copy)
+    assert built == [Path(other["cache_dir"])]
     assert other["cache_dir"].startswith(str(tmp_path / "cache"))
+    assert other["cache_dir"] != marker["cache_dir"]
     assert other["program_sha256"] != marker["program_sha256"]
+    assert NativeBackend().compile(copy) == other and len(built) == 1  # found, not rebuilt
 
 
 def test_initialisation_failure_is_a_sampling_error(native):

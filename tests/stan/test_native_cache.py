@@ -48,6 +48,10 @@ def orphan_entry(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     for lib in (real / "lib").glob("*.so*"):
         shutil.copy2(lib, fake / "lib" / lib.name)
     cache = root / "cache"
+    # the driver object is a build input shared by every program, not part of an entry:
+    # copied from the user's cache it saves a compile of the driver (same sources, flags)
+    driver = native_mod.driver_object().parent
+    shutil.copytree(driver, cache / "native" / driver.name)
     mp = pytest.MonkeyPatch()
     mp.setenv("SSMOBS_CACHE", str(cache))
     mp.setattr(native_mod, "httpstan_dir", lambda: fake)

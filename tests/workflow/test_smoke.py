@@ -85,6 +85,7 @@ def test_bad_config_stops_before_any_work(tmp_path):
 
 
 @pytest.mark.stan
+@pytest.mark.slow  # a PyStan build and a second smoke run: about 2 minutes
 def test_pystan_backend_gives_the_same_tables(smoke_run, tmp_path):
     """The smoke workflow on PyStan reproduces the native backend's tables byte for byte
     (the backends give identical draws), and every record is recomputed for it."""
