@@ -212,6 +212,17 @@ def test_thresholds_key_the_tables_not_the_records():
     assert a.gather("same_T4", 4) != b.gather("same_T4", 4)
 
 
+def test_exact_settings_key_the_exact_stage_only():
+    base = smoke()
+    edited = copy.deepcopy(base)
+    edited["exact_marginal"]["coarse_nodes"] = [200, 48, 16, 9]
+    a, b = keys(base), keys(edited)
+    assert a.exact("same_T4", 30) != b.exact("same_T4", 30)
+    assert a.trajectories("same_T4", 30) == b.trajectories("same_T4", 30)
+    assert a.joint_map("same_T4") == b.joint_map("same_T4")
+    assert a.nuts_records("same_T4") == b.nuts_records("same_T4")
+
+
 def test_exact_key_knows_its_K():
     k = keys(smoke())
     key = k.exact("same_T4", 30)

@@ -167,7 +167,16 @@ def full_config() -> dict:
     """base() with every optional section present, so each number key has a place to go."""
     c = base()
     c["k_selection"] = [{"name": "k", "scenario": "s", "K_grid": [10, 20]}]
-    for section in ("figure2", "figure4", "design", "joint_map", "stan", "convergence", "limits"):
+    sections = (
+        "figure2",
+        "figure4",
+        "design",
+        "joint_map",
+        "stan",
+        "convergence",
+        "exact_marginal",
+    )
+    for section in (*sections, "limits"):
         c[section] = {}
     return c
 

@@ -11,9 +11,9 @@ from ssmobs.exact_marginal import (
     boundary_slopes,
     exact_marginal,
     improper,
-    kalman_marginal,
     log_posterior_omega,
 )
+from ssmobs.kalman_filter import kalman_marginal
 from ssmobs.models import MODELS, get_model
 from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories
@@ -288,11 +288,7 @@ def test_sep_d1_p2_is_not_uniquely_identified():
         kalman_marginal(model, swapped, z).neg2_loglik, rel=1e-12
     )
     bounds = model.prior_bounds(traj.omega, "restricted")
-    settings = ExactSettings(
-        coarse_nodes={1: 400, 2: 48, 3: 16, 4: 7},
-        state_nodes={1: 41, 2: 21, 3: 11, 4: 4},
-        state_thin={1: 10, 2: 3, 3: 2, 4: 2},
-    )
+    settings = ExactSettings(coarse_nodes=(400, 48, 16, 7), state_nodes=(41, 21, 11, 4))
     res = exact_marginal(model, traj.z, bounds, settings)
     assert not (res.maxima == "unique").any()
 

@@ -1,6 +1,6 @@
 """Settings defined once: every key of a config block that has a settings dataclass is a
 field of it with the same default, type and allowed values (workflow/schemas/config.schema.yaml
-against JointMapSettings, SamplerSettings and ConvergenceSettings)."""
+against JointMapSettings, SamplerSettings, ConvergenceSettings and ExactSettings)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from ssmobs import config as cfg
 from ssmobs.cache_keys import SAMPLER_FIELDS
 from ssmobs.convergence import ConvergenceSettings
+from ssmobs.exact_marginal import ExactSettings
 from ssmobs.joint_map import JointMapSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends.base import SamplerSettings
@@ -31,9 +32,10 @@ BLOCKS: dict[str, tuple[type, dict[str, str]]] = {
         },
     ),
     "convergence": (ConvergenceSettings, {}),
+    "exact_marginal": (ExactSettings, {}),
 }
 #: JSON schema type -> the annotation of the dataclass field
-TYPES = {"integer": "int", "number": "float", "string": "str", "boolean": "bool"}
+TYPES = {"integer": "int", "number": "float", "string": "str", "boolean": "bool", "array": "tuple"}
 
 
 def _fields(cls: type) -> dict[str, dataclasses.Field]:
@@ -42,8 +44,8 @@ def _fields(cls: type) -> dict[str, dataclasses.Field]:
 
 def _settings(block: str, values: dict[str, Any]) -> Any:
     cls = BLOCKS[block][0]
-    if cls is JointMapSettings:
-        return JointMapSettings.from_mapping(values)
+    if cls in (JointMapSettings, ExactSettings):
+        return cls.from_mapping(values)
     return cls(**values)
 
 
@@ -61,7 +63,8 @@ def test_every_schema_key_is_a_field_with_the_same_default_and_type(block):
     for key, spec in _keys(block).items():
         assert key in fields, f"{block}.{key} is in the schema but not a field of {cls.__name__}"
         field = fields[key]
-        assert spec["default"] == field.default, (
+        default = tuple(spec["default"]) if spec["type"] == "array" else spec["default"]
+        assert default == field.default, (
             f"{block}.{key}: schema default {spec['default']!r}, "
             f"{cls.__name__}.{key} default {field.default!r}"
         )
@@ -103,6 +106,26 @@ def test_the_default_config_gives_the_default_settings():
     assert JointMapSettings.from_mapping(conf["joint_map"]) == JointMapSettings()
     assert ConvergenceSettings(**conf["convergence"]) == ConvergenceSettings()
     assert sampler_settings(conf["stan"]) == SamplerSettings()
+    assert ExactSettings.from_mapping(conf["exact_marginal"]) == ExactSettings()
+
+
+def test_the_exact_settings_from_a_config_block_are_the_values_written():
+    scenario = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+    conf = cfg.validate(
+        {
+            "scenarios": [scenario],
+            "exact_marginal": {"coarse_nodes": [100, 20, 10, 5], "box_sd": 5.0},
+        }
+    )
+    settings = ExactSettings.from_mapping(conf["exact_marginal"])
+    assert settings.coarse(1) == 100 and settings.coarse(4) == 5
+    assert settings.box_sd == 5.0 and settings.face_drop == ExactSettings().face_drop
+    short = {"scenarios": [scenario], "exact_marginal": {"coarse_nodes": [9, 9, 9]}}
+    with pytest.raises(cfg.ConfigError, match="coarse_nodes"):
+        cfg.validate(short)
+    upside_down = {"scenarios": [scenario], "exact_marginal": {"half_line_range": [10.0, 0.1]}}
+    with pytest.raises(cfg.ConfigError, match=r"half_line_range = \[10.0, 0.1\]: the lower"):
+        cfg.validate(upside_down)
 
 
 def test_the_scenario_start_of_the_joint_map_is_the_settings_start():

@@ -23,5 +23,6 @@ rule exact_marginal:
         runtime=60,
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
+        settings=config["exact_marginal"],
     script:
         "../scripts/exact_marginal.py"

@@ -9,6 +9,7 @@ io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 run_exact_marginal(
     snakemake.input.trajectories,
     Scenario.from_config(snakemake.params.scenario),
+    snakemake.params.settings,
     snakemake.output.table,
     snakemake.output.summary,
 )

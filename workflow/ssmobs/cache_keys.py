@@ -434,6 +434,7 @@ class CacheKeys:
         payload = {
             "trajectories": self.trajectories(name, K),
             "prior": sc.get("prior"),
+            "settings": self.config["exact_marginal"],
             "code": self.code("exact"),
         }
         return self._key("exact", name, payload, K=int(K))

@@ -693,6 +693,16 @@ def _backend_problems(config: dict) -> list[str]:
     return []
 
 
+def _exact_settings_problems(config: dict[str, Any]) -> list[str]:
+    """What the exact_marginal block's schema cannot say: its range is an interval."""
+    lo, hi = config["exact_marginal"]["half_line_range"]
+    if lo < hi:
+        return []
+    return [
+        f"exact_marginal.half_line_range = [{lo!r}, {hi!r}]: the lower end must be below the upper"
+    ]
+
+
 def validate(config: dict[str, Any]) -> dict[str, Any]:
     """Fill schema defaults into ``config`` (in place) and check it.
 
@@ -713,7 +723,11 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     explicit_exact = frozenset(_explicit_exact(config))
     problems = _nonfinite_problems(config) or schema_problems(config, schema)
     if not problems:
-        problems = _scenario_problems(config, explicit_exact) + _backend_problems(config)
+        problems = (
+            _scenario_problems(config, explicit_exact)
+            + _backend_problems(config)
+            + _exact_settings_problems(config)
+        )
     if not problems:
         from . import budget
 

@@ -109,9 +109,14 @@ def allowed(schema: Mapping[str, Any]) -> list[str]:
             parts.append(f"{sign} {_value(schema[word])}")
     if "pattern" in schema:
         parts.append(f"matches `{schema['pattern']}`")
-    if "minItems" in schema:
-        n = schema["minItems"]
-        parts.append(f"at least {n} item{'s' if n != 1 else ''}")
+    lo, hi = schema.get("minItems"), schema.get("maxItems")
+    if lo is not None and lo == hi:
+        parts.append(f"exactly {lo} item{'s' if lo != 1 else ''}")
+    else:
+        if lo is not None:
+            parts.append(f"at least {lo} item{'s' if lo != 1 else ''}")
+        if hi is not None:
+            parts.append(f"at most {hi} item{'s' if hi != 1 else ''}")
     if schema.get("uniqueItems"):
         parts.append("no item twice")
     items = schema.get("items")

@@ -6,15 +6,10 @@ p_0(x_0) of Sec. IV the states integrate out in closed form:
 
     p(Omega | z) ∝ p(Omega) ∫ p(z | Omega, x_0, ..., x_T) p(x_1..x_T | x_0, Omega) dx_0..dx_T.
 
-:func:`kalman_marginal` evaluates -2 log of that integral (the log marginal likelihood with
-a diffuse initial state, exactly, including its Omega-dependent normalising terms) by the
-information form of the Kalman filter: forward elimination of the block-tridiagonal
-precision of (x_0, ..., x_T) given z, starting from zero information on x_0.  The same
-recursion run backwards (Rauch-Tung-Striebel) gives the smoothed Gaussian N(mu_t, P_t) of
-every state x_t given (Omega, z).  Everything is vectorised over Omega values and
-trajectories (the filter is a scalar recursion for p = 1 and 2 x 2 for p = 2).
+:func:`ssmobs.kalman_filter.kalman_marginal` evaluates -2 log of that integral exactly
+and the smoothed Gaussians of the states given (Omega, z).
 
-:func:`exact_marginal` then integrates over Omega per trajectory:
+:func:`exact_marginal` integrates over Omega per trajectory:
 
 1. a coarse tensor grid over the prior support (log scale for half-line priors) finds the
    interior local maxima of p(Omega | z) (Definition 3: unique / several / none);
@@ -45,14 +40,15 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.special import ndtr, ndtri
 
+from .kalman_filter import kalman_marginal
 from .models import PriorBounds, StateSpaceModel
 
 if TYPE_CHECKING:
@@ -60,170 +56,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger("ssmobs.exact")
 
-LOG_2PI = math.log(2 * math.pi)
 QUANTILES = (0.05, 0.95)
 MAXIMA_KINDS = ("unique", "several", "none")
-
-
-# ====================================================================== Kalman filter
-@dataclass(frozen=True)
-class KalmanMarginal:
-    """Result of :func:`kalman_marginal` (batch shape ``B`` = broadcast of Omega and z)."""
-
-    #: -2 log ∫ p(z, x_1..x_T | Omega, x_0) dx_0..dx_T (flat prior on x_0), shape B
-    neg2_loglik: np.ndarray
-    #: smoothed means E[x_t | Omega, z], t = 0..T, shape B + (T+1, p) (None unless smooth)
-    mean: np.ndarray | None = None
-    #: smoothed marginal variances Var[x_{t,i} | Omega, z], shape B + (T+1, p)
-    var: np.ndarray | None = None
-
-
-def kalman_marginal(
-    model: StateSpaceModel, omega: np.ndarray, z: np.ndarray, smooth: bool = False
-) -> KalmanMarginal:
-    """Log marginal likelihood with a diffuse x_0 and, optionally, the smoothed states.
-
-    Parameters
-    ----------
-    model : a model with ``linear_in_states``.
-    omega : (..., m) parameter values.
-    z : (..., T, d) observations; the batch shapes of ``omega`` and ``z`` broadcast.
-    smooth : also return smoothed means and marginal variances of x_0..x_T.
-
-    Returns
-    -------
-    :class:`KalmanMarginal`; -2 log p is +inf (or NaN) where Omega makes F singular or a
-    noise variance non-positive (the value is then meaningless: callers mask the support).
-    """
-    if not model.linear_in_states:
-        raise ValueError(f"model '{model.slug}' is not linear-Gaussian in the states")
-    omega = np.asarray(omega, dtype=float)
-    z = np.asarray(z, dtype=float)
-    F, Q, H, R = model.state_space_matrices(omega)
-    with np.errstate(all="ignore"):
-        if model.state_dim == 1:
-            return _kalman_p1(F[..., 0, 0], Q[..., 0], H[..., :, 0], R, z, smooth)
-        return _kalman_general(F, Q, H, R, z, smooth)
-
-
-def _kalman_p1(
-    f: np.ndarray, q: np.ndarray, h: np.ndarray, r: np.ndarray, z: np.ndarray, smooth: bool
-) -> KalmanMarginal:
-    T, d = z.shape[-2:]
-    hr = h / r  # (..., d)
-    hrh = sum(h[..., i] * hr[..., i] for i in range(d))
-    a0 = f * f / q
-    a_mid = hrh + 1 / q + a0
-    a_end = hrh + 1 / q
-    bm = -f / q  # block (t, t-1) of the precision
-    zz = (z * z).sum(-2)
-    c = sum(zz[..., i] / r[..., i] for i in range(d))
-    S = a0
-    y = np.zeros(np.broadcast_shapes(z.shape[:-2], np.shape(f)))
-    logdet = np.log(S)
-    quad = 0.0
-    Ss, ys = [S], [y]
-    for t in range(1, T + 1):
-        g = bm / S
-        S = (a_mid if t < T else a_end) - g * bm
-        b_t = sum(z[..., t - 1, i] * hr[..., i] for i in range(d))  # H' R^-1 z_t
-        y = b_t - g * y
-        quad = quad + y * y / S
-        logdet = logdet + np.log(S)
-        if smooth:
-            Ss.append(S)
-            ys.append(y)
-    neg2 = (
-        c
-        - quad
-        + logdet
-        + T * (sum(np.log(r[..., i]) for i in range(d)) + np.log(q))
-        + ((d + 1) * T - (T + 1)) * LOG_2PI
-    )
-    if not smooth:
-        return KalmanMarginal(neg2)
-    shape = np.broadcast_shapes(np.shape(neg2), np.shape(Ss[-1]))
-    mean = np.empty(shape + (T + 1, 1))
-    var = np.empty(shape + (T + 1, 1))
-    m = ys[T] / Ss[T]
-    v = 1 / Ss[T]
-    mean[..., T, 0], var[..., T, 0] = m, v
-    for t in range(T - 1, -1, -1):
-        gi = bm / Ss[t]
-        m = ys[t] / Ss[t] - gi * m
-        v = 1 / Ss[t] + gi * gi * v
-        mean[..., t, 0], var[..., t, 0] = m, v
-    return KalmanMarginal(neg2, mean, var)
-
-
-def _inv(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of (..., 2, 2) matrices in closed form."""
-    det = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
-    out = np.empty(np.shape(A))
-    out[..., 0, 0] = A[..., 1, 1] / det
-    out[..., 1, 1] = A[..., 0, 0] / det
-    out[..., 0, 1] = -A[..., 0, 1] / det
-    out[..., 1, 0] = -A[..., 1, 0] / det
-    return out, det
-
-
-def _kalman_general(
-    F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, z: np.ndarray, smooth: bool
-) -> KalmanMarginal:
-    p = F.shape[-1]
-    if p != 2:
-        raise NotImplementedError("the exact marginal is implemented for p = 1 and p = 2")
-    T, d = z.shape[-2:]
-    Ft = np.swapaxes(F, -1, -2)
-    Qi = 1 / Q
-    HtRi = np.swapaxes(H, -1, -2) / R[..., None, :]  # (..., p, d)
-    hrh = HtRi @ H
-    a0 = Ft @ (Qi[..., :, None] * F)
-    diagQi = Qi[..., :, None] * np.eye(p)
-    a_mid = hrh + diagQi + a0
-    a_end = hrh + diagQi
-    bm = -Qi[..., :, None] * F  # block (t, t-1)
-    bmt = np.swapaxes(bm, -1, -2)
-    c = ((z * z).sum(-2) / R).sum(-1)
-    S = a0
-    Si, det = _inv(S)
-    y = np.zeros(np.broadcast_shapes(z.shape[:-2], F.shape[:-2]) + (p,))
-    logdet = np.log(det)
-    quad = 0.0
-    Ss, Sis, ys = [S], [Si], [y]
-    for t in range(1, T + 1):
-        g = bm @ Si
-        S = (a_mid if t < T else a_end) - g @ bmt
-        b_t = (HtRi @ z[..., t - 1, :, None])[..., 0]
-        y = b_t - (g @ y[..., None])[..., 0]
-        Si, det = _inv(S)
-        quad = quad + np.einsum("...i,...ij,...j->...", y, Si, y)
-        logdet = logdet + np.log(det)
-        if smooth:
-            Ss.append(S)
-            Sis.append(Si)
-            ys.append(y)
-    neg2 = (
-        c
-        - quad
-        + logdet
-        + T * (np.log(R).sum(-1) + np.log(Q).sum(-1))
-        + ((d + p) * T - p * (T + 1)) * LOG_2PI
-    )
-    if not smooth:
-        return KalmanMarginal(neg2)
-    shape = np.broadcast_shapes(np.shape(neg2), Sis[-1].shape[:-2])
-    mean = np.empty(shape + (T + 1, p))
-    var = np.empty(shape + (T + 1, p))
-    m = (Sis[T] @ ys[T][..., None])[..., 0]
-    P = Sis[T]
-    mean[..., T, :], var[..., T, :] = m, np.diagonal(P, axis1=-2, axis2=-1)
-    for t in range(T - 1, -1, -1):
-        gi = Sis[t] @ bmt  # S_t^-1 B'
-        m = (Sis[t] @ ys[t][..., None])[..., 0] - (gi @ m[..., None])[..., 0]
-        P = Sis[t] + gi @ P @ np.swapaxes(gi, -1, -2)
-        mean[..., t, :], var[..., t, :] = m, np.diagonal(P, axis1=-2, axis2=-1)
-    return KalmanMarginal(neg2, mean, var)
 
 
 # ====================================================================== Omega axes
@@ -263,23 +97,25 @@ def _axes(bounds: PriorBounds, margin: float, log_range: tuple[float, float]) ->
 # ====================================================================== settings and result
 @dataclass(frozen=True)
 class ExactSettings:
-    """Grid sizes and tolerances of :func:`exact_marginal` (keyed by the number m of
-    parameters; entries for m = 1..4).
+    """Grid sizes and tolerances of :func:`exact_marginal`: the config block
+    ``exact_marginal`` (workflow/schemas/config.schema.yaml describes every field; a test
+    keeps the two equal).
 
-    ``state_nodes[m]`` nodes per axis carry the state mixtures; the fine Omega grid has
-    ``(state_nodes - 1) * state_thin + 1`` nodes per axis.
+    ``coarse_nodes``, ``state_nodes`` and ``state_thin`` hold one value per number m = 1..4
+    of parameters; ``state_nodes`` nodes per axis carry the state mixtures and the fine
+    Omega grid has ``(state_nodes - 1) * state_thin + 1`` nodes per axis.
     """
 
-    coarse_nodes: dict = field(default_factory=lambda: {1: 400, 2: 48, 3: 16, 4: 9})
-    state_nodes: dict = field(default_factory=lambda: {1: 41, 2: 21, 3: 11, 4: 7})
-    state_thin: dict = field(default_factory=lambda: {1: 10, 2: 3, 3: 2, 4: 2})
+    coarse_nodes: tuple = (400, 48, 16, 9)
+    state_nodes: tuple = (41, 21, 11, 7)
+    state_thin: tuple = (10, 3, 2, 2)
     box_sd: float = 7.0
     face_drop: float = 20.0
     max_widen: int = 4
     margin: float = 1e-6
-    log_range: tuple = (math.log(1e-4), math.log(1e4))
+    half_line_range: tuple = (1e-4, 1e4)
     spline_refine: int = 16
-    mixture_mass: float = 1 - 1e-10
+    mixture_mass: float = 0.9999999999
     newton_iter: int = 30
     spike_distance: float = 1e-6
     spike_tol: float = 1e-3
@@ -289,8 +125,34 @@ class ExactSettings:
     valley_nodes: int = 200
     chunk_elements: int = 4_000_000
 
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> ExactSettings:
+        """From the validated config block (its lists become tuples)."""
+        fields: dict[str, Any] = {
+            k: tuple(v) if isinstance(v, list) else v for k, v in values.items()
+        }
+        return cls(**fields)
+
+    @property
+    def max_params(self) -> int:
+        """The largest m the per-m settings cover."""
+        return min(len(self.coarse_nodes), len(self.state_nodes), len(self.state_thin))
+
+    def coarse(self, m: int) -> int:
+        """Coarse grid nodes per axis for m parameters."""
+        return int(self.coarse_nodes[m - 1])
+
+    def state(self, m: int) -> int:
+        """Nodes per axis of the grid carrying the state mixtures for m parameters."""
+        return int(self.state_nodes[m - 1])
+
+    def thin(self, m: int) -> int:
+        """Fine grid nodes per state-grid interval for m parameters."""
+        return int(self.state_thin[m - 1])
+
     def fine_nodes(self, m: int) -> int:
-        return (self.state_nodes[m] - 1) * self.state_thin[m] + 1
+        """Fine grid nodes per axis for m parameters."""
+        return (self.state(m) - 1) * self.thin(m) + 1
 
 
 @dataclass
@@ -436,7 +298,7 @@ def _coarse_search(
     """Up to ``n_starts`` highest interior local maxima of the coarse grid per trajectory
     (K, n_starts, m) (NaN where fewer), and the grid spacing (m,)."""
     m = model.n_params
-    n = settings.coarse_nodes[m]
+    n = settings.coarse(m)
     nodes = [np.linspace(axes.lo[j], axes.hi[j], n) for j in range(m)]
     grid = _tensor(nodes).reshape(-1, m)  # (G, m)
     K = z.shape[0]
@@ -822,8 +684,8 @@ def _state_mixtures(
     K = lpu.shape[0]
     m = lpu.ndim - 1
     n = lpu.shape[1]
-    thin = settings.state_thin[m]
-    ns = settings.state_nodes[m]
+    thin = settings.thin(m)
+    ns = settings.state(m)
     sel = (slice(None),) + (slice(0, n, thin),) * m
     lps = lpu[sel]
     tw = _trapezoid_weights(ns)
@@ -994,15 +856,17 @@ def exact_marginal(
             f"exact marginal does not apply"
         )
     m = model.n_params
-    if m not in settings.coarse_nodes:
+    if not 1 <= m <= settings.max_params:
         raise ValueError(
-            f"exact marginal grids are set for 1..4 parameters, model '{model.slug}' has {m}"
+            f"exact marginal grids are set for 1..{settings.max_params} parameters, "
+            f"model '{model.slug}' has {m}"
         )
     z = np.asarray(z, dtype=float)
     if z.ndim != 3 or z.shape[2] != model.obs_dim:
         raise ValueError(f"z must have shape (K, T, {model.obs_dim}), got {z.shape}")
     K, T, _ = z.shape
-    axes = _axes(bounds, settings.margin, settings.log_range)
+    log_range = (math.log(settings.half_line_range[0]), math.log(settings.half_line_range[1]))
+    axes = _axes(bounds, settings.margin, log_range)
 
     starts, spacing = _coarse_search(model, axes, z, bounds, settings)
     u, H, n_max, _ = _modes(model, axes, z, bounds, starts, spacing, settings)
@@ -1039,9 +903,9 @@ def exact_marginal(
     for arr in (theta_map, theta_q5, theta_q95):
         arr[nan_rows] = np.nan
     info = {
-        "coarse_nodes": settings.coarse_nodes[m],
+        "coarse_nodes": settings.coarse(m),
         "fine_nodes": settings.fine_nodes(m),
-        "state_nodes": settings.state_nodes[m],
+        "state_nodes": settings.state(m),
         "box_sd": settings.box_sd,
         "face_drop": settings.face_drop,
         "lower": bounds.lower.tolist(),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -47,12 +48,17 @@ def exact_summary(
 
 
 def run_exact_marginal(
-    trajectories: PathLike, scenario: Scenario, table: PathLike, summary: PathLike
+    trajectories: PathLike,
+    scenario: Scenario,
+    settings: Mapping[str, Any],
+    table: PathLike,
+    summary: PathLike,
 ) -> dict:
-    """Rule exact_marginal: exact marginal posteriors of every design trajectory."""
+    """Rule exact_marginal: exact marginal posteriors of every design trajectory (the
+    config block ``exact_marginal`` as ``settings``)."""
     import time
 
-    from ..exact_marginal import exact_marginal
+    from ..exact_marginal import ExactSettings, exact_marginal
     from ..trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
@@ -64,7 +70,7 @@ def run_exact_marginal(
         )
     bounds = model.prior_bounds(traj.omega, scenario.prior)
     start = time.perf_counter()
-    result = exact_marginal(model, traj.z, bounds)
+    result = exact_marginal(model, traj.z, bounds, ExactSettings.from_mapping(settings))
     seconds = time.perf_counter() - start
     frame = result.to_frame(model)
     info = exact_summary(frame, model, traj.omega, traj.x0, traj.x)
