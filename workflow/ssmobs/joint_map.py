@@ -98,7 +98,7 @@ import numpy as np
 import pandas as pd
 
 from .banded_linalg import ArrowFactor, arrow_extreme_eigenpairs
-from .estimator_moments import estimator_moments
+from .estimator_moments import moment_entries, stat_key
 from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import compile_model, neg2_log_posterior, neg2_log_posterior_blocks
 
@@ -948,6 +948,6 @@ def joint_map_summary(
     for c, true in zip(names, truth):
         est = frame.loc[ok, c].to_numpy(dtype=float)
         lv = frame.loc[ok, f"lvar_{c}"].to_numpy(dtype=float)
-        out.update({f"{c}_{s}": v for s, v in estimator_moments(est, true).items()})
-        out[f"{c}_lvar_mean"] = float(lv.mean()) if k_max else float("nan")
+        out.update(moment_entries(c, est, true))
+        out[stat_key(c, "lvar_mean")] = float(lv.mean()) if k_max else float("nan")
     return out

@@ -22,6 +22,7 @@ import pandas as pd
 from . import io
 from .binomial import clopper_pearson
 from .convergence import CHECKS
+from .estimator_moments import EstimatorSummary
 from .joint_map import STATUSES
 from .scenario import Scenario
 
@@ -42,14 +43,13 @@ def study_row(
         "method": scenario.method,
     }
     row.update({f"{n}_true": float(v) for n, v in zip(model.param_names, scenario.omega)})
-    row["K_max"] = joint["K_max"] if joint else np.nan
-    row["K_max_ratio"] = joint["ratio"] if joint else np.nan
-    row["K_stan"] = stan["n_stan"] if stan else np.nan
-    row["K_stan_ratio"] = stan["ratio"] if stan else np.nan
+    js, ss = EstimatorSummary.read("joint", joint), EstimatorSummary.read("stan", stan)
+    row["K_max"], row["K_max_ratio"] = js.count, js.get("ratio", np.nan)
+    row["K_stan"], row["K_stan_ratio"] = ss.count, ss.get("ratio", np.nan)
     for ratio, count in (("K_max_ratio", "K_max"), ("K_stan_ratio", "K_stan")):
         row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], row["K"])
-    if joint:
-        failed = {st: joint.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
+    if js.present:
+        failed = {st: js.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
         row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"
     if stan_table is not None:
         counts: Counter[str] = Counter()
@@ -59,8 +59,8 @@ def study_row(
             ", ".join(f"{c} {counts[c]}" for c in CHECKS if counts[c]) or "none"
         )
     for n in model.param_names:
-        row[f"{n}_mean_marginal"] = stan.get(f"{n}_mean", np.nan) if stan else np.nan
-        row[f"{n}_mean_joint"] = joint.get(f"{n}_mean", np.nan) if joint else np.nan
+        row[f"{n}_mean_marginal"] = ss.stat(n, "mean")
+        row[f"{n}_mean_joint"] = js.stat(n, "mean")
     if stan_table is not None:
         # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
         for n in model.param_names:

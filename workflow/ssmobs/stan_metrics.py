@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .estimator_moments import estimator_moments
+from .estimator_moments import moment_entries, stat_key
 
 if TYPE_CHECKING:
     from .models.base import StateSpaceModel
@@ -94,9 +94,9 @@ def stan_summary(
         est = _col(frame, f"{name}_map")[conv]
         q5 = _col(frame, f"{name}_q5")[conv]
         q95 = _col(frame, f"{name}_q95")[conv]
-        out[f"{name}_true"] = float(truth)
-        out.update({f"{name}_{s}": v for s, v in estimator_moments(est, truth).items()})
-        out[f"{name}_cover90"] = _mean(((q5 < truth) & (truth < q95)).astype(float))
+        out[stat_key(name, "true")] = float(truth)
+        out.update(moment_entries(name, est, truth))
+        out[stat_key(name, "cover90")] = _mean(((q5 < truth) & (truth < q95)).astype(float))
 
     # states x_1..x_T: names[m + p:] are time-major (t = 1..T, component i = 1..p)
     state_names = names[m + p :]

@@ -20,6 +20,7 @@ import yaml
 
 from . import io
 from .binomial import clopper_pearson, format_fraction
+from .estimator_moments import EstimatorSummary
 
 
 def load_paper_values(path: str | os.PathLike) -> dict[str, Any]:
@@ -96,8 +97,12 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     out = []
     for r in sorted(rows, key=lambda r: r["T"]):
         pv = paper.get(r["paper_ref"], {})
-        for est_key, est_name in (("joint", "joint MAP"), ("marginal", "marginal MAP")):
-            summ = r.get(est_key) or {}
+        for est_key, stage, est_name in (
+            ("joint", "joint", "joint MAP"),
+            ("marginal", "stan", "marginal MAP"),
+        ):
+            summ = EstimatorSummary.read(stage, r.get(est_key))
+            exact = EstimatorSummary.read("exact", r.get("exact") if stage == "stan" else None)
             for stat, stat_name in STATS:
                 row = {
                     "T": r["T"],
@@ -105,12 +110,11 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                     "estimator": est_name,
                     "statistic": stat_name,
                 }
-                exact = r.get("exact") or {} if est_key == "marginal" else {}
                 for comp in ("a", "x0"):
-                    ours = _num(summ.get(f"{comp}_{stat}"))
+                    ours = summ.stat(comp, stat)
                     ref = _get(pv, est_key, stat, comp)
                     row[f"{comp}_ours"] = ours
-                    row[f"{comp}_exact"] = _num(exact.get(f"{comp}_{stat}"))
+                    row[f"{comp}_exact"] = exact.stat(comp, stat)
                     row[f"{comp}_paper"] = _num(ref)
                     row[f"{comp}_rel_diff"] = rel_diff(ours, ref)
                 out.append(row)
@@ -118,13 +122,18 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- Table III
+#: (label, (component or None for the mean over the states, statistic), the paper's value)
 TABLE_III = (
-    ("cover90_a", "a_cover90", ("coverage", "cover90", "a")),
-    ("cover90_x0", "x0_cover90", ("coverage", "cover90", "x0")),
-    ("mean_cover90_states", "x_cover90_mean", ("coverage", "mean_cover90_states")),
-    ("mean_abs_bias_states", "x_abs_bias_mean", ("coverage", "mean_abs_bias_states")),
-    ("mean_mse_states", "x_mse_mean", ("coverage", "mean_mse_states")),
+    ("cover90_a", ("a", "cover90"), ("coverage", "cover90", "a")),
+    ("cover90_x0", ("x0", "cover90"), ("coverage", "cover90", "x0")),
+    ("mean_cover90_states", (None, "cover90"), ("coverage", "mean_cover90_states")),
+    ("mean_abs_bias_states", (None, "abs_bias"), ("coverage", "mean_abs_bias_states")),
+    ("mean_mse_states", (None, "mse"), ("coverage", "mean_mse_states")),
 )
+
+
+def _table_iii_value(summary: EstimatorSummary, comp: str | None, stat: str) -> float:
+    return summary.states(stat) if comp is None else summary.stat(comp, stat)
 
 
 def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
@@ -134,10 +143,10 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     out = []
     for r in sorted(rows, key=lambda r: r["T"]):
         pv = paper.get(r["paper_ref"], {})
-        summ = r.get("marginal") or {}
-        exact = r.get("exact") or {}
-        for label, key, ref_path in TABLE_III:
-            ours = _num(summ.get(key))
+        summ = EstimatorSummary.read("stan", r.get("marginal"))
+        exact = EstimatorSummary.read("exact", r.get("exact"))
+        for label, (comp, stat), ref_path in TABLE_III:
+            ours = _table_iii_value(summ, comp, stat)
             ref = _get(pv, *ref_path)
             out.append(
                 {
@@ -145,12 +154,12 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                     "scenario": r["scenario"],
                     "quantity": label,
                     "ours": ours,
-                    "exact": _num(exact.get(key)),
+                    "exact": _table_iii_value(exact, comp, stat),
                     "paper": _num(ref),
                     "rel_diff": rel_diff(ours, ref),
-                    "K_stan": summ.get("n_stan"),
+                    "K_stan": summ.count if summ.present else None,
                     "K_exact": exact.get("K"),
-                    "n_exact": exact.get("n_exact"),
+                    "n_exact": exact.count if exact.present else None,
                 }
             )
     return pd.DataFrame(out)
@@ -175,7 +184,10 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     fraction ``<f>`` has its exact binomial 95 % interval in ``<f>_lo95`` / ``<f>_hi95``."""
     out = []
     for r in rows:
-        sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
+        sc = r["config"]
+        joint = EstimatorSummary.read("joint", r.get("joint"))
+        marg = EstimatorSummary.read("stan", r.get("marginal"))
+        ex = EstimatorSummary.read("exact", r.get("exact"))
         pv = paper.get(sc.get("paper_ref", ""), {}) or {}
         K = sc["K"]
         row: dict[str, Any] = {
@@ -189,10 +201,10 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
             "K": K,
             "method": sc["method"],
             "stan_init": sc["stan_init"],
-            "K_max": joint.get("K_max", math.nan) if sc["joint_map"] else math.nan,
+            "K_max": joint.count if sc["joint_map"] else math.nan,
             "K_max_paper": _num(pv.get("K_max")),
             "K_paper": _num(pv.get("K")),
-            "K_stan": marg.get("n_stan", math.nan) if sc["stan"] else math.nan,
+            "K_stan": marg.count if sc["stan"] else math.nan,
             "K_stan_paper": _num(pv.get("K_stan")),
         }
         kp = row["K_paper"]
@@ -206,28 +218,28 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         comps = joint.get("components") or list(sc["omega"]) + ["x0"]
         for c in comps:
             for stat in ("mean", "var", "mse"):
-                row[f"joint_{stat}_{c}"] = _num(joint.get(f"{c}_{stat}"))
-                row[f"marginal_{stat}_{c}"] = _num(marg.get(f"{c}_{stat}"))
-            row[f"cover90_{c}"] = _num(marg.get(f"{c}_cover90"))
-        row["mean_cover90_states"] = _num(marg.get("x_cover90_mean"))
-        row["mean_abs_bias_states"] = _num(marg.get("x_abs_bias_mean"))
-        row["mean_mse_states"] = _num(marg.get("x_mse_mean"))
-        exact = r.get("exact")
-        row["K_exact"] = exact.get("K", math.nan) if exact else math.nan
+                row[f"joint_{stat}_{c}"] = joint.stat(c, stat)
+                row[f"marginal_{stat}_{c}"] = marg.stat(c, stat)
+            row[f"cover90_{c}"] = marg.stat(c, "cover90")
+        row["mean_cover90_states"] = marg.states("cover90")
+        row["mean_abs_bias_states"] = marg.states("abs_bias")
+        row["mean_mse_states"] = marg.states("mse")
+        row["K_exact"] = ex.get("K", math.nan)
         for kind in ("unique", "several", "none"):
-            row[f"exact_{kind}"] = exact.get(f"n_{kind}", math.nan) if exact else math.nan
-        row["exact_unique_frac"] = (row["exact_unique"] / row["K_exact"]) if exact else math.nan
+            row[f"exact_{kind}"] = ex.get(f"n_{kind}", math.nan)
+        row["exact_unique_frac"] = (
+            (row["exact_unique"] / row["K_exact"]) if ex.present else math.nan
+        )
         row["exact_unique_frac_lo95"], row["exact_unique_frac_hi95"] = clopper_pearson(
             row["exact_unique"], row["K_exact"]
         )
-        row["K_exact_used"] = exact.get("n_exact", math.nan) if exact else math.nan
-        ex = exact or {}
+        row["K_exact_used"] = ex.count
         for c in comps:
             for stat in ("mean", "var", "mse", "cover90"):
-                row[f"exact_{stat}_{c}"] = _num(ex.get(f"{c}_{stat}"))
-        row["exact_mean_cover90_states"] = _num(ex.get("x_cover90_mean"))
-        row["exact_mean_abs_bias_states"] = _num(ex.get("x_abs_bias_mean"))
-        row["exact_mean_mse_states"] = _num(ex.get("x_mse_mean"))
+                row[f"exact_{stat}_{c}"] = ex.stat(c, stat)
+        row["exact_mean_cover90_states"] = ex.states("cover90")
+        row["exact_mean_abs_bias_states"] = ex.states("abs_bias")
+        row["exact_mean_mse_states"] = ex.states("mse")
         out.append(row)
     return pd.DataFrame(out)
 
@@ -241,12 +253,14 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 
     out = []
     for r in rows:
-        sc, joint, marg = r["config"], r.get("joint") or {}, r.get("marginal") or {}
+        sc = r["config"]
+        joint = EstimatorSummary.read("joint", r.get("joint"))
+        marg = EstimatorSummary.read("stan", r.get("marginal"))
         pv = paper.get(sc.get("paper_ref", ""), {}) or {}
         comps = get_model(sc["model"]).theta_names(0)
         K, K_paper = sc["K"], _num(pv.get("K"))
-        k_max = joint.get("K_max", math.nan) if sc["joint_map"] else math.nan
-        k_stan = marg.get("n_stan", math.nan) if sc["stan"] else math.nan
+        k_max = joint.count if sc["joint_map"] else math.nan
+        k_stan = marg.count if sc["stan"] else math.nan
         out.append(
             {
                 "scenario": sc["name"],
@@ -263,14 +277,10 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def _per_component(summary: Mapping, comps: Sequence[str], stat: str) -> str:
-    """``"a 0.897, x0 8.05"``: ``<c>_<stat>`` of every component c that has a value."""
-    cells = [
-        f"{c} {summary[f'{c}_{stat}']:.3g}"
-        for c in comps
-        if summary.get(f"{c}_{stat}") is not None and math.isfinite(float(summary[f"{c}_{stat}"]))
-    ]
-    return ", ".join(cells)
+def _per_component(summary: EstimatorSummary, comps: Sequence[str], stat: str) -> str:
+    """``"a 0.897, x0 8.05"``: ``stat`` of every component that has a value."""
+    values = ((c, summary.stat(c, stat)) for c in comps)
+    return ", ".join(f"{c} {v:.3g}" for c, v in values if math.isfinite(v))
 
 
 # ---------------------------------------------------------------- K selection
