@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint docs test test-slow smoke paper tables section4 clean
+.PHONY: setup run lint docs test test-slow smoke paper tables section4 map clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -82,6 +82,17 @@ section4: setup
 	$(BIN)/python -m ssmobs.provenance --config $(SECTION4_CONFIG) --outputs-dir $(SECTION4_DIR) \
 		--command "make section4" --note "$(SECTION4_NOTE)" -- \
 		$(SNAKEMAKE) --configfile $(SECTION4_CONFIG)
+
+# The observability maps (issue 21, ours), with a provenance file (committed).
+MAP_CONFIG := config/map.yaml
+MAP_DIR := paper_figures/observability_map
+MAP_NOTE ?=
+
+map: setup
+	$(PREFLIGHT) $(MAP_CONFIG)
+	$(BIN)/python -m ssmobs.provenance --config $(MAP_CONFIG) --outputs-dir $(MAP_DIR) \
+		--command "make map" --note "$(MAP_NOTE)" -- \
+		$(SNAKEMAKE) --configfile $(MAP_CONFIG)
 
 clean:
 	rm -rf results .snakemake

@@ -5,6 +5,7 @@
 #   results/shared/design_disturbances/<key>/q{q}_K{K}_{method}_seed{seed}.nc  (q = (d+p)T)
 #   results/{scenario}/<stage>/<key>/...     one folder per stage and key of each scenario
 #   results/k_selection/{name}/<key>/...     runs of the choice of K (Sec. IV.A)
+#   results/observability_map/cells/<key>.json  one cell of an observability map
 #   results/outputs/<outputs_dir>/*.key      what made each table and figure (stamps)
 #   <outputs_dir>/            final tables and figures (see paper_figures/README.md)
 #
@@ -43,6 +44,7 @@ include: "workflow/rules/exact_marginal.smk"
 include: "workflow/rules/outputs.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/own_model.smk"
+include: "workflow/rules/observability_map.smk"
 
 
 remove_stale_stamps()

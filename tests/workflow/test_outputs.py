@@ -24,6 +24,8 @@ FIGURES = [
     "fig4_profile_posterior_ranwalk_T4",
     "fig_k_convergence_same_T4",
     "fig_observability_ratios",
+    "map_same",
+    "map_stoch_vol",
 ]
 
 

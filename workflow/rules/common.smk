@@ -57,6 +57,7 @@ SCENARIOS = {sc["name"]: sc for sc in config["scenarios"]}
 SCENARIO_OBJECTS = {name: Scenario.from_config(sc) for name, sc in SCENARIOS.items()}
 KSEL = {ks["name"]: ks for ks in config["k_selection"]}
 STUDIES = {st["name"]: st for st in config["observability_studies"]}
+MAPS = {m["name"]: m for m in config["observability_maps"]}
 JOINT_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["joint_map"]]
 STAN_SCENARIOS = [n for n, sc in SCENARIOS.items() if sc["stan"]]
 MU0_SCENARIOS = [
@@ -87,6 +88,8 @@ for _name, _sc in SCENARIO_OBJECTS.items():
         KEYS.exact(_name, _K)  # and the trajectories at K
 for _name in KSEL:
     KEYS.k_selection_points(_name)
+#: every cell of every observability map with its key (issue 21)
+MAP_CELLS = {_name: KEYS.map_cells(_name) for _name in MAPS}
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
 STAMPS = {}
 
@@ -199,6 +202,7 @@ wildcard_constraints:
     scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
     ksel="|".join(map(re.escape, KSEL)) or "NONE",
     study="|".join(map(re.escape, STUDIES)) or "NONE",
+    map="|".join(map(re.escape, MAPS)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
@@ -354,6 +358,8 @@ def all_targets():
         )
     for name in STUDIES:
         targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}", ext=["csv", "md", "png"])
+    for name in MAPS:
+        targets += expand(f"{OUT}/map_{name}.{{ext}}", ext=["csv", "md", "png", "pdf"])
     targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
     targets += expand(
         f"{OUT}/{{stem}}.{{ext}}",

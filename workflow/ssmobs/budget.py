@@ -154,6 +154,23 @@ def estimates(config: dict) -> list[JobEstimate]:
                     sizes + f", |Theta| = {model.n_theta(T)}",
                 )
             )
+    for entry in config.get("observability_maps", []):
+        model = MODELS[entry["base"]["model"]]
+        T, K = max(entry["T"]), entry["K"]
+        q = (model.obs_dim + model.state_dim) * T
+        method = entry["base"].get("method", "design")
+        out.append(
+            JobEstimate(
+                f"observability map '{entry['name']}'",
+                "observability_map",
+                max(
+                    disturbance_bytes(q, K, method),
+                    trajectories_bytes(q, K),
+                    joint_map_bytes(model, T, K, jm["chunk_size"]),
+                ),
+                f"K = {K}, T = {T}, q = {q}, |Theta| = {model.n_theta(T)} (largest cell)",
+            )
+        )
     for ks in config["k_selection"]:
         sc = scenarios.get(ks["scenario"])
         if sc is None:
@@ -229,6 +246,8 @@ def job_counts(config: dict) -> dict[str, int]:
         # one k_selection_grid job per (method, set variant, seed), which makes its own
         # sets, and select_k
         counts[f"k_selection '{ks['name']}'"] = runs + 1
+    if config.get("observability_maps"):  # one job per map; its cells and sets in the job
+        counts["observability maps"] = len(config["observability_maps"])
     counts["design disturbance sets"] = len(disturbances) + 1  # + Figure 2's
     counts["Stan programs, tables and figures"] = (
         len({sc["model"] for sc in config["scenarios"] if sc["stan"]}) + FIXED_JOBS

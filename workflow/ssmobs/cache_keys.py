@@ -55,8 +55,11 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "nuts_batches": ("stages/stan.py:run_sample_batch",),
     "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
     "exact": ("stages/exact.py",),
-    # every stamped table and figure; observability_study's script calls its module itself
-    "outputs": ("stages/outputs.py", "observability_study.py"),
+    # the cells of an observability map: what computes a cell, not the map's table or figure
+    "map_cells": ("observability_map.py:map_table,cell_summary",),
+    # every stamped table and figure; observability_study's and observability_map's scripts
+    # call their modules themselves
+    "outputs": ("stages/outputs.py", "observability_study.py", "observability_map.py"),
 }
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
@@ -71,6 +74,7 @@ OUTPUT_SCRIPTS = (
     "select_k",
     "table_k_selection",
     "observability_study",
+    "observability_map",
     "figure_design_points",
     "figure_joint_vs_marginal",
     "figure_profile_posterior",
@@ -88,6 +92,7 @@ STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
     "nuts_batches": ("sample_nuts",),
     "gather": ("gather_nuts",),
     "exact": ("exact_marginal",),
+    "map_cells": ("observability_map",),
     "outputs": OUTPUT_SCRIPTS,
 }
 #: modules that only log, plan or describe and never change a number or a file's content
@@ -451,6 +456,27 @@ class CacheKeys:
             "code": self.code("k_selection"),
         }
         return self._key("k_selection_points", ksel, payload)
+
+    def map_cells(self, name: str) -> list[tuple[dict[str, Any], str]]:
+        """Every cell of one observability map (issue 21) with its own key: the cell's
+        scenario entry but its name, the design sets' key, the joint-MAP settings, the exact
+        settings where the map runs the exact stage, the model's code and the cells' code.
+        A cell two maps share, or that an extended grid keeps, has the same key."""
+        from .observability_map import cell_entries
+
+        entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
+        out = []
+        for cell in cell_entries(entry):
+            payload = {
+                "cell": {k: v for k, v in cell.items() if k != "name"},
+                "design": self.design,
+                "settings": self.config["joint_map"],
+                "exact": self.config["exact_marginal"] if entry["exact"] else None,
+                "model_code": self.model_code(cell["model"]),
+                "code": self.code("map_cells"),
+            }
+            out.append((cell, self._key("map_cell", cell["name"], payload)))
+        return out
 
     def output(self, name: str, inputs: Iterable[str], params: Any) -> str:
         """A table or figure of ``outputs_dir``: its keyed inputs, its parameters and the

@@ -525,6 +525,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             )
     return (
         problems
+        + _map_problems(config)
         + _keep_draws_problems(config)
         + _figure_problems(config)
         + _paper_output_problems(config)
@@ -532,6 +533,48 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
         + _mu0_sweep_problems(config)
         + _outputs_dir_problems(config)
     )
+
+
+#: keys of a map's base that its cells set themselves
+MAP_CELL_KEYS = ("name", "T", "K", "joint_map", "stan", "exact", "exact_K", "stan_batch_size")
+
+
+def _map_problems(config: dict) -> list[str]:
+    """Every cell of every observability map is a valid scenario (its true values too)."""
+    from .observability_map import cell_entries
+    from .scenario import Scenario
+
+    maps = config.get("observability_maps", [])
+    problems = _name_problems(maps, "observability_maps")
+    for i, entry in enumerate(maps):
+        where = _where("observability_maps", i, entry["name"])
+        own = [k for k in MAP_CELL_KEYS if k in entry["base"]]
+        if own:
+            problems.append(
+                f"{where}.base: {short_list(own)} are set per cell (name, T and K by the map); "
+                f"leave them out of base"
+            )
+            continue
+        model = MODELS.get(entry["base"]["model"])
+        if model is None:
+            problems.append(
+                f"{where}.base.model = {_short(entry['base']['model'])}: unknown model; "
+                f"allowed: {sorted(MODELS)}"
+            )
+            continue
+        if entry["vary"] not in model.param_names:
+            problems.append(
+                f"{where}.vary = {_short(entry['vary'])}: not a parameter of model "
+                f"{model.slug!r}; allowed: {list(model.param_names)}"
+            )
+            continue
+        for cell in cell_entries(entry):
+            try:
+                Scenario.from_config(cell)
+            except ConfigError as err:
+                problems.append(f"{where}, cell {cell['name']}: {_cut(str(err), 2 * MAX_REPR)}")
+                break  # one bad cell says what is wrong with the map
+    return problems
 
 
 def _name_problems(entries: list[dict], section: str) -> list[str]:

@@ -83,8 +83,9 @@ def _axes(bounds: PriorBounds, margin: float, log_range: tuple[float, float]) ->
     lo, hi = np.asarray(bounds.lower, float), np.asarray(bounds.upper, float)
     log_scale = ~(np.isfinite(lo) & np.isfinite(hi))
     sign = np.where(np.isfinite(lo) & ~np.isfinite(hi), 1.0, -1.0)
-    ulo = np.where(log_scale, log_range[0], lo + margin * (hi - lo))
-    uhi = np.where(log_scale, log_range[1], hi - margin * (hi - lo))
+    with np.errstate(invalid="ignore"):  # inf - inf on the half lines, not used there
+        ulo = np.where(log_scale, log_range[0], lo + margin * (hi - lo))
+        uhi = np.where(log_scale, log_range[1], hi - margin * (hi - lo))
     for i in np.flatnonzero(log_scale):
         if not ((lo[i] == 0 and hi[i] == np.inf) or (lo[i] == -np.inf and hi[i] == 0)):
             raise ValueError(

@@ -1,0 +1,129 @@
+"""Issue 21: the cells of an observability map, their keys and cache, and a cell known to
+be unobservable."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+from ssmobs import observability_map as om
+from ssmobs.cache_keys import CacheKeys
+from ssmobs.config import ConfigError, validate
+
+pytestmark = pytest.mark.unit
+
+SCENARIO = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+MAP = {
+    "name": "m",
+    "base": {"model": "same", "omega": {"a": 0.9}, "x0": 8, "prior": "restricted"},
+    "vary": "a",
+    "values": [0.5, 0.9],
+    "T": [4, 10],
+    "K": 20,
+}
+
+
+def config(*maps: dict, **blocks: dict) -> dict:
+    return validate({"scenarios": [dict(SCENARIO)], "observability_maps": list(maps), **blocks})
+
+
+def test_cells_are_the_base_at_every_value_and_horizon():
+    conf = config(MAP)
+    cells = om.cell_entries(conf["observability_maps"][0])
+    assert [c["name"] for c in cells] == ["m_a0.5_T4", "m_a0.5_T10", "m_a0.9_T4", "m_a0.9_T10"]
+    assert [c["omega"]["a"] for c in cells] == [0.5, 0.5, 0.9, 0.9]
+    assert all(c["K"] == 20 and c["stan"] is False and c["joint_map"] for c in cells)
+    assert all(c["method"] == "design" and c["seed"] == 1 for c in cells)  # defaults filled
+    assert conf["observability_maps"][0]["base"] == MAP["base"]  # the base is not changed
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"vary": "b"}, r"vary = 'b': not a parameter of model 'same'; allowed: \['a'\]"),
+        ({"base": {**MAP["base"], "T": 5}}, r"base: \['T'\] are set per cell"),
+        ({"values": [0.5, 1.5]}, r"cell m_a1.5_T4: invalid scenario 'm_a1.5_T4'"),
+        ({"base": {**MAP["base"], "model": "nope"}}, r"base.model = 'nope': unknown model"),
+        ({"T": [0]}, r"T\[0\]"),
+    ],
+)
+def test_a_bad_map_is_refused_before_any_job(change, message):
+    with pytest.raises(ConfigError, match=message):
+        config({**MAP, **change})
+
+
+def _keys(conf: dict) -> dict[str, str]:
+    return {cell["name"]: key for cell, key in CacheKeys(conf, "native").map_cells("m")}
+
+
+def test_an_extended_grid_keeps_the_keys_of_its_cells():
+    before = _keys(config(MAP))
+    after = _keys(config({**MAP, "values": [0.5, 0.9, 0.99], "T": [4, 10, 20]}))
+    assert all(after[name] == key for name, key in before.items())
+    assert len(set(after.values())) == 9
+
+
+def test_cell_keys_follow_the_settings_that_determine_them():
+    base = _keys(config(MAP))
+    coarse = _keys(config(MAP, exact_marginal={"coarse_nodes": [200, 48, 16, 9]}))
+    assert set(coarse.values()).isdisjoint(base.values())
+    no_exact = {**MAP, "exact": False}
+    assert _keys(config(no_exact)) == _keys(
+        config(no_exact, exact_marginal={"coarse_nodes": [200, 48, 16, 9]})
+    )
+    joint = _keys(config(MAP, joint_map={"grad_tol": 1e-6}))
+    assert set(joint.values()).isdisjoint(base.values())
+    renamed = {**MAP, "name": "other"}
+    other = CacheKeys(config(renamed), "native").map_cells("other")
+    assert sorted(k for _, k in other) == sorted(base.values())  # the name is no part of it
+
+
+def test_only_missing_or_damaged_cells_are_computed(tmp_path, monkeypatch):
+    calls: list[str] = []
+
+    def fake_summary(scenario, disturbances, design_cfg, joint, exact):
+        calls.append(scenario.name)
+        return {"K_max": 1, "K_max_frac": 0.05, "exact": False}
+
+    monkeypatch.setattr(om, "cell_summary", fake_summary)
+    conf = config(MAP)
+    entry = conf["observability_maps"][0]
+    cells = CacheKeys(conf, "native").map_cells("m")
+    args = (tmp_path / "design", conf["design"], conf["joint_map"], None, tmp_path / "cells")
+    frame = om.map_table(entry, cells, *args)
+    assert len(calls) == 4 and list(frame["T"]) == [4, 10, 4, 10]
+    wider = copy.deepcopy(conf)
+    wider["observability_maps"][0]["values"] = [0.5, 0.9, 0.99]
+    more = CacheKeys(wider, "native").map_cells("m")
+    (tmp_path / "cells" / f"{cells[0][1]}.json").write_text("{not json")
+    calls.clear()
+    frame = om.map_table(wider["observability_maps"][0], more, *args)
+    assert calls == ["m_a0.5_T4", "m_a0.99_T4", "m_a0.99_T10"]
+    assert len(frame) == 6 and list(frame["value"]) == [0.5, 0.5, 0.9, 0.9, 0.99, 0.99]
+
+
+def test_random_walk_at_T4_is_unobservable(tmp_path):
+    """ranWalk, T = 4 (Sec. IV): no joint MAP passes the checks, and few trajectories have
+    a unique interior maximum of p(a | z)."""
+    conf = config(
+        {
+            "name": "m",
+            "base": {"model": "sep_ranwalk", "omega": {"a": 0.9}, "x0": 8, "prior": "half_line"},
+            "vary": "a",
+            "values": [0.9],
+            "T": [4],
+            "K": 40,
+        }
+    )
+    ((cell, _),) = CacheKeys(conf, "native").map_cells("m")
+    from ssmobs.scenario import Scenario
+
+    row = om.cell_summary(
+        Scenario.from_config(cell),
+        tmp_path / "q8_K40_design_seed1.nc",
+        conf["design"],
+        conf["joint_map"],
+        conf["exact_marginal"],
+    )
+    assert row["K_max"] == 0 and row["K_max_frac_hi95"] < 0.1
+    assert row["exact"] and row["exact_unique_frac"] < 0.5

@@ -1,0 +1,40 @@
+"""Issue 21: the observability maps of the smoke run, checked against the scenario whose
+trajectories one cell shares, and a user's model mapped with one config entry."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+from helpers import SMOKE_OUT, only
+
+pytestmark = pytest.mark.workflow
+
+
+def test_map_cell_equals_the_scenario_with_the_same_trajectories(smoke_run):
+    """Cell (a = 0.9, T = 4) of map 'same' is scenario same_T4: the same |K^max| and the same
+    count of unique interior maxima of the exact marginal."""
+    cells = pd.read_csv(smoke_run / SMOKE_OUT / "map_same.csv")
+    assert len(cells) == 4 and set(cells["T"]) == {4, 8}
+    cell = cells[(cells["value"] == 0.9) & (cells["T"] == 4)].iloc[0]
+    joint = json.loads(only(smoke_run, "results/same_T4/joint_map/*/summary.json").read_text())
+    exact = json.loads(only(smoke_run, "results/same_T4/exact_marginal/*/summary.json").read_text())
+    assert cell["K"] == joint["K"] == 12
+    assert cell["K_max"] == joint["K_max"]
+    assert cell["exact_unique"] == exact["n_unique"]
+    assert bool(cell["paper_point"]) and cells["paper_point"].sum() == 1
+    for col in ("K_max_frac", "exact_unique_frac"):
+        assert (cells[f"{col}_lo95"] <= cells[col]).all() and (
+            cells[col] <= cells[f"{col}_hi95"]
+        ).all()
+
+
+def test_own_model_map_has_the_joint_map_only(smoke_run):
+    """stoch_vol is not linear in the states: joint MAP columns, no exact ones."""
+    cells = pd.read_csv(smoke_run / SMOKE_OUT / "map_stoch_vol.csv")
+    assert list(cells["value"]) == [0.5, 0.9] and not cells["exact"].any()
+    assert "exact_unique" not in cells.columns
+    assert cells["lvar_median_phi"].notna().any()
+    for ext in ("png", "pdf", "md"):
+        assert (smoke_run / SMOKE_OUT / f"map_stoch_vol.{ext}").stat().st_size > 0

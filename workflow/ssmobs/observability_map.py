@@ -1,0 +1,280 @@
+"""The observability map (issue 21): where in (true parameter, T) a model is observable, and
+how well.
+
+A map (one entry of the config's ``observability_maps``) is a grid of *cells*: a base
+scenario (model, Omega, x0, prior, method, seed) with one parameter set to each of
+``values`` and the horizon set to each of ``T``.  Every cell gets K design trajectories
+(Sec. III.A) and
+- the joint MAP (Sec. III.B): |K^max|/K with its exact binomial 95 % interval and, over
+  K^max, the median local variance of every Omega component;
+- for a model linear in the states, the exact marginal posterior p(Omega | z) (Kalman filter
+  and grid, :mod:`ssmobs.exact_marginal`): the fraction of trajectories with a unique interior
+  maximum (Definition 3) with its interval, and over those the median Laplace standard
+  deviation and the median width of the 90 % interval of every Omega component ("how
+  well"), plus the fraction whose cut-off improper spike is not negligible.
+Each cell is cached on its own under its content key (the cell, K, the design, joint-MAP and
+exact settings and the code; :meth:`ssmobs.cache_keys.CacheKeys.map_cells`), so a grid
+extended by new values or horizons computes only the new cells.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from . import io
+from .binomial import clopper_pearson
+from .log import Progress
+from .scenario import Scenario
+
+logger = logging.getLogger("ssmobs")
+
+#: keys every cached cell file must hold
+CELL_KEYS = ("K_max", "K_max_frac", "exact")
+
+
+def _value_label(value: float) -> str:
+    return f"{value:g}"
+
+
+def cell_entries(entry: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The scenario entries of every cell of one map, value-major then T (config order).
+
+    A cell is the map's ``base`` with ``omega[vary]`` = value, its ``T`` and ``K``, the
+    joint MAP on and Stan off; its name is ``<map>_<vary><value>_T<T>``."""
+    from .config import schema_problems
+    from .scenario import _entry_schema
+
+    base = dict(entry["base"])
+    cells = []
+    for value in entry["values"]:
+        for T in entry["T"]:
+            omega = {**base["omega"], entry["vary"]: value}
+            cell = {
+                **copy.deepcopy(base),
+                "name": f"{entry['name']}_{entry['vary']}{_value_label(value)}_T{T}",
+                "omega": omega,
+                "T": int(T),
+                "K": int(entry["K"]),
+                "joint_map": True,
+                "stan": False,
+            }
+            schema_problems(cell, _entry_schema())  # fills in the defaults (checked elsewhere)
+            cells.append(cell)
+    return cells
+
+
+def _median(values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else math.nan
+
+
+def cell_summary(
+    scenario: Scenario,
+    disturbances: str | os.PathLike,
+    design_cfg: Mapping[str, Any],
+    joint_settings: Mapping[str, Any],
+    exact_settings: Mapping[str, Any] | None,
+) -> dict[str, Any]:
+    """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
+    model linear in the states) exact marginal; the row of the map's table (module
+    docstring), without the map's own columns."""
+    from .exact_marginal import ExactSettings, exact_marginal
+    from .stages.design import disturbance_set
+    from .stages.joint_map import joint_map_of
+    from .trajectories import make_trajectories
+
+    model = scenario.model
+    matrix, attrs = disturbance_set(
+        disturbances,
+        scenario.disturbance_dim,
+        scenario.K,
+        scenario.method,
+        scenario.seed,
+        dict(design_cfg),
+    )
+    traj = make_trajectories(scenario, matrix, provenance=attrs)
+    _, frame, info, bounds = joint_map_of(traj, scenario.prior, dict(joint_settings))
+    K = scenario.K
+    row: dict[str, Any] = {"K_max": int(info["K_max"])}
+    row["K_max_frac"] = row["K_max"] / K
+    row["K_max_frac_lo95"], row["K_max_frac_hi95"] = clopper_pearson(row["K_max"], K)
+    ok = (frame["status"] == "ok").to_numpy()
+    for name in model.param_names:
+        row[f"lvar_median_{name}"] = _median(frame.loc[ok, f"lvar_{name}"].to_numpy(float))
+    row["exact"] = bool(exact_settings is not None and model.linear_in_states)
+    if row["exact"]:
+        assert exact_settings is not None
+        result = exact_marginal(model, traj.z, bounds, ExactSettings.from_mapping(exact_settings))
+        ex = result.to_frame(model)
+        unique = int((ex["maxima"] == "unique").sum())
+        used = ex["converged"].to_numpy(bool)
+        row["exact_unique"] = unique
+        row["exact_unique_frac"] = unique / K
+        row["exact_unique_frac_lo95"], row["exact_unique_frac_hi95"] = clopper_pearson(unique, K)
+        row["exact_used"] = int(used.sum())
+        row["spike_frac"] = float((used & ex["spike_not_negligible"].to_numpy(bool)).sum()) / K
+        for name in model.param_names:
+            sd = ex.loc[used, f"laplace_sd_{name}"].to_numpy(float)
+            width = (ex.loc[used, f"{name}_q95"] - ex.loc[used, f"{name}_q5"]).to_numpy(float)
+            row[f"sd_median_{name}"] = _median(sd)
+            row[f"width90_median_{name}"] = _median(width)
+    return row
+
+
+def _read_cell(path: Path) -> dict[str, Any] | None:
+    if not path.exists():
+        return None
+    try:
+        return io.read_json(path, required=list(CELL_KEYS))
+    except io.CorruptFileError as err:
+        logger.warning("recomputing: %s", err)
+        return None
+
+
+def map_table(
+    entry: Mapping[str, Any],
+    cells: Sequence[tuple[Mapping[str, Any], str]],
+    design_dir: str | os.PathLike,
+    design_cfg: Mapping[str, Any],
+    joint_settings: Mapping[str, Any],
+    exact_settings: Mapping[str, Any] | None,
+    cells_dir: str | os.PathLike,
+) -> pd.DataFrame:
+    """One row per cell of a map (``cells``: each cell's scenario entry and content key).
+
+    A cell found in ``cells_dir/<key>.json`` is read, any other computed and written there
+    at once (a rerun after a kill computes only the missing cells)."""
+    progress = Progress(f"observability map {entry['name']}", len(cells))
+    rows = []
+    for cell, key in cells:
+        path = Path(cells_dir) / f"{key}.json"
+        row = _read_cell(path)
+        if row is None:
+            sc = Scenario.from_config(cell)
+            disturbances = (
+                Path(design_dir) / f"q{sc.disturbance_dim}_K{sc.K}_{sc.method}_seed{sc.seed}.nc"
+            )
+            row = cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
+            io.write_json(path, row)
+        rows.append(
+            {
+                "map": entry["name"],
+                "model": cell["model"],
+                "vary": entry["vary"],
+                "value": float(cell["omega"][entry["vary"]]),
+                "T": int(cell["T"]),
+                "K": int(cell["K"]),
+                **row,
+            }
+        )
+        progress.update()
+    frame = pd.DataFrame(rows)
+    points = {(float(v), int(T)) for v, T in entry.get("paper_points", [])}
+    frame["paper_point"] = [
+        (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
+    ]
+    return frame
+
+
+def figure_map(
+    frame: pd.DataFrame, entry: Mapping[str, Any], title: str, paths: Sequence[str]
+) -> None:
+    """Left: the observable fraction over the varied parameter, one colour per T (exact
+    marginal: solid with its 95 % band; joint MAP |K^max|/K: dashed); the paper's cells
+    ringed.  Right: how well, the median 90 % interval width of the varied parameter (exact)
+    or 2 x 1.645 x sqrt(median local variance) (joint MAP, models without the exact stage)."""
+    from .figures import _plt, save_figure
+
+    plt = _plt()
+    vary = entry["vary"]
+    exact = bool(frame["exact"].any())
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9.0, 3.4))
+    for i, (T, cells) in enumerate(frame.groupby("T", sort=True)):
+        cells = cells.sort_values("value")
+        colour = f"C{i % 10}"
+        x = cells["value"].to_numpy(float)
+        if exact:
+            left.plot(x, cells["exact_unique_frac"], "o-", color=colour, label=f"T = {T}")
+            left.fill_between(
+                x,
+                cells["exact_unique_frac_lo95"].astype(float),
+                cells["exact_unique_frac_hi95"].astype(float),
+                color=colour,
+                alpha=0.12,
+                lw=0,
+            )
+            left.plot(x, cells["K_max_frac"], "x--", color=colour, lw=0.8)
+            right.plot(x, cells[f"width90_median_{vary}"], "o-", color=colour, label=f"T = {T}")
+        else:
+            left.plot(x, cells["K_max_frac"], "x--", color=colour, label=f"T = {T}")
+            width = 2 * 1.645 * np.sqrt(cells[f"lvar_median_{vary}"].to_numpy(float))
+            right.plot(x, width, "x--", color=colour, label=f"T = {T}")
+        marked = cells[cells["paper_point"]]
+        if len(marked):
+            y = marked["exact_unique_frac"] if exact else marked["K_max_frac"]
+            left.plot(marked["value"], y, "o", ms=11, mfc="none", mec="k", mew=1.2)
+    left.set_ylim(-0.03, 1.03)
+    left.set_xlabel(vary)
+    left.set_ylabel("fraction of the K trajectories")
+    left.set_title(
+        "unique interior maximum of p(Ω | z) (solid), |K^max|/K (dashed)"
+        if exact
+        else "|K^max|/K (joint MAP)",
+        fontsize=8,
+    )
+    right.set_yscale("log")
+    right.set_xlabel(vary)
+    right.set_ylabel(f"median 90 % width of {vary}")
+    right.set_title(
+        "exact marginal posterior" if exact else "joint MAP, from the local variance",
+        fontsize=8,
+    )
+    right.legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=9)
+    save_figure(fig, paths)
+    plt.close(fig)
+
+
+def run_observability_map(
+    entry: Mapping[str, Any],
+    cells: Sequence[tuple[Mapping[str, Any], str]],
+    design_dir: str | os.PathLike,
+    design_cfg: Mapping[str, Any],
+    joint_settings: Mapping[str, Any],
+    exact_settings: Mapping[str, Any],
+    cells_dir: str | os.PathLike,
+    paths: Mapping[str, str],
+) -> pd.DataFrame:
+    """Rule observability_map: every cell of one map (cached per cell), the table (CSV,
+    Markdown) and the figure (PNG, PDF) in ``paths``."""
+    from .models import get_model
+    from .tables import write_table
+
+    model = get_model(entry["base"]["model"])
+    frame = map_table(
+        entry,
+        cells,
+        design_dir,
+        design_cfg,
+        joint_settings,
+        exact_settings if entry["exact"] else None,
+        cells_dir,
+    )
+    caption = (
+        f"Observability map of {model.title} ({entry['name']}, ours): {entry['vary']} over "
+        f"{_value_label(min(entry['values']))}..{_value_label(max(entry['values']))}, T in "
+        f"{list(entry['T'])}, K = {entry['K']} design trajectories per cell."
+    )
+    write_table(frame, [paths["csv"], paths["md"]], caption)
+    title = f"{model.title}: where is it observable? ({entry['name']}, K = {entry['K']})"
+    figure_map(frame, entry, title, [paths["png"], paths["pdf"]])
+    return frame
