@@ -292,3 +292,19 @@ def test_committed_outputs_of_another_profile_are_refused(base, tmp_path):
     proc = snakemake(work, *ARGS, "-n", check=False)
     assert proc.returncode != 0
     assert "holds the committed outputs of config/tables.yaml" in proc.stdout + proc.stderr
+
+
+def test_a_run_naming_its_targets_remakes_a_stale_table(base, tmp_path):
+    """``make tables`` names its files: after an edit of the tables' code the named table is
+    remade too (its stamp is stale), and a dry run first deletes nothing."""
+    work = _copy(base, tmp_path / "named")
+    _append("workflow/ssmobs/tables.py", "\n# an edit of the tables' code\n")(work)
+    table = f"{OUT}/table2_joint_vs_marginal.csv"
+    named = [table, "--cores", "2", "--configfile", CONFIG]
+    snakemake(work, "-n", *named)
+    assert (work / table).is_file(), "a dry run deleted a table"
+    ran = rules_run(snakemake(work, *named))
+    assert ran == {"paper_tables"}, ran
+    assert (work / table).read_bytes() == (base / table).read_bytes()
+    again = snakemake(work, "-n", *named)
+    assert "Nothing to be done" in again.stdout + again.stderr

@@ -90,6 +90,8 @@ for _name in KSEL:
     KEYS.k_selection_points(_name)
 #: every cell of every observability map with its key (issue 21)
 MAP_CELLS = {_name: KEYS.map_cells(_name) for _name in MAPS}
+for _name in MAPS:
+    KEYS.map_table(_name)
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
 STAMPS = {}
 
@@ -325,17 +327,46 @@ def repair_damaged_trajectories():
                 Path(path).unlink()
 
 
+def stamped_outputs(path):
+    """The other outputs of the rule whose stamp is ``path`` (its wildcards applied)."""
+    from snakemake.io import apply_wildcards
+
+    for rule in workflow.rules:
+        pattern = getattr(rule.output, "stamp", None)
+        found = pattern.match(path) if pattern is not None else None
+        if found:
+            return [
+                apply_wildcards(str(f), found.groupdict())
+                for f in rule.output
+                if str(f) != str(pattern)
+            ]
+    return []
+
+
 def remove_stale_stamps():
-    """Remove every stamp whose key is not the current one (see :func:`stamp`); in the
-    process that plans the run (not again in cluster jobs)."""
+    """Remove every stamp whose key is not the current one (see :func:`stamp`), and the files
+    its rule made under the old key, so that a run asking for one of those files by name
+    (``make tables``) remakes it too, not only a run of every target.  In the process that
+    plans the run (not again in cluster jobs).  A dry run keeps the files: it moves the
+    stamp aside to ``<stamp>.stale``, which the next real run honours."""
     if not workflow.is_main_process:
         return
     for path, key in STAMPS.items():
+        stamp_file, aside = Path(path), Path(path + ".stale")
         try:
-            if Path(path).read_text().strip() != key:
-                Path(path).unlink()
+            stale = stamp_file.read_text().strip() != key
         except FileNotFoundError:
-            pass
+            stale = aside.exists()
+        if not stale:
+            continue
+        if workflow.dryrun or getattr(workflow.output_settings, "dryrun", False):
+            if stamp_file.exists():
+                stamp_file.replace(aside)
+            continue
+        for f in stamped_outputs(path):
+            Path(f).unlink(missing_ok=True)
+        stamp_file.unlink(missing_ok=True)
+        aside.unlink(missing_ok=True)
 
 
 def all_targets():

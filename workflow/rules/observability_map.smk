@@ -1,24 +1,48 @@
 # Observability maps (issue 21, ours): one job per map computes its cells, each cached on its
-# own under its key in results/observability_map/cells/, and writes the table and figure.
+# own under its key in results/observability_map/cells/ (an extended grid computes only the
+# new cells); a second one writes the map's table and figure.
 
 #: where the cells of every map are cached (by their own keys, shared by maps and profiles)
 MAP_CELLS_DIR = "results/observability_map/cells"
 
 
-def map_params(name):
-    return {
-        "entry": MAPS[name],
-        "cells": [key for _, key in MAP_CELLS[name]],
-    }
+def map_cells_table(name):
+    return f"results/observability_map/{name}/{KEYS.map_table(name)}/cells.parquet"
+
+
+rule observability_map_cells:
+    """Every cell of one map: design set, joint MAP and (models linear in the states) exact
+    marginal; each cell cached as it finishes."""
+    output:
+        "results/observability_map/{map}/{key}/cells.parquet",
+    log:
+        "results/observability_map/{map}/{key}/cells.log",
+    conda:
+        "../../envs/ssmobs.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=120,
+    params:
+        entry=lambda wc: keyed_input("map", wc.map, wc.key, MAPS[wc.map]),
+        cells=lambda wc: MAP_CELLS[wc.map],
+        design=config["design"],
+        design_dir=DESIGN_DIR,
+        joint_settings=config["joint_map"],
+        exact_settings=config["exact_marginal"],
+        cells_dir=MAP_CELLS_DIR,
+    script:
+        "../scripts/observability_map_cells.py"
 
 
 for _name in MAPS:
-    register_stamp(f"map_{_name}", [], map_params(_name))
+    register_stamp(f"map_{_name}", [map_cells_table(_name)], {"entry": MAPS[_name]})
 
 
 rule observability_map:
-    """Where in (true parameter, T) one model is observable, and how well: every cell's
-    joint MAP and exact marginal, the table and the figure."""
+    """Where in (true parameter, T) one model is observable, and how well: table and figure."""
+    input:
+        cells=lambda wc: map_cells_table(wc.map),
     output:
         csv=f"{OUT}/map_{{map}}.csv",
         md=f"{OUT}/map_{{map}}.md",
@@ -31,20 +55,11 @@ rule observability_map:
         stamp=stamp("map_{map}"),
     log:
         f"results/outputs/{OUT}/logs/observability_map/{{map}}.log",
+    localrule: True
     conda:
         "../../envs/ssmobs.yaml"
-    threads: 1
-    resources:
-        mem_mb=4000,
-        runtime=120,
     params:
         entry=lambda wc: MAPS[wc.map],
-        cells=lambda wc: MAP_CELLS[wc.map],
-        design=config["design"],
-        design_dir=DESIGN_DIR,
-        joint_settings=config["joint_map"],
-        exact_settings=config["exact_marginal"],
-        cells_dir=MAP_CELLS_DIR,
         key=stamp_key,
     script:
         "../scripts/observability_map.py"

@@ -56,10 +56,14 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
     "exact": ("stages/exact.py",),
     # the cells of an observability map: what computes a cell, not the map's table or figure
-    "map_cells": ("observability_map.py:map_table,cell_summary",),
+    "map_cells": ("observability_map.py:run_map_cells",),
     # every stamped table and figure; observability_study's and observability_map's scripts
     # call their modules themselves
-    "outputs": ("stages/outputs.py", "observability_study.py", "observability_map.py"),
+    "outputs": (
+        "stages/outputs.py",
+        "observability_study.py",
+        "observability_map.py:write_map,figure_map",
+    ),
 }
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
@@ -92,7 +96,7 @@ STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
     "nuts_batches": ("sample_nuts",),
     "gather": ("gather_nuts",),
     "exact": ("exact_marginal",),
-    "map_cells": ("observability_map",),
+    "map_cells": ("observability_map_cells",),
     "outputs": OUTPUT_SCRIPTS,
 }
 #: modules that only log, plan or describe and never change a number or a file's content
@@ -477,6 +481,10 @@ class CacheKeys:
             }
             out.append((cell, self._key("map_cell", cell["name"], payload)))
         return out
+
+    def map_table(self, name: str) -> str:
+        """The table of every cell of one observability map: its cells' keys."""
+        return self._key("map", name, {"cells": [key for _, key in self.map_cells(name)]})
 
     def output(self, name: str, inputs: Iterable[str], params: Any) -> str:
         """A table or figure of ``outputs_dir``: its keyed inputs, its parameters and the

@@ -177,12 +177,7 @@ def map_table(
             }
         )
         progress.update()
-    frame = pd.DataFrame(rows)
-    points = {(float(v), int(T)) for v, T in entry.get("paper_points", [])}
-    frame["paper_point"] = [
-        (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
-    ]
-    return frame
+    return pd.DataFrame(rows)
 
 
 def figure_map(
@@ -244,7 +239,7 @@ def figure_map(
     plt.close(fig)
 
 
-def run_observability_map(
+def run_map_cells(
     entry: Mapping[str, Any],
     cells: Sequence[tuple[Mapping[str, Any], str]],
     design_dir: str | os.PathLike,
@@ -252,14 +247,10 @@ def run_observability_map(
     joint_settings: Mapping[str, Any],
     exact_settings: Mapping[str, Any],
     cells_dir: str | os.PathLike,
-    paths: Mapping[str, str],
+    out: str | os.PathLike,
 ) -> pd.DataFrame:
-    """Rule observability_map: every cell of one map (cached per cell), the table (CSV,
-    Markdown) and the figure (PNG, PDF) in ``paths``."""
-    from .models import get_model
-    from .tables import write_table
-
-    model = get_model(entry["base"]["model"])
+    """Rule observability_map_cells: every cell of one map (:func:`map_table`; the exact
+    settings apply where the map runs the exact stage), as one table at ``out``."""
     frame = map_table(
         entry,
         cells,
@@ -269,6 +260,24 @@ def run_observability_map(
         exact_settings if entry["exact"] else None,
         cells_dir,
     )
+    io.write_parquet(out, frame)
+    return frame
+
+
+def write_map(
+    cells: str | os.PathLike, entry: Mapping[str, Any], paths: Mapping[str, str]
+) -> pd.DataFrame:
+    """Rule observability_map: the map's table (CSV, Markdown) and figure (PNG, PDF) at
+    ``paths`` from the table of its cells."""
+    frame = io.read_parquet(cells, required_columns=["value", "T", "K_max_frac", "exact"])
+    points = {(float(v), int(T)) for v, T in entry.get("paper_points", [])}
+    frame["paper_point"] = [
+        (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
+    ]
+    from .models import get_model
+    from .tables import write_table
+
+    model = get_model(entry["base"]["model"])
     caption = (
         f"Observability map of {model.title} ({entry['name']}, ours): {entry['vary']} over "
         f"{_value_label(min(entry['values']))}..{_value_label(max(entry['values']))}, T in "

@@ -1,0 +1,18 @@
+"""Rule observability_map_cells: every cell of one map, each cached on its own."""
+
+from ssmobs import io, log
+from ssmobs.observability_map import run_map_cells
+
+log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+p = snakemake.params
+run_map_cells(
+    p.entry,
+    p.cells,
+    p.design_dir,
+    p.design,
+    p.joint_settings,
+    p.exact_settings,
+    p.cells_dir,
+    snakemake.output[0],
+)
