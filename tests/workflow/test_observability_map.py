@@ -7,7 +7,8 @@ import json
 
 import pandas as pd
 import pytest
-from helpers import SMOKE_OUT, only
+import yaml
+from helpers import REPO, SMOKE_OUT, only
 
 pytestmark = pytest.mark.workflow
 
@@ -38,3 +39,30 @@ def test_own_model_map_has_the_joint_map_only(smoke_run):
     assert cells["lvar_median_phi"].notna().any()
     for ext in ("png", "pdf", "md"):
         assert (smoke_run / SMOKE_OUT / f"map_stoch_vol.{ext}").stat().st_size > 0
+
+
+MAP_PROFILE = REPO / "config" / "map.yaml"
+MAP_OUT = REPO / "paper_figures" / "observability_map"
+committed_map = pytest.mark.skipif(
+    not (MAP_OUT / "provenance.json").is_file(), reason="no committed maps in this checkout"
+)
+
+
+@committed_map
+def test_committed_maps_match_the_profile_and_their_scenario():
+    """The committed maps come from config/map.yaml; the cell of the paper's Same (0.9, 8)
+    at T = 20 has the numbers of the scenario with the same trajectories (Section IV table
+    of the same run), and ranWalk at T = 4 is unobservable (Sec. IV.E)."""
+    prov = yaml.safe_load((MAP_OUT / "provenance.json").read_text())
+    assert prov["config"] == yaml.safe_load(MAP_PROFILE.read_text())
+    conf = yaml.safe_load(MAP_PROFILE.read_text())
+    for entry in conf["observability_maps"]:
+        cells = pd.read_csv(MAP_OUT / f"map_{entry['name']}.csv")
+        assert len(cells) == len(entry["values"]) * len(entry["T"])
+        assert (MAP_OUT / f"map_{entry['name']}.png").stat().st_size > 2000
+    same = pd.read_csv(MAP_OUT / "map_same.csv").set_index(["value", "T"])
+    s4 = pd.read_csv(MAP_OUT / "section4_summary.csv").set_index("scenario").loc["same_a09_T20"]
+    assert same.loc[(0.9, 20), "K_max"] == s4["K_max"]
+    assert same.loc[(0.9, 20), "exact_unique"] == s4["exact_unique"]
+    ranwalk = pd.read_csv(MAP_OUT / "map_ranwalk.csv").set_index(["value", "T"])
+    assert ranwalk.loc[(0.9, 4), "K_max"] == 0
