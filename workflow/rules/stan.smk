@@ -45,7 +45,6 @@ rule sample_nuts:
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         stan=config["stan"],
-        backend=STAN_BACKEND,
         convergence=config["convergence"],
         records=lambda wc: records_dir(wc.scenario),
         draws=lambda wc: draws_dir(wc.scenario),
