@@ -171,6 +171,16 @@ def exact_summary_path(name):
     return f"{exact_dir(name, SCENARIO_OBJECTS[name].exact_trajectories)}/summary.json"
 
 
+#: where the cells of every observability map are cached (by their own keys, shared by maps
+#: and profiles)
+MAP_CELLS_DIR = "results/observability_map/cells"
+
+
+def map_cells_table(name):
+    """The table of every cell of one observability map."""
+    return f"results/observability_map/{name}/{KEYS.map_table(name)}/cells.parquet"
+
+
 def ksel_points_dir(ksel):
     return f"results/k_selection/{ksel}/{KEYS.k_selection_points(ksel)}"
 
@@ -331,13 +341,13 @@ def stamped_outputs(path):
     """The other outputs of the rule whose stamp is ``path`` (its wildcards applied)."""
     from snakemake.io import apply_wildcards
 
-    for rule in workflow.rules:
-        pattern = getattr(rule.output, "stamp", None)
+    for candidate in workflow.rules:
+        pattern = getattr(candidate.output, "stamp", None)
         found = pattern.match(path) if pattern is not None else None
         if found:
             return [
                 apply_wildcards(str(f), found.groupdict())
-                for f in rule.output
+                for f in candidate.output
                 if str(f) != str(pattern)
             ]
     return []
@@ -352,7 +362,7 @@ def remove_stale_stamps():
     if not workflow.is_main_process:
         return
     for path, key in STAMPS.items():
-        stamp_file, aside = Path(path), Path(path + ".stale")
+        stamp_file, aside = Path(path), Path(f"{path}.stale")
         try:
             stale = stamp_file.read_text().strip() != key
         except FileNotFoundError:

@@ -2,13 +2,6 @@
 # own under its key in results/observability_map/cells/ (an extended grid computes only the
 # new cells); a second one writes the map's table and figure.
 
-#: where the cells of every map are cached (by their own keys, shared by maps and profiles)
-MAP_CELLS_DIR = "results/observability_map/cells"
-
-
-def map_cells_table(name):
-    return f"results/observability_map/{name}/{KEYS.map_table(name)}/cells.parquet"
-
 
 rule observability_map_cells:
     """Every cell of one map: design set, joint MAP and (models linear in the states) exact
