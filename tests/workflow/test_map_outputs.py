@@ -36,7 +36,8 @@ def test_own_model_map_has_the_joint_map_only(smoke_run):
     cells = pd.read_csv(smoke_run / SMOKE_OUT / "map_stoch_vol.csv")
     assert list(cells["value"]) == [0.5, 0.9] and not cells["exact"].any()
     assert "exact_unique" not in cells.columns
-    assert cells["lvar_median_phi"].notna().any()
+    assert {"lvar_median_phi", "lvar_median_sigma", "K_max_frac_hi95"} <= set(cells.columns)
+    assert cells["K_max_frac"].between(0, 1).all()
     for ext in ("png", "pdf", "md"):
         assert (smoke_run / SMOKE_OUT / f"map_stoch_vol.{ext}").stat().st_size > 0
 

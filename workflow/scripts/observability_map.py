@@ -4,8 +4,8 @@ from ssmobs import io, log
 from ssmobs.observability_map import write_map
 
 log.setup(snakemake.log[0])
+io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 out = snakemake.output
-io.sweep_temporaries(out)  # left by an interrupted earlier run
 write_map(
     snakemake.input.cells,
     snakemake.params.entry,
