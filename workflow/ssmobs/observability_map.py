@@ -110,9 +110,8 @@ def cell_summary(
     ok = (frame["status"] == "ok").to_numpy()
     for name in model.param_names:
         row[f"lvar_median_{name}"] = _median(frame.loc[ok, f"lvar_{name}"].to_numpy(float))
-    row["exact"] = bool(exact_settings is not None and model.linear_in_states)
-    if row["exact"]:
-        assert exact_settings is not None
+    row["exact"] = exact_settings is not None and model.linear_in_states
+    if exact_settings is not None and model.linear_in_states:
         result = exact_marginal(model, traj.z, bounds, ExactSettings.from_mapping(exact_settings))
         ex = result.to_frame(model)
         unique = int((ex["maxima"] == "unique").sum())
