@@ -11,6 +11,7 @@ from ssmobs.convergence import (
     ConvergenceSettings,
     check_convergence,
     converged_under,
+    failure_pattern_table,
     sensitivity_table,
     threshold_failures,
 )
@@ -118,7 +119,34 @@ def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
         {"a": tmp_path / "a.parquet"},
         config_with()["convergence"],
         [tmp_path / f"sens.{ext}" for ext in ("csv", "md", "tex")],
+        [tmp_path / f"fails.{ext}" for ext in ("csv", "md", "tex")],
     )
     assert out["rhat1.05_treedepth_fails"].tolist() == [2]
     text = (tmp_path / "sens.md").read_text()
     assert "rhat1.01_treedepth_warns" in text and "| a " in text
+    fails = pd.read_csv(tmp_path / "fails.csv")
+    assert fails[["scenario", "failed_checks", "runs"]].values.tolist() == [["a", "rhat", 1]]
+    assert fails["max_rhat_q50"].tolist() == [1.02]
+
+
+def test_failure_patterns_group_the_runs_that_did_not_converge():
+    separated = {"converged": False, "failed_checks": "rhat,ess_bulk,ess_tail"}
+    t = table(
+        [
+            {},
+            {**separated, "max_rhat": 1.5, "failing_blocks": "omega,states"},
+            {**separated, "max_rhat": 1.7, "failing_blocks": "omega,states", "n_divergent": 2.0},
+            {**separated, "max_rhat": 1.6, "failing_blocks": "omega,states"},
+            {"converged": False, "failed_checks": "divergences", "n_divergent": 1.0},
+        ]
+    ).fillna({"failing_blocks": ""})
+    out = failure_pattern_table({"x": t, "all good": table([{}])})
+    assert out[
+        ["failed_checks", "failing_blocks", "runs", "runs_with_divergences"]
+    ].values.tolist() == [
+        ["rhat,ess_bulk,ess_tail", "omega,states", 3, 1],
+        ["divergences", "", 1, 1],
+    ]
+    first = out.iloc[0]
+    assert (first["max_rhat_q00"], first["max_rhat_q50"], first["max_rhat_q100"]) == (1.5, 1.6, 1.7)
+    assert set(out["scenario"]) == {"x"} and set(out["K"]) == {5}

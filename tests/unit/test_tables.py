@@ -7,7 +7,13 @@ import math
 import pandas as pd
 import pytest
 from ssmobs.binomial import clopper_pearson
-from ssmobs.tables import section_iv, section_iv_compact, table_ii, write_table
+from ssmobs.tables import (
+    exact_vs_stan_table,
+    section_iv,
+    section_iv_compact,
+    table_ii,
+    write_table,
+)
 
 PAPER = {
     "ref": {
@@ -152,3 +158,17 @@ def test_table_ii_caption_names_the_configured_setting():
         [entry("s1", 0.9, 8), entry("s2", 0.7, 8)]
     )
     assert "paper_outputs.tables_2_3" in _table_ii_setting([])
+
+
+def test_exact_vs_stan_table_gives_median_and_largest_difference_per_statistic():
+    exact = pd.DataFrame({"a_map": [0.9, 0.8, 0.7], "a_q5": [0.1, 0.2, 0.3], "a_q95": [1.0] * 3})
+    stan = exact + pd.DataFrame(
+        {"a_map": [0.01, -0.03, 0.02], "a_q5": [0.0, 0.0, float("nan")], "a_q95": [0.5] * 3}
+    )
+    out = exact_vs_stan_table(stan, exact, ["a"]).set_index("statistic")
+    assert out.loc["marginal MAP", "abs_diff_median"] == pytest.approx(0.02)
+    assert out.loc["marginal MAP", "abs_diff_max"] == pytest.approx(0.03)
+    assert out.loc["5 % quantile", "n"] == 2  # the NaN difference is left out
+    assert out.loc["95 % quantile", "abs_diff_max"] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="2 Stan rows, 3 exact rows"):
+        exact_vs_stan_table(stan.iloc[:2], exact, ["a"])

@@ -65,3 +65,9 @@ def test_exact_vs_stan_figure(smoke_run):
                 assert (
                     smoke_run / SMOKE_OUT / f"fig_exact_vs_stan_{sc['name']}.{ext}"
                 ).stat().st_size > 2000
+            # the numbers of the comparison, one row per component and statistic
+            diffs = pd.read_csv(smoke_run / SMOKE_OUT / f"exact_vs_stan_{sc['name']}.csv")
+            names = [*get_model(sc["model"]).param_names, "x0"]
+            assert list(diffs["component"].unique()) == names
+            assert (diffs["n"] > 0).all()
+            assert (diffs["abs_diff_median"] <= diffs["abs_diff_max"]).all()

@@ -72,6 +72,13 @@ def test_table_values_finite_where_they_must(smoke_run):
         assert row["rhat1.01_treedepth_warns"] == row["K_stan_run"]
         assert row["rhat1.01_treedepth_fails"] <= row["rhat1.01_treedepth_warns"]
         assert row["rhat1.05_treedepth_warns"] >= row["rhat1.01_treedepth_warns"]
+    # every run that did not converge is in one failure pattern of its scenario
+    fails = pd.read_csv(smoke_run / SMOKE_OUT / "table_convergence_failures.csv")
+    failed_runs = (sens["K"] - sens["K_stan_run"]).set_axis(sens["scenario"])
+    per_scenario = fails.groupby("scenario")["runs"].sum()
+    assert per_scenario.to_dict() == {k: v for k, v in failed_runs.items() if v > 0}
+    assert (fails["failed_checks"] != "").all()
+    assert (fails["runs_with_divergences"] <= fails["runs"]).all()
 
 
 def test_paper_values_hold_every_stated_number():

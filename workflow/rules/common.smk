@@ -393,6 +393,9 @@ def all_targets():
         name=EXACT_VS_STAN_SCENARIOS,
         ext=["pdf", "png"],
     )
+    targets += expand(
+        f"{OUT}/exact_vs_stan_{{name}}.{{ext}}", name=EXACT_VS_STAN_SCENARIOS, ext=["csv", "md"]
+    )
     if FIGURE4_SCENARIO:
         targets += expand(
             f"{OUT}/fig4_profile_posterior_{FIGURE4_SCENARIO}.{{ext}}", ext=["pdf", "png"]
@@ -415,6 +418,10 @@ def all_targets():
     if MU0_SCENARIOS:
         targets += expand(f"{OUT}/table_mu0_sweep.{{ext}}", ext=["csv", "md", "tex"])
     if STAN_SCENARIOS:
-        targets += expand(f"{OUT}/table_convergence_sensitivity.{{ext}}", ext=["csv", "md", "tex"])
+        targets += expand(
+            f"{OUT}/{{stem}}.{{ext}}",
+            stem=["table_convergence_sensitivity", "table_convergence_failures"],
+            ext=["csv", "md", "tex"],
+        )
     targets += list(STAMPS)
     return targets

@@ -136,6 +136,7 @@ rule figure_exact_vs_stan:
             caption="../report/exact_vs_stan.rst",
             category="Figures",
         ),
+        table=multiext(f"{OUT}/exact_vs_stan_{{scenario}}", ".csv", ".md"),
         stamp=stamp("figure_exact_vs_stan_{scenario}"),
     log:
         f"results/outputs/{OUT}/logs/figure_exact_vs_stan_{{scenario}}.log",

@@ -68,7 +68,8 @@ register_stamp(
 
 
 rule convergence_sensitivity:
-    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted."""
+    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted, and
+    how the runs that did not converge failed."""
     input:
         tables=SENSITIVITY_INPUTS,
     output:
@@ -77,6 +78,7 @@ rule convergence_sensitivity:
             caption="../report/convergence_sensitivity.rst",
             category="Tables",
         ),
+        failures=multiext(f"{OUT}/table_convergence_failures", ".csv", ".md", ".tex"),
         stamp=stamp("convergence_sensitivity"),
     log:
         f"results/outputs/{OUT}/logs/convergence_sensitivity.log",

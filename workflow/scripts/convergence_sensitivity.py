@@ -1,4 +1,5 @@
-"""Rule convergence_sensitivity: |K^Stan| under R-hat 1.01/1.05, tree depth warned/counted."""
+"""Rule convergence_sensitivity: |K^Stan| under R-hat 1.01/1.05, tree depth warned/counted;
+how the runs that did not converge failed."""
 
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_convergence_sensitivity
@@ -10,6 +11,7 @@ run_convergence_sensitivity(
     dict(zip(p.scenarios, snakemake.input.tables, strict=True)),
     p.convergence,
     list(snakemake.output.table),
+    list(snakemake.output.failures),
 )
 # what made these files (rule of the cache: the stamp holds their key)
 io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -6,12 +6,13 @@ from ssmobs.stages.outputs import run_figure_exact_vs_stan
 
 logger = log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-stats = run_figure_exact_vs_stan(
+table = run_figure_exact_vs_stan(
     Scenario.from_config(snakemake.params.scenario),
     snakemake.input.stan,
     snakemake.input.exact,
     list(snakemake.output.figure),
+    list(snakemake.output.table),
 )
-logger.info("Stan + KDE vs exact: %s", stats)
+logger.info("Stan + KDE vs exact:\n%s", table.to_string(index=False))
 # what made these files (rule of the cache: the stamp holds their key)
 io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

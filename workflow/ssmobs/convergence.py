@@ -348,6 +348,54 @@ def sensitivity_table(
     )
 
 
+#: the quantiles of the largest R-hat shown per failure pattern
+FAILURE_RHAT_QUANTILES = (0.0, 0.05, 0.25, 0.5, 0.75, 0.95, 1.0)
+
+
+def failure_pattern_table(tables: Mapping[str, pandas.DataFrame]) -> pandas.DataFrame:
+    """How the runs that did not converge failed: per scenario and pattern (the checks that
+    failed and the blocks of Theta that failed them), the number of runs, how many of them
+    also had divergent transitions, and quantiles of their largest R-hat.
+
+    ``tables`` maps scenario names to their gather_nuts tables (thresholds applied, so
+    ``failed_checks`` and ``failing_blocks`` are the run's).  Separated modes give a large
+    R-hat with ample ESS per chain; slow mixing gives a moderate R-hat with a small ESS.
+    """
+    import pandas as pd
+
+    qcols = [f"max_rhat_q{round(100 * q):02d}" for q in FAILURE_RHAT_QUANTILES]
+    rows = []
+    for name, table in tables.items():
+        failed = table[~np.asarray(table["converged"], bool)]
+        if failed.empty:
+            continue
+        blocks = failed["failing_blocks"] if "failing_blocks" in failed else ""
+        keys = pd.DataFrame(
+            {
+                "failed_checks": failed["failed_checks"].fillna("").astype(str),
+                "failing_blocks": pd.Series(blocks, index=failed.index).fillna("").astype(str),
+            }
+        )
+        for (checks, blks), idx in keys.groupby(["failed_checks", "failing_blocks"]).groups.items():
+            group = failed.loc[idx]
+            rhat = group["max_rhat"].to_numpy(float)
+            rhat = rhat[np.isfinite(rhat)]
+            row: dict[str, Any] = {
+                "scenario": name,
+                "K": int(len(table)),
+                "failed_checks": checks,
+                "failing_blocks": blks,
+                "runs": int(len(group)),
+                "runs_with_divergences": int((group["n_divergent"].to_numpy(float) > 0).sum()),
+            }
+            for col, q in zip(qcols, FAILURE_RHAT_QUANTILES, strict=True):
+                row[col] = float(np.quantile(rhat, q)) if rhat.size else math.nan
+            rows.append(row)
+    cols = ["scenario", "K", "failed_checks", "failing_blocks", "runs", "runs_with_divergences"]
+    frame = pd.DataFrame(rows, columns=cols + qcols)
+    return frame.sort_values(["scenario", "runs"], ascending=[True, False], kind="stable")
+
+
 #: the blocks of Theta whose diagnostics every record keeps: Omega, x0, the states x_1..x_T
 BLOCKS = ("omega", "x0", "states")
 #: the per-block diagnostics (worst over the block's components)

@@ -254,17 +254,16 @@ def figure_exact_vs_stan(
     names: Sequence[str],
     title: str,
     paths: Sequence[str | os.PathLike],
-) -> dict:
+) -> None:
     """Stan + KDE marginal MAP against the exact one, trajectory by trajectory (issue 11).
 
     Top row: one scatter per component (exact on x, Stan + KDE on y, the diagonal); bottom
     row: histograms of the differences Stan - exact of the MAP and of the 5 %/95 % quantiles.
     ``stan`` and ``exact`` hold the same trajectories in the same order (converged in
-    both).  Returns the median and maximum absolute differences per component.
+    both).  The numbers of the comparison: :func:`ssmobs.tables.exact_vs_stan_table`.
     """
     plt = _plt()
     fig, axes = plt.subplots(2, len(names), figsize=(3.2 * len(names), 6.0), squeeze=False)
-    stats: dict = {"n": int(len(stan))}
     for i, name in enumerate(names):
         ex, st = exact[f"{name}_map"].to_numpy(float), stan[f"{name}_map"].to_numpy(float)
         ax = axes[0, i]
@@ -281,12 +280,9 @@ def figure_exact_vs_stan(
             d = d[np.isfinite(d)]
             if d.size:
                 ax.hist(d, bins=30, histtype="step", label=label)
-                stats[f"{name}_{stat}_abs_diff_median"] = float(np.median(np.abs(d)))
-                stats[f"{name}_{stat}_abs_diff_max"] = float(np.max(np.abs(d)))
         ax.axvline(0, color="k", lw=0.8)
         ax.set_xlabel(f"Stan + KDE - exact ({name})")
         ax.legend(fontsize=7)
     fig.tight_layout()
     save_figure(fig, paths)
     plt.close(fig)
-    return stats

@@ -119,20 +119,34 @@ def run_paper_tables(
 
 
 def run_convergence_sensitivity(
-    tables: dict[str, PathLike], convergence_cfg: dict, paths: list[PathLike]
+    tables: dict[str, PathLike],
+    convergence_cfg: dict,
+    paths: list[PathLike],
+    failure_paths: list[PathLike],
 ) -> pandas.DataFrame:
-    """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth rules.
+    """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth
+    rules, and how the runs that did not converge failed (``failure_paths``).
 
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
     scenario names to their gather_nuts tables.
     """
-    from ..convergence import ConvergenceSettings, sensitivity_table
+    from ..convergence import ConvergenceSettings, failure_pattern_table, sensitivity_table
     from ..tables import write_table
 
     frames = {
-        name: io.read_parquet(path, required_columns=["k", "converged", "failed_checks"])
+        name: io.read_parquet(
+            path,
+            required_columns=["k", "converged", "failed_checks", "max_rhat", "n_divergent"],
+        )
         for name, path in tables.items()
     }
+    write_table(
+        failure_pattern_table(frames),
+        failure_paths,
+        "The runs that did not converge, by the checks they failed and the blocks of "
+        "Theta that failed them (omega, x0, states): how many, how many also had divergent "
+        "transitions, and quantiles of their largest R-hat",
+    )
     base = ConvergenceSettings(**convergence_cfg)
     table = sensitivity_table(frames, base)
     write_table(
@@ -223,10 +237,16 @@ def run_figure_profile_posterior(
 
 
 def run_figure_exact_vs_stan(
-    scenario: Scenario, stan_table: PathLike, exact_table: PathLike, paths: list[str]
-) -> dict:
-    """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k."""
+    scenario: Scenario,
+    stan_table: PathLike,
+    exact_table: PathLike,
+    figure_paths: list[str],
+    table_paths: list[str],
+) -> pandas.DataFrame:
+    """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k: the
+    figure, and the table of median and largest differences (returned)."""
     from ..figures import figure_exact_vs_stan
+    from ..tables import exact_vs_stan_table, write_table
 
     model = scenario.model
     names = list(model.param_names) + (
@@ -241,7 +261,15 @@ def run_figure_exact_vs_stan(
             f"different trajectories (K = {len(stan)} and {len(exact)})"
         )
     both = stan["converged"].to_numpy(bool) & exact["converged"].to_numpy(bool)
-    return figure_exact_vs_stan(stan[both], exact[both], names, scenario.name, paths)
+    figure_exact_vs_stan(stan[both], exact[both], names, scenario.name, figure_paths)
+    table = exact_vs_stan_table(stan[both], exact[both], names)
+    write_table(
+        table,
+        table_paths,
+        f"Stan + KDE against the exact marginal posterior, {scenario.name}: median and "
+        "largest |difference| over the trajectories converged in both",
+    )
+    return table
 
 
 # ---------------------------------------------------- barrier starts of the joint MAP (Sec. III.B)

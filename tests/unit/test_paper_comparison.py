@@ -1,0 +1,93 @@
+"""Ours against the paper's in standard errors (ssmobs.paper_comparison)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from ssmobs.paper_comparison import (
+    paper_comparison,
+    se_fraction,
+    se_mean,
+    se_mse,
+    se_variance,
+)
+
+
+def test_standard_errors_match_the_spread_over_repeated_samples():
+    rng = np.random.default_rng(7)
+    K, bias, sd, reps = 400, 0.3, 0.5, 4000
+    est = bias + sd * rng.standard_normal((reps, K))  # estimates minus the truth
+    means, variances = est.mean(axis=1), est.var(axis=1, ddof=1)
+    mses = (est**2).mean(axis=1)
+    # each standard error within 5 % of the spread it predicts (4000 repetitions: ~1 %)
+    assert se_mean(sd**2, K) == pytest.approx(means.std(), rel=0.05)
+    assert se_variance(sd**2, K) == pytest.approx(variances.std(), rel=0.05)
+    assert se_mse(sd**2, sd**2 + bias**2, K) == pytest.approx(mses.std(), rel=0.05)
+    cover = rng.random((reps, K)) < 0.9
+    assert se_fraction(0.9, K) == pytest.approx(cover.mean(axis=1).std(), rel=0.05)
+
+
+def _folder(tmp_path, table2: str = "", table3: str = ""):
+    pd.DataFrame(
+        [
+            {
+                "scenario": "s",
+                "T": 20,
+                "K": 100,
+                "K_max": 100,
+                "K_stan": 80,
+                "K_max_frac": 1.0,
+                "K_max_frac_paper": float("nan"),
+                "K_stan_frac": 0.8,
+                "K_stan_frac_paper": 0.9,
+            },
+        ]
+    ).to_csv(tmp_path / "section4_summary.csv", index=False)
+    (tmp_path / "table2_joint_vs_marginal.csv").write_text(table2 or "\n")
+    (tmp_path / "table3_coverage.csv").write_text(table3 or "\n")
+    return tmp_path
+
+
+def test_a_fraction_is_judged_by_the_binomial_error_at_the_papers_fraction(tmp_path):
+    out = paper_comparison(_folder(tmp_path))
+    assert out["quantity"].tolist() == ["|K^Stan|/K"]  # the paper gives no K^max here
+    row = out.iloc[0]
+    assert row["standard_error"] == pytest.approx(math.sqrt(0.9 * 0.1 / 100))
+    assert row["z"] == pytest.approx(-0.1 / 0.03)
+
+
+def test_table_ii_uses_the_estimators_own_sample_size(tmp_path):
+    rows = []
+    for est in ("joint MAP", "marginal MAP"):
+        for stat, ours, paper in (
+            ("mean", 0.9, 0.91),
+            ("variance", 0.01, 0.011),
+            ("MSE", 0.02, None),
+        ):
+            rows.append(
+                {
+                    "T": 20,
+                    "scenario": "s",
+                    "estimator": est,
+                    "statistic": stat,
+                    "a_ours": ours,
+                    "a_paper": paper,
+                    "a_rel_diff": 0.0,
+                }
+            )
+    table3 = (
+        "T,scenario,quantity,ours,paper,rel_diff,K_stan\n20,s,cover90_a,0.85,0.9,0.05,80\n"
+        "20,s,mean_cover90_states,0.9,0.9,0,80\n"
+    )
+    out = paper_comparison(_folder(tmp_path, pd.DataFrame(rows).to_csv(index=False), table3))
+    out = out.set_index("quantity")
+    # the joint MAP averages K^max = 100 trajectories, the marginal MAP K^Stan = 80
+    assert out.loc["joint MAP mean of a", "standard_error"] == pytest.approx(0.1 / 10)
+    assert out.loc["marginal MAP mean of a", "standard_error"] == pytest.approx(0.1 / math.sqrt(80))
+    assert out.loc["marginal MAP variance of a", "K"] == 80
+    assert "joint MAP MSE of a" not in out.index  # the paper states no MSE here
+    assert out.loc["cover90_a", "z"] == pytest.approx(-0.05 / math.sqrt(0.09 / 80))
+    assert math.isnan(out.loc["mean_cover90_states", "z"])  # no simple standard error
