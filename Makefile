@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint docs test test-slow smoke paper tables section4 map clean
+.PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows map clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -73,16 +73,23 @@ tables: setup
 		--command "make tables" --note "$(TABLES_NOTE)" -- \
 		$(SNAKEMAKE) $(TABLES_TARGETS) --configfile config/tables.yaml
 
-# One Section IV row at the paper's settings (issue 10), with a provenance file (committed).
+# One Section IV row at the paper's settings (issue 10), with a provenance file (committed);
+# SECTION4_CONFIG=config/section4_rows/<row>.yaml for a row at the paper's iterations on a
+# subset of its design set (issue 20). Its outputs go to the config's outputs_dir.
 SECTION4_CONFIG := config/section4_sep_d2_p1.yaml
-SECTION4_DIR := paper_figures/section4_sep_d2_p1_a_T50
+SECTION4_DIR = $(shell sed -n 's/^outputs_dir: *//p' $(SECTION4_CONFIG))
 SECTION4_NOTE ?=
+SECTION4_ROWS := $(sort $(wildcard config/section4_rows/*.yaml))
 
 section4: setup
 	$(PREFLIGHT) $(SECTION4_CONFIG)
 	$(BIN)/python -m ssmobs.provenance --config $(SECTION4_CONFIG) --outputs-dir $(SECTION4_DIR) \
-		--command "make section4" --note "$(SECTION4_NOTE)" -- \
+		--command "make section4 SECTION4_CONFIG=$(SECTION4_CONFIG)" --note "$(SECTION4_NOTE)" -- \
 		$(SNAKEMAKE) --configfile $(SECTION4_CONFIG)
+
+# Every row of config/section4_rows/, one after another (about 4.4 CPU-hours in all).
+section4-rows: setup
+	set -e; for c in $(SECTION4_ROWS); do $(MAKE) --no-print-directory section4 SECTION4_CONFIG=$$c; done
 
 # The observability maps (issue 21, ours), with a provenance file (committed).
 MAP_CONFIG := config/map.yaml

@@ -1,11 +1,13 @@
 """MkDocs hook: numbers of a committed run rendered from its files, never retyped.
 
-Two markers:
+Three markers:
 
 - ``<!-- paper-comparison: paper_figures/<folder> -->`` becomes the table of
   :func:`ssmobs.paper_comparison.paper_comparison` (every value the paper states, ours
   beside it, with its Monte Carlo standard error and z) and a sentence naming the largest
   |z|.
+- ``<!-- section4-rows: paper_figures/section4_rows -->`` becomes one table of every
+  committed Section IV row at the paper's iterations (one folder per row, issue 20).
 - ``<!-- table-if-made: paper_figures/<folder>/<table>.md -->`` becomes that table. A folder
   made before the workflow wrote the table does not have it; the page then says so and
   names the command that writes it, instead of failing the build.
@@ -18,12 +20,14 @@ import math
 import re
 from pathlib import Path
 
+import pandas as pd
 from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
 from ssmobs.paper_comparison import paper_comparison
 
 COMPARISON = re.compile(r"<!-- paper-comparison: (?P<folder>[\w./-]+) -->")
+ROWS = re.compile(r"<!-- section4-rows: (?P<folder>[\w./-]+) -->")
 OPTIONAL_TABLE = re.compile(r"<!-- table-if-made: (?P<path>[\w./-]+\.md) -->")
 
 
@@ -77,7 +81,51 @@ def render_optional_table(root: Path, path: str) -> str:
     )
 
 
+def _fraction(count: float, trials: float, lo: float, hi: float) -> str:
+    if any(pd.isna(v) for v in (count, trials)) or not trials:
+        return ""
+    return f"{count / trials:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def render_rows(folder: Path) -> str:
+    """One line per committed row folder under ``folder`` (each a run of one config of
+    ``config/section4_rows/``): |K^max|/K over all K, |K^Stan|/K over the Stan runs, with
+    their 95 % intervals, beside the paper's, and how the row was made."""
+    lines = [
+        "| row | T | K | Stan runs | K^max/K | paper | K^Stan/K | paper | made |",
+        "|:--|--:|--:|--:|:--|:--|:--|:--|:--|",
+    ]
+    for summary in sorted(folder.glob("*/section4_summary.csv")):
+        prov = json.loads((summary.parent / "provenance.json").read_text())
+        made = f"`{prov['commit'][:12]}`, {prov['date_utc'][:10]}"
+        for r in pd.read_csv(summary).to_dict("records"):
+            runs = r.get("K_stan_runs", r["K"])
+
+            def frac(name: str, count: str, trials: float, r: dict = r) -> str:
+                return _fraction(r[count], trials, r[f"{name}_lo95"], r[f"{name}_hi95"])
+
+            cells = [
+                r["scenario"],
+                r["T"],
+                r["K"],
+                runs,
+                frac("K_max_frac", "K_max", r["K"]),
+                frac("K_max_frac_paper", "K_max_paper", r["K_paper"]),
+                frac("K_stan_frac", "K_stan", runs),
+                frac("K_stan_frac_paper", "K_stan_paper", r["K_paper"]),
+                made,
+            ]
+            lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+    if len(lines) == 2:
+        return (
+            "*No row is committed yet: `make section4-rows` (or one row with `make section4 "
+            "SECTION4_CONFIG=config/section4_rows/<row>.yaml`) makes them.*"
+        )
+    return "\n".join(lines)
+
+
 def on_page_markdown(markdown: str, page: Page, config: MkDocsConfig, files: Files) -> str:
     root = Path(config.config_file_path).resolve().parent
     markdown = COMPARISON.sub(lambda m: render_comparison(root / m["folder"]), markdown)
+    markdown = ROWS.sub(lambda m: render_rows(root / m["folder"]), markdown)
     return OPTIONAL_TABLE.sub(lambda m: render_optional_table(root, m["path"]), markdown)

@@ -212,6 +212,24 @@ def test_thresholds_key_the_tables_not_the_records():
     assert a.gather("same_T4", 4) != b.gather("same_T4", 4)
 
 
+def test_stan_every_keys_the_batches_not_the_records():
+    base = smoke()
+    every2, every1 = copy.deepcopy(base), copy.deepcopy(base)
+    every2["scenarios"][0]["stan_every"] = 2
+    every1["scenarios"][0]["stan_every"] = 1  # the same as absent: the keys stay
+    a, b, c = keys(base), keys(every2), keys(every1)
+    # a subset's runs are the full set's runs: the same records
+    assert a.nuts_records("same_T4") == b.nuts_records("same_T4")
+    assert a.nuts_batches("same_T4", 4) != b.nuts_batches("same_T4", 4)
+    assert a.gather("same_T4", 4) != b.gather("same_T4", 4)
+    assert (a.trajectories("same_T4"), a.joint_map("same_T4"), a.exact("same_T4", 12)) == (
+        b.trajectories("same_T4"),
+        b.joint_map("same_T4"),
+        b.exact("same_T4", 12),
+    )
+    assert a.nuts_batches("same_T4", 4) == c.nuts_batches("same_T4", 4)
+
+
 def test_exact_settings_key_the_exact_stage_only():
     base = smoke()
     edited = copy.deepcopy(base)

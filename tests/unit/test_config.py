@@ -14,7 +14,11 @@ from ssmobs import config as cfg
 pytestmark = pytest.mark.unit
 
 #: every profile of config/ (paper_values.yaml holds the paper's numbers, not a profile)
-PROFILES = sorted(p.name for p in (REPO / "config").glob("*.yaml") if p.name != "paper_values.yaml")
+PROFILES = sorted(
+    p.relative_to(REPO / "config").as_posix()
+    for p in [*(REPO / "config").glob("*.yaml"), *(REPO / "config").glob("section4_rows/*.yaml")]
+    if p.name != "paper_values.yaml"
+)
 
 
 def load(name: str) -> dict:

@@ -91,3 +91,12 @@ def test_table_ii_uses_the_estimators_own_sample_size(tmp_path):
     assert "joint MAP MSE of a" not in out.index  # the paper states no MSE here
     assert out.loc["cover90_a", "z"] == pytest.approx(-0.05 / math.sqrt(0.09 / 80))
     assert math.isnan(out.loc["mean_cover90_states", "z"])  # no simple standard error
+
+
+def test_a_subsets_k_stan_is_judged_over_its_stan_runs(tmp_path):
+    folder = _folder(tmp_path)
+    summary = pd.read_csv(folder / "section4_summary.csv").assign(K=4000, K_stan_runs=100)
+    summary.to_csv(folder / "section4_summary.csv", index=False)
+    row = paper_comparison(folder).iloc[0]
+    assert row["K"] == 100
+    assert row["standard_error"] == pytest.approx(math.sqrt(0.9 * 0.1 / 100))

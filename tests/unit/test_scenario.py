@@ -106,6 +106,27 @@ def test_helpers_for_the_stages():
     assert (bounds.lower[0], bounds.upper[0]) == (0.0, 1.0)
 
 
+def test_stan_every_picks_every_mth_trajectory_and_its_batches():
+    from ssmobs.config import ConfigError
+    from ssmobs.stages.stan import batches
+
+    entry = {**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8, "K": 10}
+    plain = Scenario.from_config(entry)
+    assert plain.stan_trajectories == range(10)
+    sc = Scenario.from_config({**entry, "stan_every": 3})
+    assert list(sc.stan_trajectories) == [0, 3, 6, 9]
+    assert [list(b) for b in batches(sc.stan_trajectories, 3)] == [[0, 3, 6], [9]]
+    assert [list(b) for b in batches(plain.stan_trajectories, 4)] == [
+        [0, 1, 2, 3],
+        [4, 5, 6, 7],
+        [8, 9],
+    ]
+    with pytest.raises(ConfigError, match="stan_every = 11: larger than K = 10"):
+        Scenario.from_config({**entry, "stan_every": 11})
+    with pytest.raises(ConfigError, match="stan_every"):
+        Scenario.from_config({**entry, "stan_every": 0})
+
+
 @pytest.mark.parametrize(
     "change, message",
     [

@@ -112,6 +112,18 @@ def test_wide_summary_keeps_its_columns_and_adds_intervals():
     assert math.isnan(wide.loc["own", "K_stan_frac_lo95"])
 
 
+def test_k_stan_counts_over_the_stan_runs_of_a_subset():
+    sub = rows()[:1]
+    sub[0]["config"] = {**sub[0]["config"], "stan_every": 4}
+    sub[0]["marginal"] = {**sub[0]["marginal"], "K": 10, "n_stan": 8}  # k = 0, 4, ..., 36
+    wide = section_iv(sub, PAPER).iloc[0]
+    assert (wide["K"], wide["K_stan_runs"], wide["K_stan"]) == (40, 10, 8)
+    assert wide["K_stan_frac"] == 0.8 and wide["K_max_frac"] == 0.5  # the joint MAP ran all K
+    assert (wide["K_stan_frac_lo95"], wide["K_stan_frac_hi95"]) == clopper_pearson(8, 10)
+    compact = section_iv_compact(sub, PAPER).iloc[0]
+    assert compact["Stan runs"] == 10 and compact["K^Stan/K (95 % CI)"].startswith("0.80 [")
+
+
 def test_compact_summary_is_one_short_row_per_scenario(tmp_path):
     compact = section_iv_compact(rows(), PAPER)
     assert list(compact.columns) == [
@@ -120,6 +132,7 @@ def test_compact_summary_is_one_short_row_per_scenario(tmp_path):
         "K",
         "K^max/K (95 % CI)",
         "paper K^max/K",
+        "Stan runs",
         "K^Stan/K (95 % CI)",
         "paper K^Stan/K",
         "marginal MAP mean",

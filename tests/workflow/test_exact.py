@@ -69,5 +69,7 @@ def test_exact_vs_stan_figure(smoke_run):
             diffs = pd.read_csv(smoke_run / SMOKE_OUT / f"exact_vs_stan_{sc['name']}.csv")
             names = [*get_model(sc["model"]).param_names, "x0"]
             assert list(diffs["component"].unique()) == names
-            assert (diffs["n"] > 0).all()
+            assert diffs["n"].between(0, sc["K"]).all()
+            if sc["name"] == "same_T4":  # its runs converge (ranWalk's do not: Sec. IV.E)
+                assert (diffs["n"] > 0).all()
             assert (diffs["abs_diff_median"] <= diffs["abs_diff_max"]).all()

@@ -59,6 +59,11 @@ def test_table_values_finite_where_they_must(smoke_run):
     ranwalk = s4.set_index("scenario").loc["ranwalk_T4"]
     assert ranwalk["K_max"] == 0  # a ridge of variable height: no joint MAP (Sec. IV.E)
     assert ranwalk["K_max_paper"] == 0 and ranwalk["K_stan_paper"] == 0
+    # stan_every: 2 (issue 20): Stan ran k = 0, 2, 4 of the K = 6, the joint MAP all six
+    assert (ranwalk["K"], ranwalk["K_stan_runs"]) == (6, 3)
+    assert ranwalk["K_stan_frac"] == ranwalk["K_stan"] / 3
+    (table,) = (smoke_run / "results" / "ranwalk_T4" / "gather_nuts").glob("*/marginal_map.parquet")
+    assert pd.read_parquet(table, columns=["k"])["k"].tolist() == [0, 2, 4]
     ks = pd.read_csv(smoke_run / SMOKE_OUT / "table_k_selection.csv")
     assert set(ks["method"]) == {"design", "random"}
     assert set(ks["sets"]) == {"independent", "nested"}

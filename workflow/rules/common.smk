@@ -261,7 +261,7 @@ def nuts_batches(name):
     """The batch tables of a scenario's Stan stage."""
     from ssmobs.stages.stan import batches
 
-    ranges = batches(SCENARIO_OBJECTS[name].K, batch_size(name))
+    ranges = batches(SCENARIO_OBJECTS[name].stan_trajectories, batch_size(name))
     return [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
 

@@ -227,7 +227,8 @@ def job_counts(config: dict) -> dict[str, int]:
         n = 2 + int(sc["joint_map"])  # check_model (one per scenario), design_trajectories
         if sc["stan"]:  # check_model_stan, the batches and gather_nuts
             batch = sc.get("stan_batch_size") or config["stan"]["batch_size"]
-            n += 1 + math.ceil(sc["K"] / batch) + 1
+            runs = math.ceil(sc["K"] / sc.get("stan_every", 1))
+            n += 1 + math.ceil(runs / batch) + 1
         if sc.get("exact", True) and model.linear_in_states:  # the exact stage (issue 11)
             n += 1 + int(bool(sc["stan"]))  # exact_marginal, figure_exact_vs_stan
             exact_K = sc.get("exact_K") or sc["K"]

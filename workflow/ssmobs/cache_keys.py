@@ -422,9 +422,12 @@ class CacheKeys:
         return self._key("nuts_records", name, payload)
 
     def nuts_batches(self, name: str, batch_size: int) -> str:
+        every = int(self.scenarios[name].get("stan_every", 1))
         payload = {
             "records": self.nuts_records(name),
             "batch_size": int(batch_size),
+            # absent for every trajectory, so that the keys of earlier runs stay valid
+            **({"stan_every": every} if every != 1 else {}),
             "keep_draws": sorted(self.config["stan"]["keep_draws"]),
             "convergence": self.config["convergence"],
             "code": self.code("nuts_batches"),

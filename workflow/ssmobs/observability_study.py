@@ -46,8 +46,10 @@ def study_row(
     js, ss = EstimatorSummary.read("joint", joint), EstimatorSummary.read("stan", stan)
     row["K_max"], row["K_max_ratio"] = js.count, js.get("ratio", np.nan)
     row["K_stan"], row["K_stan_ratio"] = ss.count, ss.get("ratio", np.nan)
+    # |K^Stan| counts over the Stan runs (every stan_every-th of the K)
+    trials = {"K_max": scenario.K, "K_stan": ss.get("K", scenario.K)}
     for ratio, count in (("K_max_ratio", "K_max"), ("K_stan_ratio", "K_stan")):
-        row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], row["K"])
+        row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], trials[count])
     if js.present:
         failed = {st: js.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
         row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"

@@ -67,6 +67,8 @@ class Scenario:
     exact: bool
     exact_K: int | None
     stan_batch_size: int | None
+    #: the Stan stage runs on trajectories k = 0, m, 2m, ... (``stan_every``, absent = 1)
+    stan_every: int
     paper_ref: str
     description: str
 
@@ -88,6 +90,11 @@ class Scenario:
         sc = copy.deepcopy(dict(entry))
         where = f"scenario '{sc.get('name', '?')}'"
         problems = schema_problems(sc, _entry_schema())  # also fills in the defaults
+        if not problems and sc.get("stan_every", 1) > sc["K"]:
+            problems = [
+                f"stan_every = {sc['stan_every']}: larger than K = {sc['K']}; allowed: "
+                f"1 to K (every m-th of the K design trajectories)"
+            ]
         if not problems:
             from .models import MODELS
 
@@ -118,6 +125,7 @@ class Scenario:
             exact=bool(sc.get("exact", True)),
             exact_K=sc.get("exact_K"),
             stan_batch_size=sc.get("stan_batch_size"),
+            stan_every=int(sc.get("stan_every", 1)),
             paper_ref=sc["paper_ref"],
             description=sc["description"],
         )
@@ -155,6 +163,11 @@ class Scenario:
     def exact_trajectories(self) -> int:
         """K of the design trajectories of the exact stage (``exact_K``, else K)."""
         return int(self.exact_K or self.K)
+
+    @property
+    def stan_trajectories(self) -> range:
+        """The trajectories k of the Stan stage: every ``stan_every``-th of the K."""
+        return range(0, self.K, self.stan_every)
 
     def batch_size(self, stan_cfg: Mapping[str, Any]) -> int:
         """Trajectories per Stan job: ``stan_batch_size``, else the config's ``stan.batch_size``."""

@@ -20,9 +20,11 @@ if TYPE_CHECKING:
 logger = logging.getLogger("ssmobs")
 
 
-def batches(K: int, batch_size: int) -> list[range]:
-    """Contiguous trajectory ranges of the Stan jobs: a pure function of (K, batch_size)."""
-    return [range(b, min(b + batch_size, K)) for b in range(0, K, batch_size)]
+def batches(trajectories: range, batch_size: int) -> list[range]:
+    """The trajectories k of each Stan job: consecutive runs of ``batch_size`` of the
+    scenario's Stan trajectories (:attr:`ssmobs.scenario.Scenario.stan_trajectories`); a pure
+    function of both."""
+    return [trajectories[i : i + batch_size] for i in range(0, len(trajectories), batch_size)]
 
 
 def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
@@ -74,7 +76,9 @@ def run_sample_batch(
     traj = read_trajectories(trajectories)
     model = traj.model
     backend_name = io.read_json(marker, required=["backend"])["backend"]
-    ks = list(batches(traj.K, scenario.batch_size(stan_cfg))[batch])
+    if traj.K != scenario.K:
+        raise ValueError(f"scenario {scenario.name}: K = {scenario.K}, trajectories K = {traj.K}")
+    ks = list(batches(scenario.stan_trajectories, scenario.batch_size(stan_cfg))[batch])
     # the shared folders' files of this batch: no other job writes them
     io.sweep_temporaries(
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
@@ -132,16 +136,18 @@ def run_gather_nuts(
         check_batch_records(path, batch_frame, traj.model, traj.T, records_dir, convergence_cfg)
     frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
-    if frame["k"].tolist() != list(range(traj.K)):
+    expected = scenario.stan_trajectories
+    if frame["k"].tolist() != list(expected):
         raise io.CorruptFileError(
             f"batch tables of scenario {scenario.name} do not cover "
-            f"k = 0..{traj.K - 1} exactly once"
+            f"k = {expected.start}, {expected.start + expected.step}, ..., "
+            f"{expected[-1] if len(expected) else '-'} exactly once"
         )
     info = stan_summary(frame, traj.model, traj.omega, traj.x0, traj.x)
     info.update(
         scenario=scenario.name, model=traj.model.slug, T=traj.T, stan_init=scenario.stan_init
     )
-    logger.info("scenario %s: |K^Stan| = %s of %d", scenario.name, info["n_stan"], traj.K)
+    logger.info("scenario %s: |K^Stan| = %s of %d", scenario.name, info["n_stan"], len(frame))
     io.write_parquet(table, frame)
     io.write_json(summary, info)
     return info
