@@ -129,6 +129,32 @@ def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
     assert fails["max_rhat_q50"].tolist() == [1.02]
 
 
+def test_block_variants_check_mixing_on_the_chosen_blocks_only():
+    good = {
+        f"{s}_{b}": v
+        for b in ("omega", "x0", "states")
+        for s, v in (("max_rhat", 1.001), ("min_ess_bulk", 900.0), ("min_ess_tail", 800.0))
+    }
+    bad = {"max_rhat": 1.5, "converged": False, "failed_checks": "rhat"}
+    t = table(
+        [
+            good,
+            {**good, **bad, "max_rhat_states": 1.5},  # only the states mix badly
+            {**good, **bad, "max_rhat_x0": 1.5, "max_rhat_states": 1.5},
+            {**good, **bad, "max_rhat_omega": 1.5, "min_ess_bulk_omega": 20.0},
+            {**good, "converged": False, "failed_checks": "divergences", "n_divergent": 3.0},
+        ]
+    )
+    base = ConvergenceSettings()
+    assert converged_under(t, base).tolist() == [True, False, False, False, False]
+    assert converged_under(t, base, ("omega", "x0")).tolist() == [True, True, False, False, False]
+    assert converged_under(t, base, ("omega",)).tolist() == [True, True, True, False, False]
+    row = sensitivity_table({"x": t}, base).iloc[0]
+    assert (row["omega_x0_only"], row["omega_only"]) == (2, 3)
+    # a table without per-block columns (records before format 2): no block variant
+    assert np.isnan(sensitivity_table({"x": table([{}])}, base).iloc[0]["omega_only"])
+
+
 def test_failure_patterns_group_the_runs_that_did_not_converge():
     separated = {"converged": False, "failed_checks": "rhat,ess_bulk,ess_tail"}
     t = table(

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -219,15 +219,20 @@ def threshold_failures(worst: Mapping[str, Any], settings: ConvergenceSettings) 
 def converged_under(
     table: pandas.DataFrame,
     settings: ConvergenceSettings,
+    blocks: Sequence[str] | None = None,
 ) -> np.ndarray:
     """(K,) bool: would each trajectory of a Stan-stage table pass under ``settings``?
 
     ``table`` is the per-trajectory table of rule gather_nuts (columns ``failed_checks``,
     comma-separated, and the worst diagnostics).  A trajectory passes when it failed no
     check outside :data:`THRESHOLD_CHECKS` (non-finite draws, KDE, sampling errors stay
-    failures) and :func:`threshold_failures` finds none under the new thresholds.  No new
-    sampling: the records keep every diagnostic the thresholds act on.
+    failures) and :func:`threshold_failures` finds none under the new thresholds.  With
+    ``blocks`` (some of :data:`BLOCKS`), R-hat and both ESS are checked on those blocks of
+    Theta only (per-block columns ``max_rhat_<block>``, ...; issue 20: which quantities the
+    paper's checks covered is not stated).  No new sampling: the records keep every
+    diagnostic the thresholds act on.
     """
+    mixing = {"rhat", "ess_bulk", "ess_tail"}
     out = np.zeros(len(table), dtype=bool)
     for i, row in enumerate(table.to_dict("records")):
         other = [
@@ -237,7 +242,12 @@ def converged_under(
         ]
         if other or row.get("status", "ok") != "ok":
             continue
-        out[i] = not threshold_failures(row, settings)
+        failed = set(threshold_failures(row, settings))
+        if blocks is not None:
+            failed -= mixing
+            if set(failing_blocks(row, settings)) & set(blocks):
+                failed.add("rhat")
+        out[i] = not failed
     return out
 
 
@@ -318,15 +328,22 @@ SENSITIVITY_VARIANTS = (
 )
 
 
+#: the block variants of the sensitivity table: (column, blocks whose R-hat and ESS count)
+BLOCK_VARIANTS = (("omega_x0_only", ("omega", "x0")), ("omega_only", ("omega",)))
+
+
 def sensitivity_table(
     tables: Mapping[str, pandas.DataFrame],
     base: ConvergenceSettings,
 ) -> pandas.DataFrame:
-    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted.
+    """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted,
+    and with R-hat and ESS checked on Omega and x0 only or on Omega only (the run's
+    thresholds; :data:`BLOCK_VARIANTS`).
 
     ``tables`` maps scenario names to their gather_nuts tables; the other thresholds are
     those of ``base`` (the run's config).  Column ``K_stan_run`` is |K^Stan| as the run
-    decided it, so a reader sees which variant the run used.
+    decided it, so a reader sees which variant the run used.  A table without per-block
+    columns (records before format 2) gives NaN in the block columns.
     """
     import pandas as pd
 
@@ -342,10 +359,12 @@ def sensitivity_table(
                 **{**base.to_dict(), "rhat_max": rhat_max, "treedepth_fails": td}
             )
             row[col] = int(converged_under(table, settings).sum())
+        has_blocks = all(f"max_rhat_{b}" in table.columns for b in BLOCKS)
+        for col, blocks in BLOCK_VARIANTS:
+            row[col] = int(converged_under(table, base, blocks).sum()) if has_blocks else math.nan
         rows.append(row)
-    return pd.DataFrame(
-        rows, columns=["scenario", "K", "K_stan_run", *[v[0] for v in SENSITIVITY_VARIANTS]]
-    )
+    columns = [v[0] for v in SENSITIVITY_VARIANTS] + [v[0] for v in BLOCK_VARIANTS]
+    return pd.DataFrame(rows, columns=["scenario", "K", "K_stan_run", *columns])
 
 
 #: the quantiles of the largest R-hat shown per failure pattern

@@ -153,7 +153,8 @@ def run_convergence_sensitivity(
         table,
         paths,
         "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
-        f"or counted as a failure (other thresholds as configured: divergences <= "
+        "or counted as a failure, and with R-hat and ESS checked on Omega and x0 only or on "
+        f"Omega only (other thresholds as configured: divergences <= "
         f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
         f"E-BFMI >= {base.ebfmi_min:g})",
     )
