@@ -3,6 +3,7 @@ no files left behind, a compiled-program cache keyed by what determines the bina
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -69,6 +70,18 @@ def test_same_draws_as_pystan(native, slug, omega, inits):
         np.testing.assert_array_equal(a.params[name], b.params[name], err_msg=name)
     for name in SAMPLER_COLUMNS:
         np.testing.assert_array_equal(a.sample_stats[name], b.sample_stats[name], err_msg=name)
+
+
+def test_init_radius_reaches_the_sampler(native):
+    """Random inits uniform on (-r, r) as Stan draws them: PyStan gives the same draws with
+    another radius, and that radius gives other draws than Stan's default 2 (issue 20)."""
+    data = _data("same", {"a": 0.9}, T=6)
+    narrow = dataclasses.replace(SMALL, init_radius=0.5)
+    a = native.sample(stan_file("same"), data, 1234, narrow)
+    b = get_backend("pystan").sample(stan_file("same"), data, 1234, narrow)
+    np.testing.assert_array_equal(a.params["x"], b.params["x"])
+    default = native.sample(stan_file("same"), data, 1234, SMALL)
+    assert not np.array_equal(a.params["x"], default.params["x"])
 
 
 def test_threads_do_not_change_draws(native):

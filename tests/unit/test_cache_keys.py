@@ -230,6 +230,17 @@ def test_stan_every_keys_the_batches_not_the_records():
     assert a.nuts_batches("same_T4", 4) == c.nuts_batches("same_T4", 4)
 
 
+def test_init_radius_keys_the_records_only_off_stans_default():
+    base = smoke()
+    two, one = copy.deepcopy(base), copy.deepcopy(base)
+    two["stan"]["init_radius"] = 2  # Stan's default: records made before the key stay valid
+    one["stan"]["init_radius"] = 1
+    a, b, c = keys(base), keys(two), keys(one)
+    assert a.nuts_records("same_T4") == b.nuts_records("same_T4")
+    assert a.nuts_records("same_T4") != c.nuts_records("same_T4")
+    assert a.joint_map("same_T4") == c.joint_map("same_T4")
+
+
 def test_exact_settings_key_the_exact_stage_only():
     base = smoke()
     edited = copy.deepcopy(base)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 
@@ -244,6 +245,27 @@ def test_changed_settings_program_or_data_recompute(scenario):
     backend = FakeBackend()
     run(scenario, backend, ks=[0, 1], z=z, convergence=ConvergenceSettings(rhat_max=1.05))
     assert [c["k"] for c in backend.calls] == [1]
+
+
+def test_init_radius_recomputes_only_off_stans_default(scenario):
+    """Records made before ``init_radius`` existed hold Stan's default 2: still valid."""
+    run(scenario, FakeBackend(), ks=[0, 1])
+    backend = FakeBackend()
+    run(
+        scenario,
+        backend,
+        ks=[0, 1],
+        sampler=dataclasses.replace(scenario["sampler"], init_radius=2.0),
+    )
+    assert backend.calls == []
+    backend = FakeBackend()
+    run(
+        scenario,
+        backend,
+        ks=[0, 1],
+        sampler=dataclasses.replace(scenario["sampler"], init_radius=0.5),
+    )
+    assert [c["k"] for c in backend.calls] == [0, 1]
 
 
 def test_retry_errors(scenario):

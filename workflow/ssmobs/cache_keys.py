@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from . import io
+from .stan_backends.base import sampler_key
 
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -289,7 +290,14 @@ JOINT_MAP_FIELDS = ("prior", "joint_map_start")
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)
-SAMPLER_FIELDS = ("chains", "iter_warmup", "iter_sampling", "adapt_delta", "max_treedepth")
+SAMPLER_FIELDS = (
+    "chains",
+    "iter_warmup",
+    "iter_sampling",
+    "adapt_delta",
+    "max_treedepth",
+    "init_radius",
+)
 
 
 class UnknownKeyError(KeyError):
@@ -413,7 +421,7 @@ class CacheKeys:
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, NUTS_FIELDS),
-            "sampler": _pick(stan, SAMPLER_FIELDS),
+            "sampler": sampler_key(_pick(stan, SAMPLER_FIELDS)),
             "diagnostics": self.config["convergence"].get("implementation", "vectorized"),
             "program": self.program(sc["model"]),
             "model_code": self.model_code(sc["model"]),

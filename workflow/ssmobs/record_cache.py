@@ -30,6 +30,7 @@ import numpy as np
 
 from . import io, seeds
 from .marginal_map import GRID_PER_BW
+from .stan_backends.base import sampler_key
 
 if TYPE_CHECKING:
     import pandas
@@ -100,7 +101,7 @@ def settings_hash(
     :class:`~ssmobs.scenario.Scenario` holds them); ``sampler.workers`` is left out: it
     changes how chains are scheduled, not the draws.
     """
-    sampler_d = {k: v for k, v in asdict(sampler).items() if k != "workers"}
+    sampler_d = sampler_key({k: v for k, v in asdict(sampler).items() if k != "workers"})
     payload = {
         "record_version": RECORD_VERSION,
         "model": model.slug,

@@ -37,6 +37,7 @@ def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
         iter_sampling=stan_cfg["iter_sampling"],
         adapt_delta=stan_cfg["adapt_delta"],
         max_treedepth=stan_cfg["max_treedepth"],
+        init_radius=float(stan_cfg.get("init_radius", 2.0)),
         workers=max(1, threads),
     )
 

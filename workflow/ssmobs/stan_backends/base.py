@@ -24,8 +24,25 @@ class SamplerSettings:
     iter_sampling: int = 6000
     adapt_delta: float = 0.8
     max_treedepth: int = 10
+    #: random inits uniform on (-init_radius, init_radius), unconstrained (Stan's default 2)
+    init_radius: float = 2.0
     #: parallel chain processes of one sampling call (PyStan pool, cmdstanpy parallel_chains)
     workers: int = 1
+
+
+#: sampler settings whose default value is left out of record and cache keys, so that the
+#: keys of records made before the setting existed stay valid (the value is the same)
+KEYED_ONLY_OFF_DEFAULT = {"init_radius": 2.0}
+
+
+def sampler_key(settings: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` (sampler fields) without those at a default of
+    :data:`KEYED_ONLY_OFF_DEFAULT`: what a record's key holds of the sampler."""
+    return {
+        k: v
+        for k, v in settings.items()
+        if not (k in KEYED_ONLY_OFF_DEFAULT and float(v) == KEYED_ONLY_OFF_DEFAULT[k])
+    }
 
 
 @dataclass

@@ -254,7 +254,8 @@ class CmdStanPyBackend:
                         chains=settings.chains,
                         parallel_chains=settings.workers,
                         seed=int(seed),
-                        inits=init_arg,
+                        # explicit inits, else uniform(-r, r) on the unconstrained scale
+                        inits=init_arg if init_arg is not None else settings.init_radius,
                         iter_warmup=settings.iter_warmup,
                         iter_sampling=settings.iter_sampling,
                         adapt_delta=settings.adapt_delta,

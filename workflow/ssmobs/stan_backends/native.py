@@ -664,6 +664,8 @@ class NativeBackend:
                 repr(float(settings.adapt_delta)),
                 "--max-depth",
                 str(settings.max_treedepth),
+                "--init-radius",
+                repr(float(settings.init_radius)),
                 "--threads",
                 str(min(settings.workers, settings.chains)),
                 "--parent-pid",

@@ -472,6 +472,7 @@ class PyStanBackend:
             num_samples=settings.iter_sampling,
             delta=settings.adapt_delta,
             max_depth=settings.max_treedepth,
+            init_radius=settings.init_radius,
             refresh=self.refresh,
         )
         if inits is not None:
