@@ -73,6 +73,9 @@ def render_optional_table(root: Path, path: str) -> str:
     table = root / path
     if table.exists():
         return table.read_text()
+    if not (table.parent / "provenance.json").exists():
+        folder = table.parent.relative_to(root)
+        return f"*`{folder}` is not made yet: the text above names its command.*"
     prov = json.loads((table.parent / "provenance.json").read_text())
     return (
         f"*`{table.name}` is not in this folder: it was made at commit "

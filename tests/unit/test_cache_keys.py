@@ -241,6 +241,23 @@ def test_init_radius_keys_the_records_only_off_stans_default():
     assert a.joint_map("same_T4") == c.joint_map("same_T4")
 
 
+def test_a_scenarios_own_stan_settings_and_seed_key_its_records():
+    base = smoke()
+
+    def with_(**changes):
+        conf = copy.deepcopy(base)
+        conf["scenarios"][0].update(changes)
+        return keys(conf).nuts_records("same_T4")
+
+    plain = keys(base).nuts_records("same_T4")
+    block = base["stan"]
+    assert with_(stan_settings={}) == plain
+    assert with_(stan_settings={"iter_warmup": block["iter_warmup"]}) == plain  # the same value
+    assert with_(stan_settings={"adapt_delta": 0.95}) != plain
+    assert with_(stan_settings={"init_radius": 0.5}) != plain
+    assert with_(stan_seed=3) != plain != with_(stan_seed=4)
+
+
 def test_exact_settings_key_the_exact_stage_only():
     base = smoke()
     edited = copy.deepcopy(base)

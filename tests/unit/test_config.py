@@ -16,7 +16,11 @@ pytestmark = pytest.mark.unit
 #: every profile of config/ (paper_values.yaml holds the paper's numbers, not a profile)
 PROFILES = sorted(
     p.relative_to(REPO / "config").as_posix()
-    for p in [*(REPO / "config").glob("*.yaml"), *(REPO / "config").glob("section4_rows/*.yaml")]
+    for p in [
+        *(REPO / "config").glob("*.yaml"),
+        *(REPO / "config").glob("section4_rows/*.yaml"),
+        *(REPO / "config").glob("stan_variants/*.yaml"),
+    ]
     if p.name != "paper_values.yaml"
 )
 

@@ -128,6 +128,7 @@ def run(sc, backend, ks=range(K), **kw):
         args["draws_dir"],
         kw.get("progress"),
         kw.get("retry_errors", False),
+        kw.get("stan_seed"),
     )
 
 
@@ -266,6 +267,19 @@ def test_init_radius_recomputes_only_off_stans_default(scenario):
         sampler=dataclasses.replace(scenario["sampler"], init_radius=0.5),
     )
     assert [c["k"] for c in backend.calls] == [0, 1]
+
+
+def test_one_stan_seed_for_every_trajectory(scenario):
+    """Scenario key stan_seed: every k sampled with the same seed, keyed apart from the
+    per-trajectory records (issue 20: the seed scheme of a loop with a fixed seed)."""
+    backend = FakeBackend()
+    run(scenario, backend, ks=[0, 1, 2])
+    per_k = [c["seed"] for c in backend.calls]
+    assert len(set(per_k)) == 3
+    backend = FakeBackend()
+    recs = run(scenario, backend, ks=[0, 1, 2], stan_seed=77)
+    assert [c["seed"] for c in backend.calls] == [77, 77, 77]  # not the stored records
+    assert {r["key"]["stan_seed"] for r in recs} == {77}
 
 
 def test_retry_errors(scenario):

@@ -106,6 +106,21 @@ def test_helpers_for_the_stages():
     assert (bounds.lower[0], bounds.upper[0]) == (0.0, 1.0)
 
 
+def test_a_scenarios_stan_settings_override_the_block():
+    from ssmobs.config import ConfigError
+
+    entry = {**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8}
+    block = {"chains": 4, "adapt_delta": 0.8, "init_radius": 2, "batch_size": 50}
+    assert Scenario.from_config(entry).stan_config(block) == block
+    sc = Scenario.from_config({**entry, "stan_settings": {"adapt_delta": 0.95}, "stan_seed": 5})
+    assert sc.stan_config(block) == {**block, "adapt_delta": 0.95}
+    assert sc.stan_seed == 5 and Scenario.from_config(entry).stan_seed is None
+    with pytest.raises(ConfigError, match="batch_size"):  # not a NUTS setting of a run
+        Scenario.from_config({**entry, "stan_settings": {"batch_size": 5}})
+    with pytest.raises(ConfigError, match="adapt_delta"):
+        Scenario.from_config({**entry, "stan_settings": {"adapt_delta": 1.0}})
+
+
 def test_stan_every_picks_every_mth_trajectory_and_its_batches():
     from ssmobs.config import ConfigError
     from ssmobs.stages.stan import batches

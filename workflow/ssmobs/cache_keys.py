@@ -417,10 +417,13 @@ class CacheKeys:
         """Everything that determines a trajectory's NUTS record (not the thresholds of
         the convergence checks: they are applied to the stored diagnostics by gather)."""
         sc = self.scenarios[name]
-        stan = self.config["stan"]
+        # the scenario's own NUTS settings over the stan block (absent: the block's)
+        stan = {**self.config["stan"], **(sc.get("stan_settings") or {})}
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, NUTS_FIELDS),
+            # one Stan seed for all trajectories; absent, so earlier keys stay, when per k
+            **({"stan_seed": sc["stan_seed"]} if sc.get("stan_seed") is not None else {}),
             "sampler": sampler_key(_pick(stan, SAMPLER_FIELDS)),
             "diagnostics": self.config["convergence"].get("implementation", "vectorized"),
             "program": self.program(sc["model"]),

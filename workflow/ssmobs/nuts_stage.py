@@ -295,6 +295,7 @@ def run_trajectories(
     draws_dir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     retry_errors: bool = False,
+    stan_seed: int | None = None,
 ) -> list[dict[str, Any]]:
     """Sample, check and summarise the design trajectories ``ks`` of one scenario.
 
@@ -310,7 +311,8 @@ def run_trajectories(
     omega_true, x0_true : true parameters (array in ``model.param_names`` order) and
         initial state (array of p values), e.g. a :class:`~ssmobs.scenario.Scenario`'s.
     scenario, seed : scenario name and seed; Stan's seed is
-        ``seeds.int_seed(seed, "nuts", scenario, k)``.
+        ``seeds.int_seed(seed, "nuts", scenario, k)``, or ``stan_seed`` for every k when
+        given (as a loop calling Stan with one fixed seed would).
     sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
     init : ``"random"`` (Stan's uniform(-2, 2) on the unconstrained scale, the paper's
         default) or ``"true"`` (all chains at the true Omega, x0 and design states).
@@ -361,7 +363,7 @@ def run_trajectories(
         k = int(k)
         if not 0 <= k < z.shape[0]:
             raise IndexError(f"trajectory k={k} outside 0..{z.shape[0] - 1}")
-        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k], ident)
+        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k], ident, stan_seed)
         rec = load_record(record_path(records_dir, k), key, n_theta)
         if rec is not None and retry_errors and rec["status"] == "error":
             rec = None

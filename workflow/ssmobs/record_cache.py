@@ -140,13 +140,17 @@ def record_key(
     z_k: np.ndarray,
     x_k: np.ndarray,
     backend: str = "",
+    stan_seed: int | None = None,
 ) -> dict[str, Any]:
-    """The key a stored record must match to be reused."""
+    """The key a stored record must match to be reused; ``stan_seed``: one Stan seed for
+    every trajectory (scenario key ``stan_seed``), else one derived per trajectory."""
     return {
         "scenario": scenario,
         "k": int(k),
         "seed": int(seed),
-        "stan_seed": seeds.int_seed(seed, "nuts", scenario, int(k)),
+        "stan_seed": (
+            seeds.int_seed(seed, "nuts", scenario, int(k)) if stan_seed is None else int(stan_seed)
+        ),
         "program_hash": prog_hash,
         "settings_hash": set_hash,
         "backend": backend,

@@ -80,6 +80,7 @@ def run_sample_batch(
     if traj.K != scenario.K:
         raise ValueError(f"scenario {scenario.name}: K = {scenario.K}, trajectories K = {traj.K}")
     ks = list(batches(scenario.stan_trajectories, scenario.batch_size(stan_cfg))[batch])
+    stan_cfg = scenario.stan_config(stan_cfg)  # the scenario's own NUTS settings over the block
     # the shared folders' files of this batch: no other job writes them
     io.sweep_temporaries(
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
@@ -105,6 +106,7 @@ def run_sample_batch(
         keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
         draws_dir=draws_dir,
         progress=progress,
+        stan_seed=scenario.stan_seed,
     )
     settings = ConvergenceSettings(**convergence_cfg)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
