@@ -72,4 +72,5 @@ def test_exact_vs_stan_figure(smoke_run):
             assert diffs["n"].between(0, sc["K"]).all()
             if sc["name"] == "same_T4":  # its runs converge (ranWalk's do not: Sec. IV.E)
                 assert (diffs["n"] > 0).all()
-            assert (diffs["abs_diff_median"] <= diffs["abs_diff_max"]).all()
+            compared = diffs[diffs["n"] > 0]
+            assert (compared["abs_diff_median"] <= compared["abs_diff_max"]).all()
