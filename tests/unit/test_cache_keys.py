@@ -258,6 +258,18 @@ def test_a_scenarios_own_stan_settings_and_seed_key_its_records():
     assert with_(stan_seed=3) != plain != with_(stan_seed=4)
 
 
+def test_chains_at_the_joint_map_key_the_records_by_it():
+    base = smoke()
+    at_map = copy.deepcopy(base)
+    at_map["scenarios"][0]["stan_init"] = "joint_map"
+    edited = copy.deepcopy(at_map)
+    edited["joint_map"] = {**edited.get("joint_map", {}), "grad_tol": 2e-5}
+    plain, edited_plain = copy.deepcopy(base), copy.deepcopy(base)
+    edited_plain["joint_map"] = {**edited_plain.get("joint_map", {}), "grad_tol": 2e-5}
+    assert keys(at_map).nuts_records("same_T4") != keys(edited).nuts_records("same_T4")
+    assert keys(plain).nuts_records("same_T4") == keys(edited_plain).nuts_records("same_T4")
+
+
 def test_exact_settings_key_the_exact_stage_only():
     base = smoke()
     edited = copy.deepcopy(base)

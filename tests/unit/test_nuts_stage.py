@@ -129,6 +129,7 @@ def run(sc, backend, ks=range(K), **kw):
         kw.get("progress"),
         kw.get("retry_errors", False),
         kw.get("stan_seed"),
+        kw.get("init_theta"),
     )
 
 
@@ -280,6 +281,31 @@ def test_one_stan_seed_for_every_trajectory(scenario):
     recs = run(scenario, backend, ks=[0, 1, 2], stan_seed=77)
     assert [c["seed"] for c in backend.calls] == [77, 77, 77]  # not the stored records
     assert {r["key"]["stan_seed"] for r in recs} == {77}
+
+
+def test_chains_start_at_each_trajectorys_joint_map(scenario):
+    """init "joint_map": every chain of trajectory k starts at its joint MAP (Omega, x0, x);
+    where that is not finite or outside the prior's support, at Stan's random inits."""
+    m, n_theta = 1, 1 + 1 + T
+    theta = np.tile(np.linspace(0.5, 1.5, n_theta), (K, 1))
+    theta[:, 0] = 0.8  # a inside (0, 1)
+    theta[1, 3] = np.nan  # no point for k = 1
+    theta[2, 0] = 1.0  # a on the bound for k = 2
+    backend = FakeBackend()
+    recs = run(scenario, backend, ks=[0, 1, 2], init="joint_map", init_theta=theta)
+    first = backend.calls[0]["inits"]
+    assert len(first) == SAMPLER.chains and first[0]["a"] == 0.8
+    assert first[0]["x0"] == theta[0, m] and first[0]["x"] == theta[0, m + 1 :].tolist()
+    assert backend.calls[1]["inits"] is None and backend.calls[2]["inits"] is None
+    assert [r["init"] for r in recs] == ["joint_map", "joint_map: random", "joint_map: random"]
+    assert "init_hash" in recs[0]["key"] and "init_hash" not in recs[1]["key"]
+    # another joint MAP for k = 0 only: only k = 0 is sampled again
+    theta[0, 2] += 0.1
+    backend = FakeBackend()
+    run(scenario, backend, ks=[0, 1, 2], init="joint_map", init_theta=theta)
+    assert [c["k"] for c in backend.calls] == [0]
+    with pytest.raises(ValueError, match="init_theta"):
+        run(scenario, FakeBackend(), ks=[0], init="joint_map")
 
 
 def test_retry_errors(scenario):

@@ -115,6 +115,9 @@ def test_a_scenarios_stan_settings_override_the_block():
     sc = Scenario.from_config({**entry, "stan_settings": {"adapt_delta": 0.95}, "stan_seed": 5})
     assert sc.stan_config(block) == {**block, "adapt_delta": 0.95}
     assert sc.stan_seed == 5 and Scenario.from_config(entry).stan_seed is None
+    with pytest.raises(ConfigError, match="joint_map must be true"):
+        Scenario.from_config({**entry, "stan_init": "joint_map", "joint_map": False})
+    assert Scenario.from_config({**entry, "stan_init": "joint_map"}).stan_init == "joint_map"
     with pytest.raises(ConfigError, match="batch_size"):  # not a NUTS setting of a run
         Scenario.from_config({**entry, "stan_settings": {"batch_size": 5}})
     with pytest.raises(ConfigError, match="adapt_delta"):

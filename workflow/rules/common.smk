@@ -130,6 +130,13 @@ def joint_summary(name):
     return f"{joint_dir(name)}/summary.json"
 
 
+def stan_init_inputs(name):
+    """The joint MAP of every trajectory when the scenario's chains start there."""
+    if SCENARIOS[name]["stan_init"] == "joint_map":
+        return {"joint_map": f"{joint_dir(name)}/theta_hat.nc"}
+    return {}
+
+
 def program_marker(model):
     return f"results/shared/stan/{STAN_BACKEND}/{model}/{KEYS.program(model)}.json"
 

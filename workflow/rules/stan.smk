@@ -23,6 +23,7 @@ rule build_stan_model:
 rule sample_nuts:
     """NUTS for one batch of trajectories; one record per trajectory, resumable."""
     input:
+        unpack(lambda wc: stan_init_inputs(wc.scenario)),
         trajectories=lambda wc: keyed_input(
             "nuts_batches", wc.scenario, wc.key, trajectories_path(wc.scenario)
         ),

@@ -18,4 +18,5 @@ run_sample_batch(
     p.draws,
     snakemake.output[0],
     threads=snakemake.threads,
+    joint_map_theta=snakemake.input.get("joint_map"),
 )

@@ -424,6 +424,8 @@ class CacheKeys:
             "scenario": _pick(sc, NUTS_FIELDS),
             # one Stan seed for all trajectories; absent, so earlier keys stay, when per k
             **({"stan_seed": sc["stan_seed"]} if sc.get("stan_seed") is not None else {}),
+            # chains that start at the joint MAP depend on it
+            **({"joint_map": self.joint_map(name)} if sc.get("stan_init") == "joint_map" else {}),
             "sampler": sampler_key(_pick(stan, SAMPLER_FIELDS)),
             "diagnostics": self.config["convergence"].get("implementation", "vectorized"),
             "program": self.program(sc["model"]),

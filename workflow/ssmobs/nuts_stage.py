@@ -90,7 +90,7 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger("ssmobs.nuts")
 
-INIT_MODES = ("random", "true")
+INIT_MODES = ("random", "true", "joint_map")
 #: diagnostics columns copied into the per-k table
 DIAGNOSTIC_COLUMNS = (
     "max_rhat",
@@ -123,6 +123,23 @@ def _inits(
     return [dict(init) for _ in range(chains)]
 
 
+def joint_map_point(
+    model: StateSpaceModel, theta_hat: np.ndarray, bounds: Any, T: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(Omega, x0, x) of a trajectory's joint MAP ``theta_hat`` (``model.theta_names(T)``
+    order) as Stan inits, or None where it is not finite or Omega is not strictly inside
+    the prior's support (a joint MAP that failed its checks may sit on a bound)."""
+    theta = np.asarray(theta_hat, dtype=float)
+    m, p = model.n_params, model.state_dim
+    if theta.shape != (m + p + T * p,) or not np.isfinite(theta).all():
+        return None
+    omega = theta[:m]
+    lower, upper = np.asarray(bounds.lower, float), np.asarray(bounds.upper, float)
+    if not ((omega > lower) & (omega < upper)).all():
+        return None
+    return omega, theta[m : m + p], theta[m + p :].reshape(T, p)
+
+
 def _floats(values: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=float)]
 
@@ -143,6 +160,7 @@ def _one_trajectory(
     convergence: ConvergenceSettings,
     init: str,
     keep_draws: Path | None,
+    init_point: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> dict[str, Any]:
     T = int(np.asarray(z_k).shape[0])
     names = model.theta_names(T)
@@ -172,14 +190,19 @@ def _one_trajectory(
         "map": None,
         "q5": None,
         "q95": None,
-        "init": init,
+        # "joint_map" falls back to Stan's random inits where the joint MAP gives no point
+        "init": init if init != "joint_map" or init_point is not None else "joint_map: random",
         "backend": getattr(backend, "name", type(backend).__name__),
     }
     reasons: list[str] = []
     draws: Draws | None = None
     try:
         data = model.stan_data(np.asarray(z_k, dtype=float), bounds)
-        inits = _inits(model, omega_true, x0_true, x_k, sampler.chains) if init == "true" else None
+        inits = None
+        if init == "true":
+            inits = _inits(model, omega_true, x0_true, x_k, sampler.chains)
+        elif init_point is not None:  # init "joint_map": this trajectory's joint MAP
+            inits = _inits(model, *init_point, sampler.chains)
         t1, c1 = time.perf_counter(), time.process_time()
         timings["prepare"] = t1 - t0
         try:
@@ -296,6 +319,7 @@ def run_trajectories(
     progress: Progress | None = None,
     retry_errors: bool = False,
     stan_seed: int | None = None,
+    init_theta: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """Sample, check and summarise the design trajectories ``ks`` of one scenario.
 
@@ -315,7 +339,9 @@ def run_trajectories(
         given (as a loop calling Stan with one fixed seed would).
     sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
     init : ``"random"`` (Stan's uniform(-2, 2) on the unconstrained scale, the paper's
-        default) or ``"true"`` (all chains at the true Omega, x0 and design states).
+        default), ``"true"`` (all chains at the true Omega, x0 and design states) or
+        ``"joint_map"`` (all chains at trajectory k's joint MAP, row k of ``init_theta``,
+        where :func:`joint_map_point` gives one, else random; the point is in the key).
     records_dir : where ``k{k:05d}.json`` records go.
     keep_draws_for : k whose draws are written to ``draws_dir/k{k:05d}.nc`` (ArviZ).
     progress : a :class:`~ssmobs.log.Progress` updated once per k of ``ks`` (skipped ones
@@ -331,6 +357,8 @@ def run_trajectories(
     convergence = convergence or ConvergenceSettings()
     if init not in INIT_MODES:
         raise ValueError(f"init must be one of {INIT_MODES}, got {init!r}")
+    if (init == "joint_map") != (init_theta is not None):
+        raise ValueError('init_theta (the joint MAP of every k) goes with init="joint_map" only')
     z = np.asarray(z, dtype=float)
     x_true = np.asarray(x_true, dtype=float)
     if z.ndim == 2:
@@ -359,11 +387,15 @@ def run_trajectories(
 
     records: dict[int, dict[str, Any]] = {}
     todo: list[tuple[int, dict[str, Any]]] = []
+    points: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray] | None] = {}
     for k in ks:
         k = int(k)
         if not 0 <= k < z.shape[0]:
             raise IndexError(f"trajectory k={k} outside 0..{z.shape[0] - 1}")
-        key = record_key(scenario, k, seed, prog, set_hash, z[k], x_true[k], ident, stan_seed)
+        points[k] = None if init_theta is None else joint_map_point(model, init_theta[k], bounds, T)
+        key = record_key(
+            scenario, k, seed, prog, set_hash, z[k], x_true[k], ident, stan_seed, points[k]
+        )
         rec = load_record(record_path(records_dir, k), key, n_theta)
         if rec is not None and retry_errors and rec["status"] == "error":
             rec = None
@@ -416,6 +448,7 @@ def run_trajectories(
             convergence,
             init,
             draws_path(draws_dir, k) if k in keep and draws_dir is not None else None,
+            points[k],
         )
         t_w = time.perf_counter()
         io.write_json(record_path(records_dir, k), rec)

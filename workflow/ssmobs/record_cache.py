@@ -141,10 +141,12 @@ def record_key(
     x_k: np.ndarray,
     backend: str = "",
     stan_seed: int | None = None,
+    init_point: tuple[np.ndarray, ...] | None = None,
 ) -> dict[str, Any]:
     """The key a stored record must match to be reused; ``stan_seed``: one Stan seed for
-    every trajectory (scenario key ``stan_seed``), else one derived per trajectory."""
-    return {
+    every trajectory (scenario key ``stan_seed``), else one derived per trajectory;
+    ``init_point``: the (Omega, x0, x) the chains start from (init "joint_map")."""
+    key = {
         "scenario": scenario,
         "k": int(k),
         "seed": int(seed),
@@ -156,6 +158,9 @@ def record_key(
         "backend": backend,
         "data_hash": io.array_checksum(np.asarray(z_k, float), np.asarray(x_k, float))[:16],
     }
+    if init_point is not None:  # absent otherwise, so that earlier keys stay valid
+        key["init_hash"] = io.array_checksum(*(np.asarray(v, float) for v in init_point))[:16]
+    return key
 
 
 def record_path(records_dir: str | os.PathLike, k: int) -> Path:

@@ -94,6 +94,11 @@ class Scenario:
         sc = copy.deepcopy(dict(entry))
         where = f"scenario '{sc.get('name', '?')}'"
         problems = schema_problems(sc, _entry_schema())  # also fills in the defaults
+        if not problems and sc["stan_init"] == "joint_map" and not sc["joint_map"]:
+            problems = [
+                "stan_init = 'joint_map': the chains start at the joint MAP, so joint_map "
+                "must be true"
+            ]
         if not problems and sc.get("stan_every", 1) > sc["K"]:
             problems = [
                 f"stan_every = {sc['stan_every']}: larger than K = {sc['K']}; allowed: "

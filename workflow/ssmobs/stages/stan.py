@@ -7,7 +7,7 @@ The checks that a batch table still matches its records are in :mod:`ssmobs.reco
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .. import io
 from ..log import Progress
@@ -62,8 +62,11 @@ def run_sample_batch(
     draws_dir: PathLike,
     out: PathLike,
     threads: int = 1,
+    joint_map_theta: PathLike | None = None,
 ) -> None:
-    """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories.
+    """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories;
+    ``joint_map_theta``: the joint MAP of every k (rule joint_map's ``theta_hat.nc``), where
+    the scenario's chains start (``stan_init: joint_map``).
 
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
     interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
@@ -107,9 +110,21 @@ def run_sample_batch(
         draws_dir=draws_dir,
         progress=progress,
         stan_seed=scenario.stan_seed,
+        init_theta=None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K),
     )
     settings = ConvergenceSettings(**convergence_cfg)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
+
+
+def _theta_hat(path: PathLike, K: int) -> Any:
+    """(K, n_theta) joint MAP of every trajectory from rule joint_map's ``theta_hat.nc``."""
+    import numpy as np
+
+    ds = io.read_netcdf(path, required_vars=["theta_hat"])
+    theta = np.asarray(ds["theta_hat"].values, dtype=float)
+    if theta.shape[0] != K or ds["k"].values.tolist() != list(range(K)):
+        raise io.CorruptFileError(f"{path}: joint MAP of {theta.shape[0]} trajectories, K = {K}")
+    return theta
 
 
 def run_gather_nuts(
