@@ -69,8 +69,8 @@ class Scenario:
     stan_batch_size: int | None
     #: the Stan stage runs on trajectories k = 0, m, 2m, ... (``stan_every``, absent = 1)
     stan_every: int
-    #: NUTS settings that differ from the config's stan block (read-only)
-    stan_settings: Mapping[str, Any]
+    #: NUTS settings that differ from the config's stan block, as sorted (key, value) pairs
+    stan_settings: tuple[tuple[str, Any], ...]
     #: one Stan seed for every trajectory, or None (a seed per trajectory)
     stan_seed: int | None
     paper_ref: str
@@ -135,7 +135,7 @@ class Scenario:
             exact_K=sc.get("exact_K"),
             stan_batch_size=sc.get("stan_batch_size"),
             stan_every=int(sc.get("stan_every", 1)),
-            stan_settings=MappingProxyType(dict(sc.get("stan_settings") or {})),
+            stan_settings=tuple(sorted((sc.get("stan_settings") or {}).items())),
             stan_seed=sc.get("stan_seed"),
             paper_ref=sc["paper_ref"],
             description=sc["description"],
@@ -182,7 +182,7 @@ class Scenario:
 
     def stan_config(self, stan_cfg: Mapping[str, Any]) -> dict[str, Any]:
         """The config's stan block with this scenario's ``stan_settings`` over it."""
-        return {**stan_cfg, **self.stan_settings}
+        return {**stan_cfg, **dict(self.stan_settings)}
 
     def batch_size(self, stan_cfg: Mapping[str, Any]) -> int:
         """Trajectories per Stan job: ``stan_batch_size``, else the config's ``stan.batch_size``."""
