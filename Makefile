@@ -87,7 +87,7 @@ section4: setup
 		--command "make section4 SECTION4_CONFIG=$(SECTION4_CONFIG)" --note "$(SECTION4_NOTE)" -- \
 		$(SNAKEMAKE) --configfile $(SECTION4_CONFIG)
 
-# Every row of config/section4_rows/, one after another (about 4.4 CPU-hours in all).
+# Every row of config/section4_rows/, one after another (about 4.6 CPU-hours in all).
 section4-rows: setup
 	set -e; for c in $(SECTION4_ROWS); do $(MAKE) --no-print-directory section4 SECTION4_CONFIG=$$c; done
 

@@ -651,3 +651,12 @@ def test_check_config_files_refuses_duplicate_keys_in_snakemakes_config_files(tm
         f"config file {bad}, line 3, column 1: key 'stan' appears twice in one mapping "
         f"(also line 1); YAML would silently keep only the last value: remove one"
     )
+
+
+@pytest.mark.parametrize("name", [p for p in PROFILES if "/" in p])
+def test_subsets_of_design_sets_keep_their_point_symmetry(name):
+    """Section IV rows and variants on every m-th design trajectory: m divides K/2, so the
+    subset holds both points of every pair s, -s (docs/decisions.md)."""
+    for sc in cfg.validate(load(name))["scenarios"]:
+        m = sc.get("stan_every", 1)
+        assert sc["method"] == "design" and (sc["K"] // 2) % m == 0, (sc["name"], sc["K"], m)

@@ -526,3 +526,13 @@ def test_quadrature_nodes_converged(q, K):
     v2, g2 = symmetric_distance_and_gradient(half, K, B, n_nodes=400)
     assert abs(v1 - v2) < 1e-11
     assert np.max(np.abs(g1 - g2)) < 1e-10 * np.max(np.abs(g2))
+
+
+def test_every_mth_design_point_is_a_point_symmetric_subset_when_m_divides_half_of_K():
+    """Section IV rows on subsets (scenario key stan_every, docs/decisions.md): the columns
+    are s_1..s_N, -s_1..-s_N, so every m-th with m | N keeps both points of each pair."""
+    K, m = 40, 4
+    points = design_disturbances(3, K, "design", seed=0).matrix.T  # (K, q)
+    subset = points[::m]
+    assert len(subset) == K // m
+    np.testing.assert_allclose(subset[: K // (2 * m)], -subset[K // (2 * m) :])
