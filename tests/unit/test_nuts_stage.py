@@ -252,22 +252,11 @@ def test_changed_settings_program_or_data_recompute(scenario):
 def test_init_radius_recomputes_only_off_stans_default(scenario):
     """Records made before ``init_radius`` existed hold Stan's default 2: still valid."""
     run(scenario, FakeBackend(), ks=[0, 1])
-    backend = FakeBackend()
-    run(
-        scenario,
-        backend,
-        ks=[0, 1],
-        sampler=dataclasses.replace(scenario["sampler"], init_radius=2.0),
-    )
-    assert backend.calls == []
-    backend = FakeBackend()
-    run(
-        scenario,
-        backend,
-        ks=[0, 1],
-        sampler=dataclasses.replace(scenario["sampler"], init_radius=0.5),
-    )
-    assert [c["k"] for c in backend.calls] == [0, 1]
+    for radius, sampled in ((2.0, []), (0.5, [0, 1])):
+        backend = FakeBackend()
+        sampler = dataclasses.replace(scenario["sampler"], init_radius=radius)
+        run(scenario, backend, ks=[0, 1], sampler=sampler)
+        assert [c["k"] for c in backend.calls] == sampled
 
 
 def test_one_stan_seed_for_every_trajectory(scenario):
