@@ -187,6 +187,7 @@ def full_config() -> dict:
     )
     for section in (*sections, "limits"):
         c[section] = {}
+    c["scenarios"][0]["stan_settings"] = {}  # a scenario's own NUTS settings (issue 20)
     return c
 
 
@@ -587,7 +588,7 @@ def test_oneof_failure_names_the_item_of_the_matching_form():
         (
             ("scenarios", 0, "stan_init"),
             True,
-            "scenarios[0].stan_init = True: allowed values are ['random', 'true'] "
+            "scenarios[0].stan_init = True: allowed values are ['random', 'true', 'joint_map'] "
             "(write 'true' in quotes: unquoted, YAML reads true as a boolean, not text)",
         ),
         (
