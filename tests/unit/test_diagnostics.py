@@ -83,3 +83,17 @@ def test_ebfmi_by_hand():
     # a slowly moving energy (random walk) has a small E-BFMI
     walk = np.random.default_rng(7).standard_normal((2, 2000)).cumsum(axis=1)
     assert (ebfmi(walk) < 0.3).all()
+
+
+def test_rank_rhat_of_chains_in_separate_modes_is_a_fixed_value():
+    """docs/reproducing-the-paper.md reads the failed runs' largest R-hat this way: with rank
+    normalisation, one chain of four apart from the other three gives 1.528 whatever the
+    distance between the modes, two apart from two 1.733."""
+    x = np.random.default_rng(0).standard_normal((4, 6000))
+    for shift, rhat in (
+        ([0, 0, 0, 100], 1.528),
+        ([0, 0, 0, 1e4], 1.528),
+        ([0, 0, 100, 100], 1.733),
+    ):
+        got = rank_diagnostics((x + np.array(shift, float)[:, None])[None])["rhat"][0]
+        assert got == pytest.approx(rhat, abs=0.001)
