@@ -339,9 +339,10 @@ def run_trajectories(
         given (as a loop calling Stan with one fixed seed would).
     sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
     init : ``"random"`` (Stan's uniform(-r, r) on the unconstrained scale with r =
-        ``sampler.init_radius``, 2 by default: the paper's), ``"true"`` (all chains at the true Omega, x0 and design states) or
-        ``"joint_map"`` (all chains at trajectory k's joint MAP, row k of ``init_theta``,
-        where :func:`joint_map_point` gives one, else random; the point is in the key).
+        ``sampler.init_radius``, 2 by default: the paper's), ``"true"`` (all chains at the
+        true Omega, x0 and design states) or ``"joint_map"`` (all chains at trajectory k's
+        joint MAP, row k of ``init_theta``, where :func:`joint_map_point` gives one, else
+        random; the point is in the key).
     records_dir : where ``k{k:05d}.json`` records go.
     keep_draws_for : k whose draws are written to ``draws_dir/k{k:05d}.nc`` (ArviZ).
     progress : a :class:`~ssmobs.log.Progress` updated once per k of ``ks`` (skipped ones
