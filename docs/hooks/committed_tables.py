@@ -24,6 +24,7 @@ import pandas as pd
 from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
+from ssmobs.binomial import format_fraction
 from ssmobs.paper_comparison import paper_comparison
 
 COMPARISON = re.compile(r"<!-- paper-comparison: (?P<folder>[\w./-]+) -->")
@@ -84,12 +85,6 @@ def render_optional_table(root: Path, path: str) -> str:
     )
 
 
-def _fraction(count: float, trials: float, lo: float, hi: float) -> str:
-    if any(pd.isna(v) for v in (count, trials)) or not trials:
-        return ""
-    return f"{count / trials:.2f} [{lo:.2f}, {hi:.2f}]"
-
-
 def render_rows(folder: Path) -> str:
     """One line per committed row folder under ``folder`` (each a run of one config of
     ``config/section4_rows/``): |K^max|/K over all K, |K^Stan|/K over the Stan runs, with
@@ -104,18 +99,15 @@ def render_rows(folder: Path) -> str:
         for r in pd.read_csv(summary).to_dict("records"):
             runs = r.get("K_stan_runs", r["K"])
 
-            def frac(name: str, count: str, trials: float, r: dict = r) -> str:
-                return _fraction(r[count], trials, r[f"{name}_lo95"], r[f"{name}_hi95"])
-
             cells = [
                 r["scenario"],
                 r["T"],
                 r["K"],
                 runs,
-                frac("K_max_frac", "K_max", r["K"]),
-                frac("K_max_frac_paper", "K_max_paper", r["K_paper"]),
-                frac("K_stan_frac", "K_stan", runs),
-                frac("K_stan_frac_paper", "K_stan_paper", r["K_paper"]),
+                format_fraction(r["K_max"], r["K"]),
+                format_fraction(r["K_max_paper"], r["K_paper"]),
+                format_fraction(r["K_stan"], runs),
+                format_fraction(r["K_stan_paper"], r["K_paper"]),
                 made,
             ]
             lines.append("| " + " | ".join(str(c) for c in cells) + " |")

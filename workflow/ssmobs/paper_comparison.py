@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from .tables import rel_diff
+
 COLUMNS = ["scenario", "T", "quantity", "K", "ours", "paper", "rel_diff", "standard_error", "z"]
 
 
@@ -130,7 +132,6 @@ def _section_iv_rows(summary: pd.DataFrame) -> list[dict]:
             # |K^Stan| counts over the Stan runs (every stan_every-th of the K, issue 20)
             runs = rec.get("K_stan_runs") if frac == "K_stan_frac" else None
             trials = int(rec["K"] if runs is None or pd.isna(runs) else runs)
-            rel = abs(ours - paper) / max(abs(ours), abs(paper)) if (ours or paper) else 0.0
             rows.append(
                 _row(
                     rec["scenario"],
@@ -139,7 +140,7 @@ def _section_iv_rows(summary: pd.DataFrame) -> list[dict]:
                     trials,
                     ours,
                     paper,
-                    rel,
+                    rel_diff(ours, paper),
                     se_fraction(paper, trials),
                 )
             )
