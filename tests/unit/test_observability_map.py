@@ -4,7 +4,9 @@ be unobservable."""
 from __future__ import annotations
 
 import copy
+import math
 
+import numpy as np
 import pytest
 from ssmobs import observability_map as om
 from ssmobs.cache_keys import CacheKeys
@@ -100,6 +102,30 @@ def test_only_missing_or_damaged_cells_are_computed(tmp_path, monkeypatch):
     frame = om.map_table(wider["observability_maps"][0], more, *args)
     assert calls == ["m_a0.5_T4", "m_a0.99_T4", "m_a0.99_T10"]
     assert len(frame) == 6 and list(frame["value"]) == [0.5, 0.5, 0.9, 0.9, 0.99, 0.99]
+
+
+def test_a_table_of_cached_cells_equals_one_of_fresh_cells(tmp_path, monkeypatch):
+    """A rerun after a kill reads some cells from their files: the map's table must be the
+    same bytes as a fresh run's (the JSON file sorts its keys, a fresh row does not)."""
+
+    def fake_summary(scenario, disturbances, design_cfg, joint, exact):
+        return {
+            "K_max": np.int64(3),
+            "K_max_frac": np.float64(scenario.T / 70),
+            "lvar_median_a": math.nan,
+            "exact": False,
+        }
+
+    monkeypatch.setattr(om, "cell_summary", fake_summary)
+    conf = config(MAP)
+    entry = conf["observability_maps"][0]
+    cells = CacheKeys(conf, "native").map_cells("m")
+    args = (tmp_path / "design", conf["design"], conf["joint_map"], None, tmp_path / "cells")
+    fresh = om.map_table(entry, cells, *args).to_csv(index=False)
+    for _, key in cells[1:]:
+        (tmp_path / "cells" / f"{key}.json").unlink()
+    resumed = om.map_table(entry, cells, *args).to_csv(index=False)
+    assert resumed == fresh
 
 
 def test_random_walk_at_T4_is_unobservable(tmp_path):

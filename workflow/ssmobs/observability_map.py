@@ -151,7 +151,8 @@ def map_table(
     """One row per cell of a map (``cells``: each cell's scenario entry and content key).
 
     A cell found in ``cells_dir/<key>.json`` is read, any other computed and written there
-    at once (a rerun after a kill computes only the missing cells)."""
+    at once (a rerun after a kill computes only the missing cells); every row is the one its
+    file holds, so a resumed map's table is the same bytes as a fresh one's."""
     progress = Progress(f"observability map {entry['name']}", len(cells))
     rows = []
     for cell, key in cells:
@@ -162,8 +163,10 @@ def map_table(
             disturbances = (
                 Path(design_dir) / f"q{sc.disturbance_dim}_K{sc.K}_{sc.method}_seed{sc.seed}.nc"
             )
-            row = cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
-            io.write_json(path, row)
+            io.write_json(
+                path, cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
+            )
+            row = io.read_json(path)  # a fresh row as a cached one reads (sorted keys, JSON types)
         rows.append(
             {
                 "map": entry["name"],
