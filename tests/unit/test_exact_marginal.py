@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import integrate
+from scipy.special import ndtr
 from ssmobs.exact_marginal import (
     ExactSettings,
+    _mixture_mode_quantiles,
     boundary_slopes,
     exact_marginal,
     improper,
@@ -227,6 +229,41 @@ def test_state_quantiles_match_monte_carlo_over_omega():
     j = model.n_params  # x0 is the first state
     assert res.theta_q5[0, j] == pytest.approx(np.quantile(x0, 0.05), abs=0.02)
     assert res.theta_q95[0, j] == pytest.approx(np.quantile(x0, 0.95), abs=0.02)
+
+
+def test_state_quantiles_do_not_move_when_the_state_grid_is_refined():
+    """(Sep, d=2, p=1), only a restricted, T = 50: the fine box widens along a long tail
+    toward a = b = 0 (31-33 Laplace sd); a state grid thinned from that box put its nodes
+    about 3 sd apart and moved x0's quantiles by up to 0.15 against a refined grid (and
+    Stan).  On its own box mode ± box_sd sd the mixture has converged: 31 nodes per axis
+    on a box of ± 9 sd move no quantile of x0 by more than 0.02."""
+    model = get_model("sep_d2_p1")
+    omega = np.array([0.9, 0.9, 0.9])
+    bounds = model.prior_bounds(
+        omega, {"a": "restricted", "b": "unrestricted", "c": "unrestricted"}
+    )
+    rng = np.random.default_rng(7)
+    eta, eps = rng.standard_normal((12, 50, 1)), rng.standard_normal((12, 50, 2))
+    _, z = model.simulate(omega, np.array([8.0]), eta, eps)
+    z = z[[3, 7, 11]]  # before the fix: x0's quantiles 0.08-0.15 off on these
+    default = exact_marginal(model, z, bounds)
+    fine = ExactSettings(state_nodes=(41, 21, 31, 7), state_thin=(10, 3, 1, 2), box_sd=9.0)
+    refined = exact_marginal(model, z, bounds, fine)
+    j = default.theta_names.index("x0")
+    assert list(default.maxima) == ["unique"] * 3
+    for q in ("theta_q5", "theta_q95"):
+        assert np.abs(getattr(default, q)[:, j] - getattr(refined, q)[:, j]).max() < 0.02, q
+
+
+def test_mixture_quantiles_converge_with_a_light_very_wide_component():
+    """A component of weight 1e-5 and sd 4e5 (a node at a box corner) makes the bracket
+    ~1e7 wide; 16 fixed steps left the 5 % quantile at 186 > the 95 % quantile."""
+    w = np.array([[1 - 1e-5, 1e-5]])
+    mean, sd = np.array([[8.0, 0.0]]), np.array([[1.0, 4e5]])
+    _, q = _mixture_mode_quantiles(w, mean, sd, ExactSettings())
+    cdf = (w * ndtr((q[0][:, None] - mean[0]) / sd[0])).sum(1)
+    assert cdf == pytest.approx([0.05, 0.95], abs=1e-9)
+    assert q[0, 0] == pytest.approx(8 - 1.6449, abs=1e-3)
 
 
 def test_same_is_improper_at_zero_like_minus_two_log_a():

@@ -19,9 +19,9 @@ and the smoothed Gaussians of the states given (Omega, z).
    while a face of the box carries density above exp(-``face_drop``) of the peak) gives the
    marginal density of every Omega component: its mode (the exact marginal MAP) and its
    5 % / 95 % quantiles, from a cubic spline of the log marginal density;
-4. the marginal of every state x_t is the mixture over the (thinned) grid of the smoothed
-   Gaussians, weighted by p(Omega | z); its mode and quantiles come from Newton's method
-   on the mixture.
+4. the marginal of every state x_t is the mixture over a grid on the box mode ± ``box_sd``
+   sigma (not widened) of the smoothed Gaussians, weighted by p(Omega | z); its mode and
+   quantiles come from Newton's method on the mixture.
 
 Improper posteriors.  With the flat prior on x_0 the integral over x_0 contributes
 1 / |det F(Omega)|, so for Same (F = a) p(a | z) grows like 1 / a as a -> 0+ and is not
@@ -57,6 +57,8 @@ if TYPE_CHECKING:
 logger = logging.getLogger("ssmobs.exact")
 
 QUANTILES = (0.05, 0.95)
+#: a mixture quantile has converged when a step moves it by at most this many mixture sd
+QUANTILE_TOL = 1e-10
 MAXIMA_KINDS = ("unique", "several", "none")
 
 
@@ -103,8 +105,9 @@ class ExactSettings:
     keeps the two equal).
 
     ``coarse_nodes``, ``state_nodes`` and ``state_thin`` hold one value per number m = 1..4
-    of parameters; ``state_nodes`` nodes per axis carry the state mixtures and the fine
-    Omega grid has ``(state_nodes - 1) * state_thin + 1`` nodes per axis.
+    of parameters; ``state_nodes`` nodes per axis carry the state mixtures (on their own
+    box, :func:`_state_box`) and the fine Omega grid has ``(state_nodes - 1) * state_thin
+    + 1`` nodes per axis.
     """
 
     coarse_nodes: tuple = (400, 48, 16, 9)
@@ -121,7 +124,7 @@ class ExactSettings:
     spike_distance: float = 1e-6
     spike_tol: float = 1e-3
     n_starts: int = 4
-    mixture_iter: int = 16
+    mixture_iter: int = 200
     mode_iter: int = 12
     valley_nodes: int = 200
     chunk_elements: int = 4_000_000
@@ -664,31 +667,49 @@ def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 # ====================================================================== step 4: states
+def _state_box(
+    centre: np.ndarray,
+    sd: np.ndarray,
+    lo_box: np.ndarray,
+    hi_box: np.ndarray,
+    settings: ExactSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the state mixtures' grid: the mode ± box_sd Laplace sd within the fine
+    grid's box, never the widened part.  Widening (``face_drop``) follows a long flat tail
+    of p(Omega | z) for the Omega marginals; a state grid thinned from such a box put its
+    nodes about 3 sd apart in (Sep, d=2, p=1) at T = 50 (31-33 sd wide in a and b) and
+    biased the x_t quantiles (x0's 5 % quantile by 0.06 in the median)."""
+    return np.maximum(lo_box, centre - settings.box_sd * sd), np.minimum(
+        hi_box, centre + settings.box_sd * sd
+    )
+
+
 def _state_mixtures(
     model: StateSpaceModel,
     axes: _Axes,
     z: np.ndarray,
     bounds: PriorBounds,
-    lpu: np.ndarray,
     lo_box: np.ndarray,
     hi_box: np.ndarray,
     settings: ExactSettings,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Marginal MAP and quantiles of x_0..x_T: mixtures over the thinned Omega grid.
+    """Marginal MAP and quantiles of x_0..x_T: mixtures over a tensor grid of
+    ``state_nodes`` nodes per axis on the box [lo_box, hi_box] (:func:`_state_box`).
 
-    Node g of the thinned grid carries weight w_g ∝ p(Omega_g | z) x (trapezoid weight)
-    and the smoothed Gaussian N(mu_t(Omega_g), P_t(Omega_g)), widened by the variance of
-    mu_t across the node's cell, sum_j (d mu_t / d index_j)^2 / 12 (midpoint rule for the
-    cell, so that a coarse Omega grid does not make the mixture bumpy).  Nodes are pruned
-    to the heaviest ones holding ``mixture_mass`` of the weight.
+    Node g carries weight w_g ∝ p(Omega_g | z) x (trapezoid weight) and the smoothed
+    Gaussian N(mu_t(Omega_g), P_t(Omega_g)), widened by the variance of mu_t across the
+    node's cell, sum_j (d mu_t / d index_j)^2 / 12 (midpoint rule for the cell, so that a
+    coarse Omega grid does not make the mixture bumpy).  Nodes are pruned to the heaviest
+    ones holding ``mixture_mass`` of the weight.
     """
-    K = lpu.shape[0]
-    m = lpu.ndim - 1
-    n = lpu.shape[1]
-    thin = settings.thin(m)
+    K, m = lo_box.shape
     ns = settings.state(m)
-    sel = (slice(None),) + (slice(0, n, thin),) * m
-    lps = lpu[sel]
+    nodes = [np.linspace(lo_box[:, j], hi_box[:, j], ns, axis=-1) for j in range(m)]
+    grid = _tensor(nodes).reshape(K, -1, m)
+    lps = np.empty((K, ns**m))
+    for sl in _chunks(K, ns**m, settings.chunk_elements):
+        lps[sl] = _logp_u(model, axes, grid[sl], z[sl, None], bounds)[0]
+    lps = lps.reshape((K,) + (ns,) * m)
     tw = _trapezoid_weights(ns)
     logw = lps.copy()
     for j in range(m):
@@ -702,8 +723,6 @@ def _state_mixtures(
     order = order[:, :keep]
     w = np.take_along_axis(w, order, 1)
     w /= w.sum(1, keepdims=True)
-    nodes = [np.linspace(lo_box[:, j], hi_box[:, j], n, axis=-1)[:, ::thin] for j in range(m)]
-    grid = _tensor(nodes).reshape(K, -1, m)
     T = z.shape[1]
     p = model.state_dim
     n_states = (T + 1) * p
@@ -719,7 +738,7 @@ def _state_mixtures(
         # mean moves (nearly linearly): spread the component by the cell's variance
         # (gh)^2 / 12 so that the mixture density is not bumpy on a coarse grid.  The
         # quantiles use the plain components (trapezoid rule: spectrally accurate).
-        spread = sum(np.gradient(mean, axis=1 + j) ** 2 for j in range(m)) / 12
+        spread = np.sum([np.gradient(mean, axis=1 + j) ** 2 for j in range(m)], axis=0) / 12
         idx = order[sl][:, :, None]
         mean, var, spread = (
             np.take_along_axis(a.reshape(kc, -1, n_states), idx, 1) for a in (mean, var, spread)
@@ -749,7 +768,9 @@ def _mixture_mode_quantiles(
 
     Weights are sorted (heaviest first); ``sd_mode`` (default ``sd``) are the component
     standard deviations used for the mode.  Quantiles: Newton's method on the mixture CDF,
-    safeguarded by bisection on a bracket that holds every component's ±12 sd; mode:
+    safeguarded by bisection on a bracket that holds every component's ±12 sd, until a step
+    moves no quantile by more than ``QUANTILE_TOL`` mixture sd (at most ``mixture_iter``
+    steps: a light, very wide component makes the bracket ~1e7 sd wide); mode:
     Newton's method on the log density from the heaviest component's mean, steps limited
     to half the mixture's standard deviation and kept inside the components' means.
     """
@@ -777,22 +798,36 @@ def _mixture_mode_quantiles(
         step = np.where(np.isfinite(step), step, 0.0)
         x = np.clip(x + np.clip(step, -S / 2, S / 2), lo_m, hi_m)
     mode = x
+
+    # the quantiles element by element (trajectory, state): components last, and each step
+    # only on the elements that have not converged yet
+    def flat(a: np.ndarray) -> np.ndarray:
+        return np.moveaxis(a, 1, -1).reshape(-1, a.shape[1])
+
+    wf, mf, sf = flat(w), flat(mean), flat(sd)
+    lo0 = flat(np.where(big, mean - 12 * sd, np.inf)).min(1)
+    hi0 = flat(np.where(big, mean + 12 * sd, -np.inf)).max(1)
+    tol = QUANTILE_TOL * S.reshape(-1)
     qs = []
     for level in QUANTILES:
-        lo = np.where(big, mean - 12 * sd, np.inf).min(1)
-        hi = np.where(big, mean + 12 * sd, -np.inf).max(1)
-        x = np.clip(M + ndtri(level) * S, lo, hi)
+        lo, hi = lo0.copy(), hi0.copy()
+        x = np.clip((M + ndtri(level) * S).reshape(-1), lo, hi)
+        todo = np.arange(x.size)
         for _ in range(settings.mixture_iter):
-            u = (x[:, None] - mean) / sd
-            F = (w * ndtr(u)).sum(1) - level
-            f = (w * np.exp(-0.5 * u * u) / sd).sum(1) / math.sqrt(2 * math.pi)
-            lo = np.where(F < 0, x, lo)
-            hi = np.where(F >= 0, x, hi)
+            xa, wa, ma, sa = x[todo], wf[todo], mf[todo], sf[todo]
+            u = (xa[:, None] - ma) / sa
+            F = (wa * ndtr(u)).sum(1) - level
+            f = (wa * np.exp(-0.5 * u * u) / sa).sum(1) / math.sqrt(2 * math.pi)
+            lo[todo] = np.where(F < 0, xa, lo[todo])
+            hi[todo] = np.where(F >= 0, xa, hi[todo])
             with np.errstate(all="ignore"):
-                newton = x - F / f
-            inside = np.isfinite(newton) & (newton > lo) & (newton < hi)
-            x = np.where(inside, newton, 0.5 * (lo + hi))
-        qs.append(x)
+                newton = xa - F / f
+            inside = np.isfinite(newton) & (newton > lo[todo]) & (newton < hi[todo])
+            x[todo] = np.where(inside, newton, 0.5 * (lo[todo] + hi[todo]))
+            todo = todo[np.abs(x[todo] - xa) > tol[todo]]
+            if todo.size == 0:
+                break
+        qs.append(x.reshape(M.shape))
     return mode, np.stack(qs, -1)
 
 
@@ -896,7 +931,9 @@ def exact_marginal(
         model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings
     )
     om_map, om_q = _marginal_omega(axes, lpu, lo_box, hi_box, settings)
-    x_map, x_q = _state_mixtures(model, axes, z, bounds, lpu, lo_box, hi_box, settings)
+    x_map, x_q = _state_mixtures(
+        model, axes, z, bounds, *_state_box(u, sd, lo_box, hi_box, settings), settings
+    )
     nan_rows = maxima == "none"
     theta_map = np.concatenate([om_map, x_map], 1)
     theta_q5 = np.concatenate([om_q[..., 0], x_q[..., 0]], 1)
