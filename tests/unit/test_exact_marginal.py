@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import ssmobs.exact_marginal as em
 from scipy import integrate
 from scipy.special import ndtr
 from ssmobs.exact_marginal import (
@@ -231,12 +232,13 @@ def test_state_quantiles_match_monte_carlo_over_omega():
     assert res.theta_q95[0, j] == pytest.approx(np.quantile(x0, 0.95), abs=0.02)
 
 
-def test_state_quantiles_do_not_move_when_the_state_grid_is_refined():
+def test_state_quantiles_do_not_move_when_the_state_grid_is_refined(monkeypatch):
     """(Sep, d=2, p=1), only a restricted, T = 50: the fine box widens along a long tail
-    toward a = b = 0 (31-33 Laplace sd); a state grid thinned from that box put its nodes
-    about 3 sd apart and moved x0's quantiles by up to 0.15 against a refined grid (and
-    Stan).  On its own box mode ± box_sd sd the mixture has converged: 31 nodes per axis
-    on a box of ± 9 sd move no quantile of x0 by more than 0.02."""
+    toward a = b = 0; a state grid spread over that whole box put its nodes about 3 sd
+    apart and moved x0's quantiles by up to 0.15 against a refined grid (and Stan).  On
+    the part of the box that holds all but 1e-6 of the mass the mixture has converged: 31
+    nodes per axis, a box of ± 9 sd and a tail mass of 1e-9 move no quantile of x0 by more
+    than 0.02."""
     model = get_model("sep_d2_p1")
     omega = np.array([0.9, 0.9, 0.9])
     bounds = model.prior_bounds(
@@ -246,8 +248,21 @@ def test_state_quantiles_do_not_move_when_the_state_grid_is_refined():
     eta, eps = rng.standard_normal((12, 50, 1)), rng.standard_normal((12, 50, 2))
     _, z = model.simulate(omega, np.array([8.0]), eta, eps)
     z = z[[3, 7, 11]]  # before the fix: x0's quantiles 0.08-0.15 off on these
+    boxes = []
+    state_box = em._state_box
+
+    def spy(lpu, lo_box, hi_box, settings):
+        boxes.append(hi_box - lo_box)
+        return state_box(lpu, lo_box, hi_box, settings)
+
+    monkeypatch.setattr(em, "_state_box", spy)
     default = exact_marginal(model, z, bounds)
-    fine = ExactSettings(state_nodes=(41, 21, 31, 7), state_thin=(10, 3, 1, 2), box_sd=9.0)
+    # the premise: every fine box widened well beyond mode ± box_sd sd in some axis
+    widths = boxes[0] / default.laplace_sd
+    assert np.all(widths.max(1) > 2 * 2 * ExactSettings().box_sd), widths
+    fine = ExactSettings(
+        state_nodes=(41, 21, 31, 7), state_thin=(10, 3, 1, 2), box_sd=9.0, state_tail_mass=1e-9
+    )
     refined = exact_marginal(model, z, bounds, fine)
     j = default.theta_names.index("x0")
     assert list(default.maxima) == ["unique"] * 3
@@ -257,13 +272,24 @@ def test_state_quantiles_do_not_move_when_the_state_grid_is_refined():
 
 def test_mixture_quantiles_converge_with_a_light_very_wide_component():
     """A component of weight 1e-5 and sd 4e5 (a node at a box corner) makes the bracket
-    ~1e7 wide; 16 fixed steps left the 5 % quantile at 186 > the 95 % quantile."""
-    w = np.array([[1 - 1e-5, 1e-5]])
-    mean, sd = np.array([[8.0, 0.0]]), np.array([[1.0, 4e5]])
+    ~1e7 wide; 16 fixed steps left the 5 % quantile at 186 > the 95 % quantile.  Every
+    element (trajectory, state) of a batch converges on its own mixture."""
+    rng = np.random.default_rng(3)
+    K, G, S = 2, 4, 3
+    w = rng.uniform(0.1, 1, (K, G, S))
+    w[:, -1, :] = 1e-5  # one light, very wide component everywhere
+    w /= w.sum(1, keepdims=True)
+    mean = rng.normal(8, 1, (K, G, S))
+    sd = rng.uniform(0.5, 2, (K, G, S))
+    sd[:, -1, :] = 4e5
+    order = np.argsort(-w, axis=1)  # heaviest first, as the caller sorts them
+    w, mean, sd = (np.take_along_axis(a, order, 1) for a in (w, mean, sd))
     _, q = _mixture_mode_quantiles(w, mean, sd, ExactSettings())
-    cdf = (w * ndtr((q[0][:, None] - mean[0]) / sd[0])).sum(1)
-    assert cdf == pytest.approx([0.05, 0.95], abs=1e-9)
-    assert q[0, 0] == pytest.approx(8 - 1.6449, abs=1e-3)
+    assert q.shape == (K, S, 2)
+    for k in range(K):
+        for t in range(S):
+            cdf = (w[k, :, t] * ndtr((q[k, t][:, None] - mean[k, :, t]) / sd[k, :, t])).sum(1)
+            assert cdf == pytest.approx([0.05, 0.95], abs=1e-9), (k, t)
 
 
 def test_same_is_improper_at_zero_like_minus_two_log_a():

@@ -129,6 +129,17 @@ def cell_summary(
     return row
 
 
+def cell_columns(param_names: Sequence[str], row: Mapping[str, Any]) -> list[str]:
+    """The columns of a cell's row in the order :func:`cell_summary` makes them (a cell file
+    sorts its keys), any others after them."""
+    order = ["K_max", "K_max_frac", "K_max_frac_lo95", "K_max_frac_hi95"]
+    order += [f"lvar_median_{n}" for n in param_names]
+    order += ["exact", "exact_unique", "exact_unique_frac", "exact_unique_frac_lo95"]
+    order += ["exact_unique_frac_hi95", "exact_used", "spike_frac"]
+    order += [f"{s}_median_{n}" for n in param_names for s in ("sd", "width90")]
+    return [c for c in order if c in row] + sorted(c for c in row if c not in order)
+
+
 def _read_cell(path: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
@@ -152,7 +163,10 @@ def map_table(
 
     A cell found in ``cells_dir/<key>.json`` is read, any other computed and written there
     at once (a rerun after a kill computes only the missing cells); every row is the one its
-    file holds, so a resumed map's table is the same bytes as a fresh one's."""
+    file holds, its columns in :func:`cell_columns`' order, so a resumed map's table is the
+    same bytes as a fresh one's."""
+    from .models import get_model
+
     progress = Progress(f"observability map {entry['name']}", len(cells))
     rows = []
     for cell, key in cells:
@@ -166,7 +180,10 @@ def map_table(
             io.write_json(
                 path, cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
             )
-            row = io.read_json(path)  # a fresh row as a cached one reads (sorted keys, JSON types)
+            row = _read_cell(path)  # a fresh row as a cached one reads (JSON types)
+            if row is None:
+                raise io.CorruptFileError(f"{path}: not readable right after writing it")
+        names = get_model(cell["model"]).param_names
         rows.append(
             {
                 "map": entry["name"],
@@ -175,7 +192,7 @@ def map_table(
                 "value": float(cell["omega"][entry["vary"]]),
                 "T": int(cell["T"]),
                 "K": int(cell["K"]),
-                **row,
+                **{c: row[c] for c in cell_columns(names, row)},
             }
         )
         progress.update()
