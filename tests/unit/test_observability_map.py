@@ -80,18 +80,26 @@ def test_cell_keys_follow_the_settings_that_determine_them():
     assert sorted(k for _, k in other) == sorted(base.values())  # the name is no part of it
 
 
-def test_only_missing_or_damaged_cells_are_computed(tmp_path, monkeypatch):
+def fake_cells(tmp_path, monkeypatch, row):
+    """The cells of map MAP with cell_summary replaced by ``row(scenario)``: the names of the
+    cells it computed, the config, the map's entry, its cells and map_table's other args."""
     calls: list[str] = []
 
     def fake_summary(scenario, disturbances, design_cfg, joint, exact):
         calls.append(scenario.name)
-        return {"K_max": 1, "K_max_frac": 0.05, "exact": False}
+        return row(scenario)
 
     monkeypatch.setattr(om, "cell_summary", fake_summary)
     conf = config(MAP)
-    entry = conf["observability_maps"][0]
     cells = CacheKeys(conf, "native").map_cells("m")
     args = (tmp_path / "design", conf["design"], conf["joint_map"], None, tmp_path / "cells")
+    return calls, conf, conf["observability_maps"][0], cells, args
+
+
+def test_only_missing_or_damaged_cells_are_computed(tmp_path, monkeypatch):
+    calls, conf, entry, cells, args = fake_cells(
+        tmp_path, monkeypatch, lambda sc: {"K_max": 1, "K_max_frac": 0.05, "exact": False}
+    )
     frame = om.map_table(entry, cells, *args)
     assert len(calls) == 4 and list(frame["T"]) == [4, 10, 4, 10]
     wider = copy.deepcopy(conf)
@@ -108,24 +116,18 @@ def test_a_table_of_cached_cells_equals_one_of_fresh_cells(tmp_path, monkeypatch
     """A rerun after a kill reads some cells from their files: the map's table must be the
     same bytes as a fresh run's (the JSON file sorts its keys, a fresh row does not)."""
 
-    calls: list[str] = []
-
-    def fake_summary(scenario, disturbances, design_cfg, joint, exact):
-        calls.append(scenario.name)
-        return {
+    calls, _, entry, cells, args = fake_cells(
+        tmp_path,
+        monkeypatch,
+        lambda sc: {
             "K_max": np.int64(3),
-            "K_max_frac": np.float64(scenario.T / 70),
+            "K_max_frac": np.float64(sc.T / 70),
             "K_max_frac_lo95": 0.01,
             "K_max_frac_hi95": 0.3,
             "lvar_median_a": math.nan,
             "exact": False,
-        }
-
-    monkeypatch.setattr(om, "cell_summary", fake_summary)
-    conf = config(MAP)
-    entry = conf["observability_maps"][0]
-    cells = CacheKeys(conf, "native").map_cells("m")
-    args = (tmp_path / "design", conf["design"], conf["joint_map"], None, tmp_path / "cells")
+        },
+    )
     fresh = om.map_table(entry, cells, *args)
     for _, key in cells[1:]:
         (tmp_path / "cells" / f"{key}.json").unlink()
