@@ -251,9 +251,9 @@ def test_state_quantiles_do_not_move_when_the_state_grid_is_refined(monkeypatch)
     boxes = []
     state_box = em._state_box
 
-    def spy(lpu, lo_box, hi_box, settings):
+    def spy(mass, lo_box, hi_box, settings):
         boxes.append(hi_box - lo_box)
-        return state_box(lpu, lo_box, hi_box, settings)
+        return state_box(mass, lo_box, hi_box, settings)
 
     monkeypatch.setattr(em, "_state_box", spy)
     default = exact_marginal(model, z, bounds)

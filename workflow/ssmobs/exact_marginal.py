@@ -603,18 +603,26 @@ def _fine_grid(
     return out_lp, lo_box, hi_box, truncated
 
 
-def _marginal_omega(
-    axes: _Axes, lpu: np.ndarray, lo_box: np.ndarray, hi_box: np.ndarray, settings: ExactSettings
-) -> tuple[np.ndarray, np.ndarray]:
-    """Marginal MAP (Omega scale) and 5 %/95 % quantiles of every Omega component."""
-    K = lpu.shape[0]
-    m = lpu.ndim - 1
-    n = lpu.shape[1]
-    peak = lpu.reshape(K, -1).max(1)
-    w = np.exp(lpu - peak.reshape((K,) + (1,) * m))
+def _grid_mass(lpu: np.ndarray) -> np.ndarray:
+    """The fine grid's nodes' masses (up to a factor per trajectory): density relative to the
+    peak times the tensor trapezoid weights."""
+    K, m, n = lpu.shape[0], lpu.ndim - 1, lpu.shape[1]
+    w = np.exp(lpu - lpu.reshape(K, -1).max(1).reshape((K,) + (1,) * m))
     tw = _trapezoid_weights(n)
     for j in range(m):
         w = w * tw.reshape((1,) + tuple(n if i == j else 1 for i in range(m)))
+    return w
+
+
+def _marginal_omega(
+    axes: _Axes, w: np.ndarray, lo_box: np.ndarray, hi_box: np.ndarray, settings: ExactSettings
+) -> tuple[np.ndarray, np.ndarray]:
+    """Marginal MAP (Omega scale) and 5 %/95 % quantiles of every Omega component, from the
+    fine grid's masses ``w`` (:func:`_grid_mass`)."""
+    K = w.shape[0]
+    m = w.ndim - 1
+    n = w.shape[1]
+    tw = _trapezoid_weights(n)
     r = settings.spline_refine
     s_fine = np.linspace(0, n - 1, (n - 1) * r + 1)
     est = np.full((K, m), np.nan)
@@ -670,7 +678,7 @@ def _parabola_vertex(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 # ====================================================================== step 4: states
 def _state_box(
-    lpu: np.ndarray, lo_box: np.ndarray, hi_box: np.ndarray, settings: ExactSettings
+    w: np.ndarray, lo_box: np.ndarray, hi_box: np.ndarray, settings: ExactSettings
 ) -> tuple[np.ndarray, np.ndarray]:
     """The box of the state mixtures' grid: per axis, the fine grid's nodes outside which
     p(Omega | z) holds at most ``state_tail_mass`` / (2 m) on each side, so the box holds
@@ -680,13 +688,8 @@ def _state_box(
     Omega marginals, and a state grid spread over it put its nodes about 3 Laplace sd apart
     in (Sep, d=2, p=1) at T = 50 (boxes 31-33 sd wide in a and b), which moved x0's 5 %
     quantile by 0.065 in the median over 198 trajectories."""
-    K = lpu.shape[0]
-    m = lpu.ndim - 1
-    n = lpu.shape[1]
-    w = np.exp(lpu - lpu.reshape(K, -1).max(1).reshape((K,) + (1,) * m))
-    tw = _trapezoid_weights(n)
-    for j in range(m):
-        w = w * tw.reshape((1,) + tuple(n if i == j else 1 for i in range(m)))
+    m = w.ndim - 1
+    n = w.shape[1]
     tail = settings.state_tail_mass / (2 * m)
     lo, hi = lo_box.copy(), hi_box.copy()
     for j in range(m):
@@ -959,9 +962,10 @@ def exact_marginal(
     lpu, lo_box, hi_box, truncated = _fine_grid(
         model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings
     )
-    om_map, om_q = _marginal_omega(axes, lpu, lo_box, hi_box, settings)
+    mass = _grid_mass(lpu)
+    om_map, om_q = _marginal_omega(axes, mass, lo_box, hi_box, settings)
     x_map, x_q = _state_mixtures(
-        model, axes, z, bounds, *_state_box(lpu, lo_box, hi_box, settings), settings
+        model, axes, z, bounds, *_state_box(mass, lo_box, hi_box, settings), settings
     )
     nan_rows = maxima == "none"
     theta_map = np.concatenate([om_map, x_map], 1)
