@@ -167,6 +167,7 @@ def map_table(
     same bytes as a fresh one's."""
     from .models import get_model
 
+    names = get_model(entry["base"]["model"]).param_names  # every cell's model
     progress = Progress(f"observability map {entry['name']}", len(cells))
     rows = []
     for cell, key in cells:
@@ -183,7 +184,6 @@ def map_table(
             row = _read_cell(path)  # a fresh row as a cached one reads (JSON types)
             if row is None:
                 raise io.CorruptFileError(f"{path}: not readable right after writing it")
-        names = get_model(cell["model"]).param_names
         rows.append(
             {
                 "map": entry["name"],
