@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows map clean
+.PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows map committed clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -101,6 +101,17 @@ map: setup
 	$(BIN)/python -m ssmobs.provenance --config $(MAP_CONFIG) --outputs-dir $(MAP_DIR) \
 		--command "make map" --note "$(MAP_NOTE)" -- \
 		$(SNAKEMAKE) --configfile $(MAP_CONFIG)
+
+# Any config whose outputs are committed (e.g. CONFIG=config/stoch_vol.yaml): the run with a
+# provenance file in the config's outputs_dir.
+COMMITTED_DIR = $(shell sed -n 's/^outputs_dir: *//p' $(CONFIG))
+NOTE ?=
+
+committed: setup
+	$(PREFLIGHT) $(CONFIG)
+	$(BIN)/python -m ssmobs.provenance --config $(CONFIG) --outputs-dir $(COMMITTED_DIR) \
+		--command "make committed CONFIG=$(CONFIG)" --note "$(NOTE)" -- \
+		$(SNAKEMAKE) --configfile $(CONFIG)
 
 clean:
 	rm -rf results .snakemake
