@@ -21,9 +21,11 @@ pytestmark = pytest.mark.stan
 WORKFLOW_DIR = Path(__file__).resolve().parents[2] / "workflow"
 
 #: a run that takes far longer than the test: warmup draws are not kept, so this costs no
-#: memory
+#: memory.  It turns Ctrl-C into KeyboardInterrupt as an interactive Python does: a Python
+#: started from a background job (`make test &`, nohup) inherits SIGINT ignored.
 LONG_RUN = (
-    "import json, sys\n"
+    "import json, signal, sys\n"
+    "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
     "from ssmobs.stan_backends import SamplerSettings, stan_file\n"
     "from ssmobs.stan_backends.native import NativeBackend\n"
     "b = NativeBackend(tmp_root=sys.argv[1])\n"
