@@ -36,11 +36,20 @@ step() {  # step NAME COMMAND...: time one command in the clone, log to WORKDIR/
   cpu=$(awk 'NR == 2 { split($1, u, /[ms]/); split($2, s, /[ms]/); print u[1] * 60 + u[2] + s[1] * 60 + s[2] }' "$work/$name.times")
   printf '%s\t%.1f\t%.1f\t%s\t%s\t%s\t%s\t%s\n' "$name" "$(awk "BEGIN { print $t1 - $t0 }")" "$cpu" "$rc" \
     "$load0" "$(cut -d' ' -f1 /proc/loadavg)" "$commit" "$started" >>"$out"
+  last_t0=$t0 last_t1=$t1 last_cpu=$cpu last_rc=$rc
   return 0
 }
 
 step setup make setup
 step run make run
+# the default profile's outputs with the provenance of this run, ready to be committed
+outputs=$(sed -n 's/^outputs_dir: *//p' "$work/clone/config/config.yaml")
+if [[ $last_rc == 0 ]]; then
+  (cd "$work/clone" && .venv/bin/python -m ssmobs.provenance --config config/config.yaml \
+    --outputs-dir "$outputs" --command "make run" --started "$last_t0" --finished "$last_t1" \
+    --cpu-seconds "$last_cpu" --from-empty-results yes \
+    --note "benchmarks/newcomer.sh: a fresh clone with empty caches, compiles included")
+fi
 step rerun make run
 step test make test
 cat "$out"

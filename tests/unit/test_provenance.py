@@ -36,3 +36,25 @@ def test_a_failed_command_writes_no_provenance(tmp_path, monkeypatch):
     assert provenance.main(args) == 3
     assert not (tmp_path / "out").exists()
     assert not provenance.results_empty(tmp_path / "results")
+
+
+def test_a_run_made_before_is_recorded_with_its_measured_times(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.yaml").write_text(CONFIG)
+    args = ["--config", "c.yaml", "--outputs-dir", "out", "--started", "1000", "--finished"]
+    args += ["4175.2", "--cpu-seconds", "5977.8", "--from-empty-results", "yes"]
+    assert provenance.main(args) == 0
+    record = json.loads((tmp_path / "out" / "provenance.json").read_text())
+    assert record["wall_seconds"] == 3175.2
+    assert record["cpu_seconds"] == 5977.8
+    assert record["started_from_empty_results"] is True
+    assert record["date_utc"].startswith("1970-01-01T01:09:35")
+
+
+def test_measured_times_are_refused_beside_a_command(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.yaml").write_text(CONFIG)
+    args = ["--config", "c.yaml", "--outputs-dir", "out", "--cpu-seconds", "3", "--", "true"]
+    with pytest.raises(SystemExit):
+        provenance.main(args)
+    assert not (tmp_path / "out").exists()

@@ -5,7 +5,9 @@ which Stan backend, how long, and with which config.
 (the make targets pass their Snakemake call) and, when it succeeds, writes
 ``D/provenance.json`` with its wall and CPU time and whether it started from an empty
 ``results/`` (a committed output must be exactly what its recorded commit produces).
-``--started EPOCH`` instead of a command records a run made before.
+``--started EPOCH`` instead of a command records a run made before (with ``--finished``,
+``--cpu-seconds`` and ``--from-empty-results`` when they were measured, e.g. by
+``benchmarks/newcomer.sh``).
 """
 
 from __future__ import annotations
@@ -111,13 +113,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", required=True)
     parser.add_argument("--outputs-dir", required=True)
     parser.add_argument("--started", type=float, help="start of a run made before, Unix seconds")
+    parser.add_argument("--finished", type=float, help="its end, Unix seconds (default: now)")
+    parser.add_argument("--cpu-seconds", type=float, help="its CPU time, when measured")
+    parser.add_argument(
+        "--from-empty-results", choices=("yes", "no"), help="whether it began with no results/"
+    )
     parser.add_argument("--command", default="make tables")
     parser.add_argument("--note", default="", help="e.g. what an earlier, resumed run did")
     parser.add_argument("run", nargs=argparse.REMAINDER, help="-- the command to run")
     args = parser.parse_args(argv)
     run = args.run[1:] if args.run[:1] == ["--"] else args.run
-    cpu = None
-    empty = None
+    if run and (args.finished, args.cpu_seconds, args.from_empty_results) != (None,) * 3:
+        parser.error(
+            "--finished, --cpu-seconds and --from-empty-results describe a run made before"
+        )
+    cpu = args.cpu_seconds
+    empty = None if args.from_empty_results is None else args.from_empty_results == "yes"
+    finished = None
     if run:
         empty = results_empty()
         started = time.time()
@@ -128,11 +140,18 @@ def main(argv: list[str] | None = None) -> int:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the run's whole process tree
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     elif args.started is not None:
-        started = args.started
+        started, finished = args.started, args.finished
     else:
         parser.error("give --started or a command after --")
     record = provenance(
-        args.config, started, time.time(), args.command, args.note, cpu, empty, args.outputs_dir
+        args.config,
+        started,
+        time.time() if finished is None else finished,
+        args.command,
+        args.note,
+        cpu,
+        empty,
+        args.outputs_dir,
     )
     io.write_json(Path(args.outputs_dir) / "provenance.json", record)
     return 0
