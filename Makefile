@@ -59,6 +59,16 @@ paper: setup
 	$(PREFLIGHT) config/paper.yaml
 	$(SNAKEMAKE) --configfile config/paper.yaml
 
+# A committed reproduction: the preflight, then Snakemake under ssmobs.provenance, which writes
+# provenance.json into the outputs folder when the run succeeds.  Arguments: the config file,
+# the outputs folder, the command to record, the NAME of the variable holding the note (free
+# text may contain commas) and optional Snakemake targets.
+define with_provenance
+	$(PREFLIGHT) $(1)
+	$(BIN)/python -m ssmobs.provenance --config $(1) --outputs-dir $(2) \
+		--command "$(3)" --note "$($(4))" -- $(SNAKEMAKE) $(5) --configfile $(1)
+endef
+
 # Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).
 TABLES_DIR := paper_figures/paper_settings
 TABLES_TARGETS := $(foreach s,table2_joint_vs_marginal table3_coverage section4_summary,$(foreach e,csv md tex,$(TABLES_DIR)/$(s).$(e))) \
@@ -68,10 +78,7 @@ TABLES_TARGETS := $(foreach s,table2_joint_vs_marginal table3_coverage section4_
 TABLES_NOTE ?=
 
 tables: setup
-	$(PREFLIGHT) config/tables.yaml
-	$(BIN)/python -m ssmobs.provenance --config config/tables.yaml --outputs-dir $(TABLES_DIR) \
-		--command "make tables" --note "$(TABLES_NOTE)" -- \
-		$(SNAKEMAKE) $(TABLES_TARGETS) --configfile config/tables.yaml
+	$(call with_provenance,config/tables.yaml,$(TABLES_DIR),make tables,TABLES_NOTE,$(TABLES_TARGETS))
 
 # One Section IV row at the paper's settings (issue 10), with a provenance file (committed);
 # SECTION4_CONFIG=config/section4_rows/<row>.yaml for a row at the paper's iterations on a
@@ -82,10 +89,7 @@ SECTION4_NOTE ?=
 SECTION4_ROWS := $(sort $(wildcard config/section4_rows/*.yaml))
 
 section4: setup
-	$(PREFLIGHT) $(SECTION4_CONFIG)
-	$(BIN)/python -m ssmobs.provenance --config $(SECTION4_CONFIG) --outputs-dir $(SECTION4_DIR) \
-		--command "make section4 SECTION4_CONFIG=$(SECTION4_CONFIG)" --note "$(SECTION4_NOTE)" -- \
-		$(SNAKEMAKE) --configfile $(SECTION4_CONFIG)
+	$(call with_provenance,$(SECTION4_CONFIG),$(SECTION4_DIR),make section4 SECTION4_CONFIG=$(SECTION4_CONFIG),SECTION4_NOTE)
 
 # Every row of config/section4_rows/, one after another (about 4.6 CPU-hours in all).
 section4-rows: setup
@@ -97,10 +101,7 @@ MAP_DIR := paper_figures/observability_map
 MAP_NOTE ?=
 
 map: setup
-	$(PREFLIGHT) $(MAP_CONFIG)
-	$(BIN)/python -m ssmobs.provenance --config $(MAP_CONFIG) --outputs-dir $(MAP_DIR) \
-		--command "make map" --note "$(MAP_NOTE)" -- \
-		$(SNAKEMAKE) --configfile $(MAP_CONFIG)
+	$(call with_provenance,$(MAP_CONFIG),$(MAP_DIR),make map,MAP_NOTE)
 
 # Any config whose outputs are committed (e.g. CONFIG=config/stoch_vol.yaml): the run with a
 # provenance file in the config's outputs_dir.
@@ -108,10 +109,7 @@ COMMITTED_DIR = $(shell sed -n 's/^outputs_dir: *//p' $(CONFIG))
 NOTE ?=
 
 committed: setup
-	$(PREFLIGHT) $(CONFIG)
-	$(BIN)/python -m ssmobs.provenance --config $(CONFIG) --outputs-dir $(COMMITTED_DIR) \
-		--command "make committed CONFIG=$(CONFIG)" --note "$(NOTE)" -- \
-		$(SNAKEMAKE) --configfile $(CONFIG)
+	$(call with_provenance,$(CONFIG),$(COMMITTED_DIR),make committed CONFIG=$(CONFIG),NOTE)
 
 clean:
 	rm -rf results .snakemake
