@@ -91,7 +91,8 @@ SECTION4_ROWS := $(sort $(wildcard config/section4_rows/*.yaml))
 section4: setup
 	$(call with_provenance,$(SECTION4_CONFIG),$(SECTION4_DIR),make section4 SECTION4_CONFIG=$(SECTION4_CONFIG),SECTION4_NOTE)
 
-# Every row of config/section4_rows/, one after another (about 4.6 CPU-hours in all).
+# Every row of config/section4_rows/, one after another (the configs estimate 4.6 CPU-hours in
+# all; the rows measured so far took 2-5 times their estimates, BENCHMARKS.md).
 section4-rows: setup
 	set -e; for c in $(SECTION4_ROWS); do $(MAKE) --no-print-directory section4 SECTION4_CONFIG=$$c; done
 
