@@ -60,13 +60,13 @@ paper: setup
 	$(SNAKEMAKE) --configfile config/paper.yaml
 
 # A committed reproduction: the preflight, then Snakemake under ssmobs.provenance, which writes
-# provenance.json into the outputs folder when the run succeeds.  Arguments: the config file,
-# the outputs folder, the command to record, the NAME of the variable holding the note (free
-# text may contain commas) and optional Snakemake targets.
+# provenance.json into the config's outputs_dir when the run succeeds.  Arguments: the config
+# file, the command to record, the NAME of the variable holding the note (free text may
+# contain commas) and optional Snakemake targets.
 define with_provenance
 	$(PREFLIGHT) $(1)
-	$(BIN)/python -m ssmobs.provenance --config $(1) --outputs-dir $(2) \
-		--command "$(3)" --note "$($(4))" -- $(SNAKEMAKE) $(5) --configfile $(1)
+	$(BIN)/python -m ssmobs.provenance --config $(1) \
+		--command "$(2)" --note "$($(3))" -- $(SNAKEMAKE) $(4) --configfile $(1)
 endef
 
 # Tables II, III and Figure 3 at the paper's settings, with a provenance file (committed).
@@ -78,18 +78,17 @@ TABLES_TARGETS := $(foreach s,table2_joint_vs_marginal table3_coverage section4_
 TABLES_NOTE ?=
 
 tables: setup
-	$(call with_provenance,config/tables.yaml,$(TABLES_DIR),make tables,TABLES_NOTE,$(TABLES_TARGETS))
+	$(call with_provenance,config/tables.yaml,make tables,TABLES_NOTE,$(TABLES_TARGETS))
 
 # One Section IV row at the paper's settings (issue 10), with a provenance file (committed);
 # SECTION4_CONFIG=config/section4_rows/<row>.yaml for a row at the paper's iterations on a
 # subset of its design set (issue 20). Its outputs go to the config's outputs_dir.
 SECTION4_CONFIG := config/section4_sep_d2_p1.yaml
-SECTION4_DIR = $(shell sed -n 's/^outputs_dir: *//p' $(SECTION4_CONFIG))
 SECTION4_NOTE ?=
 SECTION4_ROWS := $(sort $(wildcard config/section4_rows/*.yaml))
 
 section4: setup
-	$(call with_provenance,$(SECTION4_CONFIG),$(SECTION4_DIR),make section4 SECTION4_CONFIG=$(SECTION4_CONFIG),SECTION4_NOTE)
+	$(call with_provenance,$(SECTION4_CONFIG),make section4 SECTION4_CONFIG=$(SECTION4_CONFIG),SECTION4_NOTE)
 
 # Every row of config/section4_rows/, one after another (the configs estimate 4.6 CPU-hours in
 # all; the rows measured so far took 2-5 times their estimates, BENCHMARKS.md).
@@ -98,19 +97,17 @@ section4-rows: setup
 
 # The observability maps (issue 21, ours), with a provenance file (committed).
 MAP_CONFIG := config/map.yaml
-MAP_DIR := paper_figures/observability_map
 MAP_NOTE ?=
 
 map: setup
-	$(call with_provenance,$(MAP_CONFIG),$(MAP_DIR),make map,MAP_NOTE)
+	$(call with_provenance,$(MAP_CONFIG),make map,MAP_NOTE)
 
 # Any config whose outputs are committed (e.g. CONFIG=config/stoch_vol.yaml): the run with a
 # provenance file in the config's outputs_dir.
-COMMITTED_DIR = $(shell sed -n 's/^outputs_dir: *//p' $(CONFIG))
 NOTE ?=
 
 committed: setup
-	$(call with_provenance,$(CONFIG),$(COMMITTED_DIR),make committed CONFIG=$(CONFIG),NOTE)
+	$(call with_provenance,$(CONFIG),make committed CONFIG=$(CONFIG),NOTE)
 
 clean:
 	rm -rf results .snakemake

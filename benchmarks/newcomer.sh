@@ -43,10 +43,9 @@ step() {  # step NAME COMMAND...: time one command in the clone, log to WORKDIR/
 step setup make setup
 step run make run
 # the default profile's outputs with the provenance of this run, ready to be committed
-outputs=$(sed -n 's/^outputs_dir: *//p' "$work/clone/config/config.yaml")
 if [[ $last_rc == 0 ]]; then
   (cd "$work/clone" && .venv/bin/python -m ssmobs.provenance --config config/config.yaml \
-    --outputs-dir "$outputs" --command "make run" --started "$last_t0" --finished "$last_t1" \
+    --command "make run" --started "$last_t0" --finished "$last_t1" \
     --cpu-seconds "$last_cpu" --from-empty-results yes \
     --note "benchmarks/newcomer.sh: a fresh clone with empty caches, compiles included")
 fi

@@ -58,3 +58,10 @@ def test_measured_times_are_refused_beside_a_command(tmp_path, monkeypatch):
     with pytest.raises(SystemExit):
         provenance.main(args)
     assert not (tmp_path / "out").exists()
+
+
+def test_the_outputs_folder_defaults_to_the_configs_outputs_dir(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "c.yaml").write_text(CONFIG)
+    assert provenance.main(["--config", "c.yaml", "--", sys.executable, "-c", "pass"]) == 0
+    assert json.loads((tmp_path / "out" / "provenance.json").read_text())["command"]

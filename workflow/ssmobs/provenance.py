@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", required=True)
-    parser.add_argument("--outputs-dir", required=True)
+    parser.add_argument("--outputs-dir", help="default: the config's outputs_dir")
     parser.add_argument("--started", type=float, help="start of a run made before, Unix seconds")
     parser.add_argument("--finished", type=float, help="its end, Unix seconds (default: now)")
     parser.add_argument("--cpu-seconds", type=float, help="its CPU time, when measured")
@@ -127,9 +127,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(
             "--finished, --cpu-seconds and --from-empty-results describe a run made before"
         )
+    outputs_dir = args.outputs_dir or read_config_file(args.config)["outputs_dir"]
     cpu = args.cpu_seconds
     empty = None if args.from_empty_results is None else args.from_empty_results == "yes"
-    finished = None
+    finished = args.finished  # None with a command: it ends now
     if run:
         empty = results_empty()
         started = time.time()
@@ -140,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the run's whole process tree
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     elif args.started is not None:
-        started, finished = args.started, args.finished
+        started = args.started
     else:
         parser.error("give --started or a command after --")
     record = provenance(
@@ -151,9 +152,9 @@ def main(argv: list[str] | None = None) -> int:
         args.note,
         cpu,
         empty,
-        args.outputs_dir,
+        outputs_dir,
     )
-    io.write_json(Path(args.outputs_dir) / "provenance.json", record)
+    io.write_json(Path(outputs_dir) / "provenance.json", record)
     return 0
 
 
