@@ -45,11 +45,14 @@ docs: setup
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
 # damage tests, the cluster runs, the PyStan smoke run); `make test-slow` runs those (CI runs both).
+# Both run on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test module,
+# and every test of the shared smoke run, on one worker.
+PYTEST := $(BIN)/pytest -n $(CORES) --dist loadgroup
 test: setup lint
-	$(BIN)/pytest -m "not slow"
+	$(PYTEST) -m "not slow"
 
 test-slow: setup
-	$(BIN)/pytest -m slow
+	$(PYTEST) -m slow
 
 smoke: setup
 	$(PREFLIGHT) config/smoke.yaml
