@@ -47,7 +47,7 @@ docs: setup
 # damage tests, the cluster runs, the PyStan smoke run); `make test-slow` runs those (CI runs both).
 # Both run on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test module,
 # and every test of the shared smoke run, on one worker.
-PYTEST := $(BIN)/pytest -n $(CORES) --dist loadgroup
+PYTEST := $(BIN)/pytest -n $(CORES) --dist loadscope
 test: setup lint
 	$(PYTEST) -m "not slow"
 

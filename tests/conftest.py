@@ -5,22 +5,34 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
 
 
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """With ``-n N --dist loadgroup`` (``make test``): one worker per test module, and one
-    worker for every test of the session-wide smoke run, so that no module- or session-scoped
-    fixture (a smoke run, a fresh compile) is computed twice."""
-    if not config.getoption("dist", "no") == "loadgroup":
-        return
-    for item in items:
-        if item.get_closest_marker("xdist_group"):
-            continue
-        uses_smoke = "smoke_run" in getattr(item, "fixturenames", ())
-        group = "smoke_run" if uses_smoke else item.nodeid.split("::")[0]
-        item.add_marker(pytest.mark.xdist_group(group))
+def _scope(nodeid: str) -> str:
+    """The scheduling unit of a test: its module, or "smoke_run" for every module that uses
+    the session-wide smoke run (tests/workflow/conftest.py)."""
+    module = nodeid.split("::")[0]
+    path = Path(__file__).resolve().parents[1] / module
+    if path.is_file() and "smoke_run" in path.read_text():
+        return "smoke_run"
+    return module
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """With ``-n N --dist loadscope`` (``make test``): whole test modules go to one worker
+    each, and all modules of the smoke run to the same one, so that no module- or
+    session-scoped fixture (a smoke run, a fresh compile) is computed twice."""
+    if config.getvalue("dist") != "loadscope":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleOrSmokeRun(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _scope(nodeid)
+
+    return ModuleOrSmokeRun(config, log)
