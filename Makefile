@@ -44,15 +44,17 @@ docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
-# damage tests, the cluster runs, the PyStan smoke run); `make test-slow` runs those (CI runs both).
+# damage tests, the cluster runs, the PyStan smoke run) and those that build with PyStan (marker
+# `pystan`: the second backend and the native backend's oracle); `make test-slow` runs those
+# (CI runs both).
 # `make test` runs on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test
 # module, and every module of the shared smoke run, on one worker. The slow tests stay in one
 # process: most run whole workflows on both cores, and they are not yet checked under xdist.
 test: setup lint
-	$(BIN)/pytest -n $(CORES) --dist loadscope -m "not slow"
+	$(BIN)/pytest -n $(CORES) --dist loadscope -m "not slow and not pystan"
 
 test-slow: setup
-	$(BIN)/pytest -m slow
+	$(BIN)/pytest -m "slow or pystan"
 
 smoke: setup
 	$(PREFLIGHT) config/smoke.yaml

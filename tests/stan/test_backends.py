@@ -72,6 +72,7 @@ def _check_draws(draws: Draws, settings: SamplerSettings, shapes: dict[str, tupl
 
 
 # ----------------------------------------------------------------------------- PyStan
+@pytest.mark.pystan
 def test_pystan_draws_deterministic_and_no_files_left(backend):
     sf = stan_file("same")
     data = _data("same", {"a": 0.9})
@@ -105,6 +106,7 @@ def test_pystan_draws_deterministic_and_no_files_left(backend):
     assert private_models and all(p.is_symlink() for d in private_models for p in d.iterdir())
 
 
+@pytest.mark.pystan
 def test_pystan_p2_layout_matches_arviz(backend):
     """Draws of matrix[T, 2] x agree with ArviZ's from_pystan (chain, draw, t, i)."""
     import arviz_base as az
@@ -127,6 +129,7 @@ def test_pystan_p2_layout_matches_arviz(backend):
     )
 
 
+@pytest.mark.pystan
 def test_pystan_pool_cap(backend, monkeypatch):
     """The chain pool has settings.workers processes and httpstan's pool is restored."""
     import httpstan.services_stub as ss
@@ -161,6 +164,7 @@ def test_pystan_pool_cap(backend, monkeypatch):
     assert ss.executor is original
 
 
+@pytest.mark.pystan
 def test_pystan_inits(backend):
     data = _data("sep", {"a": 0.9, "b": 0.9})
     sf = stan_file("sep")
@@ -171,6 +175,7 @@ def test_pystan_inits(backend):
         backend.sample(sf, data, seed=5, settings=SMALL, inits=[{}])
 
 
+@pytest.mark.pystan
 def test_pystan_sampling_error_leaves_nothing(backend):
     """An init outside the support makes Stan fail: SamplingError, and no files left."""
     data = _data("same", {"a": 0.9})
@@ -185,6 +190,7 @@ def test_pystan_sampling_error_leaves_nothing(backend):
     backend.sample(stan_file("same"), data, seed=5, settings=SMALL)
 
 
+@pytest.mark.pystan
 def test_pystan_bad_data_is_valueerror(backend):
     data = _data("same", {"a": 0.9})
     with pytest.raises(ValueError, match="data rejected"):
@@ -216,6 +222,7 @@ def test_pystan_bad_data_is_valueerror(backend):
         ),
     ],
 )
+@pytest.mark.pystan
 def test_pystan_other_models_run(backend, slug, omega, shapes):
     draws = backend.sample(stan_file(slug), _data(slug, omega), seed=11, settings=SMALL)
     _check_draws(draws, SMALL, shapes)

@@ -91,6 +91,7 @@ def test_agreeing_program_gives_no_problem_for_configured_case():
     assert problems == []
 
 
+@pytest.mark.pystan
 def test_native_log_density_equals_pystan_oracle():
     # the same points, inside and outside the support: equal up to PyStan's dropped constants
     model = get_model("stoch_vol")

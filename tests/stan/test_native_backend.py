@@ -55,6 +55,7 @@ def test_auto_is_native_without_cmdstan(monkeypatch):
         ("sep_d1_p2", {"a": 0.6, "b": 0.5, "c": 0.9, "d": 0.9}, False),
     ],
 )
+@pytest.mark.pystan
 def test_same_draws_as_pystan(native, slug, omega, inits):
     """Bit-identical draws and sampler columns for the same seed (chain ids 1..C)."""
     pystan = get_backend("pystan")
@@ -72,6 +73,7 @@ def test_same_draws_as_pystan(native, slug, omega, inits):
         np.testing.assert_array_equal(a.sample_stats[name], b.sample_stats[name], err_msg=name)
 
 
+@pytest.mark.pystan
 def test_init_radius_reaches_the_sampler(native):
     """Random inits uniform on (-r, r) as Stan draws them: PyStan gives the same draws with
     another radius, and that radius gives other draws than Stan's default 2 (issue 20)."""

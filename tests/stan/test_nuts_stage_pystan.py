@@ -16,7 +16,8 @@ from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.pystan import PyStanBackend
 from ssmobs.stan_metrics import stan_summary
 
-pytestmark = pytest.mark.stan
+# every test builds its program with PyStan (`make test-slow`)
+pytestmark = [pytest.mark.stan, pytest.mark.pystan]
 
 
 @pytest.fixture(scope="module")

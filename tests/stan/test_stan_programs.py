@@ -18,7 +18,8 @@ from ssmobs.models.log_posterior import log_posterior
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.pystan import PyStanBackend
 
-pytestmark = pytest.mark.stan
+# every test builds its program with PyStan (`make test-slow`)
+pytestmark = [pytest.mark.stan, pytest.mark.pystan]
 
 T = 7
 N_POINTS = 6
