@@ -3,6 +3,7 @@ keep shared fixtures on one worker when the tests run in parallel."""
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -12,10 +13,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
 
 
-def _scope(nodeid: str) -> str:
-    """The scheduling unit of a test: its module, or "smoke_run" for every module that uses
-    the session-wide smoke run (tests/workflow/conftest.py)."""
-    module = nodeid.split("::")[0]
+@functools.cache
+def _module_scope(module: str) -> str:
+    """The scheduling unit of a test module: itself, or "smoke_run" for every module that
+    uses the session-wide smoke run (tests/workflow/conftest.py)."""
     path = Path(__file__).resolve().parents[1] / module
     if path.is_file() and "smoke_run" in path.read_text():
         return "smoke_run"
@@ -33,6 +34,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
 
     class ModuleOrSmokeRun(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            return _scope(nodeid)
+            return _module_scope(nodeid.split("::")[0])
 
     return ModuleOrSmokeRun(config, log)
