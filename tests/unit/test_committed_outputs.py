@@ -4,13 +4,13 @@ config fails here until its outputs are regenerated (``make committed CONFIG=...
 
 from __future__ import annotations
 
-import hashlib
 import json
 import subprocess
 from pathlib import Path
 
 import pytest
 import yaml
+from ssmobs.io import file_sha256
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -42,12 +42,11 @@ def test_committed_outputs_match_their_config_file(path: Path):
     prov = json.loads(path.read_text())
     config_file = REPO / prov["config_file"]
     assert config_file.is_file(), f"{path}: its config {prov['config_file']} is gone"
-    config_bytes = config_file.read_bytes()
-    assert prov["config_sha256"] == hashlib.sha256(config_bytes).hexdigest(), (
+    assert prov["config_sha256"] == file_sha256(config_file), (
         f"{prov['config_file']} changed after {path.parent.relative_to(REPO)} was made: "
         f"regenerate it (make committed CONFIG={prov['config_file']})"
     )
-    assert prov["config"] == yaml.safe_load(config_bytes)
+    assert prov["config"] == yaml.safe_load(config_file.read_text())
     # the folder is the one the config writes to, so no profile's run overwrites another's
     assert (REPO / prov["config"]["outputs_dir"]).resolve() == path.parent.resolve()
     assert prov["wall_seconds"] > 0 and len(prov["commit"]) == 40
