@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CORES ?= 2
 
-.PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows map committed clean
+.PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows variant-table map committed clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -99,6 +99,11 @@ section4: setup
 # all; the rows measured so far took 2-5 times their estimates, BENCHMARKS.md).
 section4-rows: setup
 	set -e; for c in $(SECTION4_ROWS); do $(MAKE) --no-print-directory section4 SECTION4_CONFIG=$$c; done
+
+# The variant x row table of Section IV (issue 20), from the committed studies that
+# config/tables/stan_variants_by_row.yaml names (no sampling; seconds).
+variant-table: setup
+	$(SNAKEMAKE) stan_variant_table
 
 # The observability maps (issue 21, ours), with a provenance file (committed).
 MAP_CONFIG := config/map.yaml

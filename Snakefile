@@ -45,6 +45,7 @@ include: "workflow/rules/outputs.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/own_model.smk"
 include: "workflow/rules/observability_map.smk"
+include: "workflow/rules/stan_variants.smk"
 
 
 remove_stale_stamps()

@@ -58,6 +58,8 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "exact": ("stages/exact.py",),
     # the cells of an observability map: what computes a cell, not the map's table or figure
     "map_cells": ("observability_map.py:run_map_cells",),
+    # the variant x row table of Section IV, read from committed reproductions
+    "variant_table": ("stan_variants.py",),
     # every stamped table and figure; observability_study's and observability_map's scripts
     # call their modules themselves
     "outputs": (
@@ -98,6 +100,7 @@ STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
     "gather": ("gather_nuts",),
     "exact": ("exact_marginal",),
     "map_cells": ("observability_map_cells",),
+    "variant_table": ("stan_variant_table",),
     "outputs": OUTPUT_SCRIPTS,
 }
 #: modules that only log, plan or describe and never change a number or a file's content

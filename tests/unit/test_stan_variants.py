@@ -1,0 +1,164 @@
+"""The variant x row table (issue 20): labels derived from the Stan set-up, variants refused
+when they ran on other trajectories, and the committed table is what the committed studies
+give today."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from ssmobs.config import ConfigError
+from ssmobs.stan_variants import (
+    OURS,
+    VariantTableError,
+    read_spec,
+    setup_label,
+    spec_inputs,
+    stan_setup,
+    table_key,
+    variant_by_row,
+    variant_rows,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+SPEC = REPO / "config/tables/stan_variants_by_row.yaml"
+
+SCENARIO = {
+    "name": "base",
+    "model": "same",
+    "omega": {"a": 0.7},
+    "x0": 8,
+    "T": 20,
+    "K": 40,
+    "prior": "restricted",
+    "stan_every": 2,
+    "paper_ref": "same_a07_T100",
+}
+
+
+def _study(folder: Path, scenarios: list[dict], converged: dict[str, int]) -> Path:
+    """A committed-looking folder: provenance.json with the config, a Section IV summary."""
+    folder.mkdir(parents=True)
+    config = {"outputs_dir": "x", "scenarios": scenarios}
+    (folder / "provenance.json").write_text(json.dumps({"config": config}))
+    pd.DataFrame(
+        [
+            {
+                "scenario": s["name"],
+                "K_stan": converged[s["name"]],
+                "K_stan_runs": 20,
+                "K_stan_frac": converged[s["name"]] / 20,
+                "K_stan_frac_lo95": 0.0,
+                "K_stan_frac_hi95": 1.0,
+                "K_stan_frac_paper": 0.808,
+            }
+            for s in scenarios
+        ]
+    ).to_csv(folder / "section4_summary.csv", index=False)
+    return folder
+
+
+def test_labels_say_what_differs_from_the_rows_own_setup():
+    config = {"stan": {"chains": 4, "iter_warmup": 10, "init_radius": 2, "adapt_delta": 0.8}}
+    base = stan_setup(config, {"stan_init": "true"})
+    assert setup_label(base, base) == OURS
+    seeded = stan_setup(config, {"stan_init": "true", "stan_seed": 2})
+    assert setup_label(seeded, base) == "one Stan seed (2) for all"
+    zero = stan_setup(config, {"stan_settings": {"init_radius": 0}})
+    assert setup_label(zero, stan_setup(config, {})) == "every chain at 0"
+    both = stan_setup(config, {"stan_settings": {"adapt_delta": 0.95, "iter_warmup": 80}})
+    assert setup_label(both, stan_setup(config, {})) == "warmup 80, adapt_delta 0.95"
+
+
+def test_variants_line_up_under_their_rows_baseline(tmp_path):
+    base = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    variants = [
+        {**SCENARIO, "name": "zero", "stan_settings": {"init_radius": 0}},
+        {**SCENARIO, "name": "seed", "stan_seed": 3},
+        {**SCENARIO, "name": "elsewhere", "paper_ref": "mult_T50", "model": "sep_mult"},
+    ]
+    study = _study(tmp_path / "study", variants, {"zero": 18, "seed": 9, "elsewhere": 1})
+    lines = variant_rows([{"folder": str(base), "scenario": "base"}], [str(study)])
+    assert list(lines["scenario"]) == ["base", "zero", "seed"]  # another row's scenario left out
+    assert list(lines["setup"]) == [OURS, "every chain at 0", "one Stan seed (3) for all"]
+    table = variant_by_row(lines)
+    assert table.columns.tolist() == ["Stan set-up", "same_a07_T100"]
+    assert table.iloc[1, 1] == "0.90 [0.68, 0.99] of 20"
+    assert table.iloc[-1].tolist() == ["paper", "0.808"]
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"stan_every": 3}, {"K": 80}, {"x0": 7}, {"seed": 2}],
+    ids=lambda c: next(iter(c)),
+)
+def test_a_variant_on_other_trajectories_is_refused(tmp_path, change):
+    base = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    other = {**SCENARIO, "name": "other", "stan_seed": 1, **change}
+    study = _study(tmp_path / "study", [other], {"other": 10})
+    with pytest.raises(VariantTableError, match=f"other.*{next(iter(change))}"):
+        variant_rows([{"folder": str(base), "scenario": "base"}], [str(study)])
+
+
+def test_a_variant_under_other_checks_is_refused(tmp_path):
+    base = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    study = _study(
+        tmp_path / "study", [{**SCENARIO, "name": "other", "stan_seed": 1}], {"other": 3}
+    )
+    provenance = json.loads((study / "provenance.json").read_text())
+    provenance["config"]["convergence"] = {"rhat_max": 1.05}
+    (study / "provenance.json").write_text(json.dumps(provenance))
+    with pytest.raises(VariantTableError, match="convergence"):
+        variant_rows([{"folder": str(base), "scenario": "base"}], [str(study)])
+
+
+def test_a_spec_without_its_keys_is_refused(tmp_path):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("output: x\nbaselines: [{folder: a}]\nstudies: []\n")
+    with pytest.raises(ConfigError, match="'folder' and 'scenario'"):
+        read_spec(spec)
+    spec.write_text("baselines: []\nstudies: []\n")
+    with pytest.raises(ConfigError, match="'output'"):
+        read_spec(spec)
+
+
+def test_the_committed_table_is_what_the_committed_studies_give(monkeypatch, tmp_path):
+    """Regenerating the table from the committed folders gives the committed bytes: a study
+    committed or replaced without `make variant-table` fails here."""
+    from ssmobs.stan_variants import CAPTION
+    from ssmobs.tables import write_table
+
+    monkeypatch.chdir(REPO)
+    spec = read_spec(SPEC)
+    assert all(Path(p).is_file() for p in spec_inputs(spec))
+    lines = variant_rows(spec["baselines"], spec["studies"])
+    csv, md = Path(f"{spec['output']}.csv"), Path(f"{spec['output']}.md")
+    fresh_csv, fresh_md = tmp_path / "fresh.csv", tmp_path / "fresh.md"
+    write_table(lines, [fresh_csv])
+    write_table(variant_by_row(lines), [fresh_md], caption=CAPTION)
+    assert fresh_csv.read_bytes() == csv.read_bytes(), f"{csv} is stale: make variant-table"
+    assert fresh_md.read_bytes() == md.read_bytes(), f"{md} is stale: make variant-table"
+
+
+def test_every_row_has_its_baseline_first(monkeypatch):
+    monkeypatch.chdir(REPO)
+    spec = copy.deepcopy(read_spec(SPEC))
+    lines = variant_rows(spec["baselines"], spec["studies"])
+    firsts = lines.groupby("row", sort=False).head(1)
+    assert (firsts["setup"] == OURS).all()
+    assert len(firsts) == len(spec["baselines"])
+
+
+def test_the_rules_key_follows_the_contents_of_what_it_reads(tmp_path):
+    study = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    inputs = [study / "provenance.json", study / "section4_summary.csv"]
+    before = table_key(inputs)
+    assert table_key(inputs) == before
+    summary = inputs[1].read_text()
+    inputs[1].write_text(summary.replace("15", "16"))
+    assert table_key(inputs) != before
+    inputs[1].write_text(summary)
+    assert table_key(inputs) == before  # content, not mtime

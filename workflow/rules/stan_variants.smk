@@ -1,0 +1,29 @@
+# The variant x row table of Section IV (issue 20): read from the committed studies that
+# config/tables/stan_variants_by_row.yaml names, never from results/; made on request
+# (`make variant-table`), not by `all`.
+
+from ssmobs.stan_variants import read_spec, spec_inputs, table_key
+
+VARIANT_TABLE_SPEC = "config/tables/stan_variants_by_row.yaml"
+VARIANT_TABLE = read_spec(VARIANT_TABLE_SPEC)
+VARIANT_TABLE_INPUTS = spec_inputs(VARIANT_TABLE)
+
+
+rule stan_variant_table:
+    """|K^Stan|/K per Stan set-up and row, beside each row's own set-up and the paper's."""
+    input:
+        spec=VARIANT_TABLE_SPEC,
+        committed=VARIANT_TABLE_INPUTS,
+    output:
+        csv=f"{VARIANT_TABLE['output']}.csv",
+        md=f"{VARIANT_TABLE['output']}.md",
+    log:
+        "results/logs/stan_variant_table.log",
+    localrule: True
+    conda:
+        "../../envs/ssmobs.yaml"
+    params:
+        # content keys: the committed files and the code that reads them
+        key=lambda wc, input: table_key(input),
+    script:
+        "../scripts/stan_variant_table.py"
