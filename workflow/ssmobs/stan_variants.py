@@ -20,22 +20,13 @@ from typing import Any
 import pandas as pd
 
 from ssmobs.binomial import format_fraction
-from ssmobs.cache_keys import code_digest, digest, file_digest
+from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS, code_digest, digest, file_digest
 from ssmobs.config import ConfigError, read_config_file, validate
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
-TRAJECTORY_KEYS = ("model", "omega", "x0", "T", "K", "prior", "method", "seed", "stan_every")
+TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")
 # the Stan set-up: the config's stan block (scenario's stan_settings override), inits, seed
-SETUP_KEYS = (
-    "chains",
-    "iter_warmup",
-    "iter_sampling",
-    "adapt_delta",
-    "max_treedepth",
-    "init_radius",
-    "stan_init",
-    "stan_seed",
-)
+SETUP_KEYS = (*SAMPLER_FIELDS, "stan_init", "stan_seed")
 OURS = "ours (the row's own set-up)"
 CAPTION = (
     "Section IV under Stan set-ups the paper leaves open: |K^Stan|/K with its exact binomial "
