@@ -4,7 +4,6 @@ give today."""
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
@@ -145,7 +144,7 @@ def test_the_committed_table_is_what_the_committed_studies_give(monkeypatch, tmp
 
 def test_every_row_has_its_baseline_first(monkeypatch):
     monkeypatch.chdir(REPO)
-    spec = copy.deepcopy(read_spec(SPEC))
+    spec = read_spec(SPEC)
     lines = variant_rows(spec["baselines"], spec["studies"])
     firsts = lines.groupby("row", sort=False).head(1)
     assert (firsts["setup"] == OURS).all()

@@ -100,7 +100,7 @@ def variant_rows(
     loaded = {os.fspath(f): _study(f) for f in [b["folder"] for b in baselines] + list(studies)}
     lines = []
     for base_ref in baselines:
-        base_config, base_summary = loaded[os.fspath(base_ref["folder"])]
+        base_config, _ = loaded[os.fspath(base_ref["folder"])]
         base = next(s for s in base_config["scenarios"] if s["name"] == base_ref["scenario"])
         base_setup = stan_setup(base_config, base)
         members = [(os.fspath(base_ref["folder"]), base)]
