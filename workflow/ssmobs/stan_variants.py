@@ -11,7 +11,6 @@ differs is its Stan set-up, and that difference is its label (derived, never typ
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -19,9 +18,11 @@ from typing import Any
 
 import pandas as pd
 
+from ssmobs import io
 from ssmobs.binomial import format_fraction
 from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS, code_digest, digest, file_digest
 from ssmobs.config import ConfigError, read_config_file, validate
+from ssmobs.tables import write_table
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
 TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")
@@ -42,8 +43,7 @@ class VariantTableError(ValueError):
 def _study(folder: str | os.PathLike) -> tuple[dict[str, Any], pd.DataFrame]:
     """A committed reproduction's config (schema defaults filled in) and Section IV summary."""
     path = Path(folder)
-    provenance = json.loads((path / "provenance.json").read_text())
-    config = validate(provenance["config"])
+    config = validate(io.read_json(path / "provenance.json", required=["config"])["config"])
     summary = pd.read_csv(path / "section4_summary.csv")
     return config, summary.set_index("scenario")
 
@@ -147,7 +147,7 @@ def variant_by_row(lines: pd.DataFrame) -> pd.DataFrame:
 
 
 def read_spec(path: str | os.PathLike) -> dict[str, Any]:
-    """The table's spec (config/stan_variants/variant_table.yaml): baselines and studies."""
+    """The table's spec (config/tables/stan_variants_by_row.yaml): output, baselines, studies."""
     spec = read_config_file(path)
     if not isinstance(spec, dict) or set(spec) != {"output", "baselines", "studies"}:
         raise ConfigError(f"{path}: needs exactly the keys 'output', 'baselines' and 'studies'")
@@ -157,6 +157,15 @@ def read_spec(path: str | os.PathLike) -> dict[str, Any]:
                 f"{path}: baselines: each needs 'folder' and 'scenario', got {base!r}"
             )
     return spec
+
+
+def write_variant_table(
+    spec: Mapping[str, Any], csv: str | os.PathLike, md: str | os.PathLike
+) -> None:
+    """The spec's table: the lines to ``csv``, the table to read (with its caption) to ``md``."""
+    lines = variant_rows(spec["baselines"], spec["studies"])
+    write_table(lines, [csv])
+    write_table(variant_by_row(lines), [md], caption=CAPTION)
 
 
 def table_key(inputs: Sequence[str | os.PathLike]) -> str:
