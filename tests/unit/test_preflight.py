@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import time
@@ -205,3 +206,32 @@ def test_command_line_prints_the_duplicate_key(tmp_path):
     )
     assert proc.returncode == 1
     assert proc.stderr.startswith(f"error: config file {path}, line 8, column 5: key 'K'")
+
+
+def makefile_recipes() -> dict[str, list[str]]:
+    """Each Makefile target's recipe lines (tab-indented lines under `target: ...`)."""
+    recipes: dict[str, list[str]] = {}
+    target = None
+    for line in (REPO / "Makefile").read_text().splitlines():
+        if line.startswith("\t") and target is not None:
+            recipes[target].append(line.strip())
+        elif m := re.match(r"^([A-Za-z0-9_-]+):(?!=)", line):
+            target = m.group(1)
+            recipes[target] = []
+        elif line.strip() and not line.startswith("#"):
+            target = None
+    return recipes
+
+
+def test_every_make_target_that_runs_snakemake_runs_the_preflight_first():
+    """Issue 19: every target resumes a killed run with the same command, which needs the
+    stale lock removed before Snakemake starts (the README promises it for every target)."""
+    recipes = makefile_recipes()
+    runs = {t: r for t, r in recipes.items() if any("$(SNAKEMAKE)" in x for x in r)}
+    assert {"run", "smoke", "paper", "variant-table"} <= set(runs)
+    for target, lines in runs.items():
+        first = next(i for i, x in enumerate(lines) if "$(SNAKEMAKE)" in x)
+        assert any(x.startswith("$(PREFLIGHT)") for x in lines[:first]), target
+    wrapped = [t for t, r in recipes.items() if any("with_provenance" in x for x in r)]
+    assert {"tables", "section4", "map", "committed"} <= set(wrapped)
+    assert "$(PREFLIGHT) $(1)" in (REPO / "Makefile").read_text()  # inside with_provenance
