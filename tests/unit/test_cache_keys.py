@@ -281,6 +281,22 @@ def test_exact_settings_key_the_exact_stage_only():
     assert a.nuts_records("same_T4") == b.nuts_records("same_T4")
 
 
+def test_k_grid_and_scenario_name_key_the_grids_not_their_points():
+    """A changed K_grid gives new grid files (found stale before: the grid files kept the old
+    K_i) while the points of the K_i both grids hold are found again; the scenario's name,
+    which the grid files carry, keys them too."""
+    base = smoke()
+    grid, renamed = copy.deepcopy(base), copy.deepcopy(base)
+    grid["k_selection"][0]["K_grid"] = [8, 16, 32]
+    renamed["scenarios"][0]["name"] = "same_T4_renamed"
+    renamed["k_selection"][0]["scenario"] = "same_T4_renamed"
+    a, b, c = keys(base), keys(grid), keys(renamed)
+    assert a.k_selection_points("same_T4") == b.k_selection_points("same_T4")
+    assert a.k_selection_grid("same_T4") != b.k_selection_grid("same_T4")
+    assert a.k_selection_points("same_T4") == c.k_selection_points("same_T4")
+    assert a.k_selection_grid("same_T4") != c.k_selection_grid("same_T4")
+
+
 def test_exact_key_knows_its_K():
     k = keys(smoke())
     key = k.exact("same_T4", 30)
@@ -345,7 +361,7 @@ def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
             "design": k.design,
             "trajectories": k.trajectories("same_T4"),
             "joint_map": k.joint_map("same_T4"),
-            "k_selection": k.k_selection_points("same_T4"),
+            "k_selection": k.k_selection_grid("same_T4"),
             "program": k.program("same"),
             "nuts_records": k.nuts_records("same_T4"),
             "nuts_batches": k.nuts_batches("same_T4", 4),
@@ -383,3 +399,46 @@ def test_stan_program_keys_the_records_and_the_stan_check_only(tmp_path):
     after = some_keys(keys(conf, repo=tmp_path))
     assert before[:2] == after[:2]  # trajectories and the Python check
     assert before[2] != after[2] and before[3] != after[3]  # NUTS records and the Stan check
+
+
+def test_the_stan_version_keys_the_programs_and_what_follows():
+    """Found stale before: the programs' keys held the backend's name only, so another Stan
+    (a new httpstan wheel or CmdStan) left every NUTS output as it was."""
+    conf = smoke()
+    a = CacheKeys(conf, "native stanc3 v2.35.0 (Unix)")
+    b = CacheKeys(conf, "native stanc3 v2.36.0 (Unix)")
+    assert a.program("same") != b.program("same")
+    assert a.nuts_records("same_T4") != b.nuts_records("same_T4")
+    assert a.check_model("same_T4", stan=True) != b.check_model("same_T4", stan=True)
+    assert a.trajectories("same_T4") == b.trajectories("same_T4")
+    assert a.joint_map("same_T4") == b.joint_map("same_T4")
+    assert a.check_model("same_T4") == b.check_model("same_T4")
+
+
+def test_the_native_driver_keys_the_stan_check_not_the_python_check(tmp_path):
+    """Found stale before: the Stan check runs the driver's log-density mode, but an edit of
+    the driver left the check passed."""
+    work = tmp_path / "workflow"
+    shutil.copytree(
+        REPO / "workflow", work, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+    )
+    conf = smoke()
+    module_closure.cache_clear()
+    before = keys(conf, package_dir=work / "ssmobs")
+    stan_check, python_check = (
+        before.check_model("same_T4", stan=True),
+        before.check_model("same_T4"),
+    )
+    driver = work / "ssmobs" / "stan_backends" / "native_driver" / "driver.cpp"
+    driver.write_text(driver.read_text() + "\n// an edit\n")
+    module_closure.cache_clear()
+    after = keys(conf, package_dir=work / "ssmobs")
+    assert after.check_model("same_T4", stan=True) != stan_check
+    assert after.check_model("same_T4") == python_check
+
+
+def test_the_configured_backend_identity_names_its_stan():
+    from ssmobs.record_cache import configured_backend_identity
+
+    native = configured_backend_identity("native")
+    assert native.startswith("native ") and "stanc" in native

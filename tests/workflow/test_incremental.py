@@ -153,10 +153,10 @@ CASES = {
         {"exact_marginal", "paper_tables"},
         {"design_trajectories", "joint_map", "sample_nuts"},
     ),
-    "model module": (
+    "model module": (  # Figure 2 draws model Same's trajectories: it is remade too
         None,
         _append("workflow/ssmobs/models/same.py", "\n# an edit of the model\n"),
-        EVERY_STAGE | {"check_model", "check_model_stan"},
+        EVERY_STAGE | {"check_model", "check_model_stan", "figure_design_points"},
         {"design_disturbances", "build_stan_model"},
     ),
     "Stan program": (

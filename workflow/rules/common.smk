@@ -12,6 +12,7 @@ from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
+from ssmobs.record_cache import configured_backend_identity  # noqa: E402
 from ssmobs.preflight import use_package_of  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
@@ -74,7 +75,7 @@ EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
 #: every output's content key (ssmobs/cache_keys.py): outputs live under results/.../<key>/
-KEYS = CacheKeys(config, STAN_BACKEND, repo=REPO)
+KEYS = CacheKeys(config, configured_backend_identity(STAN_BACKEND), repo=REPO)
 #: the design sets of this config's design settings and code
 DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
 # Every key up front: a cluster job plans only its own job and looks its key up directly.
@@ -87,13 +88,15 @@ for _name, _sc in SCENARIO_OBJECTS.items():
     for _K in {_sc.K, _sc.exact_trajectories}:
         KEYS.exact(_name, _K)  # and the trajectories at K
 for _name in KSEL:
-    KEYS.k_selection_points(_name)
+    KEYS.k_selection_grid(_name)  # and its points
 #: every cell of every observability map with its key (issue 21)
 MAP_CELLS = {_name: KEYS.map_cells(_name) for _name in MAPS}
 for _name in MAPS:
     KEYS.map_table(_name)
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
 STAMPS = {}
+#: stamps of rules made on request only (not targets of `all`), with their current keys
+STAMPS_ON_REQUEST = {}
 
 # Jobs run the package of this checkout, not the one `pip install -e` pointed at elsewhere.
 use_package_of(REPO / "workflow")
@@ -188,8 +191,15 @@ def map_cells_table(name):
     return f"results/observability_map/{name}/{KEYS.map_table(name)}/cells.parquet"
 
 
-def ksel_points_dir(ksel):
-    return f"results/k_selection/{ksel}/{KEYS.k_selection_points(ksel)}"
+def ksel_grids_dir(ksel):
+    """The grid files of one k_selection entry (keyed by its points' key and the grid)."""
+    return f"results/k_selection/{ksel}/{KEYS.k_selection_grid(ksel)}"
+
+
+def ksel_points_dir(ksel, method, sets, seed):
+    """The cached points V_{K_i} of one grid, one file per K_i (keyed without the grid)."""
+    key = KEYS.k_selection_points(ksel)
+    return f"results/k_selection/{ksel}/points/{key}/{method}_{sets}_seed{seed}"
 
 
 def stamp(name):
@@ -260,7 +270,7 @@ def k_selection_grids(name):
         seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
         for sets in ks["sets"]:
             for seed in seeds:
-                out.append(f"{ksel_points_dir(name)}/{method}_{sets}_seed{seed}.json")
+                out.append(f"{ksel_grids_dir(name)}/{method}_{sets}_seed{seed}.json")
     return out
 
 
@@ -368,7 +378,7 @@ def remove_stale_stamps():
     stamp aside to ``<stamp>.stale``, which the next real run honours."""
     if not workflow.is_main_process:
         return
-    for path, key in STAMPS.items():
+    for path, key in {**STAMPS, **STAMPS_ON_REQUEST}.items():
         stamp_file, aside = Path(path), Path(f"{path}.stale")
         try:
             stale = stamp_file.read_text().strip() != key

@@ -1,7 +1,12 @@
 # Every figure of paper_figures/ (the paper's Figures 2-4 and ours); the figure of the choice
 # of K comes with its rule select_k (k_selection.smk), the observability studies' with theirs.
 
-register_stamp("figure_design_points", [figure2_disturbances()], config["figure2"])
+# the figure draws model Same's trajectories: its module keys the figure too
+register_stamp(
+    "figure_design_points",
+    [figure2_disturbances()],
+    {"figure": config["figure2"], "model_code": KEYS.model_code("same")},
+)
 
 
 rule figure_design_points:

@@ -17,13 +17,13 @@ rule k_selection_grid:
         runtime=120,
     params:
         scenario=lambda wc: keyed_input(
-            "k_selection_points", wc.ksel, wc.key, SCENARIOS[KSEL[wc.ksel]["scenario"]]
+            "k_selection_grid", wc.ksel, wc.key, SCENARIOS[KSEL[wc.ksel]["scenario"]]
         ),
         settings=config["joint_map"],
         K_grid=lambda wc: KSEL[wc.ksel]["K_grid"],
         design=config["design"],
         design_dir=DESIGN_DIR,
-        points=lambda wc, output: output[0][: -len(".json")],
+        points=lambda wc: ksel_points_dir(wc.ksel, wc.method, wc.sets, wc.seed),
     script:
         "../scripts/k_selection_grid.py"
 

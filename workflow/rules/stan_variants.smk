@@ -7,6 +7,11 @@ from ssmobs.stan_variants import read_spec, spec_inputs, table_key
 VARIANT_TABLE_SPEC = "config/tables/stan_variants_by_row.yaml"
 VARIANT_TABLE = read_spec(VARIANT_TABLE_SPEC)
 VARIANT_TABLE_INPUTS = spec_inputs(VARIANT_TABLE)
+# its stamp: the content key of the spec, the committed files and the code that reads them,
+# so that an edit of any of them remakes the table whatever the file times say
+VARIANT_TABLE_STAMP = "results/outputs/stan_variant_table.key"
+if all(Path(p).is_file() for p in VARIANT_TABLE_INPUTS):
+    STAMPS_ON_REQUEST[VARIANT_TABLE_STAMP] = table_key([VARIANT_TABLE_SPEC, *VARIANT_TABLE_INPUTS])
 
 
 rule stan_variant_table:
@@ -17,13 +22,13 @@ rule stan_variant_table:
     output:
         csv=f"{VARIANT_TABLE['output']}.csv",
         md=f"{VARIANT_TABLE['output']}.md",
+        stamp=VARIANT_TABLE_STAMP,
     log:
         "results/logs/stan_variant_table.log",
     localrule: True
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        # content keys: the committed files and the code that reads them
-        key=lambda wc, input: table_key(input),
+        key=lambda wc, input: table_key([input.spec, *input.committed]),
     script:
         "../scripts/stan_variant_table.py"

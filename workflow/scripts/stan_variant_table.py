@@ -6,3 +6,5 @@ from ssmobs.stan_variants import read_spec, write_variant_table
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
 write_variant_table(read_spec(snakemake.input.spec), snakemake.output.csv, snakemake.output.md)
+# what made these files (rule of the cache: the stamp holds their key)
+io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -309,7 +309,9 @@ class UnknownKeyError(KeyError):
 
 class CacheKeys:
     """Every key of one validated config (see the module docstring), with a lookup from
-    (kind, name, key) back to what it describes, for the rules' wildcards."""
+    (kind, name, key) back to what it describes, for the rules' wildcards.  ``backend``:
+    the Stan backend with its Stan version
+    (:func:`ssmobs.record_cache.configured_backend_identity`), part of the programs' keys."""
 
     def __init__(
         self,
@@ -382,7 +384,10 @@ class CacheKeys:
             "code": self.code("check_model"),
         }
         if stan:
+            # the check runs the compiled program (the native driver's log-density mode):
+            # keyed by it, i.e. the Stan program, the backend, its Stan version, the driver
             payload["stan"] = self.stan_program(sc["model"])
+            payload["program"] = self.program(sc["model"])
         return self._key("check_model_stan" if stan else "check_model", name, payload)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
@@ -408,7 +413,8 @@ class CacheKeys:
         return self._key("joint_map", name, payload)
 
     def program(self, model: str) -> str:
-        """The compiled-program marker of ``model`` for the configured backend."""
+        """The compiled-program marker of ``model`` for the configured backend and its Stan
+        version (so another Stan gives new programs, records and everything after them)."""
         payload = {
             "backend": self.backend,
             "stan": self.stan_program(model),
@@ -468,7 +474,8 @@ class CacheKeys:
         return self._key("exact", name, payload, K=int(K))
 
     def k_selection_points(self, ksel: str) -> str:
-        """The joint-MAP summaries V_{K_i} of one k_selection entry (Sec. IV.A)."""
+        """Each point V_{K_i} of one k_selection entry (Sec. IV.A), cached one file per K_i:
+        not the grid, so that a point a changed grid keeps is not computed again."""
         ks = self.k_selections[ksel]
         sc = self.scenarios[ks["scenario"]]
         payload = {
@@ -479,6 +486,17 @@ class CacheKeys:
             "code": self.code("k_selection"),
         }
         return self._key("k_selection_points", ksel, payload)
+
+    def k_selection_grid(self, ksel: str) -> str:
+        """The grids of one k_selection entry: its points' key, the grid of K_i and the
+        scenario's name (both written into the grid files)."""
+        ks = self.k_selections[ksel]
+        payload = {
+            "points": self.k_selection_points(ksel),
+            "K_grid": [int(K) for K in ks["K_grid"]],
+            "scenario_name": ks["scenario"],
+        }
+        return self._key("k_selection_grid", ksel, payload)
 
     def map_cells(self, name: str) -> list[tuple[dict[str, Any], str]]:
         """Every cell of one observability map (issue 21) with its own key: the cell's
@@ -530,14 +548,16 @@ def main(argv: list[str] | None = None) -> int:
 
     from .config import validate
     from .preflight import load_config_file
+    from .record_cache import configured_backend_identity
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--configfile", default="config/config.yaml")
-    parser.add_argument("--backend", default="native")
+    parser.add_argument("--backend", help="default: the config's stan.backend")
     args = parser.parse_args(argv)
     config = load_config_file(args.configfile)
     validate(config)
-    keys = CacheKeys(config, args.backend)
+    backend = args.backend or config["stan"]["backend"]
+    keys = CacheKeys(config, configured_backend_identity(backend))
     for name, sc in keys.scenarios.items():
         keys.trajectories(name)
         if sc.get("joint_map"):
@@ -545,7 +565,7 @@ def main(argv: list[str] | None = None) -> int:
         if sc.get("stan"):
             keys.nuts_records(name)
     for ksel in keys.k_selections:
-        keys.k_selection_points(ksel)
+        keys.k_selection_grid(ksel)
     print(json.dumps(keys.describe(), indent=1, sort_keys=True))
     return 0
 

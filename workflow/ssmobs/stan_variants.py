@@ -170,7 +170,8 @@ def write_variant_table(
 
 def table_key(inputs: Sequence[str | os.PathLike]) -> str:
     """The rule's content key: the bytes of every file it reads and the code that reads them
-    (a params value, so Snakemake reruns the rule when either changes, whatever the mtimes)."""
+    (its stamp's content: a stamp of another key is removed before the DAG is built, so the
+    rule reruns when either changes, whatever the file times)."""
     files = {os.fspath(p): file_digest(os.fspath(p)) for p in inputs}
     return digest({"inputs": files, "code": code_digest("variant_table")})
 

@@ -44,9 +44,8 @@ def run_k_selection_point(
     matrix, attrs = io.read_disturbances(disturbances, q=sc.disturbance_dim, K=K)
     traj = make_trajectories(sc, matrix, provenance=attrs)
     _, _, info, _ = joint_map_of(traj, sc.prior, settings)
-    info.update(
-        K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed, scenario=scenario.name
-    )
+    # no scenario name: a point is keyed by what it computes, the grid names the scenario
+    info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed)
     io.write_json(out, info)
     return info
 
@@ -86,7 +85,7 @@ def run_k_selection_grid(
             path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
             disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
             info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
-        rows.append(info)
+        rows.append({**info, "scenario": scenario.name})
         progress.update()
     io.write_json(out, {"points": rows})
     return rows

@@ -1,0 +1,108 @@
+"""Incremental runs equal fresh runs: the quick cases, on single targets (issue 19).
+
+The mutation suite (``test_incremental.py``, slow) edits a whole run; these cases need only
+one rule's outputs, so they run in ``make test``: the grid of the choice of K, and the
+variant x row table, which is made on request from committed files.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from helpers import REPO, make_workdir, snakemake
+
+pytestmark = pytest.mark.workflow
+
+CONFIG = "config/ksel.yaml"
+KSEL = {
+    "outputs_dir": "paper_figures/ksel",
+    "scenarios": [
+        {
+            "name": "same_T4",
+            "model": "same",
+            "omega": {"a": 0.9},
+            "x0": 8,
+            "T": 4,
+            "K": 4,
+            "prior": "restricted",
+            "paper_ref": "same_a09_T4",
+        }
+    ],
+    "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
+    "k_selection": [
+        {
+            "name": "same_T4",
+            "scenario": "same_T4",
+            "K_grid": [4, 8],
+            "methods": ["design"],
+            "seeds": [1],
+            "sets": ["independent"],
+        }
+    ],
+}
+#: the choice of K's own outputs (no Stan, no joint MAP of the scenario)
+KSEL_TARGET = "results/k_selection/same_T4/v_vectors.csv"
+
+
+def rules_run(proc) -> list[str]:
+    """Names of the rules whose jobs ran, from Snakemake's log."""
+    return re.findall(r"^(?:local)?rule (\w+):$", proc.stdout + proc.stderr, flags=re.M)
+
+
+def ksel_run(work: Path, K_grid: list[int]):
+    conf = yaml.safe_load(yaml.safe_dump(KSEL))
+    conf["k_selection"][0]["K_grid"] = K_grid
+    (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+    return snakemake(work, KSEL_TARGET, "--cores", "2", "--configfile", CONFIG)
+
+
+def test_a_changed_k_grid_gives_the_fresh_runs_choice_of_k(tmp_path):
+    """Found stale before: the grid files were keyed without K_grid, so a changed grid left
+    select_k reading the old K_i. Now a new grid makes new grid files, reusing the points
+    both grids hold, and equals a fresh run of the edited config."""
+    work = make_workdir(tmp_path / "incremental")
+    ksel_run(work, [4, 8])
+    edited = ksel_run(work, [4, 12])
+    assert {"k_selection_grid", "select_k"} <= set(rules_run(edited))
+    fresh = make_workdir(tmp_path / "fresh")
+    ksel_run(fresh, [4, 12])
+    assert (work / KSEL_TARGET).read_bytes() == (fresh / KSEL_TARGET).read_bytes()
+    points = sorted(p.name for p in work.glob("results/k_selection/same_T4/points/*/*/K*.json"))
+    assert points == ["K12.json", "K4.json", "K8.json"]  # K = 4 computed once, kept
+    assert rules_run(ksel_run(work, [4, 12])) == []  # and nothing to do again
+
+
+def variant_table_workdir(dest: Path) -> Path:
+    """A workflow copy with the committed studies the variant table reads."""
+    from ssmobs.stan_variants import read_spec, spec_inputs
+
+    work = make_workdir(dest)
+    spec = read_spec(REPO / "config" / "tables" / "stan_variants_by_row.yaml")
+    for path in spec_inputs(spec):
+        (work / path).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO / path, work / path)
+    return work
+
+
+def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
+    """Found stale before: its key was a params value, which Snakemake's rerun by file
+    times does not see, so a code edit left the table as it was. Now its stamp holds the
+    key of the files it reads and of its code."""
+    work = variant_table_workdir(tmp_path / "work")
+    first = snakemake(work, "--cores", "1", "stan_variant_table")
+    assert rules_run(first) == ["stan_variant_table"]
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == []
+    code = work / "workflow" / "ssmobs" / "stan_variants.py"
+    code.write_text(code.read_text() + "\n# an edit of the table's code\n")
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == [
+        "stan_variant_table"
+    ]
+    spec = work / "config" / "tables" / "stan_variants_by_row.yaml"
+    spec.write_text(spec.read_text() + "\n# an edit of the spec\n")
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == [
+        "stan_variant_table"
+    ]
