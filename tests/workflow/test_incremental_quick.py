@@ -7,31 +7,20 @@ variant x row table, which is made on request from committed files.
 
 from __future__ import annotations
 
-import re
 import shutil
 from pathlib import Path
 
 import pytest
 import yaml
 from helpers import REPO, make_workdir, snakemake
+from test_incremental import BASE, rules_run
 
 pytestmark = pytest.mark.workflow
 
 CONFIG = "config/ksel.yaml"
 KSEL = {
     "outputs_dir": "paper_figures/ksel",
-    "scenarios": [
-        {
-            "name": "same_T4",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8,
-            "T": 4,
-            "K": 4,
-            "prior": "restricted",
-            "paper_ref": "same_a09_T4",
-        }
-    ],
+    "scenarios": BASE["scenarios"],  # the mutation suite's tiny Same scenario
     "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
     "k_selection": [
         {
@@ -46,11 +35,6 @@ KSEL = {
 }
 #: the choice of K's own outputs (no Stan, no joint MAP of the scenario)
 KSEL_TARGET = "results/k_selection/same_T4/v_vectors.csv"
-
-
-def rules_run(proc) -> list[str]:
-    """Names of the rules whose jobs ran, from Snakemake's log."""
-    return re.findall(r"^(?:local)?rule (\w+):$", proc.stdout + proc.stderr, flags=re.M)
 
 
 def ksel_run(work: Path, K_grid: list[int]):
@@ -73,7 +57,7 @@ def test_a_changed_k_grid_gives_the_fresh_runs_choice_of_k(tmp_path):
     assert (work / KSEL_TARGET).read_bytes() == (fresh / KSEL_TARGET).read_bytes()
     points = sorted(p.name for p in work.glob("results/k_selection/same_T4/points/*/*/K*.json"))
     assert points == ["K12.json", "K4.json", "K8.json"]  # K = 4 computed once, kept
-    assert rules_run(ksel_run(work, [4, 12])) == []  # and nothing to do again
+    assert rules_run(ksel_run(work, [4, 12])) == set()  # and nothing to do again
 
 
 def variant_table_workdir(dest: Path) -> Path:
@@ -94,15 +78,15 @@ def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     key of the files it reads and of its code."""
     work = variant_table_workdir(tmp_path / "work")
     first = snakemake(work, "--cores", "1", "stan_variant_table")
-    assert rules_run(first) == ["stan_variant_table"]
-    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == []
+    assert rules_run(first) == {"stan_variant_table"}
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == set()
     code = work / "workflow" / "ssmobs" / "stan_variants.py"
     code.write_text(code.read_text() + "\n# an edit of the table's code\n")
-    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == [
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == {
         "stan_variant_table"
-    ]
+    }
     spec = work / "config" / "tables" / "stan_variants_by_row.yaml"
     spec.write_text(spec.read_text() + "\n# an edit of the spec\n")
-    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == [
+    assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == {
         "stan_variant_table"
-    ]
+    }
