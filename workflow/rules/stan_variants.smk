@@ -29,6 +29,6 @@ rule stan_variant_table:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        key=lambda wc, input: table_key([input.spec, *input.committed]),
+        key=lambda wc, output: STAMPS_ON_REQUEST[output.stamp],
     script:
         "../scripts/stan_variant_table.py"
