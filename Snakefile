@@ -4,7 +4,8 @@
 # (config values, inputs' keys, code: ssmobs/cache_keys.py), with its log beside it
 #   results/shared/design_disturbances/<key>/q{q}_K{K}_{method}_seed{seed}.nc  (q = (d+p)T)
 #   results/{scenario}/<stage>/<key>/...     one folder per stage and key of each scenario
-#   results/k_selection/{name}/<key>/...     runs of the choice of K (Sec. IV.A)
+#   results/k_selection/{name}/<key>/...     grids of the choice of K (Sec. IV.A)
+#   results/shared/k_selection_points/<key>/...  its points V_{K_i}, shared by its entries
 #   results/observability_map/cells/<key>.json  one cell of an observability map
 #   results/outputs/<outputs_dir>/*.key      what made each table and figure (stamps)
 #   <outputs_dir>/            final tables and figures (see paper_figures/README.md)

@@ -50,13 +50,16 @@ def test_a_changed_k_grid_gives_the_fresh_runs_choice_of_k(tmp_path):
     both grids hold, and equals a fresh run of the edited config."""
     work = make_workdir(tmp_path / "incremental")
     ksel_run(work, [4, 8])
+    (k4,) = work.glob("results/shared/k_selection_points/*/*/K4.json")
+    made = k4.stat().st_mtime_ns
     edited = ksel_run(work, [4, 12])
     assert {"k_selection_grid", "select_k"} <= set(rules_run(edited))
     fresh = make_workdir(tmp_path / "fresh")
     ksel_run(fresh, [4, 12])
     assert (work / KSEL_TARGET).read_bytes() == (fresh / KSEL_TARGET).read_bytes()
-    points = sorted(p.name for p in work.glob("results/k_selection/same_T4/points/*/*/K*.json"))
-    assert points == ["K12.json", "K4.json", "K8.json"]  # K = 4 computed once, kept
+    points = sorted(p.name for p in k4.parent.glob("K*.json"))
+    assert points == ["K12.json", "K4.json", "K8.json"]
+    assert k4.stat().st_mtime_ns == made  # K = 4 computed once, found again by the new grid
     assert rules_run(ksel_run(work, [4, 12])) == set()  # and nothing to do again
 
 

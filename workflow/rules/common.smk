@@ -12,7 +12,8 @@ from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
-from ssmobs.record_cache import configured_backend_identity  # noqa: E402
+from ssmobs.cache_keys import stan_identity  # noqa: E402
+from ssmobs.stan_backends.base import BackendError  # noqa: E402
 from ssmobs.preflight import use_package_of  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
@@ -75,7 +76,16 @@ EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 
 
 #: every output's content key (ssmobs/cache_keys.py): outputs live under results/.../<key>/
-KEYS = CacheKeys(config, configured_backend_identity(STAN_BACKEND), repo=REPO)
+# keyed by the backends' Stan versions (the model check evaluates with the native driver)
+try:
+    KEYS = CacheKeys(
+        config,
+        stan_identity(STAN_BACKEND),
+        repo=REPO,
+        check_backend=stan_identity("native"),
+    )
+except (ValueError, BackendError) as err:
+    raise WorkflowError(f"stan.backend {STAN_BACKEND!r} cannot start here: {err}") from None
 #: the design sets of this config's design settings and code
 DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
 # Every key up front: a cluster job plans only its own job and looks its key up directly.
@@ -197,9 +207,10 @@ def ksel_grids_dir(ksel):
 
 
 def ksel_points_dir(ksel, method, sets, seed):
-    """The cached points V_{K_i} of one grid, one file per K_i (keyed without the grid)."""
+    """The cached points V_{K_i} of one grid, one file per K_i, keyed without the grid and
+    the entry: every k_selection entry on the same scenario finds them."""
     key = KEYS.k_selection_points(ksel)
-    return f"results/k_selection/{ksel}/points/{key}/{method}_{sets}_seed{seed}"
+    return f"results/shared/k_selection_points/{key}/{method}_{sets}_seed{seed}"
 
 
 def stamp(name):
@@ -380,6 +391,9 @@ def remove_stale_stamps():
         return
     for path, key in {**STAMPS, **STAMPS_ON_REQUEST}.items():
         stamp_file, aside = Path(path), Path(f"{path}.stale")
+        # a rule made on request keeps its files (committed, e.g. the variant table) until
+        # it is asked for: its missing stamp makes it rerun then
+        keep_outputs = path in STAMPS_ON_REQUEST
         try:
             stale = stamp_file.read_text().strip() != key
         except FileNotFoundError:
@@ -390,7 +404,7 @@ def remove_stale_stamps():
             if stamp_file.exists():
                 stamp_file.replace(aside)
             continue
-        for f in stamped_outputs(path):
+        for f in [] if keep_outputs else stamped_outputs(path):
             Path(f).unlink(missing_ok=True)
         stamp_file.unlink(missing_ok=True)
         aside.unlink(missing_ok=True)

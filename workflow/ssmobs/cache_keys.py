@@ -68,10 +68,12 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
         "observability_map.py:write_map,figure_map",
     ),
 }
+#: the native backend's C++ driver (samples, and evaluates the log density for the check)
+NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
-    "program": ("stan_backends/native_driver/driver.cpp",),
-    "nuts_records": ("stan_backends/native_driver/driver.cpp",),
+    "program": (NATIVE_DRIVER,),
+    "nuts_records": (NATIVE_DRIVER,),
 }
 #: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
 OUTPUT_SCRIPTS = (
@@ -307,11 +309,22 @@ class UnknownKeyError(KeyError):
     """A keyed path was asked for whose key the current config does not produce."""
 
 
+def stan_identity(backend: str) -> str:
+    """The Stan backend a config names (``auto`` resolved) with its Stan version, as the NUTS
+    records name it (:func:`ssmobs.record_cache.backend_identity`, e.g. ``native stanc3
+    v2.35.0 (Unix)``): part of the compiled programs' keys, so another Stan recomputes them
+    and all after them.  ValueError or BackendError where that backend cannot start here."""
+    from .record_cache import backend_identity
+    from .stan_backends import get_backend
+
+    return backend_identity(get_backend(backend))
+
+
 class CacheKeys:
     """Every key of one validated config (see the module docstring), with a lookup from
-    (kind, name, key) back to what it describes, for the rules' wildcards.  ``backend``:
-    the Stan backend with its Stan version
-    (:func:`ssmobs.record_cache.configured_backend_identity`), part of the programs' keys."""
+    (kind, name, key) back to what it describes, for the rules' wildcards.  ``backend``: the
+    sampling backend's :func:`stan_identity`; ``check_backend``: that of the backend the
+    model check evaluates Stan's log density with (the native driver)."""
 
     def __init__(
         self,
@@ -319,9 +332,11 @@ class CacheKeys:
         backend: str,
         repo: Path = REPO_DIR,
         package_dir: Path = PACKAGE_DIR,
+        check_backend: str = "native",
     ) -> None:
         self.config = config
         self.backend = backend
+        self.check_backend = check_backend
         self.repo = Path(repo)
         self.package_dir = Path(package_dir)
         self.scenarios = {sc["name"]: sc for sc in config["scenarios"]}
@@ -384,10 +399,11 @@ class CacheKeys:
             "code": self.code("check_model"),
         }
         if stan:
-            # the check runs the compiled program (the native driver's log-density mode):
-            # keyed by it, i.e. the Stan program, the backend, its Stan version, the driver
+            # the check runs the program in the native driver's log-density mode, whatever
+            # backend samples: keyed by the program, that backend's Stan and the driver
             payload["stan"] = self.stan_program(sc["model"])
-            payload["program"] = self.program(sc["model"])
+            payload["check_backend"] = self.check_backend
+            payload["driver"] = file_digest(self.package_dir / NATIVE_DRIVER)
         return self._key("check_model_stan" if stan else "check_model", name, payload)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
@@ -548,7 +564,6 @@ def main(argv: list[str] | None = None) -> int:
 
     from .config import validate
     from .preflight import load_config_file
-    from .record_cache import configured_backend_identity
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--configfile", default="config/config.yaml")
@@ -557,7 +572,7 @@ def main(argv: list[str] | None = None) -> int:
     config = load_config_file(args.configfile)
     validate(config)
     backend = args.backend or config["stan"]["backend"]
-    keys = CacheKeys(config, configured_backend_identity(backend))
+    keys = CacheKeys(config, stan_identity(backend), check_backend=stan_identity("native"))
     for name, sc in keys.scenarios.items():
         keys.trajectories(name)
         if sc.get("joint_map"):

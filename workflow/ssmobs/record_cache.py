@@ -131,20 +131,6 @@ def backend_identity(backend: Any) -> str:
     return " ".join(str(ident[k]) for k in sorted(ident))
 
 
-def configured_backend_identity(name: str) -> str:
-    """:func:`backend_identity` of the backend the config names (``auto`` resolved), for
-    the keys of the compiled programs and what follows from them: another Stan version gives
-    new keys.  The name alone where that backend cannot start here (cmdstanpy without
-    CmdStan), which cannot sample either."""
-    from .stan_backends import get_backend
-    from .stan_backends.base import BackendError
-
-    try:
-        return backend_identity(get_backend(name))
-    except (ValueError, BackendError):
-        return name
-
-
 def record_key(
     scenario: str,
     k: int,

@@ -65,8 +65,9 @@ def run_k_selection_grid(
     """Rule k_selection_grid: V_{K_i} for every K_i of one grid (method, set variant, seed).
 
     Each point is cached on its own in ``points_dir/K<K_i>.json`` as soon as it is done (a
-    rerun after a kill computes only the missing ones), each set in ``design_dir``
-    (:func:`ssmobs.stages.design.disturbance_set`)."""
+    rerun after a kill computes only the missing ones; grids of other k_selection entries on
+    the same scenario find it too, and a file lock keeps two jobs from computing it at once),
+    each set in ``design_dir`` (:func:`ssmobs.stages.design.disturbance_set`)."""
     from ..k_selection import set_seed
     from .design import disturbance_set
 
@@ -75,16 +76,17 @@ def run_k_selection_grid(
     for K in K_grid:
         point = Path(points_dir) / f"K{K}.json"
         info = None
-        if point.exists():
-            try:
-                info = io.read_json(point, required=["K_i", "method", "seed"])
-            except io.CorruptFileError as err:
-                logger.warning("recomputing: %s", err)
-        if info is None:
-            s = set_seed(seed, K, sets)
-            path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
-            disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
-            info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
+        with io.file_lock(Path(points_dir) / ".locks" / f"K{K}.lock"):
+            if point.exists():
+                try:
+                    info = io.read_json(point, required=["K_i", "method", "seed"])
+                except io.CorruptFileError as err:
+                    logger.warning("recomputing: %s", err)
+            if info is None:
+                s = set_seed(seed, K, sets)
+                path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
+                disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
+                info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
         rows.append({**info, "scenario": scenario.name})
         progress.update()
     io.write_json(out, {"points": rows})
