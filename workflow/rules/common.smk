@@ -12,7 +12,6 @@ from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
-from ssmobs.cache_keys import stan_identity  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
 from ssmobs.preflight import use_package_of  # noqa: E402
 
@@ -78,12 +77,7 @@ EXACT_VS_STAN_SCENARIOS = [n for n in EXACT_SCENARIOS if SCENARIOS[n]["stan"]]
 #: every output's content key (ssmobs/cache_keys.py): outputs live under results/.../<key>/
 # keyed by the backends' Stan versions (the model check evaluates with the native driver)
 try:
-    KEYS = CacheKeys(
-        config,
-        stan_identity(STAN_BACKEND),
-        repo=REPO,
-        check_backend=stan_identity("native"),
-    )
+    KEYS = CacheKeys.for_backend(config, STAN_BACKEND, repo=REPO)
 except (ValueError, BackendError) as err:
     raise WorkflowError(f"stan.backend {STAN_BACKEND!r} cannot start here: {err}") from None
 #: the design sets of this config's design settings and code
@@ -391,9 +385,6 @@ def remove_stale_stamps():
         return
     for path, key in {**STAMPS, **STAMPS_ON_REQUEST}.items():
         stamp_file, aside = Path(path), Path(f"{path}.stale")
-        # a rule made on request keeps its files (committed, e.g. the variant table) until
-        # it is asked for: its missing stamp makes it rerun then
-        keep_outputs = path in STAMPS_ON_REQUEST
         try:
             stale = stamp_file.read_text().strip() != key
         except FileNotFoundError:
@@ -404,8 +395,11 @@ def remove_stale_stamps():
             if stamp_file.exists():
                 stamp_file.replace(aside)
             continue
-        for f in [] if keep_outputs else stamped_outputs(path):
-            Path(f).unlink(missing_ok=True)
+        # a rule made on request keeps its files (committed, e.g. the variant table) until
+        # it is asked for: its missing stamp makes it rerun then
+        if path not in STAMPS_ON_REQUEST:
+            for f in stamped_outputs(path):
+                Path(f).unlink(missing_ok=True)
         stamp_file.unlink(missing_ok=True)
         aside.unlink(missing_ok=True)
 

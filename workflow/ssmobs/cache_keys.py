@@ -344,6 +344,14 @@ class CacheKeys:
         self._payloads: dict[str, dict[str, Any]] = {}
         self._lookup: dict[tuple[str, str, str], dict[str, Any]] = {}
 
+    @classmethod
+    def for_backend(cls, config: Mapping[str, Any], backend: str, **kw: Any) -> CacheKeys:
+        """The keys of ``config`` sampled with ``backend`` (a config value): its
+        :func:`stan_identity`, and the native driver's for the model check."""
+        native = stan_identity("native")
+        sampling = native if backend == "native" else stan_identity(backend)
+        return cls(config, sampling, check_backend=native, **kw)
+
     # ------------------------------------------------------------------ helpers
     @functools.cache  # noqa: B019 - one object per parse of the workflow
     def code(self, stage: str) -> dict[str, str]:
@@ -572,7 +580,7 @@ def main(argv: list[str] | None = None) -> int:
     config = load_config_file(args.configfile)
     validate(config)
     backend = args.backend or config["stan"]["backend"]
-    keys = CacheKeys(config, stan_identity(backend), check_backend=stan_identity("native"))
+    keys = CacheKeys.for_backend(config, backend)
     for name, sc in keys.scenarios.items():
         keys.trajectories(name)
         if sc.get("joint_map"):
