@@ -8,10 +8,11 @@ CORES ?= 2
 
 .PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows variant-table map committed clean
 
-$(STAMP): pyproject.toml
+# envs/constraints.txt pins every package to the version the committed outputs were made with.
+$(STAMP): pyproject.toml envs/constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[test,cluster]'
+	$(BIN)/pip install --quiet -c envs/constraints.txt -e '.[test,cluster]'
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -21,6 +21,13 @@ min_version("9.0")
 
 sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
+from ssmobs import kernels  # noqa: E402
+
+# Every job computes with the same kernels whatever this CPU (OpenBLAS's Haswell kernels, NumPy
+# up to AVX2, one thread): set here, before any job starts, and inherited by every job, local
+# or on SLURM (whose job-side Snakemake reads this file again); each job checks (issue 34).
+kernels.apply()
+
 
 # config/config.yaml is the default; a profile given with --configfile replaces it whole
 # (Snakemake would otherwise deep-merge the two and leak default settings into it).

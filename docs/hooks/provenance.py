@@ -4,6 +4,9 @@ A page writes ``<!-- provenance: paper_figures/<folder> -->`` where it describes
 committed reproduction; the hook replaces it with what the file records (command, commit,
 date, machine, backend, wall and CPU time, whether it started from an empty ``results/``,
 the note), so that run times and dates on the site are read, never retyped.
+``<!-- kernels-status -->`` becomes a table of every committed folder under
+``paper_figures/`` with the numerical kernels it was made with (``numerics`` in its
+provenance; docs/reproducibility.md).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
 
 MARKER = re.compile(r"<!-- provenance: (?P<folder>[\w./-]+) -->")
+STATUS_MARKER = "<!-- kernels-status -->"
 
 
 def _minutes(seconds: Any) -> str:
@@ -48,9 +52,37 @@ def render(prov: dict[str, Any]) -> str:
             else ""
         ),
     ]
+    lines.append(f"- **kernels**: {kernels(prov)}")
     if prov.get("note"):
         lines.append(f"- **note**: {prov['note']}")
     return "\n".join(lines)
+
+
+def kernels(prov: dict[str, Any]) -> str:
+    """The numerical kernels a run computed with, from its ``numerics`` record."""
+    numerics = prov.get("numerics")
+    if not numerics:
+        return (
+            "made before the fixed kernels: its commit gives these numbers only on a CPU and "
+            "environment like this machine's (OpenBLAS Haswell by its environment, NumPy up "
+            "to AVX-512, the default thread count)"
+        )
+    blas = ", ".join(f"{b['api']} {b['kernel']} x{b['threads']}" for b in numerics["blas"])
+    dispatch = (numerics.get("numpy_dispatch") or ["baseline"])[-1]
+    return f"fixed: BLAS {blas}, NumPy {numerics['numpy']} up to {dispatch}; {numerics['guarantee']}"
+
+
+def status_table(root: Path) -> str:
+    """Every committed folder with the date, commit and kernels of its run."""
+    rows = ["| folder | made | commit | kernels |", "|---|---|---|---|"]
+    for path in sorted((root / "paper_figures").rglob("provenance.json")):
+        prov = json.loads(path.read_text())
+        folder = path.parent.relative_to(root)
+        fixed = "fixed" if prov.get("numerics") else "before the fixed kernels"
+        rows.append(
+            f"| `{folder}` | {prov['date_utc'][:10]} | `{prov['commit'][:8]}` | {fixed} |"
+        )
+    return "\n".join(rows)
 
 
 def on_page_markdown(markdown: str, page: Page, config: MkDocsConfig, files: Files) -> str:
@@ -60,4 +92,6 @@ def on_page_markdown(markdown: str, page: Page, config: MkDocsConfig, files: Fil
         path = root / match["folder"] / "provenance.json"
         return render(json.loads(path.read_text()))
 
+    if STATUS_MARKER in markdown:
+        markdown = markdown.replace(STATUS_MARKER, status_table(root))
     return MARKER.sub(replace, markdown)

@@ -65,3 +65,18 @@ def test_the_outputs_folder_defaults_to_the_configs_outputs_dir(tmp_path, monkey
     (tmp_path / "c.yaml").write_text(CONFIG)
     assert provenance.main(["--config", "c.yaml", "--", sys.executable, "-c", "pass"]) == 0
     assert json.loads((tmp_path / "out" / "provenance.json").read_text())["command"]
+
+
+def test_provenance_records_what_the_numbers_depended_on():
+    """CPU model and flags, the BLAS libraries with their kernel and threads, NumPy's
+    dispatch, the versions (issue 34): as a job computes, not as this test process does."""
+    from ssmobs import kernels, provenance
+
+    numerics = provenance.numerics()
+    assert numerics["cpu_model"] and numerics["cpu_flags"] and numerics["architecture"]
+    assert numerics["numpy"] and numerics["scipy"] and numerics["settings"]
+    assert numerics["blas"] and all(b["threads"] == 1 for b in numerics["blas"])
+    assert len(numerics["blas"]) == 2  # NumPy's and SciPy's own OpenBLAS
+    if kernels.covered():
+        assert {b["kernel"] for b in numerics["blas"]} == {"Haswell"}
+        assert not set(numerics["numpy_dispatch"]) & set(kernels.NUMPY_DISABLED)

@@ -185,3 +185,23 @@ def test_exact_vs_stan_table_gives_median_and_largest_difference_per_statistic()
     assert out.loc["95 % quantile", "abs_diff_max"] == pytest.approx(0.5)
     with pytest.raises(ValueError, match="2 Stan rows, 3 exact rows"):
         exact_vs_stan_table(stan.iloc[:2], exact, ["a"])
+
+
+def test_k_selection_distribution_counts_each_chosen_k_over_the_seeds():
+    from ssmobs.tables import k_selection_distribution, k_selection_table
+
+    base = {"name": "n", "scenario": "s", "method": "design", "c1": 0.01, "c2": 0.01,
+            "K_grid": "100-1000 step 100", "K_paper": 300}  # fmt: skip
+    chosen = {"independent": [200, 300, 200, None], "nested": [300, 300, 300, 300]}
+    rows = [
+        {**base, "sets": sets, "seed": seed, "K_chosen": k}
+        for sets, ks in chosen.items()
+        for seed, k in enumerate(ks, 1)
+    ]
+    dist = k_selection_distribution(k_selection_table(rows))
+    indep = dist[dist["sets"] == "independent"]
+    assert list(indep["K_chosen"].fillna(-1)) == [200, 300, -1]
+    assert list(indep["n_seeds"]) == [2, 1, 1] and list(indep["share"]) == [0.5, 0.25, 0.25]
+    nested = dist[dist["sets"] == "nested"]
+    assert list(nested["n_seeds"]) == [4] and list(nested["share"]) == [1.0]
+    assert set(dist["seeds"]) == {4} and set(dist["K_paper"]) == {300}

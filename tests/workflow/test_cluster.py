@@ -155,6 +155,11 @@ def cluster_run(tmp_path_factory) -> ClusterRun:
     env["PYTHONPATH"] = os.pathsep.join(
         p for p in [str(workdir / "workflow"), env.get("PYTHONPATH", "")] if p
     )
+    # submitted from a shell with the machine's own kernels and four BLAS threads: the jobs
+    # must still compute with the fixed ones (test_slurm_jobs_compute_with_the_local_kernels)
+    for name in ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES"):
+        env.pop(name, None)
+    env["OPENBLAS_NUM_THREADS"] = "4"
     args = ["--workflow-profile", PROFILE, *SMOKE, *group_components_args()]
     dry = snakemake(workdir, "--dry-run", *args, env=env)
     proc = snakemake(
@@ -434,3 +439,26 @@ def test_tables_identical_to_local_run(cluster_run, smoke_run):
     assert len(local) >= 12 and set(ours) == set(local)
     differ = [name for name in local if ours[name] != local[name]]
     assert not differ, f"tables differ between the SLURM and the local run: {differ}"
+
+
+def kernel_lines(workdir: Path) -> dict[str, str]:
+    """Job log -> the kernels it computed with (the line every job logs first, see
+    ssmobs/kernels.py), for every job log under results/."""
+    found = {}
+    for path in sorted((workdir / "results").rglob("*.log")):
+        for line in path.read_text(errors="replace").splitlines():
+            if " kernels: " in line:
+                found[str(path.relative_to(workdir))] = line.split(" kernels: ", 1)[1]
+                break
+    return found
+
+
+@pytest.mark.cluster
+@pytest.mark.slow
+def test_slurm_jobs_compute_with_the_local_kernels(cluster_run, smoke_run):
+    """Jobs on SLURM get the settings local jobs get, although submitted from a shell with
+    the machine's own kernels and four threads (issue 34)."""
+    remote, local = kernel_lines(cluster_run.workdir), kernel_lines(smoke_run)
+    assert len(local) >= 10 and set(remote) == set(local), sorted(set(remote) ^ set(local))
+    assert len(set(local.values())) == 1, set(local.values())
+    assert set(remote.values()) == set(local.values()), (set(remote.values()), local)

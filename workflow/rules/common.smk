@@ -411,7 +411,11 @@ def all_targets():
     for name in KSEL:
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
     if KSEL:
-        targets += expand(f"{OUT}/table_k_selection.{{ext}}", ext=["csv", "md", "tex"])
+        targets += expand(
+            f"{OUT}/table_k_selection{{part}}.{{ext}}",
+            part=["", "_distribution"],
+            ext=["csv", "md", "tex"],
+        )
     targets += [exact_summary_path(name) for name in EXACT_SCENARIOS]
     targets += expand(
         f"{OUT}/fig_exact_vs_stan_{{name}}.{{ext}}",

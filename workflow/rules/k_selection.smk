@@ -71,7 +71,8 @@ register_stamp(
 
 
 rule table_k_selection:
-    """Chosen K for every k_selection entry, method and seed, beside the paper's K."""
+    """Chosen K for every k_selection entry, method and seed, beside the paper's K, and how
+    often each K was chosen over the seeds."""
     input:
         SELECTIONS,
     output:
@@ -80,6 +81,7 @@ rule table_k_selection:
             caption="../report/k_selection.rst",
             category="Tables",
         ),
+        distribution=multiext(f"{OUT}/table_k_selection_distribution", ".csv", ".md", ".tex"),
         stamp=stamp("table_k_selection"),
     log:
         f"results/outputs/{OUT}/logs/table_k_selection.log",

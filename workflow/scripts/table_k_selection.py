@@ -1,10 +1,12 @@
-"""Rule table_k_selection: chosen K per entry, method and seed."""
+"""Rule table_k_selection: chosen K per entry, method and seed, and its distribution."""
 
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_table_k_selection
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
-run_table_k_selection(list(snakemake.input), list(snakemake.output.table))
+run_table_k_selection(
+    list(snakemake.input), list(snakemake.output.table), list(snakemake.output.distribution)
+)
 # what made these files (rule of the cache: the stamp holds their key)
 io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -10,7 +10,9 @@ a SHA-256 over everything that determines them (the rule of the cache):
   the stage runs (:data:`STAGE_MODULES`: its glue in :mod:`ssmobs.stages`, closed over its
   imports inside the package by :func:`module_closure`), so an edit of a log-density term
   or of a stage's numerics gives new keys and a recomputation, never an old result; an
-  edit of code a stage does not run (a figure's glue) leaves its keys alone.
+  edit of code a stage does not run (a figure's glue) leaves its keys alone,
+- the numerical kernels every job computes with (:data:`ssmobs.kernels.SETTINGS_ID`), in
+  every key: the same key means the same bits on any x86-64 CPU with AVX2.
 
 A key path that exists holds exactly what its key describes, whatever the files' times
 and whatever ``.snakemake/`` holds; a path that does not exist is computed.  Editing the
@@ -29,7 +31,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from . import io
+from . import io, kernels
 from .stan_backends.base import sampler_key
 
 #: the package's own directory (``workflow/ssmobs``)
@@ -367,6 +369,8 @@ class CacheKeys:
         return file_digest(self.repo / "stan" / f"{model}.stan")
 
     def _key(self, kind: str, name: str, payload: dict[str, Any], **about: Any) -> str:
+        # every output depends on the fixed numerical kernels (ssmobs/kernels.py)
+        payload = {**payload, "kernels": kernels.SETTINGS_ID}
         key = digest(payload)
         self._payloads[f"{kind}:{name}:{key}"] = payload
         self._lookup[(kind, name, key)] = about

@@ -8,11 +8,16 @@ import time
 from pathlib import Path
 from types import TracebackType
 
+from . import kernels
+
 LOGGER_NAME = "ssmobs"
 
 
 def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logger:
-    """Log to ``logfile`` (if given) and to stderr; uncaught exceptions land in the log."""
+    """Log to ``logfile`` (if given) and to stderr; uncaught exceptions land in the log.
+
+    With a ``logfile`` (every workflow job's first call) it also checks that the job computes
+    with the fixed kernels (:func:`ssmobs.kernels.require`) and logs which."""
     root = logging.getLogger()
     root.setLevel(level)
     for h in list(root.handlers):
@@ -34,7 +39,10 @@ def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logg
         sys.__excepthook__(exc_type, exc, tb)
 
     sys.excepthook = _hook
-    return logging.getLogger(LOGGER_NAME)
+    logger = logging.getLogger(LOGGER_NAME)
+    if logfile:  # a workflow job: it refuses to compute with this CPU's own kernels
+        logger.info(kernels.require())
+    return logger
 
 
 class Progress:

@@ -293,6 +293,8 @@ def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
             "program_hash": rec["key"]["program_hash"],
         }
     )
+    for group in idata.subtree:  # ArviZ's creation time: the file's bytes are its draws'
+        group.attrs.pop("created_at", None)
     with io.atomic_path(path, suffix=".nc") as tmp:
         idata.to_netcdf(str(tmp), engine="h5netcdf")
 

@@ -57,6 +57,28 @@ def machine() -> dict[str, Any]:
     }
 
 
+def numerics() -> dict[str, Any]:
+    """What the numbers depended on (:func:`ssmobs.kernels.record`: CPU model and flags, the
+    BLAS libraries and the kernel they use, NumPy's dispatch, versions), read in a child
+    process that starts as every job does, with :func:`ssmobs.kernels.environment`."""
+    import json
+    import sys
+
+    from . import kernels
+
+    code = "import json; from ssmobs import kernels; print(json.dumps(kernels.record()))"
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, **kernels.environment()},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    if out.returncode != 0:
+        return {"error": out.stderr.strip().splitlines()[-1:] or ["unknown"]}
+    return dict(json.loads(out.stdout))
+
+
 def backend_info(config: dict[str, Any]) -> dict[str, str]:
     """The concrete Stan backend the config resolves to, and its Stan version."""
     from .stan_backends import get_backend, resolve_backend
@@ -94,6 +116,7 @@ def provenance(
             _git("status", "--porcelain", "--untracked-files=no", "--", ".", f":!{outputs_dir}")
         ),
         "machine": machine(),
+        "numerics": numerics(),
         "stan": backend_info(config),
         "wall_seconds": round(finished - started, 1),
         "cpu_seconds": None if cpu_seconds is None else round(cpu_seconds, 1),

@@ -313,6 +313,30 @@ def k_selection_table(rows: Iterable[dict]) -> pd.DataFrame:
     return frame[cols]
 
 
+def k_selection_distribution(table: pd.DataFrame) -> pd.DataFrame:
+    """The chosen K as a distribution over seeds (issue 34): per k_selection entry, method,
+    set variant and (c1, c2), how many seeds chose each K (``K_chosen`` empty: none on the
+    grid) and their share, beside the paper's K; ``table`` is :func:`k_selection_table`."""
+    group = ["name", "scenario", "method", "sets", "c1", "c2", "K_grid"]
+    rows = []
+    for keys, sub in table.groupby(group, sort=False, dropna=False):
+        chosen = sub["K_chosen"]
+        values = sorted(chosen.dropna().unique()) + ([np.nan] if chosen.isna().any() else [])
+        for value in values:
+            n = int(chosen.isna().sum() if pd.isna(value) else (chosen == value).sum())
+            rows.append(
+                {
+                    **dict(zip(group, keys)),
+                    "seeds": len(sub),
+                    "K_chosen": value,
+                    "n_seeds": n,
+                    "share": n / len(sub),
+                    "K_paper": sub["K_paper"].iloc[0],
+                }
+            )
+    return pd.DataFrame(rows, columns=[*group, "seeds", "K_chosen", "n_seeds", "share", "K_paper"])
+
+
 # ---------------------------------------------------------------- Stan + KDE against exact
 EXACT_VS_STAN_STATS = (("map", "marginal MAP"), ("q5", "5 % quantile"), ("q95", "95 % quantile"))
 

@@ -400,15 +400,26 @@ def run_select_k(
     return {"choices": choices}
 
 
-def run_table_k_selection(selections: list[PathLike], paths: list[PathLike]) -> None:
-    """Rule table_k_selection: chosen K per k_selection entry, method and seed."""
-    from ..tables import k_selection_table, write_table
+def run_table_k_selection(
+    selections: list[PathLike], paths: list[PathLike], distribution: list[PathLike]
+) -> None:
+    """Rule table_k_selection: chosen K per k_selection entry, method and seed (``paths``),
+    and how often each K was chosen over the seeds (``distribution``)."""
+    from ..tables import k_selection_distribution, k_selection_table, write_table
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
+    table = k_selection_table(rows)
     write_table(
-        k_selection_table(rows),
+        table,
         paths,
         "Choice of K by relative differences (Sec. IV.A): ours per method, set variant "
         "(independent sets per K_i, or nested: one seed for all K_i) and seed, beside "
         "the paper's",
+    )
+    write_table(
+        k_selection_distribution(table),
+        distribution,
+        "Choice of K over seeds (Sec. IV.A): per entry, method, set variant and (c1, c2), "
+        "how many of its seeds chose each K (empty K_chosen: none on the grid), beside the "
+        "paper's K",
     )

@@ -1,0 +1,118 @@
+"""The fixed numerical kernels (ssmobs/kernels.py): what is set, what a job checks, what keys
+and pins them (issue 34)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import tomllib
+from ssmobs import kernels
+from ssmobs.cache_keys import CacheKeys
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def state(kernel: str = "Haswell", threads: int = 1, dispatch: tuple[str, ...] = ("X86_V3",)):
+    return {
+        "blas": [{"api": "openblas", "version": "0.3", "kernel": kernel, "threads": threads,
+                  "library": "libopenblas.so"}],
+        "numpy": "2",
+        "numpy_dispatch": list(dispatch),
+    }  # fmt: skip
+
+
+def test_the_environment_fixes_threads_everywhere_and_kernels_on_avx2_cpus(monkeypatch):
+    monkeypatch.setattr(kernels, "covered", lambda: True)
+    env = kernels.environment()
+    assert env["OPENBLAS_CORETYPE"] == "Haswell"
+    assert {"X86_V4", "AVX512_SKX", "AVX512_ICL"} <= set(env["NPY_DISABLE_CPU_FEATURES"].split())
+    assert all(env[v] == "1" for v in kernels.THREAD_VARIABLES)
+    monkeypatch.setattr(kernels, "covered", lambda: False)
+    env = kernels.environment()
+    assert "OPENBLAS_CORETYPE" not in env and "NPY_DISABLE_CPU_FEATURES" not in env
+    assert all(env[v] == "1" for v in kernels.THREAD_VARIABLES)
+
+
+def test_apply_sets_the_environment_a_job_inherits():
+    environ: dict[str, str] = {"OPENBLAS_NUM_THREADS": "8", "OPENBLAS_CORETYPE": "SkylakeX"}
+    kernels.apply(environ)
+    assert environ["OPENBLAS_NUM_THREADS"] == "1"
+    if kernels.covered():
+        assert environ["OPENBLAS_CORETYPE"] == "Haswell"
+
+
+def test_problems_name_each_departure_from_the_fixed_kernels(monkeypatch):
+    monkeypatch.setattr(kernels, "covered", lambda: True)
+    assert kernels.problems(state()) == []
+    found = kernels.problems(state("SkylakeX", 4, ("X86_V3", "X86_V4", "AVX512_ICL")))
+    assert len(found) == 3
+    assert "4 threads" in found[0] and "SkylakeX" in found[1] and "X86_V4" in found[2]
+    monkeypatch.setattr(kernels, "covered", lambda: False)  # only threads are fixed there
+    assert kernels.problems(state("ARMV8", 1, ("ASIMD",))) == []
+    assert len(kernels.problems(state("ARMV8", 2))) == 1
+
+
+def test_a_process_started_with_the_environment_has_the_fixed_kernels():
+    code = "from ssmobs import kernels; print(kernels.require())"
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **kernels.environment()}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("kernels: BLAS openblas")
+    if kernels.covered():
+        assert " Haswell x1" in out.stdout and "AVX512" not in out.stdout
+
+
+def test_a_job_started_without_it_refuses_to_compute():
+    """A script run outside Snakemake, with four threads: one clear error, no numbers."""
+    code = "from ssmobs import log; log.setup('/dev/null')"
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"),
+           "OPENBLAS_NUM_THREADS": "4"}  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode != 0
+    assert "KernelsNotFixed" in out.stderr
+    assert re.search(r"runs [2-9] threads, not 1", out.stderr), out.stderr  # capped at the cores
+
+
+def test_every_cache_key_holds_the_kernel_settings():
+    import yaml
+
+    config = yaml.safe_load((ROOT / "config" / "smoke.yaml").read_text())
+    from ssmobs import config as ssmobs_config
+
+    ssmobs_config.validate(config)
+    keys = CacheKeys(config, "native stanc3 test")
+    _ = keys.design
+    payloads = keys.describe()
+    assert payloads and all(p["kernels"] == kernels.SETTINGS_ID for p in payloads.values())
+
+
+def test_every_dependency_is_pinned_to_one_version_in_the_constraints_file():
+    pins = {}
+    for line in (ROOT / "envs" / "constraints.txt").read_text().splitlines():
+        if line and not line.startswith("#"):
+            name, _, version = line.partition("==")
+            assert version, f"envs/constraints.txt: {line!r} is not name==version"
+            pins[re.sub(r"[-_.]+", "-", name.lower())] = version
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    deps = project["dependencies"] + [d for ds in project["optional-dependencies"].values()
+                                      for d in ds]  # fmt: skip
+    for dep in deps:
+        name = re.sub(r"[-_.]+", "-", re.split(r"[<>=!~\[; ]", dep, maxsplit=1)[0].lower())
+        assert name in pins, f"{name} (pyproject.toml) is not pinned in envs/constraints.txt"
+
+
+@pytest.mark.parametrize("module", ["numpy", "scipy", "threadpoolctl"])
+def test_the_environment_has_the_pinned_versions(module):
+    """The versions the numbers depend on are the pinned ones (make setup installs them)."""
+    import importlib
+
+    pins = dict(
+        line.split("==")
+        for line in (ROOT / "envs" / "constraints.txt").read_text().splitlines()
+        if "==" in line and not line.startswith("#")
+    )
+    assert importlib.import_module(module).__version__ == pins[module]

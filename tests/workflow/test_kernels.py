@@ -1,0 +1,118 @@
+"""One commit, the same bytes whatever kernels this CPU's libraries would pick (issue 34).
+
+A small run through the workflow (a design set of dimension (d + p) T = 40, its trajectories,
+the joint MAP, the exact stage, a few NUTS runs and the tables) twice: once started with this
+machine's own kernels (OpenBLAS's choice for this CPU, NumPy's widest SIMD targets) and four
+BLAS threads, once with OpenBLAS's Haswell kernels, NumPy without its AVX-512 targets and one
+thread.  Every cached result and every table must be the same bytes.  Where this machine's
+kernels give the same bits either way (no AVX-512 here), the test says so and skips: it
+could not fail there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from helpers import make_workdir, snakemake
+
+OUT = "paper_figures/kernels"
+CONFIG = {
+    "outputs_dir": OUT,
+    "scenarios": [
+        # q = (d + p) T = 40: the design set's optimiser runs through BLAS and NumPy's exp
+        {"name": "same_T20", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 6,
+         "prior": "restricted"},
+    ],
+    "paper_outputs": {"tables_2_3": ["same_T20"], "figure3": []},
+    "observability_studies": [],
+    "observability_maps": [],
+    "k_selection": [],
+    "stan": {"chains": 2, "iter_warmup": 150, "iter_sampling": 150, "batch_size": 3,
+             "keep_draws": [0]},
+    "convergence": {"ess_bulk_min": 50, "ess_tail_min": 50},
+}  # fmt: skip
+
+#: the machine's own choice: what a user's shell has when nothing is set
+OWN = {"OPENBLAS_NUM_THREADS": "4", "OMP_NUM_THREADS": "4"}
+UNSET_FOR_OWN = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+#: the kernels the workflow fixes (ssmobs/kernels.py), set by hand
+FIXED = {
+    "OPENBLAS_CORETYPE": "Haswell",
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+    "OPENBLAS_NUM_THREADS": "1",
+    "OMP_NUM_THREADS": "1",
+}
+#: a product through BLAS and NumPy's exp, without our package: does this machine's own
+#: choice of kernels change bits?
+PROBE = """
+import hashlib, numpy as np
+rng = np.random.default_rng(0)
+a, b = rng.standard_normal((300, 257)), rng.standard_normal((257, 301))
+h = hashlib.sha256((a @ b).tobytes() + np.exp(np.linspace(-5, 5, 10001)).tobytes())
+print(h.hexdigest())
+"""
+
+
+def environment(variant: dict[str, str], unset: tuple[str, ...] = ()) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in unset}
+    env.update(variant)
+    return env
+
+
+def probe(env: dict[str, str]) -> str:
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True
+    )
+    return out.stdout.strip()
+
+
+def comparable(workdir: Path) -> dict[str, bytes]:
+    """Every file the run wrote under results/ and its outputs_dir, as the bytes a result is:
+    without logs and timings (job benchmarks, the records' ``timings``, the build records of
+    the compiled programs, which name their build directory and time)."""
+    files: dict[str, bytes] = {}
+    for root in (workdir / "results", workdir / OUT):
+        for path in sorted(root.rglob("*")):
+            rel = str(path.relative_to(workdir))
+            if not path.is_file() or path.suffix == ".log" or "benchmark" in rel:
+                continue  # logs and job benchmarks (wall and CPU times)
+            if rel.startswith("results/shared/stan/"):
+                continue  # compiled programs and their build records
+            data = path.read_bytes()
+            if "/records/" in rel and path.suffix == ".json":
+                record = json.loads(data)
+                record.pop("timings", None)
+                data = json.dumps(record, sort_keys=True).encode()
+            files[rel] = data
+    return files
+
+
+def run(tmp_path: Path, name: str, env: dict[str, str]) -> dict[str, bytes]:
+    work = make_workdir(tmp_path / name)
+    (work / "config" / "kernels.yaml").write_text(yaml.safe_dump(CONFIG, sort_keys=False))
+    snakemake(work, "--cores", "2", "--configfile", "config/kernels.yaml", env=env)
+    return comparable(work)
+
+
+def test_one_commit_gives_the_same_bytes_under_any_kernels_and_thread_count(tmp_path):
+    own = environment(OWN, UNSET_FOR_OWN)
+    fixed = environment(FIXED)
+    if probe(own) == probe(fixed):
+        pytest.skip(
+            "this machine's own kernels and thread count give the same bits as the fixed ones "
+            "(no AVX-512 here?): it cannot show a difference, so the test could not fail"
+        )
+    first = run(tmp_path, "own_kernels_4_threads", own)
+    second = run(tmp_path, "fixed_kernels_1_thread", fixed)
+    assert any(k.endswith(".nc") and "/design_disturbances/" in k for k in first), sorted(first)
+    assert any("/exact_marginal/" in k for k in first) and any("/draws/" in k for k in first)
+    assert any(k.startswith(OUT) and k.endswith(".csv") for k in first)
+    assert set(first) == set(second), sorted(set(first) ^ set(second))
+    differ = sorted(k for k in first if first[k] != second[k])
+    assert not differ, f"{len(differ)} of {len(first)} files differ: {differ[:20]}"
