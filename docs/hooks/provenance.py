@@ -69,7 +69,8 @@ def kernels(prov: dict[str, Any]) -> str:
         )
     blas = ", ".join(f"{b['api']} {b['kernel']} x{b['threads']}" for b in numerics["blas"])
     dispatch = (numerics.get("numpy_dispatch") or ["baseline"])[-1]
-    return f"fixed: BLAS {blas}, NumPy {numerics['numpy']} up to {dispatch}; {numerics['guarantee']}"
+    numpy = f"NumPy {numerics['numpy']} up to {dispatch}"
+    return f"fixed: BLAS {blas}, {numpy}; {numerics['guarantee']}"
 
 
 def status_table(root: Path) -> str:
@@ -79,9 +80,7 @@ def status_table(root: Path) -> str:
         prov = json.loads(path.read_text())
         folder = path.parent.relative_to(root)
         fixed = "fixed" if prov.get("numerics") else "before the fixed kernels"
-        rows.append(
-            f"| `{folder}` | {prov['date_utc'][:10]} | `{prov['commit'][:8]}` | {fixed} |"
-        )
+        rows.append(f"| `{folder}` | {prov['date_utc'][:10]} | `{prov['commit'][:8]}` | {fixed} |")
     return "\n".join(rows)
 
 
