@@ -35,7 +35,11 @@ LOG = logging.getLogger("ssmobs.stan")
 @dataclass(frozen=True)
 class SamplerSettings:
     """NUTS settings; the defaults are the paper's (Sec. IV): 4 chains, 10 000 iterations,
-    4 000 of them warmup."""
+    4 000 of them warmup.  The config's ``stan`` block sets every field but one.
+
+    Fixed fields, not in the config: ``workers``, which is the job's threads
+    (:func:`ssmobs.stages.stan.sampler_settings`): it schedules chains and changes no draw.
+    """
 
     chains: int = 4
     iter_warmup: int = 4000
