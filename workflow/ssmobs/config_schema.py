@@ -30,6 +30,7 @@ class ConfigError(ValueError):
 
 
 def load_schema() -> dict:
+    """The config schema (:data:`SCHEMA_PATH`), read afresh."""
     return yaml.safe_load(SCHEMA_PATH.read_text())
 
 
@@ -45,6 +46,7 @@ def short_repr(value: Any, limit: int = MAX_REPR) -> str:
 
 
 def cut_text(text: str, limit: int = MAX_REPR) -> str:
+    """``text``, cut to ``limit`` characters with how long it was."""
     if len(text) <= limit:
         return text
     return f"{text[:limit]}... ({len(text)} characters)"
