@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import records_to_frame, run_trajectories
+from ssmobs.nuts_stage import run_trajectories
+from ssmobs.record_format import records_to_frame
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.pystan import PyStanBackend

@@ -187,7 +187,8 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
             path = tmp_path / f"d_{sets}_{K}.nc"
             io.write_disturbances(path, d)
             out = tmp_path / f"{sets}_K{K}.json"
-            info = run_k_selection_point(path, sc, K, "random", 3, {}, out, sets=sets)
+            matrix, attrs = io.read_disturbances(path, q=8, K=K)
+            info = run_k_selection_point(matrix, attrs, sc, K, "random", 3, {}, out, sets=sets)
             assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3, set_seed(3, K, sets))
             points.append(info)
     grid = tmp_path / "grid.json"  # what rule k_selection_grid writes

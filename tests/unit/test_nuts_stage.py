@@ -12,8 +12,9 @@ from ssmobs import seeds
 from ssmobs.convergence import ConvergenceSettings, apply_thresholds
 from ssmobs.log import Progress
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import records_to_frame, run_trajectories
+from ssmobs.nuts_stage import run_trajectories
 from ssmobs.record_cache import RECORD_KEYS, load_records, record_path
+from ssmobs.record_format import records_to_frame
 from ssmobs.stan_backends.base import Draws, SamplerSettings, SamplingError
 from ssmobs.stan_metrics import stan_summary
 

@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 import pytest
-from ssmobs import observability_map as om
 from ssmobs.cache_keys import CacheKeys
-from ssmobs.config import ConfigError, validate
+from ssmobs.config import ConfigError, cell_entries, validate
+from ssmobs.stages import observability_map as om
 
 pytestmark = pytest.mark.unit
 
@@ -31,7 +31,7 @@ def config(*maps: dict, **blocks: dict) -> dict:
 
 def test_cells_are_the_base_at_every_value_and_horizon():
     conf = config(MAP)
-    cells = om.cell_entries(conf["observability_maps"][0])
+    cells = cell_entries(conf["observability_maps"][0])
     assert [c["name"] for c in cells] == ["m_a0.5_T4", "m_a0.5_T10", "m_a0.9_T4", "m_a0.9_T10"]
     assert [c["omega"]["a"] for c in cells] == [0.5, 0.5, 0.9, 0.9]
     assert all(c["K"] == 20 and c["stan"] is False and c["joint_map"] for c in cells)
@@ -44,7 +44,7 @@ def test_cells_are_the_base_at_every_value_and_horizon():
     [
         ({"vary": "b"}, r"vary = 'b': not a parameter of model 'same'; allowed: \['a'\]"),
         ({"base": {**MAP["base"], "T": 5}}, r"base: \['T'\] are set per cell"),
-        ({"values": [0.5, 1.5]}, r"cell m_a1.5_T4: invalid scenario 'm_a1.5_T4'"),
+        ({"values": [0.5, 1.5]}, r"cell m_a1.5_T4: true value a=1.5 must satisfy \|a\| < 1"),
         ({"base": {**MAP["base"], "model": "nope"}}, r"base.model = 'nope': unknown model"),
         ({"T": [0]}, r"T\[0\]"),
     ],

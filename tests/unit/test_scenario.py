@@ -170,3 +170,29 @@ def test_missing_keys_and_non_mappings_fail_clearly():
         Scenario.from_config(["s"])
     Scenario.from_config(ENTRY)  # the entry itself is not changed by the defaults
     assert "seed" not in ENTRY
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"stan_every": 6}, r"stan_every = 6: larger than K = 5"),
+        ({"stan_init": "joint_map", "joint_map": False}, r"stan_init = 'joint_map'"),
+        ({"joint_map_start": "sign_of_x0"}, r"joint_map_start = 'sign_of_x0': model 'same'"),
+        ({"omega": {"a": 1.5}}, r"true value a=1.5"),
+    ],
+)
+def test_one_check_of_an_entry_for_scenarios_map_cells_and_the_scenario_object(change, message):
+    """The config's scenarios, an observability map's cells and Scenario.from_config all
+    refuse an entry by the same check (ssmobs.scenario.entry_problems)."""
+    entry = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5, **change}
+    with pytest.raises(cfg.ConfigError, match=r"scenarios\[0\] \('s'\): " + message):
+        cfg.validate({"scenarios": [dict(entry)]})
+    base = {k: v for k, v in entry.items() if k not in ("name", "T", "K", "joint_map")}
+    values = [entry["omega"]["a"]]
+    the_map = {"name": "m", "base": base, "vary": "a", "values": values, "T": [4], "K": 5}
+    good = {"name": "ok", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5}
+    if "joint_map" not in change:  # a map's cells always run the joint MAP
+        with pytest.raises(cfg.ConfigError, match=r"cell m_a[0-9.]+_T4: " + message):
+            cfg.validate({"scenarios": [good], "observability_maps": [the_map]})
+    with pytest.raises(cfg.ConfigError, match=r"invalid scenario 's'"):
+        Scenario.from_config(entry)

@@ -1,10 +1,12 @@
 """Settings defined once: every key of a config block that has a settings dataclass is a
-field of it with the same default, type and allowed values (workflow/schemas/config.schema.yaml
+field of it with the same default, type and allowed values, and every field is a key of its
+block or named as fixed in the dataclass's docstring (workflow/schemas/config.schema.yaml
 against JointMapSettings, SamplerSettings, ConvergenceSettings and ExactSettings)."""
 
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Any
 
 import pytest
@@ -69,6 +71,24 @@ def test_every_schema_key_is_a_field_with_the_same_default_and_type(block):
             f"{cls.__name__}.{key} default {field.default!r}"
         )
         assert TYPES[spec["type"]] == field.type, f"{block}.{key}: {spec['type']} vs {field.type}"
+
+
+def _fixed_in_docstring(cls: type) -> set[str]:
+    """The fields the docstring of ``cls`` names after "Fixed fields"."""
+    _, marker, fixed = (cls.__doc__ or "").partition("Fixed fields")
+    return set(re.findall(r"``(\w+)``", fixed)) & set(_fields(cls)) if marker else set()
+
+
+@pytest.mark.parametrize("block", sorted(BLOCKS))
+def test_every_field_is_a_schema_key_or_named_fixed_in_the_docstring(block):
+    """The other way round: a field the config cannot set is named in the docstring's
+    "Fixed fields" (with why), and a field named there is not in the schema."""
+    cls = BLOCKS[block][0]
+    not_in_schema = set(_fields(cls)) - set(_keys(block))
+    assert not_in_schema == _fixed_in_docstring(cls), (
+        f"{cls.__name__}: fields the config cannot set {sorted(not_in_schema)}, "
+        f"named fixed in its docstring {sorted(_fixed_in_docstring(cls))}"
+    )
 
 
 @pytest.mark.parametrize("block", sorted(BLOCKS))

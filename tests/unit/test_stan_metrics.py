@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import records_to_frame
+from ssmobs.record_format import records_to_frame
 from ssmobs.stan_metrics import stan_summary
 
 pytestmark = pytest.mark.unit

@@ -1,7 +1,7 @@
 """Rule observability_map: one map's table and figure from the table of its cells."""
 
 from ssmobs import io, log
-from ssmobs.observability_map import write_map
+from ssmobs.stages.observability_map import write_map
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

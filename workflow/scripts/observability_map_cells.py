@@ -1,7 +1,7 @@
 """Rule observability_map_cells: every cell of one map, each cached on its own."""
 
 from ssmobs import io, log
-from ssmobs.observability_map import run_map_cells
+from ssmobs.stages.observability_map import run_map_cells
 
 log.setup(snakemake.log[0])
 io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run

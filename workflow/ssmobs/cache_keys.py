@@ -59,7 +59,7 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
     "exact": ("stages/exact.py",),
     # the cells of an observability map: what computes a cell, not the map's table or figure
-    "map_cells": ("observability_map.py:run_map_cells",),
+    "map_cells": ("stages/observability_map.py:run_map_cells",),
     # the variant x row table of Section IV, read from committed reproductions
     "variant_table": ("stan_variants.py",),
     # every stamped table and figure; observability_study's and observability_map's scripts
@@ -67,7 +67,7 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     "outputs": (
         "stages/outputs.py",
         "observability_study.py",
-        "observability_map.py:write_map,figure_map",
+        "stages/observability_map.py:write_map,figure_map",
     ),
 }
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
@@ -109,7 +109,15 @@ STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
 }
 #: modules that only log, plan or describe and never change a number or a file's content
 NEUTRAL_MODULES: frozenset[str] = frozenset(
-    {"log.py", "budget.py", "preflight.py", "config.py", "provenance.py"}
+    {
+        "log.py",
+        "budget.py",
+        "preflight.py",
+        "config.py",
+        "config_schema.py",
+        "config_files.py",
+        "provenance.py",
+    }
 )
 
 
@@ -531,7 +539,7 @@ class CacheKeys:
         scenario entry but its name, the design sets' key, the joint-MAP settings, the exact
         settings where the map runs the exact stage, the model's code and the cells' code.
         A cell two maps share, or that an extended grid keeps, has the same key."""
-        from .observability_map import cell_entries
+        from .config import cell_entries
 
         entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
         out = []

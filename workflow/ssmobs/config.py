@@ -2,448 +2,50 @@
 
 :func:`validate` is called by the Snakefile before the DAG is built, so a bad config
 stops the run with one message naming the key, the value and what is allowed, before any
-expensive work and before anything is written to ``results/``.  :func:`read_config_file`
-reads a config file strictly (duplicate keys, size and YAML alias expansion are refused);
-:func:`check_config_files` applies it to the files Snakemake read itself (``--configfile``).
+expensive work and before anything is written to ``results/``.  Every scenario and every
+cell of an observability map (:func:`cell_entries`) is checked by the one check of a
+scenario entry, :func:`ssmobs.scenario.entry_problems`.
+
+The ground floor below it, which imports nothing of the package: the schema, its messages
+and :class:`ConfigError` (:mod:`ssmobs.config_schema`), the strict reading of config files
+(:mod:`ssmobs.config_files`).  Their names that callers take from here are imported below.
 """
 
 from __future__ import annotations
 
 import copy
-import functools
-import json
-import math
-import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import yaml
 
+from .config_files import MAX_CONFIG_VALUES, count_values
+from .config_files import check_config_files as check_config_files
+from .config_files import parse_config_text as parse_config_text
+from .config_files import read_config_file as read_config_file
+from .config_schema import (
+    MAX_REPR,
+    cut_text,
+    load_schema,
+    nonfinite_problems,
+    scalars_from_command_line,
+    scenario_schema,
+    schema_problems,
+    short_repr,
+)
+from .config_schema import README as README
+from .config_schema import ConfigError as ConfigError
+from .config_schema import short_list as short_list
 from .models import MODELS
+from .scenario import entry_problems
 
 #: folders directly under results/ that the workflow uses itself; no scenario may take them
 #: (compared case-insensitively, for case-insensitive file systems)
 RESERVED_SCENARIO_NAMES = ("shared", "k_selection")
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "config.schema.yaml"
 #: the paper's values; every non-empty ``paper_ref`` must be one of its keys
 PAPER_VALUES_PATH = Path(__file__).resolve().parents[2] / "config" / "paper_values.yaml"
-
-#: largest config file read (bytes); a config has a few kB
-MAX_CONFIG_BYTES = 5 * 2**20
-#: most values (mappings, lists, scalars) a config may hold once YAML aliases are expanded;
-#: a config has a few hundred, an alias "bomb" billions
-MAX_CONFIG_VALUES = 100_000
-#: longest rendering of a value in a message (characters)
-MAX_REPR = 200
-
-README = "config/README.md"
-
-
-class ConfigError(ValueError):
-    """The configuration is invalid; the message lists every problem found."""
-
-
-def load_schema() -> dict:
-    return yaml.safe_load(SCHEMA_PATH.read_text())
-
-
-def _short(value: Any, limit: int = MAX_REPR) -> str:
-    """``repr(value)``, cut to about ``limit`` characters so that a message stays readable."""
-    return _cut(repr(value), limit)
-
-
-def _cut(text: str, limit: int = MAX_REPR) -> str:
-    if len(text) <= limit:
-        return text
-    return f"{text[:limit]}... ({len(text)} characters)"
-
-
-def short_list(names: list[str], n: int = 20) -> str:
-    """The first ``n`` of ``names`` as a list, with how many more there are."""
-    shown = _short(names[:n])
-    return shown if len(names) <= n else f"{shown} and {len(names) - n} more"
-
-
-# ------------------------------------------------------------------------ reading files
-class RefusedYAMLError(yaml.MarkedYAMLError):
-    """Valid YAML that would silently mean something else (a duplicate key) or is too big."""
-
-
-class ConfigLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses duplicate keys in a mapping (PyYAML keeps the last)
-    and documents whose YAML aliases expand to more than :data:`MAX_CONFIG_VALUES` values."""
-
-    def get_single_node(self) -> yaml.Node | None:
-        node = super().get_single_node()
-        if node is not None and _expanded_size(node, {}) > MAX_CONFIG_VALUES:
-            raise RefusedYAMLError(
-                problem=(
-                    f"holds more than {MAX_CONFIG_VALUES} values once its YAML aliases "
-                    f"(*name) are expanded; a config has a few hundred"
-                ),
-                problem_mark=node.start_mark,
-            )
-        return node
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        first: dict[Any, yaml.Node] = {}
-        for key_node, _ in node.value:
-            if key_node.tag == "tag:yaml.org,2002:merge":  # '<<: *base' may be overridden
-                continue
-            key = self.construct_object(key_node, deep=True)
-            try:
-                seen = first.get(key)
-            except TypeError:  # unhashable: the base class reports it
-                continue
-            if seen is None:
-                first[key] = key_node
-            else:
-                raise RefusedYAMLError(
-                    problem=(
-                        f"key {_short(key)} appears twice in one mapping (also line "
-                        f"{seen.start_mark.line + 1}); YAML would silently keep only the "
-                        f"last value: remove one"
-                    ),
-                    problem_mark=key_node.start_mark,
-                )
-        return super().construct_mapping(node, deep=deep)
-
-
-def _expanded_size(node: yaml.Node, memo: dict[int, int | None]) -> int:
-    """Number of values under ``node`` with every alias expanded, capped just above the
-    limit (a shared node is counted once per use but visited once)."""
-    key = id(node)
-    if key in memo:
-        size = memo[key]
-        return MAX_CONFIG_VALUES + 1 if size is None else size  # None: a cycle
-    memo[key] = None
-    if isinstance(node, yaml.SequenceNode):
-        children = list(node.value)
-    elif isinstance(node, yaml.MappingNode):
-        children = [n for pair in node.value for n in pair]
-    else:
-        children = []
-    total = 1
-    for child in children:
-        total += _expanded_size(child, memo)
-        if total > MAX_CONFIG_VALUES:
-            break
-    total = min(total, MAX_CONFIG_VALUES + 1)
-    memo[key] = total
-    return total
-
-
-def _json_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise ConfigError(
-                f"key {_short(key)} appears twice in one JSON object; JSON readers "
-                f"silently keep only the last value: remove one"
-            )
-        out[key] = value
-    return out
-
-
-def parse_config_text(text: str) -> Any:
-    """The document in ``text``: JSON first, as Snakemake reads ``--configfile``, then YAML
-    with :class:`ConfigLoader`.  Raises ConfigError (JSON) or a ``yaml.YAMLError``."""
-    try:
-        return json.loads(text, object_pairs_hook=_json_pairs)
-    except json.JSONDecodeError:
-        pass
-    loader = ConfigLoader(text)
-    try:
-        return loader.get_single_data()
-    finally:
-        loader.dispose()
-
-
-def read_config_file(path: str | os.PathLike) -> Any:
-    """The document in the config file ``path`` (None when empty).
-
-    Raises ConfigError with one line naming the file (and line and column) when it does not
-    exist, cannot be read, is larger than :data:`MAX_CONFIG_BYTES`, is not valid YAML, has a
-    key twice in one mapping, or expands to more than :data:`MAX_CONFIG_VALUES` values.
-    """
-    path = Path(path)
-    if not path.is_file():
-        what = "is a directory, not a file" if path.is_dir() else "does not exist"
-        raise ConfigError(f"config file {path} {what}")
-    try:
-        size = path.stat().st_size
-        if size > MAX_CONFIG_BYTES:
-            raise ConfigError(
-                f"config file {path} has {size} bytes, more than the {MAX_CONFIG_BYTES} "
-                f"bytes ({MAX_CONFIG_BYTES / 2**20:g} MiB) a config file may have; a config "
-                f"has a few kB"
-            )
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"config file {path} cannot be read: {err}") from None
-    try:
-        return parse_config_text(text)
-    except ConfigError as err:
-        raise ConfigError(f"config file {path}: {err}") from None
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        where = f", line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = ": ".join(str(p) for p in (err.context, err.problem) if p)
-        if not isinstance(err, RefusedYAMLError):
-            problem = f"YAML syntax error: {problem}"
-        raise ConfigError(f"config file {path}{where}: {_cut(problem, 2 * MAX_REPR)}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"config file {path}: YAML syntax error: {_cut(str(err))}") from None
-    except RecursionError:
-        raise ConfigError(f"config file {path}: nested too deeply to be a config") from None
-
-
-def check_config_files(
-    paths: Iterable[str | os.PathLike], error: type[Exception] = ConfigError
-) -> None:
-    """Read every file of ``paths`` as :func:`read_config_file` does; raise ``error`` with
-    one line per bad file.
-
-    Snakemake reads ``--configfile`` files itself and keeps the last of duplicate keys;
-    common.smk calls this on ``workflow.configfiles`` so that they are refused there too.
-    """
-    problems = []
-    for path in paths:
-        try:
-            read_config_file(path)
-        except ConfigError as err:
-            problems.append(str(err))
-    if problems:
-        raise error("\n".join(problems))
-
-
-# ------------------------------------------------------------------------ the schema
-def _is_integer(checker: Any, instance: Any) -> bool:
-    """JSON schema's "integer" without floats: 12.0 would become the path part K12.0."""
-    return isinstance(instance, int) and not isinstance(instance, bool)
-
-
-_TYPE_CHECKER = jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("integer", _is_integer)
-
-
-def _with_defaults(
-    validator_class: type[jsonschema.protocols.Validator],
-) -> type[jsonschema.protocols.Validator]:
-    validate_props = validator_class.VALIDATORS["properties"]
-
-    def set_defaults(
-        validator: jsonschema.protocols.Validator,
-        properties: dict[str, Any],
-        instance: Any,
-        schema: dict[str, Any],
-    ) -> Iterator[jsonschema.ValidationError]:
-        if isinstance(instance, dict):
-            for key, sub in properties.items():
-                if "default" in sub and key not in instance:
-                    instance[key] = copy.deepcopy(sub["default"])
-        yield from validate_props(validator, properties, instance, schema)
-
-    return jsonschema.validators.extend(
-        validator_class, {"properties": set_defaults}, type_checker=_TYPE_CHECKER
-    )
-
-
-def _path(error: jsonschema.ValidationError) -> str:
-    return _key(tuple(error.absolute_path))
-
-
-def _types(schema: Any) -> list[str]:
-    kinds = schema.get("type", []) if isinstance(schema, dict) else []
-    return kinds if isinstance(kinds, list) else [kinds]
-
-
-def _is_type(value: Any, kind: str) -> bool:
-    try:
-        return bool(_TYPE_CHECKER.is_type(value, kind))
-    except jsonschema.exceptions.UnknownType:
-        return False
-
-
-def _branch_errors(error: jsonschema.ValidationError) -> list[jsonschema.ValidationError]:
-    """The errors of the one ``oneOf`` form whose type the value has (empty if none or
-    several have it): ``K_grid: [0, 8]`` fails as a list, not as a mapping."""
-    forms = [
-        i
-        for i, sub in enumerate(error.validator_value)
-        if any(_is_type(error.instance, kind) for kind in _types(sub))
-    ]
-    if len(forms) != 1:
-        return []
-    return sorted(
-        _without_shadowed_type_errors(
-            e for e in error.context or [] if e.schema_path and e.schema_path[0] == forms[0]
-        ),
-        key=lambda e: list(e.absolute_path),
-    )
-
-
-def _describe(error: jsonschema.ValidationError) -> list[str]:
-    key = _path(error)
-    value = _short(error.instance)
-    v = error.validator
-    if v == "required":
-        return [f"{key}: {_cut(error.message)}"]
-    if v == "additionalProperties":
-        return [f"{key}: {_cut(error.message)} (see {README} for the allowed keys)"]
-    if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
-        op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}[v]
-        return [f"{key} = {value}: must be {op} {error.validator_value}"]
-    if v == "type":
-        kinds = _types(error.schema)
-        whole = isinstance(error.instance, float) and error.instance.is_integer()
-        if "integer" in kinds and whole:
-            others = [k for k in kinds if k != "integer"]
-            also = f" (or of type {' or '.join(others)})" if others else ""
-            return [
-                f"{key} = {value}: must be a whole number written without a decimal "
-                f"point ({int(error.instance)}){also}"
-            ]
-        return [f"{key} = {value}: must be of type {error.validator_value}"]
-    if v == "enum":
-        return [f"{key} = {value}: allowed values are {error.validator_value}{_quote_hint(error)}"]
-    if v == "pattern":
-        return [f"{key} = {value}: must match {error.validator_value}"]
-    if v == "oneOf":
-        inner = _branch_errors(error)
-        if inner:
-            return [d for e in inner for d in _describe(e)]
-        kinds = [s.get("type") for s in error.validator_value]
-        return [f"{key} = {value}: must be one of the forms {kinds}"]
-    return [f"{key} = {value}: {_cut(error.message)}"]
-
-
-def _yaml_spelling(value: Any) -> tuple[str, str] | None:
-    """How a boolean, null or number that YAML read from plain text is written, and what
-    YAML took it for; None for other values."""
-    if isinstance(value, bool):
-        return ("true" if value else "false"), "boolean"
-    if value is None:
-        return "null", "null"
-    if isinstance(value, (int, float)):
-        return repr(value), "number"
-    return None
-
-
-def _quote_hint(error: jsonschema.ValidationError) -> str:
-    """For an ``enum`` of strings that holds the text of a non-string value (``stan_init:
-    true`` read as a boolean): how to write it as a string; else ''."""
-    read = _yaml_spelling(error.instance)
-    if read is None or read[0] not in error.validator_value:
-        return ""
-    spelling, kind = read
-    return f" (write {spelling!r} in quotes: unquoted, YAML reads {spelling} as a {kind}, not text)"
-
-
-def _without_shadowed_type_errors(
-    errors: Iterable[jsonschema.ValidationError],
-) -> list[jsonschema.ValidationError]:
-    """``errors`` less each ``type`` error of a value whose ``enum`` error (same value, same
-    schema) is there too: the list of allowed values says all, in one message."""
-    errors = list(errors)
-    enums = {(tuple(e.absolute_path), id(e.schema)) for e in errors if e.validator == "enum"}
-    return [
-        e
-        for e in errors
-        if not (e.validator == "type" and (tuple(e.absolute_path), id(e.schema)) in enums)
-    ]
-
-
-def _key(path: tuple) -> str:
-    out = ""
-    for part in path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out or "(top level)"
-
-
-def _count_values(obj: Any, limit: int = MAX_CONFIG_VALUES) -> int:
-    """Number of values in ``obj`` (a shared list counts at every use), stopping above
-    ``limit``: a YAML alias bomb is refused before anything walks it."""
-    count, stack = 0, [obj]
-    while stack and count <= limit:
-        item = stack.pop()
-        count += 1
-        if isinstance(item, dict):
-            stack.extend(item.values())
-        elif isinstance(item, list):
-            stack.extend(item[: limit + 1])
-    return count
-
-
-def _nonfinite_problems(obj: Any, path: tuple = ()) -> list[str]:
-    """Every NaN or infinite number anywhere in the config (JSON schema ranges let NaN pass)."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return [f"{_key(path)} = {obj!r}: must be a finite number"]
-    if isinstance(obj, dict):
-        return [p for k, v in obj.items() for p in _nonfinite_problems(v, path + (k,))]
-    if isinstance(obj, list):
-        return [p for i, v in enumerate(obj) for p in _nonfinite_problems(v, path + (i,))]
-    return []
-
-
-def _scalars_from_command_line(instance: Any, schema: dict) -> Any:
-    """``instance`` with every string where the schema wants no string, but a number,
-    boolean or null, read as a YAML scalar of that type (in place; returns it).
-
-    Snakemake parses nested values of ``--config`` (and of a profile's ``config:``) with
-    YAML's BaseLoader, i.e. as strings: ``--config 'stan={chains: 1}'`` gives
-    ``{'chains': '1'}``.  A string that is no such scalar stays and the schema names it.
-    """
-    forms = schema.get("oneOf") or [schema]
-    kinds = {k for form in forms for k in _types(form)}
-    if isinstance(instance, str):
-        if "string" in kinds or not kinds & {"integer", "number", "boolean", "null"}:
-            return instance
-        if len(instance) > MAX_REPR:
-            return instance
-        try:
-            parsed = yaml.safe_load(instance)
-        except yaml.YAMLError:
-            return instance
-        number = isinstance(parsed, (int, float)) and not isinstance(parsed, bool)
-        if (
-            (parsed is None and "null" in kinds)
-            or (isinstance(parsed, bool) and "boolean" in kinds)
-            or (number and kinds & {"integer", "number"})  # 1.0 for an integer: refused later
-        ):
-            return parsed
-        return instance
-    kind = "object" if isinstance(instance, dict) else "array" if isinstance(instance, list) else ""
-    form = next((f for f in forms if kind and kind in _types(f)), None)
-    if form is None:
-        return instance
-    if isinstance(instance, dict):
-        props, extra = form.get("properties", {}), form.get("additionalProperties")
-        for key, value in list(instance.items()):
-            sub = props.get(key, extra)
-            if isinstance(sub, dict):
-                instance[key] = _scalars_from_command_line(value, sub)
-    elif isinstance(form.get("items"), dict):
-        for i, value in enumerate(instance):
-            instance[i] = _scalars_from_command_line(value, form["items"])
-    return instance
-
-
-@functools.lru_cache(maxsize=1)
-def _validator_class() -> type:
-    return _with_defaults(jsonschema.Draft202012Validator)
-
-
-def schema_problems(instance: Any, schema: dict) -> list[str]:
-    """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
-    the schema's defaults into ``instance`` (in place)."""
-    errors = sorted(
-        _without_shadowed_type_errors(_validator_class()(schema).iter_errors(instance)),
-        key=lambda e: list(e.absolute_path),
-    )
-    return [d for e in errors for d in _describe(e)]
 
 
 def _explicit_exact(config: dict) -> set[int]:
@@ -456,7 +58,7 @@ def _explicit_exact(config: dict) -> set[int]:
 
 
 def _where(section: str, i: int, name: Any) -> str:
-    return f"{section}[{i}] ({_cut(repr(name), 60)})"
+    return f"{section}[{i}] ({cut_text(repr(name), 60)})"
 
 
 def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset()) -> list[str]:
@@ -469,20 +71,9 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
                 f"holds the workflow's own files); reserved names: "
                 f"{list(RESERVED_SCENARIO_NAMES)}"
             )
-        if sc["model"] not in MODELS:
-            problems.append(
-                f"{where}.model = {_short(sc['model'])}: unknown model; allowed: {sorted(MODELS)}"
-            )
-            continue
-        model = MODELS[sc["model"]]
-        for msg in model.check_true_values(sc["omega"], sc["x0"], sc.get("prior"), T=sc["T"]):
-            problems.append(f"{where}: {_cut(msg, 2 * MAX_REPR)}")
-        if sc.get("joint_map_start") == "sign_of_x0" and not model.has_sign_consistent_start:
-            problems.append(
-                f"{where}.joint_map_start = 'sign_of_x0': model {sc['model']!r} "
-                f"has no sign-consistent start; allowed: 'observations'"
-            )
-        if i in explicit_exact and not model.linear_in_states:
+        problems += [f"{where}: {cut_text(p, 2 * MAX_REPR)}" for p in entry_problems(sc)]
+        model = MODELS.get(sc["model"])
+        if i in explicit_exact and model is not None and not model.linear_in_states:
             problems.append(
                 f"{where}.exact = True: model {sc['model']!r} is not linear in the states, "
                 f"so the exact marginal stage cannot run for it; allowed: exact: false, or "
@@ -494,7 +85,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
         where = _where("k_selection", i, ks["name"])
         if ks["scenario"] not in names:
             problems.append(
-                f"{where}.scenario = {_short(ks['scenario'])}: no scenario of that name; "
+                f"{where}.scenario = {short_repr(ks['scenario'])}: no scenario of that name; "
                 f"configured: {short_list(sorted(names))}"
             )
         grid = ks["K_grid"]
@@ -507,7 +98,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
                 continue
             grid = ks["K_grid"] = list(range(grid["step"], grid["last"] + 1, grid["step"]))
         if any(b <= a for a, b in zip(grid, grid[1:])):
-            problems.append(f"{where}.K_grid = {_short(grid)}: must be strictly increasing")
+            problems.append(f"{where}.K_grid = {short_repr(grid)}: must be strictly increasing")
     models = {sc["name"]: sc["model"] for sc in config["scenarios"]}
     problems += _name_problems(config.get("observability_studies", []), "observability_studies")
     for i, st in enumerate(config.get("observability_studies", [])):
@@ -520,7 +111,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             )
         elif len({models[n] for n in st["scenarios"]}) > 1:
             problems.append(
-                f"{where}.scenarios = {_short(st['scenarios'])}: must all use one model, "
+                f"{where}.scenarios = {short_repr(st['scenarios'])}: must all use one model, "
                 f"got {sorted({models[n] for n in st['scenarios']})}"
             )
     return (
@@ -539,11 +130,38 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
 MAP_CELL_KEYS = ("name", "T", "K", "joint_map", "stan", "exact", "exact_K", "stan_batch_size")
 
 
+def map_value_label(value: float) -> str:
+    """A value of a map's varied parameter as cell names and captions write it."""
+    return f"{value:g}"
+
+
+def cell_entries(entry: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The scenario entries of every cell of one observability map, value-major then T
+    (config order), with the schema's defaults filled in.
+
+    A cell is the map's ``base`` with ``omega[vary]`` = value, its ``T`` and ``K``, the
+    joint MAP on and Stan off; its name is ``<map>_<vary><value>_T<T>``."""
+    base = dict(entry["base"])
+    cells = []
+    for value in entry["values"]:
+        for T in entry["T"]:
+            omega = {**base["omega"], entry["vary"]: value}
+            cell = {
+                **copy.deepcopy(base),
+                "name": f"{entry['name']}_{entry['vary']}{map_value_label(value)}_T{T}",
+                "omega": omega,
+                "T": int(T),
+                "K": int(entry["K"]),
+                "joint_map": True,
+                "stan": False,
+            }
+            schema_problems(cell, scenario_schema())  # fills in the defaults (checked elsewhere)
+            cells.append(cell)
+    return cells
+
+
 def _map_problems(config: dict) -> list[str]:
     """Every cell of every observability map is a valid scenario (its true values too)."""
-    from .observability_map import cell_entries
-    from .scenario import Scenario
-
     maps = config.get("observability_maps", [])
     problems = _name_problems(maps, "observability_maps")
     for i, entry in enumerate(maps):
@@ -558,21 +176,21 @@ def _map_problems(config: dict) -> list[str]:
         model = MODELS.get(entry["base"]["model"])
         if model is None:
             problems.append(
-                f"{where}.base.model = {_short(entry['base']['model'])}: unknown model; "
+                f"{where}.base.model = {short_repr(entry['base']['model'])}: unknown model; "
                 f"allowed: {sorted(MODELS)}"
             )
             continue
         if entry["vary"] not in model.param_names:
             problems.append(
-                f"{where}.vary = {_short(entry['vary'])}: not a parameter of model "
+                f"{where}.vary = {short_repr(entry['vary'])}: not a parameter of model "
                 f"{model.slug!r}; allowed: {list(model.param_names)}"
             )
             continue
         for cell in cell_entries(entry):
-            try:
-                Scenario.from_config(cell)
-            except ConfigError as err:
-                problems.append(f"{where}, cell {cell['name']}: {_cut(str(err), 2 * MAX_REPR)}")
+            cell_problems = entry_problems(cell)
+            if cell_problems:
+                text = cut_text("; ".join(cell_problems), 2 * MAX_REPR)
+                problems.append(f"{where}, cell {cell['name']}: {text}")
                 break  # one bad cell says what is wrong with the map
     return problems
 
@@ -585,13 +203,13 @@ def _name_problems(entries: list[dict], section: str) -> list[str]:
     problems = []
     for i, entry in enumerate(entries):
         name = entry["name"]
-        where = f"{_where(section, i, name)}.name = {_short(name)}"
+        where = f"{_where(section, i, name)}.name = {short_repr(name)}"
         j = seen.get(name.lower())
         if j is not None and entries[j]["name"] == name:
             problems.append(f"{where}: used twice (also {section}[{j}]); names must be unique")
         elif j is not None:
             problems.append(
-                f"{where}: differs from {section}[{j}] ({_short(entries[j]['name'])}) only in "
+                f"{where}: differs from {section}[{j}] ({short_repr(entries[j]['name'])}) only in "
                 f"case; names must differ in more than case (they name folders and files, "
                 f"which case-insensitive file systems such as macOS's and Windows' mix up)"
             )
@@ -612,7 +230,7 @@ def _paper_ref_problems(config: dict) -> list[str]:
         return []
     known = sorted(yaml.safe_load(PAPER_VALUES_PATH.read_text()) or {})
     return [
-        f"{_where('scenarios', i, sc['name'])}.paper_ref = {_short(sc['paper_ref'])}: no "
+        f"{_where('scenarios', i, sc['name'])}.paper_ref = {short_repr(sc['paper_ref'])}: no "
         f"such key in config/paper_values.yaml (the paper's columns would stay empty); "
         f"allowed: '' (none) or one of {short_list(known)}"
         for i, sc in refs
@@ -627,8 +245,8 @@ def _mu0_sweep_problems(config: dict) -> list[str]:
     if not unknown:
         return []
     return [
-        f"mu0_sweep.models = {_short(config['mu0_sweep']['models'])}: unknown model(s) "
-        f"{_short(unknown)}; the sweep takes model slugs (workflow/ssmobs/models/<slug>.py), "
+        f"mu0_sweep.models = {short_repr(config['mu0_sweep']['models'])}: unknown model(s) "
+        f"{short_repr(unknown)}; the sweep takes model slugs (workflow/ssmobs/models/<slug>.py), "
         f"not scenario names, and a known model that no joint-MAP scenario uses adds no "
         f"rows; allowed: {sorted(MODELS)}"
     ]
@@ -639,7 +257,7 @@ def _outputs_dir_problems(config: dict) -> list[str]:
     value = config["outputs_dir"]
     if value.startswith("/") or ".." in value.split("/"):
         return [
-            f"outputs_dir = {_short(value)}: must be a relative path inside the working "
+            f"outputs_dir = {short_repr(value)}: must be a relative path inside the working "
             f"directory; allowed: no leading '/' and no '..' part (e.g. paper_figures/mine)"
         ]
     return []
@@ -655,9 +273,10 @@ def _keep_draws_problems(config: dict) -> list[str]:
     if not beyond:
         return []
     return [
-        f"stan.keep_draws = {_short(config['stan']['keep_draws'])}: k = {_short(beyond)} is "
-        f"beyond every Stan scenario (k counts from 0, so k < K; the largest K is {largest}); "
-        f"K per Stan scenario: {_short(stan_K)}"
+        f"stan.keep_draws = {short_repr(config['stan']['keep_draws'])}: "
+        f"k = {short_repr(beyond)} is beyond every Stan scenario (k counts from 0, so k < K; "
+        f"the largest K is {largest}); "
+        f"K per Stan scenario: {short_repr(stan_K)}"
     ]
 
 
@@ -702,8 +321,8 @@ def _paper_output_problems(config: dict) -> list[str]:
             truths = {(sc["model"], repr(sc["omega"]), repr(x0_list(sc))) for sc in entries}
             if len(truths) > 1:
                 problems.append(
-                    f"paper_outputs.figure3 = {_short(names)}: must share one model, omega "
-                    f"and x0 (one pair of true-value lines), got {_short(sorted(truths))}"
+                    f"paper_outputs.figure3 = {short_repr(names)}: must share one model, omega "
+                    f"and x0 (one pair of true-value lines), got {short_repr(sorted(truths))}"
                 )
             elif models[0] is not None and models[0].state_dim != 1:
                 problems.append(
@@ -713,7 +332,7 @@ def _paper_output_problems(config: dict) -> list[str]:
         if key == "figure4" and entries and models[0] is not None:
             if models[0].n_params != 1 or models[0].state_dim != 1:
                 problems.append(
-                    f"paper_outputs.figure4 = {_short(value)}: model "
+                    f"paper_outputs.figure4 = {short_repr(value)}: model "
                     f"{entries[0]['model']!r} has {models[0].n_params} parameter(s) "
                     f"and p = {models[0].state_dim}; Figure 4's (Omega, x0) grid "
                     f"needs one parameter and p = 1"
@@ -756,15 +375,15 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
             f"invalid configuration: the top level must be a mapping with the "
             f"required key 'scenarios', got {type(config).__name__}"
         )
-    if _count_values(config) > MAX_CONFIG_VALUES:
+    if count_values(config) > MAX_CONFIG_VALUES:
         raise ConfigError(
             f"invalid configuration: more than {MAX_CONFIG_VALUES} values (YAML aliases "
             f"expanded); a config has a few hundred"
         )
     schema = load_schema()
-    _scalars_from_command_line(config, schema)
+    scalars_from_command_line(config, schema)
     explicit_exact = frozenset(_explicit_exact(config))
-    problems = _nonfinite_problems(config) or schema_problems(config, schema)
+    problems = nonfinite_problems(config) or schema_problems(config, schema)
     if not problems:
         problems = (
             _scenario_problems(config, explicit_exact)

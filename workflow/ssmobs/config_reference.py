@@ -22,7 +22,7 @@ from typing import Any
 
 import yaml
 
-from .config import SCHEMA_PATH, load_schema
+from .config_schema import SCHEMA_PATH, load_schema
 
 #: the repository this package belongs to
 REPO_DIR = Path(__file__).resolve().parents[2]

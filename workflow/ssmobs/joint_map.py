@@ -118,7 +118,24 @@ STATUSES: tuple[str, ...] = (
 class JointMapSettings:
     """Thresholds and tuning of the joint-MAP optimiser and its checks (Sec. III.B).
 
-    Every number the checks use is a field, so the workflow config can set it.
+    The config's ``joint_map`` block (``workflow/schemas/config.schema.yaml``) sets the
+    paper's thresholds and the choices a study varies (the start of the barrier, the ridge
+    test); every key of it is a field (a test compares the two).
+
+    Fixed fields, not in the config (code that calls :func:`joint_map` itself may set them):
+
+    - ``start_states``: set per scenario instead (its ``joint_map_start``);
+    - the solver's numerics, how the optimum and the Hessian's extreme eigenvalues are
+      computed: ``newton_tol``, ``inner_tol_factor``, ``mu_factor``, ``mu_min``,
+      ``fraction_to_boundary``, ``armijo_c1``, ``max_backtracks``, ``damping_init``,
+      ``max_damping_tries``, ``eigen_method``, ``lanczos_steps``;
+    - the thresholds of our checks that the paper does not name: ``pd_tol``,
+      ``ridge_shift``, ``boundary_tol``, ``boundary_stop_tol``, ``boundary_near_tol``,
+      ``divergence_limit``.
+
+    A fixed value changes by an edit of this module, which moves the key of every result
+    computed with it (:mod:`ssmobs.cache_keys` hashes the code a stage runs), so no cached
+    result outlives the change.
     """
 
     #: gradient check: max |d(-2 pi)/dTheta_j| must be below this (paper: 1e-5)

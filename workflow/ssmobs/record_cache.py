@@ -1,9 +1,9 @@
 """The Stan stage's record cache: keys, hashes, paths and reading records back.
 
-Every trajectory k of the NUTS stage (:mod:`ssmobs.nuts_stage`, record format in its
-docstring) is stored as ``records_dir/k{k:05d}.json``.  A rerun reuses a record only when
-its key matches (:func:`record_key`): scenario, k, seed, Stan seed, the Stan program's hash
-(:func:`program_hash`), the hash of every setting that determines the record
+Every trajectory k of the NUTS stage (:mod:`ssmobs.nuts_stage`; the record format:
+:mod:`ssmobs.record_format`) is stored as ``records_dir/k{k:05d}.json``.  A rerun reuses a
+record only when its key matches (:func:`record_key`): scenario, k, seed, Stan seed, the
+Stan program's hash (:func:`program_hash`), the hash of every setting that determines the record
 (:func:`settings_hash`: sampler, the diagnostics' implementation, init, prior bounds, true
 values, the KDE estimator; not the convergence thresholds, which the tables apply), the
 backend with its Stan version (:func:`backend_identity`) and the data's checksum.  The
@@ -285,16 +285,15 @@ def check_batch_records(
     convergence_cfg: dict,
 ) -> None:
     """The per-trajectory records a batch table was built from are all there, parse and
-    give exactly this table (:func:`ssmobs.nuts_stage.records_to_frame`).
+    give exactly this table (:func:`ssmobs.record_format.records_to_frame`).
 
     Run by gather_nuts (the workflow also stops before it when a record is newer than its
     table, :func:`changed_batch_records`).  Raises
     :class:`~ssmobs.io.CorruptFileError` naming the batch table to delete: rerunning its
     batch recomputes the damaged records only and reuses every valid one.
     """
-    # imported here: nuts_stage imports this module
     from .convergence import ConvergenceSettings, apply_thresholds
-    from .nuts_stage import records_to_frame
+    from .record_format import records_to_frame
 
     def damaged(what: str) -> io.CorruptFileError:
         return _damaged_batch(batch_table, what)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -22,15 +21,44 @@ from typing import Any
 
 import numpy as np
 
-from .models import StateSpaceModel, get_model
+from .config_schema import ConfigError, scenario_schema, schema_problems, short_repr
+from .models import MODELS, StateSpaceModel, get_model
 
 
-@functools.lru_cache(maxsize=1)
-def _entry_schema() -> dict:
-    """The schema of one entry of ``scenarios`` (with its defaults)."""
-    from .config import load_schema
+def entry_problems(entry: dict[str, Any]) -> list[str]:
+    """Every way one scenario entry (of ``scenarios``, or a cell of an observability map)
+    is invalid, each naming key, value and what is allowed; empty when it is valid.
 
-    return load_schema()["properties"]["scenarios"]["items"]
+    The schema first (its defaults are filled into ``entry``, in place), then what it cannot
+    say: a known model and true values it accepts, ``stan_init`` against ``joint_map``,
+    ``stan_every`` against ``K``, ``joint_map_start`` against the model."""
+    problems = schema_problems(entry, scenario_schema())
+    if problems:
+        return problems
+    if entry["stan_init"] == "joint_map" and not entry["joint_map"]:
+        problems.append(
+            "stan_init = 'joint_map': the chains start at the joint MAP, so joint_map must be true"
+        )
+    if entry.get("stan_every", 1) > entry["K"]:
+        problems.append(
+            f"stan_every = {entry['stan_every']}: larger than K = {entry['K']}; allowed: "
+            f"1 to K (every m-th of the K design trajectories)"
+        )
+    model = MODELS.get(entry["model"])
+    if model is None:
+        problems.append(
+            f"model = {short_repr(entry['model'])}: unknown model; allowed: {sorted(MODELS)}"
+        )
+        return problems
+    problems += model.check_true_values(
+        entry["omega"], entry["x0"], entry.get("prior"), T=entry["T"]
+    )
+    if entry["joint_map_start"] == "sign_of_x0" and not model.has_sign_consistent_start:
+        problems.append(
+            f"joint_map_start = 'sign_of_x0': model {entry['model']!r} has no sign-consistent "
+            f"start; allowed: 'observations'"
+        )
+    return problems
 
 
 def _frozen_array(values: Any) -> np.ndarray:
@@ -82,37 +110,16 @@ class Scenario:
         """The Scenario of one entry of the config's ``scenarios`` list.
 
         Missing optional keys take the schema's defaults.  Raises
-        :class:`~ssmobs.config.ConfigError` naming the scenario, the key, the value and
-        what is allowed when the entry breaks the schema or the model's true values.
+        :class:`~ssmobs.config_schema.ConfigError` naming the scenario, the key, the value and
+        what is allowed for every problem :func:`entry_problems` finds.
         """
-        from .config import ConfigError, schema_problems
-
         if not isinstance(entry, Mapping):
             raise ConfigError(
                 f"a scenario must be a mapping of keys to values, got {type(entry).__name__}"
             )
         sc = copy.deepcopy(dict(entry))
         where = f"scenario '{sc.get('name', '?')}'"
-        problems = schema_problems(sc, _entry_schema())  # also fills in the defaults
-        if not problems and sc["stan_init"] == "joint_map" and not sc["joint_map"]:
-            problems = [
-                "stan_init = 'joint_map': the chains start at the joint MAP, so joint_map "
-                "must be true"
-            ]
-        if not problems and sc.get("stan_every", 1) > sc["K"]:
-            problems = [
-                f"stan_every = {sc['stan_every']}: larger than K = {sc['K']}; allowed: "
-                f"1 to K (every m-th of the K design trajectories)"
-            ]
-        if not problems:
-            from .models import MODELS
-
-            if sc["model"] not in MODELS:
-                problems = [f"model = {sc['model']!r}: unknown model; allowed: {sorted(MODELS)}"]
-            else:
-                problems = MODELS[sc["model"]].check_true_values(
-                    sc["omega"], sc["x0"], sc.get("prior"), T=sc["T"]
-                )
+        problems = entry_problems(sc)  # also fills in the defaults
         if problems:
             raise ConfigError(f"invalid {where}:\n  - " + "\n  - ".join(problems))
         model = get_model(sc["model"])

@@ -2,8 +2,9 @@
 
 One module per stage, as in ``workflow/rules/``: :mod:`~ssmobs.stages.design` (Sec. III.A),
 :mod:`~ssmobs.stages.joint_map` (Sec. III.B), :mod:`~ssmobs.stages.k_selection` (Sec. IV.A),
-:mod:`~ssmobs.stages.stan` (Sec. III.C), :mod:`~ssmobs.stages.exact` (issue 11) and
-:mod:`~ssmobs.stages.outputs` (the paper's tables and figures).  Each function is what one
+:mod:`~ssmobs.stages.stan` (Sec. III.C), :mod:`~ssmobs.stages.exact` (issue 11),
+:mod:`~ssmobs.stages.observability_map` (issue 21) and :mod:`~ssmobs.stages.outputs` (the
+paper's tables and figures).  Each function is what one
 Snakemake rule does, so a step can be rerun by hand by calling it with the same paths; the
 numerics live in the modules it calls.
 

@@ -16,13 +16,16 @@ from ..log import Progress
 from . import PathLike
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
 
 def run_k_selection_point(
-    disturbances: PathLike,
+    disturbances: np.ndarray,
+    provenance: dict,
     scenario: Scenario,
     K: int,
     method: str,
@@ -33,16 +36,16 @@ def run_k_selection_point(
 ) -> dict:
     """One point of rule k_selection_grid: the joint-MAP summary of one K_i (Sec. IV.A).
 
-    ``seed`` is the run's seed; the set itself was drawn with
-    :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
+    ``disturbances`` and ``provenance``: the (q x K) design set and its file's attributes,
+    as :func:`ssmobs.stages.design.disturbance_set` returns them.  ``seed`` is the run's
+    seed; the set itself was drawn with :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
     """
     from ..k_selection import set_seed
     from ..trajectories import make_trajectories
     from .joint_map import joint_map_of
 
     sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
-    matrix, attrs = io.read_disturbances(disturbances, q=sc.disturbance_dim, K=K)
-    traj = make_trajectories(sc, matrix, provenance=attrs)
+    traj = make_trajectories(sc, disturbances, provenance=provenance)
     _, _, info, _ = joint_map_of(traj, sc.prior, settings)
     # no scenario name: a point is keyed by what it computes, the grid names the scenario
     info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed)
@@ -85,8 +88,12 @@ def run_k_selection_grid(
             if info is None:
                 s = set_seed(seed, K, sets)
                 path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
-                disturbance_set(path, scenario.disturbance_dim, K, method, s, design_cfg)
-                info = run_k_selection_point(path, scenario, K, method, seed, settings, point, sets)
+                matrix, attrs = disturbance_set(
+                    path, scenario.disturbance_dim, K, method, s, design_cfg
+                )
+                info = run_k_selection_point(
+                    matrix, attrs, scenario, K, method, seed, settings, point, sets
+                )
         rows.append({**info, "scenario": scenario.name})
         progress.update()
     io.write_json(out, {"points": rows})

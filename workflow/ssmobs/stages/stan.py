@@ -72,8 +72,9 @@ def run_sample_batch(
     interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
     """
     from ..convergence import ConvergenceSettings, apply_thresholds
-    from ..nuts_stage import records_to_frame, run_trajectories
+    from ..nuts_stage import run_trajectories
     from ..record_cache import draws_path, record_path
+    from ..record_format import records_to_frame
     from ..stan_backends import get_backend, stan_file
     from ..trajectories import read_trajectories
 

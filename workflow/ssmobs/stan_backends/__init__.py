@@ -13,32 +13,23 @@ The backend modules import their Stan library lazily, so choosing one never need
 
 from __future__ import annotations
 
-import contextlib
-import logging
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
-from .base import BackendError, Draws, SamplerSettings, SamplingError, StanBackend
+from .base import (
+    SAMPLER_COLUMNS,
+    BackendError,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    StanBackend,
+)
 
 #: values accepted for the config key ``stan.backend``
 BACKEND_NAMES: tuple[str, ...] = ("auto", "native", "cmdstanpy", "pystan")
 
 #: repository directory holding the Stan programs (workflow/ssmobs/../../stan)
 STAN_DIR = Path(__file__).resolve().parents[3] / "stan"
-
-#: the sampler columns every backend returns in ``Draws.sample_stats``
-SAMPLER_COLUMNS: tuple[str, ...] = (
-    "lp__",
-    "accept_stat__",
-    "stepsize__",
-    "treedepth__",
-    "n_leapfrog__",
-    "divergent__",
-    "energy__",
-)
-
-LOG = logging.getLogger("ssmobs.stan")
 
 
 def have_cmdstan() -> bool:
@@ -117,53 +108,6 @@ def stan_file(slug: str) -> Path:
             f"no Stan program for model {slug!r} at {path}; programs in {STAN_DIR}: {known}"
         )
     return path
-
-
-class _ToDebug(logging.Handler):
-    """Re-logs records of a chatty library logger at DEBUG on ``ssmobs.stan``."""
-
-    def __init__(self, source: str) -> None:
-        super().__init__(logging.DEBUG)
-        self.source = source
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            LOG.debug("%s %s: %s", self.source, record.levelname, record.getMessage())
-        except Exception:  # pragma: no cover - never let logging break a run
-            pass
-
-
-@contextlib.contextmanager
-def quiet_loggers(forward: tuple[str, ...] = (), mute: tuple[str, ...] = ()) -> Iterator[None]:
-    """Within the block, loggers in ``forward`` go to DEBUG on ``ssmobs.stan`` only, and
-    loggers in ``mute`` (e.g. aiohttp's per-request access log) are silenced below WARNING."""
-    saved = []
-    for name in forward + mute:
-        lg = logging.getLogger(name)
-        saved.append((lg, lg.level, lg.propagate, list(lg.handlers)))
-    try:
-        for name in forward:
-            lg = logging.getLogger(name)
-            lg.handlers = [_ToDebug(name)]
-            lg.propagate = False
-            lg.setLevel(logging.DEBUG if LOG.isEnabledFor(logging.DEBUG) else logging.WARNING)
-        for name in mute:
-            logging.getLogger(name).setLevel(logging.WARNING)
-        yield
-    finally:
-        for lg, level, propagate, handlers in saved:
-            lg.setLevel(level)
-            lg.propagate = propagate
-            lg.handlers = handlers
-
-
-def log_captured(label: str, text: str, limit: int = 20000) -> None:
-    """Put captured stdout/stderr of a library call into the log at DEBUG."""
-    text = text.strip()
-    if text and LOG.isEnabledFor(logging.DEBUG):
-        if len(text) > limit:
-            text = text[:limit] + f"\n... ({len(text) - limit} more characters)"
-        LOG.debug("%s output:\n%s", label, text)
 
 
 __all__ = [

@@ -1,23 +1,45 @@
-"""The interface every Stan backend implements (PyStan 3 embedded, cmdstanpy with CmdStan).
+"""The interface every Stan backend implements (native, cmdstanpy with CmdStan, PyStan 3),
+and the names they share: the sampler columns and the logging of their libraries' output.
 
-Both backends compile the same ``stan/<model>.stan`` program, take the same data dict
-(:meth:`ssmobs.models.base.StateSpaceModel.stan_data`) and return the same :class:`Draws`.
+Every backend compiles the same ``stan/<model>.stan`` program, takes the same data dict
+(:meth:`ssmobs.models.base.StateSpaceModel.stan_data`) and returns the same :class:`Draws`.
+The backend modules import this module, never the package (:mod:`ssmobs.stan_backends`,
+which imports them).
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
+#: the sampler columns every backend returns in ``Draws.sample_stats``
+SAMPLER_COLUMNS: tuple[str, ...] = (
+    "lp__",
+    "accept_stat__",
+    "stepsize__",
+    "treedepth__",
+    "n_leapfrog__",
+    "divergent__",
+    "energy__",
+)
+
+LOG = logging.getLogger("ssmobs.stan")
+
 
 @dataclass(frozen=True)
 class SamplerSettings:
     """NUTS settings; the defaults are the paper's (Sec. IV): 4 chains, 10 000 iterations,
-    4 000 of them warmup."""
+    4 000 of them warmup.  The config's ``stan`` block sets every field but one.
+
+    Fixed fields, not in the config: ``workers``, which is the job's threads
+    (:func:`ssmobs.stages.stan.sampler_settings`): it schedules chains and changes no draw.
+    """
 
     chains: int = 4
     iter_warmup: int = 4000
@@ -116,3 +138,51 @@ class StanBackend(Protocol):
         inits: list[dict] | None = None,
     ) -> Draws:
         """Run NUTS; raise SamplingError with the reason when no draws can be had."""
+
+
+# --------------------------------------------------------------------------- logging
+class _ToDebug(logging.Handler):
+    """Re-logs records of a chatty library logger at DEBUG on ``ssmobs.stan``."""
+
+    def __init__(self, source: str) -> None:
+        super().__init__(logging.DEBUG)
+        self.source = source
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            LOG.debug("%s %s: %s", self.source, record.levelname, record.getMessage())
+        except Exception:  # pragma: no cover - never let logging break a run
+            pass
+
+
+@contextlib.contextmanager
+def quiet_loggers(forward: tuple[str, ...] = (), mute: tuple[str, ...] = ()) -> Iterator[None]:
+    """Within the block, loggers in ``forward`` go to DEBUG on ``ssmobs.stan`` only, and
+    loggers in ``mute`` (e.g. aiohttp's per-request access log) are silenced below WARNING."""
+    saved = []
+    for name in forward + mute:
+        lg = logging.getLogger(name)
+        saved.append((lg, lg.level, lg.propagate, list(lg.handlers)))
+    try:
+        for name in forward:
+            lg = logging.getLogger(name)
+            lg.handlers = [_ToDebug(name)]
+            lg.propagate = False
+            lg.setLevel(logging.DEBUG if LOG.isEnabledFor(logging.DEBUG) else logging.WARNING)
+        for name in mute:
+            logging.getLogger(name).setLevel(logging.WARNING)
+        yield
+    finally:
+        for lg, level, propagate, handlers in saved:
+            lg.setLevel(level)
+            lg.propagate = propagate
+            lg.handlers = handlers
+
+
+def log_captured(label: str, text: str, limit: int = 20000) -> None:
+    """Put captured stdout/stderr of a library call into the log at DEBUG."""
+    text = text.strip()
+    if text and LOG.isEnabledFor(logging.DEBUG):
+        if len(text) > limit:
+            text = text[:limit] + f"\n... ({len(text) - limit} more characters)"
+        LOG.debug("%s output:\n%s", label, text)

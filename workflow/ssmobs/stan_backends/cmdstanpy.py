@@ -42,8 +42,15 @@ from typing import Any
 
 import numpy as np
 
-from . import SAMPLER_COLUMNS, quiet_loggers
-from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import (
+    SAMPLER_COLUMNS,
+    BackendError,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    check_sample_args,
+    quiet_loggers,
+)
 from .cache import (
     build_lock,
     cache_root,

@@ -64,8 +64,15 @@ import numpy as np
 import stanio
 
 from ..io import json_default
-from . import SAMPLER_COLUMNS, log_captured
-from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import (
+    SAMPLER_COLUMNS,
+    BackendError,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    check_sample_args,
+    log_captured,
+)
 from .cache import (
     BUILD_RECORD,
     build_lock,

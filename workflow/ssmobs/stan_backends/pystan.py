@@ -65,8 +65,15 @@ from typing import Any
 import numpy as np
 
 from ..io import file_lock
-from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
-from .base import Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import (
+    SAMPLER_COLUMNS,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    check_sample_args,
+    log_captured,
+    quiet_loggers,
+)
 
 LOG = logging.getLogger("ssmobs.stan")
 

@@ -1,9 +1,10 @@
-"""The observability map (issue 21): where in (true parameter, T) a model is observable, and
-how well.
+"""The observability map's stage (issue 21): where in (true parameter, T) a model is
+observable, and how well.
 
 A map (one entry of the config's ``observability_maps``) is a grid of *cells*: a base
 scenario (model, Omega, x0, prior, method, seed) with one parameter set to each of
-``values`` and the horizon set to each of ``T``.  Every cell gets K design trajectories
+``values`` and the horizon set to each of ``T`` (the cells' scenario entries:
+:func:`ssmobs.config.cell_entries`).  Every cell gets K design trajectories
 (Sec. III.A) and
 - the joint MAP (Sec. III.B): |K^max|/K with its exact binomial 95 % interval and, over
   K^max, the median local variance of every Omega component;
@@ -19,7 +20,6 @@ extended by new values or horizons computes only the new cells.
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 import os
@@ -30,46 +30,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import io
-from .binomial import clopper_pearson
-from .log import Progress
-from .scenario import Scenario
+from .. import io
+from ..binomial import clopper_pearson
+from ..log import Progress
+from ..scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
 #: keys every cached cell file must hold
 CELL_KEYS = ("K_max", "K_max_frac", "exact")
-
-
-def _value_label(value: float) -> str:
-    return f"{value:g}"
-
-
-def cell_entries(entry: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """The scenario entries of every cell of one map, value-major then T (config order).
-
-    A cell is the map's ``base`` with ``omega[vary]`` = value, its ``T`` and ``K``, the
-    joint MAP on and Stan off; its name is ``<map>_<vary><value>_T<T>``."""
-    from .config import schema_problems
-    from .scenario import _entry_schema
-
-    base = dict(entry["base"])
-    cells = []
-    for value in entry["values"]:
-        for T in entry["T"]:
-            omega = {**base["omega"], entry["vary"]: value}
-            cell = {
-                **copy.deepcopy(base),
-                "name": f"{entry['name']}_{entry['vary']}{_value_label(value)}_T{T}",
-                "omega": omega,
-                "T": int(T),
-                "K": int(entry["K"]),
-                "joint_map": True,
-                "stan": False,
-            }
-            schema_problems(cell, _entry_schema())  # fills in the defaults (checked elsewhere)
-            cells.append(cell)
-    return cells
 
 
 def _median(values: np.ndarray) -> float:
@@ -87,10 +56,10 @@ def cell_summary(
     """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
     model linear in the states) exact marginal; the row of the map's table (module
     docstring), without the map's own columns."""
-    from .exact_marginal import ExactSettings, exact_marginal
-    from .stages.design import disturbance_set
-    from .stages.joint_map import joint_map_of
-    from .trajectories import make_trajectories
+    from ..exact_marginal import ExactSettings, exact_marginal
+    from ..trajectories import make_trajectories
+    from .design import disturbance_set
+    from .joint_map import joint_map_of
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -165,7 +134,7 @@ def map_table(
     at once (a rerun after a kill computes only the missing cells); every row is the one its
     file holds, its columns in :func:`cell_columns`' order, so a resumed map's table is the
     same bytes as a fresh one's."""
-    from .models import get_model
+    from ..models import get_model
 
     names = get_model(entry["base"]["model"]).param_names  # every cell's model
     progress = Progress(f"observability map {entry['name']}", len(cells))
@@ -206,7 +175,7 @@ def figure_map(
     marginal: solid with its 95 % band; joint MAP |K^max|/K: dashed); the paper's cells
     ringed.  Right: how well, the median 90 % interval width of the varied parameter (exact)
     or 2 x 1.645 x sqrt(median local variance) (joint MAP, models without the exact stage)."""
-    from .figures import _plt, save_figure
+    from ..figures import _plt, save_figure
 
     plt = _plt()
     vary = entry["vary"]
@@ -293,13 +262,14 @@ def write_map(
     frame["paper_point"] = [
         (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
     ]
-    from .models import get_model
-    from .tables import write_table
+    from ..config import map_value_label
+    from ..models import get_model
+    from ..tables import write_table
 
     model = get_model(entry["base"]["model"])
     caption = (
         f"Observability map of {model.title} ({entry['name']}, ours): {entry['vary']} over "
-        f"{_value_label(min(entry['values']))}..{_value_label(max(entry['values']))}, T in "
+        f"{map_value_label(min(entry['values']))}..{map_value_label(max(entry['values']))}, T in "
         f"{list(entry['T'])}, K = {entry['K']} design trajectories per cell."
     )
     write_table(frame, [paths["csv"], paths["md"]], caption)

@@ -1,0 +1,189 @@
+"""Strict reading of config files: duplicate keys, size and YAML alias expansion are refused.
+
+:func:`read_config_file` reads one file; :func:`check_config_files` applies it to the files
+Snakemake read itself (``--configfile``).  Imports only :mod:`ssmobs.config_schema`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .config_schema import MAX_REPR, ConfigError, cut_text, short_repr
+
+#: largest config file read (bytes); a config has a few kB
+MAX_CONFIG_BYTES = 5 * 2**20
+#: most values (mappings, lists, scalars) a config may hold once YAML aliases are expanded;
+#: a config has a few hundred, an alias "bomb" billions
+MAX_CONFIG_VALUES = 100_000
+
+
+class RefusedYAMLError(yaml.MarkedYAMLError):
+    """Valid YAML that would silently mean something else (a duplicate key) or is too big."""
+
+
+class ConfigLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses duplicate keys in a mapping (PyYAML keeps the last)
+    and documents whose YAML aliases expand to more than :data:`MAX_CONFIG_VALUES` values."""
+
+    def get_single_node(self) -> yaml.Node | None:
+        node = super().get_single_node()
+        if node is not None and _expanded_size(node, {}) > MAX_CONFIG_VALUES:
+            raise RefusedYAMLError(
+                problem=(
+                    f"holds more than {MAX_CONFIG_VALUES} values once its YAML aliases "
+                    f"(*name) are expanded; a config has a few hundred"
+                ),
+                problem_mark=node.start_mark,
+            )
+        return node
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        first: dict[Any, yaml.Node] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":  # '<<: *base' may be overridden
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                seen = first.get(key)
+            except TypeError:  # unhashable: the base class reports it
+                continue
+            if seen is None:
+                first[key] = key_node
+            else:
+                raise RefusedYAMLError(
+                    problem=(
+                        f"key {short_repr(key)} appears twice in one mapping (also line "
+                        f"{seen.start_mark.line + 1}); YAML would silently keep only the "
+                        f"last value: remove one"
+                    ),
+                    problem_mark=key_node.start_mark,
+                )
+        return super().construct_mapping(node, deep=deep)
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int | None]) -> int:
+    """Number of values under ``node`` with every alias expanded, capped just above the
+    limit (a shared node is counted once per use but visited once)."""
+    key = id(node)
+    if key in memo:
+        size = memo[key]
+        return MAX_CONFIG_VALUES + 1 if size is None else size  # None: a cycle
+    memo[key] = None
+    if isinstance(node, yaml.SequenceNode):
+        children = list(node.value)
+    elif isinstance(node, yaml.MappingNode):
+        children = [n for pair in node.value for n in pair]
+    else:
+        children = []
+    total = 1
+    for child in children:
+        total += _expanded_size(child, memo)
+        if total > MAX_CONFIG_VALUES:
+            break
+    total = min(total, MAX_CONFIG_VALUES + 1)
+    memo[key] = total
+    return total
+
+
+def _json_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ConfigError(
+                f"key {short_repr(key)} appears twice in one JSON object; JSON readers "
+                f"silently keep only the last value: remove one"
+            )
+        out[key] = value
+    return out
+
+
+def parse_config_text(text: str) -> Any:
+    """The document in ``text``: JSON first, as Snakemake reads ``--configfile``, then YAML
+    with :class:`ConfigLoader`.  Raises ConfigError (JSON) or a ``yaml.YAMLError``."""
+    try:
+        return json.loads(text, object_pairs_hook=_json_pairs)
+    except json.JSONDecodeError:
+        pass
+    loader = ConfigLoader(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
+def read_config_file(path: str | os.PathLike) -> Any:
+    """The document in the config file ``path`` (None when empty).
+
+    Raises ConfigError with one line naming the file (and line and column) when it does not
+    exist, cannot be read, is larger than :data:`MAX_CONFIG_BYTES`, is not valid YAML, has a
+    key twice in one mapping, or expands to more than :data:`MAX_CONFIG_VALUES` values.
+    """
+    path = Path(path)
+    if not path.is_file():
+        what = "is a directory, not a file" if path.is_dir() else "does not exist"
+        raise ConfigError(f"config file {path} {what}")
+    try:
+        size = path.stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"config file {path} has {size} bytes, more than the {MAX_CONFIG_BYTES} "
+                f"bytes ({MAX_CONFIG_BYTES / 2**20:g} MiB) a config file may have; a config "
+                f"has a few kB"
+            )
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"config file {path} cannot be read: {err}") from None
+    try:
+        return parse_config_text(text)
+    except ConfigError as err:
+        raise ConfigError(f"config file {path}: {err}") from None
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        where = f", line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = ": ".join(str(p) for p in (err.context, err.problem) if p)
+        if not isinstance(err, RefusedYAMLError):
+            problem = f"YAML syntax error: {problem}"
+        raise ConfigError(f"config file {path}{where}: {cut_text(problem, 2 * MAX_REPR)}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config file {path}: YAML syntax error: {cut_text(str(err))}") from None
+    except RecursionError:
+        raise ConfigError(f"config file {path}: nested too deeply to be a config") from None
+
+
+def check_config_files(
+    paths: Iterable[str | os.PathLike], error: type[Exception] = ConfigError
+) -> None:
+    """Read every file of ``paths`` as :func:`read_config_file` does; raise ``error`` with
+    one line per bad file.
+
+    Snakemake reads ``--configfile`` files itself and keeps the last of duplicate keys;
+    common.smk calls this on ``workflow.configfiles`` so that they are refused there too.
+    """
+    problems = []
+    for path in paths:
+        try:
+            read_config_file(path)
+        except ConfigError as err:
+            problems.append(str(err))
+    if problems:
+        raise error("\n".join(problems))
+
+
+def count_values(obj: Any, limit: int = MAX_CONFIG_VALUES) -> int:
+    """Number of values in ``obj`` (a shared list counts at every use), stopping above
+    ``limit``: a YAML alias bomb is refused before anything walks it."""
+    count, stack = 0, [obj]
+    while stack and count <= limit:
+        item = stack.pop()
+        count += 1
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item[: limit + 1])
+    return count
