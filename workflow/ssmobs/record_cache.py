@@ -30,7 +30,7 @@ import numpy as np
 
 from . import io, seeds
 from .marginal_map import GRID_PER_BW
-from .stan_backends.base import sampler_key
+from .stan_backends.base import program_digest, sampler_key
 
 if TYPE_CHECKING:
     import pandas
@@ -81,8 +81,8 @@ def _sha(obj: Any) -> str:
 
 
 def program_hash(stan_file: str | Path) -> str:
-    """SHA-256 (16 hex digits) of the Stan program's text."""
-    return hashlib.sha256(Path(stan_file).read_bytes()).hexdigest()[:16]
+    """SHA-256 (16 hex digits) of the Stan program's text with its ``#include`` files."""
+    return program_digest(stan_file)
 
 
 def settings_hash(

@@ -43,7 +43,14 @@ from typing import Any
 import numpy as np
 
 from . import SAMPLER_COLUMNS, quiet_loggers
-from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import (
+    BackendError,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    check_sample_args,
+    program_code,
+)
 from .cache import (
     build_lock,
     cache_root,
@@ -158,7 +165,7 @@ class CmdStanPyBackend:
         import cmdstanpy
 
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         sha = hashlib.sha256(code.encode()).hexdigest()
         key = (str(path), sha)
         if key in self._markers:

@@ -65,7 +65,14 @@ import stanio
 
 from ..io import json_default
 from . import SAMPLER_COLUMNS, log_captured
-from .base import BackendError, Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import (
+    BackendError,
+    Draws,
+    SamplerSettings,
+    SamplingError,
+    check_sample_args,
+    program_code,
+)
 from .cache import (
     BUILD_RECORD,
     build_lock,
@@ -481,7 +488,7 @@ class NativeBackend:
         cache cannot be written or the build cannot run (no compiler).
         """
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         memo = (str(path), code)
         if memo in self._markers:
             return self._markers[memo]

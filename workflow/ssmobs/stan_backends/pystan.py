@@ -66,7 +66,7 @@ import numpy as np
 
 from ..io import file_lock
 from . import SAMPLER_COLUMNS, log_captured, quiet_loggers
-from .base import Draws, SamplerSettings, SamplingError, check_sample_args
+from .base import Draws, SamplerSettings, SamplingError, check_sample_args, program_code
 
 LOG = logging.getLogger("ssmobs.stan")
 
@@ -345,7 +345,7 @@ class PyStanBackend:
 
         _patient_stanc()
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         sha = program_sha256(code)
         key = (str(path), sha)
         if key in self._markers:
@@ -465,7 +465,7 @@ class PyStanBackend:
         t_start = time.perf_counter()
         check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
-        code = Path(marker["stan_file"]).read_text()
+        code = program_code(marker["stan_file"])
         kwargs: dict[str, Any] = dict(
             num_chains=settings.chains,
             num_warmup=settings.iter_warmup,
