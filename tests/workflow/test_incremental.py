@@ -168,6 +168,45 @@ CASES = {
 }
 
 
+#: a model of ours that imports a helper (skipped by model discovery) and subclasses Same,
+#: with a Stan program made of ``#include`` files
+OWN_MODEL = {
+    "workflow/ssmobs/models/_mix.py": "SCALE = 1.0\n",
+    "workflow/ssmobs/models/same_mix.py": (
+        '"""Same under another slug, from a helper and its base model."""\n\n'
+        "from ._mix import SCALE\nfrom .same import Same\n\n\n"
+        "class SameMix(Same):\n    slug = 'same_mix'\n    scale = SCALE\n"
+    ),
+    "stan/same_mix.stan": "// Same, from its parts\n#include <_same_mix_body.stan>\n",
+}
+#: the cases on that model: name -> (file edit, rules that must run, rules that must not)
+OWN_MODEL_CASES = {
+    "helper module": (
+        _append("workflow/ssmobs/models/_mix.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "base model": (
+        _append("workflow/ssmobs/models/same.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "Stan include": (
+        _append("stan/_same_mix_body.stan", "\n// an edit of an included file\n"),
+        {"build_stan_model", "check_model_stan", "sample_nuts", "gather_nuts", "paper_tables"},
+        {"check_model", "design_trajectories", "joint_map", "exact_marginal"},
+    ),
+}
+
+
+def add_own_model(work: Path) -> None:
+    """Write :data:`OWN_MODEL` (the Stan body: the text of same.stan) and use it."""
+    for name, text in OWN_MODEL.items():
+        (work / name).write_text(text)
+    (work / "stan" / "_same_mix_body.stan").write_text((work / "stan" / "same.stan").read_text())
+    write_config(work, _set("scenarios.0.model", "same_mix"))
+
+
 def write_config(work: Path, edit=None) -> None:
     conf = yaml.safe_load(yaml.safe_dump(BASE))
     if edit is not None:
@@ -252,6 +291,34 @@ def test_an_edit_reruns_what_it_touches_and_equals_a_fresh_run(base, tmp_path, c
             work / p.relative_to(base) for p in base.glob("results/same_T4/sample_nuts/*/*.log")
         }
         assert new and all("0 trajectories to sample" in p.read_text() for p in new)
+    again = snakemake(work, *ARGS, "-n")
+    assert "Nothing to be done" in again.stdout + again.stderr
+    assert_fresh_equal(work, fresh)
+
+
+@pytest.fixture(scope="module")
+def own_base(tmp_path_factory) -> Path:
+    """One finished run of the tiny config on :data:`OWN_MODEL`."""
+    work = make_workdir(tmp_path_factory.mktemp("mutation_own_base"))
+    add_own_model(work)
+    snakemake(work, *ARGS)
+    return work
+
+
+@pytest.mark.parametrize("case", list(OWN_MODEL_CASES), ids=list(OWN_MODEL_CASES))
+def test_an_edit_of_what_a_model_imports_reruns_it(own_base, tmp_path, case):
+    """Found stale before (issue 35): an edit of a helper the model imports, of the model it
+    subclasses or of a file its Stan program includes gave "Nothing to be done"."""
+    file_edit, must_run, must_not_run = OWN_MODEL_CASES[case]
+    work = _copy(own_base, tmp_path / "incremental")
+    fresh = make_workdir(tmp_path / "fresh")
+    add_own_model(fresh)
+    for w in (work, fresh):
+        file_edit(w)
+    proc, _ = run_both(work, fresh)
+    ran = rules_run(proc)
+    assert must_run <= ran, f"did not rerun {sorted(must_run - ran)} (ran {sorted(ran)})"
+    assert not (must_not_run & ran), f"reran {sorted(must_not_run & ran)}"
     again = snakemake(work, *ARGS, "-n")
     assert "Nothing to be done" in again.stdout + again.stderr
     assert_fresh_equal(work, fresh)
