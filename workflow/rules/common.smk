@@ -345,8 +345,8 @@ def figure2_disturbances(wildcards=None):
 
 
 def repair_damaged_trajectories():
-    """Remove every design-trajectory file that no longer matches its checksum (damage that
-    kept its time), before the DAG is built, so it is made again."""
+    """Remove every design-trajectory file that no longer matches its checksum or has lost
+    it (damage that kept its time), before the DAG is built, so it is made again."""
     from ssmobs.io import checksum_problem
 
     if not workflow.is_main_process:
@@ -354,8 +354,9 @@ def repair_damaged_trajectories():
     for name, sc in SCENARIO_OBJECTS.items():
         for K in {sc.K, sc.exact_trajectories}:
             path = trajectories_path(name, K)
-            if checksum_problem(path):
-                logger.warning(f"does not match its checksum, made again: {path}")
+            problem = checksum_problem(path)
+            if problem:
+                logger.warning(f"made again: {problem}")
                 Path(path).unlink()
 
 

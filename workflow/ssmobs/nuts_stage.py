@@ -38,6 +38,7 @@ Record format (JSON, one file per k; ``record_cache.RECORD_VERSION``)::
                      or None when they could not be computed
     init             "random" | "true"
     draws_sha256     SHA-256 of the kept draws file (only when the draws were kept)
+    record_sha256    SHA-256 of the rest of the record (record_cache.write_record)
     backend          backend name
     timings          seconds: sample_call (wall time of backend.sample), backend (the
                      backend's own breakdown, e.g. transfer), prepare, diagnostics, marginal,
@@ -79,6 +80,7 @@ from .record_cache import (
     record_key,
     record_path,
     settings_hash,
+    write_record,
 )
 from .stan_backends.base import Draws, SamplerSettings, SamplingError
 
@@ -276,11 +278,12 @@ def _one_trajectory(
 
 
 def _draws_intact(path: Path, rec: dict[str, Any]) -> bool:
-    """The kept draws file exists and matches the checksum its record holds."""
+    """The kept draws file exists and matches the checksum its record holds (a record
+    without one: damaged)."""
     if not path.exists():
         return False
     expected = rec.get("draws_sha256")
-    return expected is None or io.file_sha256(path) == expected
+    return expected is not None and io.file_sha256(path) == expected
 
 
 def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
@@ -452,7 +455,7 @@ def run_trajectories(
             points[k],
         )
         t_w = time.perf_counter()
-        io.write_json(record_path(records_dir, k), rec)
+        write_record(record_path(records_dir, k), rec)
         LOG.debug(
             "k=%d: converged=%s %s (sample %.2f s, overhead %.3f s, write %.3f s)",
             k,
