@@ -18,6 +18,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -380,4 +381,44 @@ def test_a_run_naming_its_targets_remakes_a_stale_table(base, tmp_path):
     assert ran == {"paper_tables"}, ran
     assert (work / table).read_bytes() == (base / table).read_bytes()
     again = snakemake(work, "-n", *named)
+    assert "Nothing to be done" in again.stdout + again.stderr
+
+
+def test_a_refused_second_run_removes_nothing(base, tmp_path):
+    """Found before (issue 35): while one run worked, a second one with another config
+    (its Figure 2 edited) in the same directory was refused by Snakemake's lock only after
+    its parse had deleted the first run's Figure 2 and stamp, and advised ``--unlock``."""
+    work = _copy(base, tmp_path / "concurrent")
+    write_config(work, _set("scenarios.0.omega.a", 0.8))  # the first run: every stage
+    other = yaml.safe_load(yaml.safe_dump(BASE))
+    other["figure2"] = {"a": 0.5}
+    (work / "config" / "other.yaml").write_text(yaml.safe_dump(other))
+    kept = sorted(p for p in (work / OUT).glob("fig2_design_points.*") if p.is_file())
+    kept += sorted(work.glob(f"results/outputs/{OUT}/*.key"))
+    assert len([p for p in kept if p.name.startswith("fig2_")]) == 2 and len(kept) > 2
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept}
+    first = subprocess.Popen(
+        [sys.executable, "-m", "snakemake", *ARGS],
+        cwd=work,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        start = time.monotonic()
+        while not list((work / ".snakemake" / "locks").glob("*")):
+            assert first.poll() is None, "the first run ended before it took its lock"
+            assert time.monotonic() - start < 600, "the first run took no lock"
+            time.sleep(0.1)
+        second = snakemake(work, "--cores", "2", "--configfile", "config/other.yaml", check=False)
+        assert first.poll() is None, "the first run ended before the second was refused"
+    finally:
+        out, _ = first.communicate(timeout=3600)
+    text = second.stdout + second.stderr
+    assert second.returncode != 0
+    assert "another Snakemake run holds the lock of this directory" in text, text[-3000:]
+    assert "--unlock" not in text
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept} == before
+    assert first.returncode == 0, out[-3000:]
+    again = snakemake(work, *ARGS, "-n")
     assert "Nothing to be done" in again.stdout + again.stderr
