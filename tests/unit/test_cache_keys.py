@@ -21,6 +21,7 @@ from ssmobs.cache_keys import (
     digest,
     file_digest,
     module_closure,
+    syntax_digest,
 )
 from ssmobs.config import validate
 from ssmobs.record_cache import program_hash
@@ -377,7 +378,7 @@ def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
     module_closure.cache_clear()
     before = all_keys()
     f = work / edit
-    f.write_text(f.read_text() + "\n# an edit\n")
+    f.write_text(f.read_text() + "\nEDITED = 1  # an edit\n")
     module_closure.cache_clear()
     after = all_keys()
     assert set(before) == ALL_STAGES
@@ -500,7 +501,7 @@ def test_what_a_model_imports_keys_its_outputs(tmp_path, edit, moves):
 def test_a_model_without_package_imports_is_keyed_by_its_module_alone():
     """The registry's code (models/base.py, ...) keys every stage that takes a model."""
     assert CacheKeys(smoke(), "native").model_code("same") == {
-        "models/same.py": file_digest(PACKAGE_DIR / "models" / "same.py")
+        "models/same.py": syntax_digest(PACKAGE_DIR / "models" / "same.py")
     }
     registry = set(module_closure((MODEL_REGISTRY,)))
     assert "models/base.py" in registry
@@ -548,3 +549,27 @@ def test_a_program_without_includes_keeps_its_key():
         assert program_code(path) == path.read_text()
         # the key programs had before includes were expanded: their file's bytes
         assert CacheKeys(smoke(), "native").stan_program(path.stem) == file_digest(path)
+
+
+def test_a_model_is_keyed_by_what_it_computes_not_its_comments(tmp_path):
+    """Found before (issue 35): a comment-only edit of a model reran all of its stages."""
+    package = _workflow_copy(tmp_path)
+    same = package / "models" / "same.py"
+    conf = smoke()
+
+    def model_keys():
+        k = keys(conf, package_dir=package)
+        return k.model_code("same"), k.trajectories("same_T4"), k.nuts_records("same_T4")
+
+    before = model_keys()
+    text = same.read_text()
+    docstring = '"""Model (Same, d=p=1)'
+    assert docstring in text
+    same.write_text(
+        "# a comment\n" + text.replace(docstring, '"""An edited docstring. ' + docstring[3:])
+    )
+    assert model_keys() == before
+    same.write_text(text.replace("\n\n\n", "\n\n\n\n") + "\n# a comment at the end\n")
+    assert model_keys() == before
+    same.write_text(text + "\nEDITED = 1\n")
+    assert all(b != a for b, a in zip(before, model_keys()))

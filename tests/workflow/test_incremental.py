@@ -156,9 +156,15 @@ CASES = {
     ),
     "model module": (  # Figure 2 draws model Same's trajectories: it is remade too
         None,
-        _append("workflow/ssmobs/models/same.py", "\n# an edit of the model\n"),
+        _append("workflow/ssmobs/models/same.py", "\nEDITED = 1  # an edit of the model\n"),
         EVERY_STAGE | {"check_model", "check_model_stan", "figure_design_points"},
         {"design_disturbances", "build_stan_model"},
+    ),
+    "model comment": (  # issue 35: what the model computes is keyed, not its comments
+        None,
+        _append("workflow/ssmobs/models/same.py", "\n# a comment on the model\n"),
+        set(),
+        EVERY_STAGE | {"check_model", "check_model_stan", "figure_design_points"},
     ),
     "Stan program": (
         None,

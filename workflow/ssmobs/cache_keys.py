@@ -123,6 +123,21 @@ def file_digest(path: str | Path) -> str:
     return io.file_sha256(path)[:16]
 
 
+_DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def syntax_digest(path: str | Path) -> str:
+    """SHA-256 (16 hex digits) of a Python module's syntax tree (``ast.dump``, decoded as
+    Python decodes the file) without its docstrings: what the module computes, so an edit
+    of a comment, a docstring or the layout keeps it; another Python version may change
+    it (which recomputes)."""
+    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, _DOCUMENTED) and ast.get_docstring(node, clean=False) is not None:
+            node.body = node.body[1:] or [ast.Pass()]
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+
+
 def _module_file(name: str, package_dir: Path) -> Path | None:
     """The file of module ``name`` (dotted, relative to the package), or None."""
     base = package_dir.joinpath(*name.split(".")) if name else package_dir
@@ -373,10 +388,11 @@ class CacheKeys:
     @functools.cache  # noqa: B019
     def model_code(self, model: str) -> dict[str, str]:
         """The model's Python module and the package modules it runs, directly or not (a
-        helper ``models/_*.py``, a model it subclasses), by :func:`model_closure` (its Stan
-        program keys what it determines: :meth:`stan_program`)."""
+        helper ``models/_*.py``, a model it subclasses), by :func:`model_closure`, each by
+        its :func:`syntax_digest` (a comment-only edit reruns nothing; its Stan program keys
+        what it determines: :meth:`stan_program`)."""
         files = model_closure(model, self.package_dir)
-        return {f: file_digest(self.package_dir / f) for f in files}
+        return {f: syntax_digest(self.package_dir / f) for f in files}
 
     def stan_program(self, model: str) -> str:
         """The model's Stan program with its ``#include`` files."""
