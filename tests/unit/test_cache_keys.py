@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 from ssmobs.cache_keys import (
+    MODEL_REGISTRY,
     NEUTRAL_MODULES,
     PACKAGE_DIR,
     STAGE_MODULES,
@@ -18,9 +19,13 @@ from ssmobs.cache_keys import (
     UnknownKeyError,
     code_digest,
     digest,
+    file_digest,
     module_closure,
+    syntax_digest,
 )
 from ssmobs.config import validate
+from ssmobs.record_cache import program_hash
+from ssmobs.stan_backends.base import program_code
 
 pytestmark = pytest.mark.unit
 
@@ -373,7 +378,7 @@ def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
     module_closure.cache_clear()
     before = all_keys()
     f = work / edit
-    f.write_text(f.read_text() + "\n# an edit\n")
+    f.write_text(f.read_text() + "\nEDITED = 1  # an edit\n")
     module_closure.cache_clear()
     after = all_keys()
     assert set(before) == ALL_STAGES
@@ -447,3 +452,124 @@ def test_the_stan_identity_names_the_backend_and_its_stan():
 
     native = stan_identity("native")
     assert native.startswith("native ") and "stanc" in native
+
+
+#: a model that imports a helper module (skipped by model discovery) and subclasses Same
+HELPER_MODELS = {
+    "models/_mix.py": "SCALE = 1.0\n",
+    "models/same_mix.py": (
+        "from ._mix import SCALE\nfrom .same import Same\n\n\n"
+        "class SameMix(Same):\n    slug = 'same_mix'\n    scale = SCALE\n"
+    ),
+}
+
+
+def _workflow_copy(tmp_path: Path) -> Path:
+    work = tmp_path / "workflow"
+    shutil.copytree(
+        REPO / "workflow", work, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+    )
+    return work / "ssmobs"
+
+
+@pytest.mark.parametrize(
+    ("edit", "moves"),
+    [("models/_mix.py", True), ("models/same.py", True), ("models/sep.py", False)],
+)
+def test_what_a_model_imports_keys_its_outputs(tmp_path, edit, moves):
+    """Found stale before: a model keyed by its own module only kept its outputs when a
+    helper it imports or the model it subclasses was edited."""
+    package = _write(_workflow_copy(tmp_path), HELPER_MODELS)
+    shutil.copytree(REPO / "stan", tmp_path / "stan")
+    shutil.copy(tmp_path / "stan" / "same.stan", tmp_path / "stan" / "same_mix.stan")
+    conf = smoke()
+    next(sc for sc in conf["scenarios"] if sc["name"] == "same_T4")["model"] = "same_mix"
+
+    def model_keys():
+        module_closure.cache_clear()
+        k = keys(conf, repo=tmp_path, package_dir=package)
+        return k.model_code("same_mix"), k.trajectories("same_T4"), k.nuts_records("same_T4")
+
+    before = model_keys()
+    assert set(before[0]) == {"models/same_mix.py", "models/_mix.py", "models/same.py"}
+    (package / edit).write_text((package / edit).read_text() + "\nEDITED = 1\n")
+    after = model_keys()
+    assert (before != after) == moves
+    assert (before[1] != after[1]) == moves and (before[2] != after[2]) == moves
+
+
+def test_a_model_without_package_imports_is_keyed_by_its_module_alone():
+    """The registry's code (models/base.py, ...) keys every stage that takes a model."""
+    assert CacheKeys(smoke(), "native").model_code("same") == {
+        "models/same.py": syntax_digest(PACKAGE_DIR / "models" / "same.py")
+    }
+    registry = set(module_closure((MODEL_REGISTRY,)))
+    assert "models/base.py" in registry
+    for stage in ("trajectories", "check_model", "nuts_records", "k_selection", "map_cells"):
+        assert registry <= set(module_closure(STAGE_MODULES[stage])), stage
+    assert registry <= set(module_closure(STAGE_MODULES["outputs"]))  # Figure 2's model
+
+
+def test_a_stan_programs_includes_key_it(tmp_path):
+    """Found stale before: a program keyed by its own file kept its records when a file it
+    ``#include``s was edited; every backend compiles the included text."""
+    data, body = (REPO / "stan" / "same.stan").read_text().split("parameters {", 1)
+    stan = _write(
+        tmp_path / "stan",
+        {
+            "same.stan": "// Same, from its parts\n#include <_same_body.stan>\n",
+            "_same_body.stan": '#include "_same_data.stan"\n' + body,
+            "_same_data.stan": data + "parameters {",
+        },
+    )
+    code = program_code(stan / "same.stan")
+    assert "#include" not in code and "z ~ normal(a * x, s);" in code
+    assert code.replace("\n", "") == "// Same, from its parts" + (
+        data + "parameters {" + body
+    ).replace("\n", "")
+
+    def stan_keys():
+        k = keys(smoke(), repo=tmp_path)
+        return k.program("same"), k.nuts_records("same_T4"), program_hash(stan / "same.stan")
+
+    before = stan_keys()
+    (stan / "_same_data.stan").write_text((stan / "_same_data.stan").read_text() + "\n")
+    after = stan_keys()
+    assert all(b != a for b, a in zip(before, after))
+    (stan / "_same_data.stan").write_text("#include same.stan\n")
+    with pytest.raises(ValueError, match="includes itself"):
+        program_code(stan / "same.stan")
+    (stan / "_same_data.stan").unlink()
+    with pytest.raises(FileNotFoundError, match="_same_data.stan"):
+        program_code(stan / "same.stan")
+
+
+def test_a_program_without_includes_keeps_its_key():
+    for path in sorted((REPO / "stan").glob("*.stan")):
+        assert program_code(path) == path.read_text()
+        # the key programs had before includes were expanded: their file's bytes
+        assert CacheKeys(smoke(), "native").stan_program(path.stem) == file_digest(path)
+
+
+def test_a_model_is_keyed_by_what_it_computes_not_its_comments(tmp_path):
+    """Found before (issue 35): a comment-only edit of a model reran all of its stages."""
+    package = _workflow_copy(tmp_path)
+    same = package / "models" / "same.py"
+    conf = smoke()
+
+    def model_keys():
+        k = keys(conf, package_dir=package)
+        return k.model_code("same"), k.trajectories("same_T4"), k.nuts_records("same_T4")
+
+    before = model_keys()
+    text = same.read_text()
+    docstring = '"""Model (Same, d=p=1)'
+    assert docstring in text
+    same.write_text(
+        "# a comment\n" + text.replace(docstring, '"""An edited docstring. ' + docstring[3:])
+    )
+    assert model_keys() == before
+    same.write_text(text.replace("\n\n\n", "\n\n\n\n") + "\n# a comment at the end\n")
+    assert model_keys() == before
+    same.write_text(text + "\nEDITED = 1\n")
+    assert all(b != a for b, a in zip(before, model_keys()))

@@ -218,3 +218,17 @@ def test_sweep_finds_what_a_killed_atomic_write_leaves(tmp_path):
         tmp.write_text("x\n")
     assert io.temporaries(target) == []
     assert target.read_text() == "x\n"
+
+
+def test_a_file_without_its_checksum_cannot_be_trusted(tmp_path):
+    """Found passed before (issue 35): a deleted ``.sha256`` counted as a match."""
+    path = tmp_path / "trajectories.nc"
+    path.write_bytes(b"some bytes")
+    io.write_checksum(path)
+    assert io.checksum_problem(path) is None
+    path.write_bytes(b"other bytes")
+    assert "does not match its checksum" in io.checksum_problem(path)
+    io.checksum_path(path).unlink()
+    assert "has no checksum trajectories.nc.sha256" in io.checksum_problem(path)
+    path.unlink()
+    assert io.checksum_problem(path) is None  # a missing file is remade by Snakemake

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import os
 
 import numpy as np
 import pytest
@@ -228,6 +229,32 @@ def test_corrupted_or_stale_record_is_recomputed(scenario):
     assert [c["k"] for c in backend.calls] == [2, 4, 5]
     assert all(r["converged"] for r in recs)
     assert len(load_records(scenario["records_dir"], range(K))) == K
+
+
+def _keeping_time(path, edit) -> None:
+    """Apply ``edit`` (the parsed JSON, changed in place) to a record and restore its time."""
+    import os
+
+    st = path.stat()
+    rec = json.loads(path.read_text())
+    edit(rec)
+    path.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_a_record_edited_in_place_or_without_checksum_is_recomputed(scenario):
+    """Found reused before (issue 35): a record edited into other valid JSON with its file
+    time restored flowed into the tables; one without its checksum counts as damaged."""
+    from ssmobs.record_cache import RECORD_CHECKSUM
+
+    first = run(scenario, FakeBackend())
+    records = scenario["records_dir"]
+    _keeping_time(record_path(records, 1), lambda rec: rec["map"].__setitem__(0, 0.5))
+    _keeping_time(record_path(records, 4), lambda rec: rec.pop(RECORD_CHECKSUM))
+    backend = FakeBackend()
+    again = run(scenario, backend)
+    assert [c["k"] for c in backend.calls] == [1, 4]
+    assert [r["map"] for r in again] == [r["map"] for r in first]
 
 
 def test_changed_settings_program_or_data_recompute(scenario):
@@ -461,7 +488,8 @@ def test_intact_records_pass_the_check(batch, scenario):
     [
         ("truncate", r"record of trajectory k=2 is damaged .*k00002.json: not valid JSON"),
         ("delete", r"record of trajectory k=2 .*k00002.json\) is missing"),
-        ("edit", r"records of trajectories k=\[2\] .* differ from it"),
+        ("edit", r"record of trajectory k=2 is damaged .*checksum is missing or does not match"),
+        ("edit and checksum", r"records of trajectories k=\[2\] .* differ from it"),
         ("other_k", r"k00002.json is of trajectory k=3, not k=2"),
     ],
 )
@@ -473,10 +501,15 @@ def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle
         path.write_text(path.read_text()[:100])
     elif damage == "delete":
         path.unlink()
-    elif damage == "edit":
+    elif damage.startswith("edit"):
+        from ssmobs.record_cache import write_record
+
         rec = json.loads(path.read_text())
         rec["map"][0] += 1.0
-        path.write_text(json.dumps(rec))
+        if damage == "edit":
+            path.write_text(json.dumps(rec))
+        else:
+            write_record(path, rec)
     else:
         path.write_text((batch.parent / "records" / "k00003.json").read_text())
     with pytest.raises(io.CorruptFileError, match=needle) as err:
@@ -508,6 +541,30 @@ def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
     (records / "k00001.json").unlink()
     assert "trajectory k=1" in changed_batch_records(batch, records)
     assert "is missing" in changed_batch_records(batch, records)
+
+
+def test_kept_draws_without_their_checksum_are_damaged(scenario, tmp_path):
+    """Found passed before (issue 35): kept draws whose record holds no checksum counted
+    as intact."""
+    from ssmobs import io
+    from ssmobs.record_cache import changed_batch_records, read_record, write_record
+
+    folder = tmp_path / "sample_nuts"
+    recs = run(scenario, FakeBackend(), records_dir=folder / "records", keep_draws_for={0})
+    table = folder / "batch0.parquet"
+    io.write_parquet(table, records_to_frame(recs, scenario["model"], T))
+    records, draws = folder / "records", scenario["draws_dir"]
+    assert changed_batch_records(table, records, draws, {0}) is None
+    path = record_path(records, 0)
+    rec = read_record(path)
+    del rec["draws_sha256"]
+    st = table.stat()
+    write_record(path, rec)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))  # its time: not newer than the table
+    assert "kept draws" in changed_batch_records(table, records, draws, {0})
+    backend = FakeBackend()
+    run(scenario, backend, records_dir=records, keep_draws_for={0})
+    assert [c["k"] for c in backend.calls] == [0]
 
 
 def test_thresholds_are_applied_to_stored_diagnostics_with_the_failing_block(scenario):

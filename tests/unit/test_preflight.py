@@ -129,6 +129,19 @@ def test_lock_of_a_running_snakemake_is_left_alone(tmp_path):
             p.wait()
 
 
+@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs /proc (Linux)")
+def test_lock_holders_are_the_live_snakemake_processes_of_a_locked_directory(tmp_path):
+    assert preflight.lock_holders(tmp_path) == []  # no lock
+    make_lock(tmp_path)
+    assert preflight.lock_holders(tmp_path) == []  # a stale lock: no process holds it
+    proc = fake_snakemake(tmp_path)
+    try:
+        assert preflight.lock_holders(tmp_path) == [proc.pid]
+    finally:
+        proc.kill()
+        proc.wait()
+
+
 # ------------------------------------------------- configs that silently mean something else
 SCENARIO = "scenarios:\n  - name: s\n    model: same\n    omega: {a: 0.9}\n    x0: 8\n"
 

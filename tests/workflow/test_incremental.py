@@ -18,6 +18,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -155,9 +156,15 @@ CASES = {
     ),
     "model module": (  # Figure 2 draws model Same's trajectories: it is remade too
         None,
-        _append("workflow/ssmobs/models/same.py", "\n# an edit of the model\n"),
+        _append("workflow/ssmobs/models/same.py", "\nEDITED = 1  # an edit of the model\n"),
         EVERY_STAGE | {"check_model", "check_model_stan", "figure_design_points"},
         {"design_disturbances", "build_stan_model"},
+    ),
+    "model comment": (  # issue 35: what the model computes is keyed, not its comments
+        None,
+        _append("workflow/ssmobs/models/same.py", "\n# a comment on the model\n"),
+        set(),
+        EVERY_STAGE | {"check_model", "check_model_stan", "figure_design_points"},
     ),
     "Stan program": (
         None,
@@ -166,6 +173,45 @@ CASES = {
         {"check_model", "design_trajectories", "joint_map", "exact_marginal"},
     ),
 }
+
+
+#: a model of ours that imports a helper (skipped by model discovery) and subclasses Same,
+#: with a Stan program made of ``#include`` files
+OWN_MODEL = {
+    "workflow/ssmobs/models/_mix.py": "SCALE = 1.0\n",
+    "workflow/ssmobs/models/same_mix.py": (
+        '"""Same under another slug, from a helper and its base model."""\n\n'
+        "from ._mix import SCALE\nfrom .same import Same\n\n\n"
+        "class SameMix(Same):\n    slug = 'same_mix'\n    scale = SCALE\n"
+    ),
+    "stan/same_mix.stan": "// Same, from its parts\n#include <_same_mix_body.stan>\n",
+}
+#: the cases on that model: name -> (file edit, rules that must run, rules that must not)
+OWN_MODEL_CASES = {
+    "helper module": (
+        _append("workflow/ssmobs/models/_mix.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "base model": (
+        _append("workflow/ssmobs/models/same.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "Stan include": (
+        _append("stan/_same_mix_body.stan", "\n// an edit of an included file\n"),
+        {"build_stan_model", "check_model_stan", "sample_nuts", "gather_nuts", "paper_tables"},
+        {"check_model", "design_trajectories", "joint_map", "exact_marginal"},
+    ),
+}
+
+
+def add_own_model(work: Path) -> None:
+    """Write :data:`OWN_MODEL` (the Stan body: the text of same.stan) and use it."""
+    for name, text in OWN_MODEL.items():
+        (work / name).write_text(text)
+    (work / "stan" / "_same_mix_body.stan").write_text((work / "stan" / "same.stan").read_text())
+    write_config(work, _set("scenarios.0.model", "same_mix"))
 
 
 def write_config(work: Path, edit=None) -> None:
@@ -257,6 +303,34 @@ def test_an_edit_reruns_what_it_touches_and_equals_a_fresh_run(base, tmp_path, c
     assert_fresh_equal(work, fresh)
 
 
+@pytest.fixture(scope="module")
+def own_base(tmp_path_factory) -> Path:
+    """One finished run of the tiny config on :data:`OWN_MODEL`."""
+    work = make_workdir(tmp_path_factory.mktemp("mutation_own_base"))
+    add_own_model(work)
+    snakemake(work, *ARGS)
+    return work
+
+
+@pytest.mark.parametrize("case", list(OWN_MODEL_CASES), ids=list(OWN_MODEL_CASES))
+def test_an_edit_of_what_a_model_imports_reruns_it(own_base, tmp_path, case):
+    """Found stale before (issue 35): an edit of a helper the model imports, of the model it
+    subclasses or of a file its Stan program includes gave "Nothing to be done"."""
+    file_edit, must_run, must_not_run = OWN_MODEL_CASES[case]
+    work = _copy(own_base, tmp_path / "incremental")
+    fresh = make_workdir(tmp_path / "fresh")
+    add_own_model(fresh)
+    for w in (work, fresh):
+        file_edit(w)
+    proc, _ = run_both(work, fresh)
+    ran = rules_run(proc)
+    assert must_run <= ran, f"did not rerun {sorted(must_run - ran)} (ran {sorted(ran)})"
+    assert not (must_not_run & ran), f"reran {sorted(must_not_run & ran)}"
+    again = snakemake(work, *ARGS, "-n")
+    assert "Nothing to be done" in again.stdout + again.stderr
+    assert_fresh_equal(work, fresh)
+
+
 @pytest.mark.parametrize("metadata", [True, False], ids=["with metadata", "without .snakemake"])
 def test_reverting_an_edit_finds_the_earlier_outputs(base, tmp_path, metadata):
     """Edit, run, edit back, run: the tables are the baseline's again, recomputing only the
@@ -313,4 +387,44 @@ def test_a_run_naming_its_targets_remakes_a_stale_table(base, tmp_path):
     assert ran == {"paper_tables"}, ran
     assert (work / table).read_bytes() == (base / table).read_bytes()
     again = snakemake(work, "-n", *named)
+    assert "Nothing to be done" in again.stdout + again.stderr
+
+
+def test_a_refused_second_run_removes_nothing(base, tmp_path):
+    """Found before (issue 35): while one run worked, a second one with another config
+    (its Figure 2 edited) in the same directory was refused by Snakemake's lock only after
+    its parse had deleted the first run's Figure 2 and stamp, and advised ``--unlock``."""
+    work = _copy(base, tmp_path / "concurrent")
+    write_config(work, _set("scenarios.0.omega.a", 0.8))  # the first run: every stage
+    other = yaml.safe_load(yaml.safe_dump(BASE))
+    other["figure2"] = {"a": 0.5}
+    (work / "config" / "other.yaml").write_text(yaml.safe_dump(other))
+    # Figure 2 and its stamp: stale for the second config, untouched by the first run
+    kept = [*(work / OUT).glob("fig2_design_points.*"), *work.glob("results/**/fig*points.key")]
+    assert len(kept) == 3
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept}
+    first = subprocess.Popen(
+        [sys.executable, "-m", "snakemake", *ARGS],
+        cwd=work,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        start = time.monotonic()
+        while not list((work / ".snakemake" / "locks").glob("*")):
+            assert first.poll() is None, "the first run ended before it took its lock"
+            assert time.monotonic() - start < 600, "the first run took no lock"
+            time.sleep(0.1)
+        second = snakemake(work, "--cores", "2", "--configfile", "config/other.yaml", check=False)
+        assert first.poll() is None, "the first run ended before the second was refused"
+    finally:
+        out, _ = first.communicate(timeout=3600)
+    text = second.stdout + second.stderr
+    assert second.returncode != 0
+    assert "another Snakemake run holds the lock of this directory" in text, text[-3000:]
+    assert "--unlock" not in text
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept} == before
+    assert first.returncode == 0, out[-3000:]
+    again = snakemake(work, *ARGS, "-n")
     assert "Nothing to be done" in again.stdout + again.stderr

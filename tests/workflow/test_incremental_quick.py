@@ -8,6 +8,8 @@ variant x row table, which is made on request from committed files.
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -61,6 +63,37 @@ def test_a_changed_k_grid_gives_the_fresh_runs_choice_of_k(tmp_path):
     assert points == ["K12.json", "K4.json", "K8.json"]
     assert k4.stat().st_mtime_ns == made  # K = 4 computed once, found again by the new grid
     assert rules_run(ksel_run(work, [4, 12])) == set()  # and nothing to do again
+
+
+def test_a_run_refused_by_a_live_lock_changes_nothing(tmp_path):
+    """Found before (issue 35): a second run in a directory whose lock a live run held
+    removed stale stamps and their files at its parse, before Snakemake refused it."""
+    work = make_workdir(tmp_path / "locked")
+    ksel_run(work, [4, 8])
+    kept = [*work.glob("results/outputs/**/*.key"), work / KSEL_TARGET]
+    assert len(kept) > 1
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept}
+    locks = work / ".snakemake" / "locks"
+    locks.mkdir(parents=True, exist_ok=True)
+    (locks / "0.output.lock").write_text("results/of/another/run\n")
+    live = subprocess.Popen(  # a live run's process: its command line names snakemake
+        [sys.executable, "-c", "import time; time.sleep(300)", "snakemake"], cwd=work
+    )
+    try:
+        conf = yaml.safe_load(yaml.safe_dump(KSEL))
+        conf["k_selection"][0]["K_grid"] = [4, 12]  # its stamps are stale for this config
+        (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+        proc = snakemake(work, KSEL_TARGET, "--cores", "2", "--configfile", CONFIG, check=False)
+    finally:
+        live.kill()
+        live.wait()
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert "another Snakemake run holds the lock of this directory" in text, text[-2000:]
+    assert f"[{live.pid}]" in text and "--unlock" not in text
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept} == before
+    # that run has ended: its lock is stale and this run goes on
+    assert "select_k" in rules_run(ksel_run(work, [4, 12]))
 
 
 def variant_table_workdir(dest: Path) -> Path:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -178,6 +179,45 @@ def test_damaged_trajectories_with_their_old_time_are_made_again(smoke_run, tmp_
     assert "does not match its checksum" in proc.stdout + proc.stderr
     assert traj.read_bytes() == content
     assert_same_tables(smoke_run, workdir)
+
+
+def test_trajectories_without_their_checksum_are_made_again(smoke_run, tmp_path):
+    """Found passed before (issue 35): truncated with their time kept and their .sha256
+    deleted, the trajectories gave "Nothing to be done"."""
+    workdir = copy_run(smoke_run, tmp_path / "run")
+    traj = only(workdir, "results/same_T4/design_trajectories/*/trajectories.nc")
+    content = traj.read_bytes()
+    _truncate_keeping_time(traj, 500)
+    (traj.parent / "trajectories.nc.sha256").unlink()
+    proc = snakemake(workdir, "--cores", "2", *SMOKE)
+    assert "has no checksum trajectories.nc.sha256" in proc.stdout + proc.stderr
+    assert traj.read_bytes() == content
+    assert_same_tables(smoke_run, workdir)
+
+
+def test_a_record_edited_in_place_is_not_reused(smoke_run, tmp_path):
+    """Found reused before (issue 35): a record edited into other valid JSON, its file time
+    restored, flowed into the tables after a threshold change; now its checksum finds it
+    and the tables equal those of the same change on intact records."""
+    edited, intact = (
+        copy_run(smoke_run, tmp_path / "edited"),
+        copy_run(smoke_run, tmp_path / "intact"),
+    )
+    victim = next(
+        p
+        for p in sorted(edited.glob("results/same_T4/sample_nuts/records/*/k*.json"))
+        if json.loads(p.read_text())["map"] is not None
+    )
+    st = victim.stat()
+    rec = json.loads(victim.read_text())
+    rec["map"][0] += 0.25
+    victim.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+    os.utime(victim, ns=(st.st_atime_ns, st.st_mtime_ns))
+    for work in (edited, intact):
+        config = work / "config" / "smoke.yaml"
+        config.write_text(config.read_text().replace("ess_bulk_min: 100", "ess_bulk_min: 90"))
+        snakemake(work, "--cores", "2", *SMOKE)
+    assert_same_tables(intact, edited)
 
 
 def test_damaged_kept_draws_are_recomputed(smoke_run, tmp_path):

@@ -1,4 +1,5 @@
 # Glue: config validation, target lists, input functions, wildcard constraints.
+import functools
 import os
 import re
 import sys
@@ -13,7 +14,7 @@ from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
-from ssmobs.preflight import use_package_of  # noqa: E402
+from ssmobs.preflight import lock_holders, use_package_of  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
@@ -295,7 +296,7 @@ def repair_damaged_batches():
     reruns too."""
     from ssmobs.record_cache import changed_batch_records
 
-    if not workflow.is_main_process:
+    if not may_change_files_before_the_lock():
         return
     keep = config["stan"]["keep_draws"]
     for name in STAN_SCENARIOS:
@@ -345,17 +346,18 @@ def figure2_disturbances(wildcards=None):
 
 
 def repair_damaged_trajectories():
-    """Remove every design-trajectory file that no longer matches its checksum (damage that
-    kept its time), before the DAG is built, so it is made again."""
+    """Remove every design-trajectory file that no longer matches its checksum or has lost
+    it (damage that kept its time), before the DAG is built, so it is made again."""
     from ssmobs.io import checksum_problem
 
-    if not workflow.is_main_process:
+    if not may_change_files_before_the_lock():
         return
     for name, sc in SCENARIO_OBJECTS.items():
         for K in {sc.K, sc.exact_trajectories}:
             path = trajectories_path(name, K)
-            if checksum_problem(path):
-                logger.warning(f"does not match its checksum, made again: {path}")
+            problem = checksum_problem(path)
+            if problem:
+                logger.warning(f"made again: {problem}")
                 Path(path).unlink()
 
 
@@ -375,13 +377,46 @@ def stamped_outputs(path):
     return []
 
 
+def is_dry_run():
+    return bool(workflow.dryrun or getattr(workflow.output_settings, "dryrun", False))
+
+
+@functools.cache
+def may_change_files_before_the_lock():
+    """Whether this process may remove stale files before Snakemake takes its lock (the
+    repairs below): the process that plans the run (not cluster jobs), while no other
+    live Snakemake run holds the lock of this directory.  While one does, a run stops
+    here, before it removes or writes anything (Snakemake would refuse it after the
+    removals, advising an --unlock that would break the live run); a dry run goes on,
+    changing nothing."""
+    if not workflow.is_main_process:
+        return False
+    locks = getattr(workflow.execution_settings, "lock", True)  # not with --nolock
+    holders = lock_holders(Path.cwd()) if locks else []
+    if holders == []:
+        return True
+    who = (
+        f"Snakemake process(es) {holders} run here"
+        if holders
+        else "if no other run uses this directory, remove the lock with `snakemake --unlock`"
+    )
+    msg = f"another Snakemake run holds the lock of this directory ({who})"
+    if is_dry_run():
+        logger.warning(f"{msg}: this dry run moves no stale stamp aside")
+        return False
+    raise WorkflowError(
+        f"{msg}: this run stops before it removes or writes anything; "
+        f"start it again when that run has finished"
+    )
+
+
 def remove_stale_stamps():
     """Remove every stamp whose key is not the current one (see :func:`stamp`), and the files
     its rule made under the old key, so that a run asking for one of those files by name
     (``make tables``) remakes it too, not only a run of every target.  In the process that
     plans the run (not again in cluster jobs).  A dry run keeps the files: it moves the
     stamp aside to ``<stamp>.stale``, which the next real run honours."""
-    if not workflow.is_main_process:
+    if not may_change_files_before_the_lock():
         return
     for path, key in {**STAMPS, **STAMPS_ON_REQUEST}.items():
         stamp_file, aside = Path(path), Path(f"{path}.stale")
@@ -391,7 +426,7 @@ def remove_stale_stamps():
             stale = aside.exists()
         if not stale:
             continue
-        if workflow.dryrun or getattr(workflow.output_settings, "dryrun", False):
+        if is_dry_run():
             if stamp_file.exists():
                 stamp_file.replace(aside)
             continue

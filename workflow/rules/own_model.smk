@@ -6,12 +6,8 @@ rule check_model:
     """The Python model at one scenario's true values under every prior variant: shapes,
     finite values, derivatives (before its design trajectories)."""
     input:
-        module=lambda wc: keyed_input(
-            "check_model",
-            wc.scenario,
-            wc.key,
-            f"workflow/ssmobs/models/{SCENARIOS[wc.scenario]['model']}.py",
-        ),
+        # no file: the key holds the model's code (an edit that computes alike reruns nothing)
+        lambda wc: keyed_input("check_model", wc.scenario, wc.key, []),
     output:
         "results/{scenario}/check_model/{key}.json",
     log:
@@ -33,13 +29,12 @@ rule check_model_stan:
     """The Python model against its Stan program at one scenario's true values under every
     prior variant: parameter order, log density, prior bounds (before its NUTS runs)."""
     input:
-        module=lambda wc: keyed_input(
+        stan=lambda wc: keyed_input(
             "check_model_stan",
             wc.scenario,
             wc.key,
-            f"workflow/ssmobs/models/{SCENARIOS[wc.scenario]['model']}.py",
+            f"stan/{SCENARIOS[wc.scenario]['model']}.stan",
         ),
-        stan=lambda wc: f"stan/{SCENARIOS[wc.scenario]['model']}.stan",
     output:
         "results/{scenario}/check_model_stan/{key}.json",
     log:

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from . import io, kernels
-from .stan_backends.base import sampler_key
+from .stan_backends.base import program_digest, sampler_key
 
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -131,6 +131,21 @@ def digest(payload: Any) -> str:
 def file_digest(path: str | Path) -> str:
     """SHA-256 (16 hex digits) of a file's bytes."""
     return io.file_sha256(path)[:16]
+
+
+_DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def syntax_digest(path: str | Path) -> str:
+    """SHA-256 (16 hex digits) of a Python module's syntax tree (``ast.dump``, decoded as
+    Python decodes the file) without its docstrings: what the module computes, so an edit
+    of a comment, a docstring or the layout keeps it; another Python version may change
+    it (which recomputes)."""
+    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, _DOCUMENTED) and ast.get_docstring(node, clean=False) is not None:
+            node.body = node.body[1:] or [ast.Pass()]
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
 
 
 def _module_file(name: str, package_dir: Path) -> Path | None:
@@ -279,6 +294,19 @@ def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) ->
     return tuple(sorted(str(p.relative_to(package_dir)) for p in whole | set(partial)))
 
 
+#: the model registry (:mod:`ssmobs.models`), which every stage that takes a model runs
+MODEL_REGISTRY = "models/__init__.py"
+
+
+def model_closure(model: str, package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
+    """The modules model ``model`` runs: ``models/<model>.py`` and its :func:`module_closure`
+    without the registry's own (:data:`MODEL_REGISTRY` and what it imports, e.g.
+    ``models/base.py``), which is keyed with the code of every stage that takes a model."""
+    registry = set(module_closure((MODEL_REGISTRY,), package_dir))
+    own = module_closure((f"models/{model}.py",), package_dir)
+    return tuple(f for f in own if f not in registry)
+
+
 def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
     """File -> hash of the code a stage runs: its module closure (its stage module in
     :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
@@ -369,12 +397,16 @@ class CacheKeys:
 
     @functools.cache  # noqa: B019
     def model_code(self, model: str) -> dict[str, str]:
-        """The model's Python module (its Stan program keys what it determines:
-        :meth:`stan_program`)."""
-        return {f"models/{model}.py": file_digest(self.package_dir / "models" / f"{model}.py")}
+        """The model's Python module and the package modules it runs, directly or not (a
+        helper ``models/_*.py``, a model it subclasses), by :func:`model_closure`, each by
+        its :func:`syntax_digest` (a comment-only edit reruns nothing; its Stan program keys
+        what it determines: :meth:`stan_program`)."""
+        files = model_closure(model, self.package_dir)
+        return {f: syntax_digest(self.package_dir / f) for f in files}
 
     def stan_program(self, model: str) -> str:
-        return file_digest(self.repo / "stan" / f"{model}.stan")
+        """The model's Stan program with its ``#include`` files."""
+        return program_digest(self.repo / "stan" / f"{model}.stan")
 
     def _key(self, kind: str, name: str, payload: dict[str, Any], **about: Any) -> str:
         # every output depends on the fixed numerical kernels (ssmobs/kernels.py)

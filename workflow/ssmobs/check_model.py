@@ -41,6 +41,7 @@ import sympy as sp
 
 from .models import PriorBounds, StateSpaceModel, get_model
 from .models.log_posterior import in_support, log_posterior, neg2_log_posterior
+from .stan_backends.base import program_code
 
 
 class ModelCheckError(ValueError):
@@ -369,7 +370,7 @@ def stan_source_problems(model: StateSpaceModel, stan_path: Path) -> list[str]:
     """Parameter names and order, and the data the Python side passes, read from the source."""
     if not stan_path.is_file():
         return [f"no Stan program {stan_path}: every model needs stan/{model.slug}.stan"]
-    code = stan_path.read_text()
+    code = program_code(stan_path)  # with its #include files
     problems = []
     params = stan_block(code, "parameters")
     want = expected_parameters(model)
@@ -456,7 +457,7 @@ def stan_density(stan_path: Path, data: dict, backend: str = "native") -> Iterat
         with PyStanBackend().session(stan_path):
             try:
                 # mypy resolves `stan` to the repository's stan/ folder (pystan has no stubs)
-                post = stan.build(stan_path.read_text(), data=data)  # type: ignore[attr-defined]
+                post = stan.build(program_code(stan_path), data=data)  # type: ignore[attr-defined]
             except Exception as err:  # noqa: BLE001 - PyStan raises bare exceptions
                 raise ValueError(f"{type(err).__name__}: {err}") from err
 

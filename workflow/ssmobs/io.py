@@ -179,13 +179,17 @@ def write_checksum(path: str | os.PathLike) -> None:
 
 
 def checksum_problem(path: str | os.PathLike) -> str | None:
-    """Why ``path`` does not match its ``.sha256`` file, or None (also when either is
-    missing: a missing output is Snakemake's business)."""
+    """Why ``path`` does not match its ``.sha256`` file, or None (also when ``path`` is
+    missing: a missing output is Snakemake's business).  A missing checksum is damage: it
+    cannot vouch for the file."""
     try:
-        expected = checksum_path(path).read_text().strip()
         actual = file_sha256(path)
     except FileNotFoundError:
         return None
+    try:
+        expected = checksum_path(path).read_text().strip()
+    except FileNotFoundError:
+        return f"{path} has no checksum {checksum_path(path).name} (it cannot be trusted)"
     if actual != expected:
         return f"{path} does not match its checksum (damaged or changed after it was written)"
     return None

@@ -46,6 +46,7 @@ from .record_cache import (
     record_key,
     record_path,
     settings_hash,
+    write_record,
 )
 from .stan_backends.base import Draws, SamplerSettings, SamplingError
 
@@ -232,11 +233,12 @@ def _one_trajectory(
 
 
 def _draws_intact(path: Path, rec: dict[str, Any]) -> bool:
-    """The kept draws file exists and matches the checksum its record holds."""
+    """The kept draws file exists and matches the checksum its record holds (a record
+    without one: damaged)."""
     if not path.exists():
         return False
     expected = rec.get("draws_sha256")
-    return expected is None or io.file_sha256(path) == expected
+    return expected is not None and io.file_sha256(path) == expected
 
 
 def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
@@ -410,7 +412,7 @@ def run_trajectories(
             points[k],
         )
         t_w = time.perf_counter()
-        io.write_json(record_path(records_dir, k), rec)
+        write_record(record_path(records_dir, k), rec)
         LOG.debug(
             "k=%d: converged=%s %s (sample %.2f s, overhead %.3f s, write %.3f s)",
             k,

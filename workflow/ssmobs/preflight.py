@@ -105,6 +105,13 @@ def snakemake_processes(workdir: str | os.PathLike) -> list[int] | None:
     return sorted(found)
 
 
+def lock_holders(workdir: str | os.PathLike) -> list[int] | None:
+    """The Snakemake processes that may hold the lock of ``workdir``: [] when there is no
+    lock or it is stale (no Snakemake process runs there), else their PIDs (None where a
+    lock exists and /proc cannot tell)."""
+    return snakemake_processes(workdir) if lock_files(workdir) else []
+
+
 def unlock_if_stale(workdir: str | os.PathLike, configfile: str | None) -> str | None:
     """Remove a stale Snakemake lock of ``workdir``; returns what was done (None: no lock)."""
     if not lock_files(workdir):

@@ -30,7 +30,7 @@ import numpy as np
 
 from . import io, seeds
 from .marginal_map import GRID_PER_BW
-from .stan_backends.base import sampler_key
+from .stan_backends.base import program_digest, sampler_key
 
 if TYPE_CHECKING:
     import pandas
@@ -43,8 +43,11 @@ LOG = logging.getLogger("ssmobs.nuts")
 
 #: version of the record format; records of another version are recomputed
 #: (2: keyed without the convergence thresholds, which the tables apply to the stored
-#: diagnostics; R-hat and ESS per block of Theta; the checksum of kept draws)
-RECORD_VERSION = 2
+#: diagnostics; R-hat and ESS per block of Theta; the checksum of kept draws;
+#: 3: the record's own checksum, :data:`RECORD_CHECKSUM`)
+RECORD_VERSION = 3
+#: the field of a record holding the SHA-256 of the rest of it (:func:`write_record`)
+RECORD_CHECKSUM = "record_sha256"
 #: keys every record has (checked when a record is read back)
 RECORD_KEYS = (
     "record_version",
@@ -81,8 +84,8 @@ def _sha(obj: Any) -> str:
 
 
 def program_hash(stan_file: str | Path) -> str:
-    """SHA-256 (16 hex digits) of the Stan program's text."""
-    return hashlib.sha256(Path(stan_file).read_bytes()).hexdigest()[:16]
+    """SHA-256 (16 hex digits) of the Stan program's text with its ``#include`` files."""
+    return program_digest(stan_file)
 
 
 def settings_hash(
@@ -163,6 +166,31 @@ def record_key(
     return key
 
 
+def _record_checksum(rec: dict[str, Any]) -> str:
+    """SHA-256 of a record's canonical JSON without :data:`RECORD_CHECKSUM`."""
+    body = {k: v for k, v in rec.items() if k != RECORD_CHECKSUM}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), default=io.json_default)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def write_record(path: str | os.PathLike, rec: dict[str, Any]) -> None:
+    """Write a record with its checksum (:data:`RECORD_CHECKSUM`): an edit that keeps the
+    file valid JSON, and even its time, is found when the record is read back."""
+    plain = json.loads(json.dumps(rec, default=io.json_default))  # as it is read back
+    io.write_json(path, {**plain, RECORD_CHECKSUM: _record_checksum(plain)})
+
+
+def read_record(path: str | os.PathLike) -> dict[str, Any]:
+    """A record written by :func:`write_record`; CorruptFileError naming the file when it
+    does not parse, lacks keys, or its checksum is missing or does not match."""
+    rec: dict[str, Any] = io.read_json(path, required=RECORD_KEYS)
+    if rec.get(RECORD_CHECKSUM) != _record_checksum(rec):
+        raise io.CorruptFileError(
+            f"{path}: its checksum is missing or does not match (damaged or edited)"
+        )
+    return rec
+
+
 def record_path(records_dir: str | os.PathLike, k: int) -> Path:
     return Path(records_dir) / f"k{int(k):05d}.json"
 
@@ -179,7 +207,7 @@ def load_record(
     if not path.exists():
         return None
     try:
-        rec = io.read_json(path, required=RECORD_KEYS)
+        rec = read_record(path)
     except io.CorruptFileError as err:
         LOG.warning("recomputing: %s", err)
         return None
@@ -213,8 +241,7 @@ def load_records(records_dir: str | Path, ks: Iterable[int]) -> list[dict[str, A
         path = record_path(records_dir, k)
         if not path.exists():
             raise io.CorruptFileError(f"{path}: missing record of trajectory k={k}")
-        rec = io.read_json(path, required=RECORD_KEYS)
-        out.append(rec)
+        out.append(read_record(path))
     return out
 
 
@@ -234,12 +261,13 @@ def changed_batch_records(
     """Why the finished batch table ``batch_table`` no longer matches its records, or None.
 
     Reads only the table's ``k`` column, the records' file times and, for the
-    ``keep_draws`` trajectories, the kept draws' checksums (cheap enough for every DAG
-    build): a record of one of those k that is missing or newer than the table was
-    damaged, edited or deleted after the batch ran; a kept draws file that is missing or
-    differs from the checksum its record holds was
-    damaged.  None when the table does not exist (the batch is still to run) or cannot be
-    read (gather_nuts reports that).
+    ``keep_draws`` trajectories, their records and the kept draws' checksums (cheap enough
+    for every DAG build): a record of one of those k that is missing or newer than the
+    table was damaged, edited or deleted after the batch ran; a kept draws file that is
+    missing, or has no checksum or another one than its record holds, was damaged (every
+    record's own checksum is checked where it is read: reused by a batch, gathered).  None
+    when the table does not exist (the batch is still to run) or cannot be read
+    (gather_nuts reports that).
     """
     import pyarrow.parquet as pq
 
@@ -268,10 +296,11 @@ def changed_batch_records(
             continue  # only the records of kept draws are read (this runs on every DAG build)
         draws = draws_path(draws_dir, k)
         try:
-            expected = (io.read_json(path) or {}).get("draws_sha256")
+            expected = read_record(path).get("draws_sha256")
         except io.CorruptFileError:
             return str(_damaged_batch(table, f"the record of trajectory k={k} is damaged"))
-        if expected and (not draws.exists() or io.file_sha256(draws) != expected):
+        # kept draws without their checksum count as damaged (a record without draws has none)
+        if (io.file_sha256(draws) != expected) if draws.exists() else expected is not None:
             return str(_damaged_batch(table, f"the kept draws {draws} are missing or damaged"))
     return None
 
@@ -304,7 +333,7 @@ def check_batch_records(
         if not path.exists():
             raise damaged(f"the record of trajectory k={k} ({path}) is missing")
         try:
-            rec = io.read_json(path, required=RECORD_KEYS)
+            rec = read_record(path)
         except io.CorruptFileError as err:
             raise damaged(f"the record of trajectory k={k} is damaged ({err.args[0]})") from None
         if rec["k"] != k:

@@ -20,6 +20,7 @@ Record format (JSON, one file per k; :data:`ssmobs.record_cache.RECORD_VERSION`,
                      or None when they could not be computed
     init             "random" | "true"
     draws_sha256     SHA-256 of the kept draws file (only when the draws were kept)
+    record_sha256    SHA-256 of the rest of the record (record_cache.write_record)
     backend          backend name
     timings          seconds: sample_call (wall time of backend.sample), backend (the
                      backend's own breakdown, e.g. transfer), prepare, diagnostics, marginal,

@@ -10,10 +10,13 @@ which imports them).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -30,6 +33,37 @@ SAMPLER_COLUMNS: tuple[str, ...] = (
 )
 
 LOG = logging.getLogger("ssmobs.stan")
+
+#: an ``#include`` line of a Stan program: ``#include file``, ``"file"`` or ``<file>``
+STAN_INCLUDE = re.compile(r'^[ \t]*#include[ \t]+(?:"([^"\n]+)"|<([^>\n]+)>|(\S+))[ \t]*$', re.M)
+
+
+def program_code(stan_file: str | os.PathLike) -> str:
+    """The text of a Stan program with every ``#include`` replaced by the included file's
+    text, recursively (files found in the program's directory, as CmdStan's default include
+    path): what every backend compiles and what keys the program, so an edit of an included
+    file is an edit of the program.  A program without includes is its file's text.
+    FileNotFoundError for a missing include, ValueError for one that includes itself."""
+    top = Path(stan_file)
+
+    def expand(path: Path, within: tuple[Path, ...]) -> str:
+        def include(found: re.Match[str]) -> str:
+            name = next(g for g in found.groups() if g is not None)
+            target = (top.parent / name).resolve()
+            if target in within:
+                raise ValueError(f"{path}: #include {name} includes itself")
+            if not target.is_file():
+                raise FileNotFoundError(f"{path}: #include {name}: no file {target}")
+            return expand(target, (*within, target))
+
+        return STAN_INCLUDE.sub(include, path.read_text())
+
+    return expand(top, (top.resolve(),))
+
+
+def program_digest(stan_file: str | os.PathLike) -> str:
+    """SHA-256 (16 hex digits) of :func:`program_code`: a Stan program's key."""
+    return hashlib.sha256(program_code(stan_file).encode()).hexdigest()[:16]
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from .base import (
     SamplerSettings,
     SamplingError,
     check_sample_args,
+    program_code,
     quiet_loggers,
 )
 from .cache import (
@@ -165,7 +166,7 @@ class CmdStanPyBackend:
         import cmdstanpy
 
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         sha = hashlib.sha256(code.encode()).hexdigest()
         key = (str(path), sha)
         if key in self._markers:

@@ -72,6 +72,7 @@ from .base import (
     SamplingError,
     check_sample_args,
     log_captured,
+    program_code,
 )
 from .cache import (
     BUILD_RECORD,
@@ -488,7 +489,7 @@ class NativeBackend:
         cache cannot be written or the build cannot run (no compiler).
         """
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         memo = (str(path), code)
         if memo in self._markers:
             return self._markers[memo]

@@ -72,6 +72,7 @@ from .base import (
     SamplingError,
     check_sample_args,
     log_captured,
+    program_code,
     quiet_loggers,
 )
 
@@ -352,7 +353,7 @@ class PyStanBackend:
 
         _patient_stanc()
         path = Path(stan_file).resolve()
-        code = path.read_text()
+        code = program_code(path)
         sha = program_sha256(code)
         key = (str(path), sha)
         if key in self._markers:
@@ -472,7 +473,7 @@ class PyStanBackend:
         t_start = time.perf_counter()
         check_sample_args(seed, settings, inits)
         marker = self.compile(stan_file)
-        code = Path(marker["stan_file"]).read_text()
+        code = program_code(marker["stan_file"])
         kwargs: dict[str, Any] = dict(
             num_chains=settings.chains,
             num_warmup=settings.iter_warmup,
