@@ -144,6 +144,7 @@ def run_check_model(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The command line: check one model, print what was checked; exit 1 on a problem."""
     parser = argparse.ArgumentParser(
         prog="python -m ssmobs.check_model",
         description="Check workflow/ssmobs/models/<slug>.py against stan/<slug>.stan.",

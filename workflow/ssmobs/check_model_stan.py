@@ -20,6 +20,7 @@ from .models.log_posterior import in_support, log_posterior
 
 
 def stan_point(model: StateSpaceModel, theta: np.ndarray, T: int) -> dict:
+    """Theta = (Omega, x_0, x_1..x_T) as Stan's constrained values, by parameter name."""
     m, p = model.n_params, model.state_dim
     omega, states = theta[:m], theta[m:].reshape(T + 1, p)
     point: dict[str, Any] = {name: float(omega[i]) for i, name in enumerate(model.param_names)}

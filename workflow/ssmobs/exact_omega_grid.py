@@ -42,6 +42,8 @@ class OmegaAxes:
 
 
 def omega_axes(bounds: PriorBounds, margin: float, log_range: tuple[float, float]) -> OmegaAxes:
+    """The grid coordinates of ``bounds``' support, ``margin`` (a fraction of a bounded
+    interval) inside it; half lines at 0 span ``log_range`` in log|Omega|."""
     lo, hi = np.asarray(bounds.lower, float), np.asarray(bounds.upper, float)
     log_scale = ~(np.isfinite(lo) & np.isfinite(hi))
     sign = np.where(np.isfinite(lo) & ~np.isfinite(hi), 1.0, -1.0)
@@ -94,6 +96,8 @@ def log_density_u(
 
 
 def trajectory_chunks(K: int, per_traj: int, limit: int) -> Iterator[slice]:
+    """Slices of the K trajectories holding at most ``limit`` elements of ``per_traj``
+    each (at least one trajectory per slice)."""
     step = max(1, limit // max(per_traj, 1))
     for s in range(0, K, step):
         yield slice(s, min(K, s + step))
@@ -298,6 +302,7 @@ def _newton(
 
 # ---------------------------------------------------------------------- step 3: fine grid
 def trapezoid_weights(n: int) -> np.ndarray:
+    """Trapezoid rule weights of ``n`` equally spaced nodes (unit spacing)."""
     w = np.ones(n)
     w[0] = w[-1] = 0.5
     return w

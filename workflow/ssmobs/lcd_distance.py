@@ -205,6 +205,7 @@ def _check_points(points: np.ndarray, name: str) -> np.ndarray:
 
 
 def check_b_max(b_max: float) -> float:
+    """``b_max`` as a float; ValueError unless it is finite and positive."""
     try:
         b = float(b_max)
     except (TypeError, ValueError):
@@ -271,6 +272,9 @@ def lcd_distance(points: np.ndarray, b_max: float, *, n_nodes: int = N_NODES) ->
 def symmetric_distance(
     half: np.ndarray, K: int, b_max: float, *, gradient: bool, n_nodes: int = N_NODES
 ) -> tuple[float, np.ndarray | None]:
+    """Distance of the point-symmetric set of ``half`` (and its gradient w.r.t. ``half``
+    with ``gradient=True``, else None), without checking the arguments
+    (:func:`symmetric_distance_and_gradient` checks them)."""
     s = half
     n_half, q = s.shape
     quad = _quadrature(q, b_max, n_nodes)
@@ -368,6 +372,7 @@ def symmetric_distance_and_gradient(
 
 
 def check_positive_int(name: str, value: object) -> int:
+    """``value`` as an int; ValueError naming ``name`` unless it is an integer >= 1."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ValueError(f"{name} must be a positive integer (>= 1); got {value!r}")
     if value < 1:

@@ -176,6 +176,7 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
 
 
 def compile_flags() -> list[str]:
+    """The C++ compiler's flags for the driver and the programs (httpstan's headers)."""
     return [*CXXFLAGS, *("-D" + d for d in DEFINES), f"-I{httpstan_dir() / 'include'}"]
 
 
