@@ -39,9 +39,12 @@ lint: setup docs
 	$(BIN)/mypy
 
 # The documentation site (mkdocs.yml, docs/) into site/; the configuration reference page
-# must be the one the schema gives (`python -m ssmobs.config_reference` rewrites it).
+# must be the one the schema gives (`python -m ssmobs.config_reference` rewrites it), the
+# profiles tables of README.md and config/README.md the generated one
+# (`python -m ssmobs.config_profiles` rewrites them).
 docs: setup
 	$(BIN)/python -m ssmobs.config_reference --check
+	$(BIN)/python -m ssmobs.config_profiles --check
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and

@@ -29,7 +29,8 @@ import numpy as np
 from machine import machine_info, report
 from ssmobs.models import get_model
 from ssmobs.stan_backends import SamplerSettings, get_backend, stan_file
-from ssmobs.stan_backends.native import NativeBackend, stan_version
+from ssmobs.stan_backends.native import NativeBackend
+from ssmobs.stan_backends.native_build import stan_version
 
 PAPER = SamplerSettings(chains=4, iter_warmup=4000, iter_sampling=6000, workers=1)
 CASES = [

@@ -43,7 +43,8 @@ def measure(fn) -> tuple[float, float]:
 
 def cold_native(slug: str) -> tuple[float, float]:
     """A cold native build into a fresh cache that holds only the driver's object file."""
-    from ssmobs.stan_backends.native import NativeBackend, driver_object
+    from ssmobs.stan_backends.native import NativeBackend
+    from ssmobs.stan_backends.native_build import driver_object
 
     shared = driver_object().parent
     with tempfile.TemporaryDirectory() as tmp:
@@ -80,7 +81,7 @@ def main() -> None:
     parser.add_argument("--cold-pystan", action="store_true")
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args()
-    from ssmobs.stan_backends.native import driver_object
+    from ssmobs.stan_backends.native_build import driver_object
 
     load0 = os.getloadavg()[0]
     driver_cpu, driver_wall = measure(driver_object)

@@ -107,7 +107,8 @@ def time_case(slug, omega, x0, T, K, workers):
 
 def accuracy(slug, omega, x0, T, K):
     """Largest change (in units of the 90 % interval width) from default to refined grids."""
-    from ssmobs.exact_marginal import ExactSettings, exact_marginal
+    from ssmobs.exact_marginal import exact_marginal
+    from ssmobs.exact_settings import ExactSettings
 
     traj = trajectories(slug, omega, x0, T, K, seed=1)
     bounds = traj.model.prior_bounds(traj.omega, None)

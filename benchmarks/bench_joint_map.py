@@ -67,12 +67,12 @@ MODEL_CASES = [
 
 
 def blas_one_thread():
-    """One OpenBLAS thread if the design module's helper is available, else a no-op."""
+    """One OpenBLAS thread if the helper is available, else a no-op."""
     try:
-        from ssmobs.design_disturbances import _blas_threads
+        from ssmobs.openblas_threads import openblas_threads
     except Exception:  # pragma: no cover - optional
         return contextlib.nullcontext()
-    return _blas_threads(1)
+    return openblas_threads(1)
 
 
 def trajectories(slug, omega, x0, T, K, seed=0):

@@ -10,14 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ssmobs.check_model import (
-    CheckCase,
-    _sample_theta,
-    _stan_point,
-    check_model,
-    stan_density,
-    stan_problems,
-)
+from ssmobs.check_model import check_model
+from ssmobs.check_model_cases import CheckCase, sample_theta
+from ssmobs.check_model_stan import stan_density, stan_point, stan_problems
 from ssmobs.models import MODELS, get_model
 from ssmobs.stan_backends import stan_file
 
@@ -96,8 +91,8 @@ def test_native_log_density_equals_pystan_oracle():
     # the same points, inside and outside the support: equal up to PyStan's dropped constants
     model = get_model("stoch_vol")
     case = CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], {"sigma": "restricted"})
-    theta, z, bounds = _sample_theta(model, case, 7, 5, np.random.default_rng(1))
-    points = [_stan_point(model, th, 7) for th in theta]
+    theta, z, bounds = sample_theta(model, case, 7, 5, np.random.default_rng(1))
+    points = [stan_point(model, th, 7) for th in theta]
     points += [{**points[0], "sigma": 1.2}, {**points[0], "phi": -1.5}]
     data = model.stan_data(z, bounds)
     values = {}

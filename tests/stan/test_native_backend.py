@@ -23,12 +23,14 @@ from ssmobs.stan_backends import (
     SamplerSettings,
     SamplingError,
     get_backend,
+    native_run,
     resolve_backend,
     stan_file,
 )
-from ssmobs.stan_backends import native as native_mod
 from ssmobs.stan_backends.cache import BUILD_RECORD
-from ssmobs.stan_backends.native import EXE_NAME, LogDensities, NativeBackend, columns_to_draws
+from ssmobs.stan_backends.native import NativeBackend
+from ssmobs.stan_backends.native_build import EXE_NAME
+from ssmobs.stan_backends.native_run import LogDensities, columns_to_draws
 from test_backends import _data  # the same small data sets as the other backend tests
 
 pytestmark = pytest.mark.stan
@@ -107,10 +109,10 @@ def test_no_temporary_files_left(native, tmp_path):
 
 
 def test_stale_temporaries_swept(tmp_path):
-    dead = tmp_path / f"{native_mod.TMP_PREFIX}999999999-abc"
+    dead = tmp_path / f"{native_run.TMP_PREFIX}999999999-abc"
     dead.mkdir()
     (dead / "data.json").write_text("{}")
-    alive = tmp_path / f"{native_mod.TMP_PREFIX}{os.getpid()}-xyz"
+    alive = tmp_path / f"{native_run.TMP_PREFIX}{os.getpid()}-xyz"
     alive.mkdir()
     backend = NativeBackend(tmp_root=tmp_path)
     backend.sample(stan_file("same"), _data("same", {"a": 0.9}), 3, SMALL)
@@ -145,7 +147,7 @@ def test_cache_keyed_by_program_not_environment(native, tmp_path, monkeypatch):
         for name in (BUILD_RECORD, EXE_NAME):
             (cache_dir / name).write_text("{}")
 
-    monkeypatch.setattr(NativeBackend, "_build", staticmethod(record_build))
+    monkeypatch.setattr("ssmobs.stan_backends.native.build_program", record_build)
     other = NativeBackend().compile(copy)
     assert built == [Path(other["cache_dir"])]
     assert other["cache_dir"].startswith(str(tmp_path / "cache"))
@@ -311,7 +313,7 @@ def _draws_file(path: Path, header: str, values: np.ndarray, length: int | None 
     text = header.encode()
     n = len(text) if length is None else length
     path.write_bytes(
-        native_mod.MAGIC + n.to_bytes(4, "little") + text + values.astype("<f8").tobytes()
+        native_run.MAGIC + n.to_bytes(4, "little") + text + values.astype("<f8").tobytes()
     )
     return path
 
@@ -329,7 +331,7 @@ def test_draws_file_written_little_endian(native, tmp_path):
     n = int.from_bytes(raw[8:12], "little")
     header = raw[12 : 12 + n].decode()
     assert header.startswith("byteorder=little\nchains=1\ndraws=10\ncolumns=lp__,")
-    columns, values = native_mod.read_draws_file(out)
+    columns, values = native_run.read_draws_file(out)
     assert values.shape == (1, 10, len(columns))
     stepsize = values[0, :, columns.index("stepsize__")]
     assert np.all(stepsize > 0) and np.all(stepsize == stepsize[0])
@@ -358,22 +360,22 @@ def test_draws_file_header_checked(tmp_path, header, length, field):
     values = np.arange(12, dtype=float)  # 2 chains x 3 draws x 2 columns
     path = _draws_file(tmp_path / "draws.bin", header, values, length)
     if field is None:
-        columns, arr = native_mod.read_draws_file(path)
+        columns, arr = native_run.read_draws_file(path)
         assert columns == ["lp__", "x"]
         np.testing.assert_array_equal(arr, values.reshape(2, 3, 2))
         return
     with pytest.raises(BackendError, match=re.escape(field)):
-        native_mod.read_draws_file(path)
+        native_run.read_draws_file(path)
 
 
 def test_draws_file_magic_and_truncation(tmp_path):
     bad = tmp_path / "bad.bin"
     bad.write_bytes(b"NOTDRAWS" + bytes(8))
     with pytest.raises(BackendError, match="magic"):
-        native_mod.read_draws_file(bad)
-    bad.write_bytes(native_mod.MAGIC + b"\x01")
+        native_run.read_draws_file(bad)
+    bad.write_bytes(native_run.MAGIC + b"\x01")
     with pytest.raises(BackendError, match="header length"):
-        native_mod.read_draws_file(bad)
-    bad.write_bytes(native_mod.MAGIC + (2).to_bytes(4, "little") + b"\xff\xfe")
+        native_run.read_draws_file(bad)
+    bad.write_bytes(native_run.MAGIC + (2).to_bytes(4, "little") + b"\xff\xfe")
     with pytest.raises(BackendError, match="header: not UTF-8"):
-        native_mod.read_draws_file(bad)
+        native_run.read_draws_file(bad)

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ssmobs.stan_backends import BackendError, SamplerSettings, stan_file
-from ssmobs.stan_backends import native as native_mod
-from ssmobs.stan_backends.native import NativeBackend, read_draws_file
+from ssmobs.stan_backends import BackendError, SamplerSettings, native_build, stan_file
+from ssmobs.stan_backends.native import NativeBackend
+from ssmobs.stan_backends.native_run import read_draws_file
 from test_backends import _data
 
 pytestmark = pytest.mark.stan
@@ -40,7 +40,7 @@ def orphan_entry(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     """``same.stan`` built into a fresh cache by an "environment" (a copy of the httpstan
     package: its headers and stanc linked, its lib/ copied) that is deleted afterwards."""
     root = tmp_path_factory.mktemp("native-cache")
-    real = native_mod.httpstan_dir()
+    real = native_build.httpstan_dir()
     fake = root / "doomed-venv" / "httpstan"
     (fake / "lib").mkdir(parents=True)
     (fake / "include").symlink_to(real / "include")
@@ -50,11 +50,11 @@ def orphan_entry(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     cache = root / "cache"
     # the driver object is a build input shared by every program, not part of an entry:
     # copied from the user's cache it saves a compile of the driver (same sources, flags)
-    driver = native_mod.driver_object().parent
+    driver = native_build.driver_object().parent
     shutil.copytree(driver, cache / "native" / driver.name)
     mp = pytest.MonkeyPatch()
     mp.setenv("SSMOBS_CACHE", str(cache))
-    mp.setattr(native_mod, "httpstan_dir", lambda: fake)
+    mp.setattr(native_build, "httpstan_dir", lambda: fake)
     old_umask = os.umask(BUILD_UMASK)
     try:
         marker = NativeBackend().compile(stan_file("same"))
@@ -168,7 +168,7 @@ def test_build_record_names_the_compiler(orphan_entry):
     _, marker = orphan_entry
     record = json.loads((Path(marker["cache_dir"]) / "build.json").read_text())
     assert record["compiler_version"] == marker["compiler"] != "unknown"
-    assert "compiler" not in native_mod.build_key("x")
+    assert "compiler" not in native_build.build_key("x")
 
 
 def test_entry_mode_follows_the_umask(orphan_entry):

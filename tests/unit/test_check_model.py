@@ -6,17 +6,14 @@ import re
 
 import numpy as np
 import pytest
-from ssmobs.check_model import (
+from ssmobs.check_model_cases import (
     CheckCase,
     cases_from_scenarios,
-    declared_names,
     default_cases,
     default_values,
-    python_problems,
-    simulate_problems,
-    stan_block,
-    stan_source_problems,
 )
+from ssmobs.check_model_python import python_problems, simulate_problems
+from ssmobs.check_model_stan_source import declared_names, stan_block, stan_source_problems
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.base import StateSpaceModel
 from ssmobs.models.sep_d2_p1 import SepD2P1

@@ -11,14 +11,9 @@ import numpy as np
 import pytest
 from scipy import integrate, special
 from ssmobs import design_disturbances as ddm
-from ssmobs.design_disturbances import (
-    METHODS,
-    DesignResult,
-    b_max_rule,
-    design_disturbances,
-    lcd_distance,
-    symmetric_distance_and_gradient,
-)
+from ssmobs import lcd_distance as lcd
+from ssmobs.design_disturbances import METHODS, DesignResult, design_disturbances
+from ssmobs.lcd_distance import b_max_rule, lcd_distance, symmetric_distance_and_gradient
 
 pytestmark = pytest.mark.unit
 
@@ -71,7 +66,7 @@ def test_b_max_rule(q, b):
 @pytest.mark.parametrize("B", [5.0, 10.0, 100.0])
 def test_q2_closed_forms_against_quadrature(B):
     """Doc 2.2 test oracles for q = 2: D1 and J(n) (tolerance: round-off of J - B^2/2)."""
-    quad = ddm._quadrature(2, B)
+    quad = lcd._quadrature(2, B)
     d1p_exact = -0.5 * math.log1p(B * B)  # D1 - B^2/2 = (B^2 - ln(1 + B^2))/2 - B^2/2
     assert quad.d1p == pytest.approx(d1p_exact, abs=1e-13)
     tau = 1.0 + 2.0 * B * B
@@ -119,15 +114,15 @@ def test_d1_against_adaptive_quadrature(q, B):
         return ((b * b / (1.0 + b * b)) ** (q / 2.0) - 1.0) * b  # D1 - B^2/2 as one integral
 
     ref, _ = integrate.quad(integrand, 0.0, B, limit=500, epsabs=1e-13, epsrel=1e-13)
-    assert ddm._quadrature(q, B).d1p == pytest.approx(ref, rel=1e-10)
+    assert lcd._quadrature(q, B).d1p == pytest.approx(ref, rel=1e-10)
 
 
 @pytest.mark.unit
 def test_e1_series_matches_scipy():
     c = np.concatenate([np.logspace(-14, 0, 2001), np.linspace(0.5, 1.0, 101)])
-    np.testing.assert_allclose(ddm._e1(c.copy()), special.exp1(c), rtol=1e-14)
+    np.testing.assert_allclose(lcd._e1(c.copy()), special.exp1(c), rtol=1e-14)
     big = np.array([0.0, 0.5, 3.0, 40.0])  # > 1 falls back to scipy; E1(0) := 0
-    np.testing.assert_allclose(ddm._e1(big.copy()), [0.0, *special.exp1(big[1:])], rtol=1e-15)
+    np.testing.assert_allclose(lcd._e1(big.copy()), [0.0, *special.exp1(big[1:])], rtol=1e-15)
 
 
 # ------------------------------------------------------------------------------------------

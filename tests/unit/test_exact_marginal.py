@@ -5,17 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import ssmobs.exact_boundaries as boundaries
 import ssmobs.exact_marginal as em
+import ssmobs.exact_omega_grid as omega_grid
 from scipy import integrate
 from scipy.special import ndtr
-from ssmobs.exact_marginal import (
-    ExactSettings,
-    _mixture_mode_quantiles,
-    boundary_slopes,
-    exact_marginal,
-    improper,
-    log_posterior_omega,
-)
+from ssmobs.exact_boundaries import boundary_slopes, improper
+from ssmobs.exact_marginal import exact_marginal
+from ssmobs.exact_omega_grid import log_posterior_omega
+from ssmobs.exact_settings import ExactSettings
+from ssmobs.exact_state_mixtures import mixture_mode_quantiles
 from ssmobs.kalman_filter import kalman_marginal
 from ssmobs.models import MODELS, get_model
 from ssmobs.scenario import Scenario
@@ -249,13 +248,13 @@ def test_state_quantiles_do_not_move_when_the_state_grid_is_refined(monkeypatch)
     _, z = model.simulate(omega, np.array([8.0]), eta, eps)
     z = z[[3, 7, 11]]  # before the fix: x0's quantiles 0.08-0.15 off on these
     boxes = []
-    state_box = em._state_box
+    state_box = em.state_box
 
     def spy(mass, lo_box, hi_box, settings):
         boxes.append(hi_box - lo_box)
         return state_box(mass, lo_box, hi_box, settings)
 
-    monkeypatch.setattr(em, "_state_box", spy)
+    monkeypatch.setattr(em, "state_box", spy)
     default = exact_marginal(model, z, bounds)
     # the premise: every fine box widened well beyond mode ± box_sd sd in some axis
     widths = boxes[0] / default.laplace_sd
@@ -284,7 +283,7 @@ def test_mixture_quantiles_converge_with_a_light_very_wide_component():
     sd[:, -1, :] = 4e5
     order = np.argsort(-w, axis=1)  # heaviest first, as the caller sorts them
     w, mean, sd = (np.take_along_axis(a, order, 1) for a in (w, mean, sd))
-    _, q = _mixture_mode_quantiles(w, mean, sd, ExactSettings())
+    _, q = mixture_mode_quantiles(w, mean, sd, ExactSettings())
     assert q.shape == (K, S, 2)
     for k in range(K):
         for t in range(S):
@@ -358,8 +357,6 @@ def test_sep_d1_p2_is_not_uniquely_identified():
 
 def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
     """Definition 3 'several': a posterior with two separated interior maxima."""
-    import ssmobs.exact_marginal as em
-
     model = get_model("same")
     traj = _traj("same", T=20, K=2, seed=0)
     bounds = model.prior_bounds(traj.omega, "restricted")
@@ -372,7 +369,9 @@ def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
             ok, np.broadcast_to(val, np.broadcast_shapes(val.shape, np.shape(z)[:-2])), -np.inf
         )
 
-    monkeypatch.setattr(em, "log_posterior_omega", two_bumps)
+    # the grid's density and the boundary slopes both call it
+    monkeypatch.setattr(omega_grid, "log_posterior_omega", two_bumps)
+    monkeypatch.setattr(boundaries, "log_posterior_omega", two_bumps)
     res = em.exact_marginal(model, traj.z, bounds)
     assert list(res.maxima) == ["several", "several"]
     assert not res.to_frame(model)["converged"].any()

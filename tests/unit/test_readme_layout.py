@@ -40,7 +40,8 @@ def test_layout_names_every_module_and_rule_file():
     missing = {m for m in stages if not re.search(rf"\b{m}\.py\b", layout)}
     assert missing == set(), "stage modules (stages/) missing from docs/reference/layout.md"
     named = set(re.findall(r"\b(\w+)\.py\b", layout)) - {"rule"}
-    known = modules | stages | {"base", "log_posterior"}
+    backends = {p.stem for p in (package / "stan_backends").glob("*.py")}
+    known = modules | stages | backends | {"log_posterior"}
     assert named <= known, "layout names modules that do not exist"
     for smk in (REPO / "workflow" / "rules").glob("*.smk"):
         stem = smk.stem.replace("common", "common.smk")

@@ -1,16 +1,29 @@
-"""The rule scripts (workflow/scripts/*.py) share one set-up: logging, then the sweep of the
-temporaries an interrupted earlier job left beside the outputs."""
+"""The rule scripts (workflow/scripts/*.py) share one set-up, :func:`ssmobs.log.start_job`:
+logging (with the check of the fixed kernels), then the sweep of the temporaries an
+interrupted earlier job left beside the outputs."""
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
+from ssmobs import kernels
 
 pytestmark = pytest.mark.unit
 
-SCRIPTS = sorted((Path(__file__).resolve().parents[2] / "workflow" / "scripts").glob("*.py"))
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPTS = sorted((ROOT / "workflow" / "scripts").glob("*.py"))
+
+#: a rule script's first line, run on its own with a job of one output
+START = """
+import sys
+from types import SimpleNamespace
+from ssmobs import log
+log.start_job(SimpleNamespace(log=[sys.argv[1]], output=[sys.argv[2]]))
+"""
 
 
 def _is_call(node: ast.stmt, module: str, function: str) -> ast.Call | None:
@@ -32,13 +45,39 @@ def test_there_are_scripts():
 
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
-def test_every_script_sweeps_its_temporaries_right_after_setting_up_its_log(script):
-    """``log.setup(snakemake.log[0])`` then ``io.sweep_temporaries(snakemake.output)``, before
-    any work: a job killed while writing leaves temporaries (``ssmobs.io.atomic_path``) that
-    only the next job writing the same outputs may delete."""
+def test_every_script_starts_its_job_first(script):
+    """``log.start_job(snakemake)`` before any work: a job killed while writing leaves
+    temporaries (``ssmobs.io.atomic_path``) that only the next job writing the same outputs
+    may delete, and no number is computed before the kernels are checked."""
     body = [n for n in ast.parse(script.read_text()).body if not isinstance(n, ast.ImportFrom)]
     body = [n for n in body if not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))]
-    assert _is_call(body[0], "log", "setup"), f"{script.name}: the first statement sets up the log"
-    sweep = _is_call(body[1], "io", "sweep_temporaries")
-    assert sweep is not None, f"{script.name}: io.sweep_temporaries follows log.setup"
-    assert ast.unparse(sweep.args[0]) == "snakemake.output", script.name
+    start = _is_call(body[0], "log", "start_job")
+    assert start is not None, f"{script.name}: the first statement is log.start_job(...)"
+    assert [ast.unparse(a) for a in start.args] == ["snakemake"], script.name
+    assert not any(_is_call(n, "log", "setup") for n in body), f"{script.name}: set up twice"
+
+
+def _start(tmp_path: Path, env: dict[str, str]) -> tuple[subprocess.CompletedProcess, Path]:
+    """Run :data:`START` for the output ``out.csv`` beside a temporary a killed writer left."""
+    leftover = tmp_path / ".out.csv.abcdEFGH.csv"
+    leftover.write_text("half written")
+    args = [str(tmp_path / "job.log"), str(tmp_path / "out.csv")]
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **env}
+    out = subprocess.run(
+        [sys.executable, "-c", START, *args], env=env, capture_output=True, text=True
+    )
+    return out, leftover
+
+
+def test_a_job_start_logs_the_kernels_and_sweeps_the_leftovers(tmp_path):
+    out, leftover = _start(tmp_path, kernels.environment())
+    assert out.returncode == 0, out.stderr
+    assert not leftover.exists()
+    text = (tmp_path / "job.log").read_text()
+    assert "kernels: BLAS" in text and f"removed the temporary {leftover}" in text
+
+
+def test_a_job_start_without_the_fixed_kernels_stops_before_the_sweep(tmp_path):
+    out, leftover = _start(tmp_path, {"OPENBLAS_NUM_THREADS": "4"})
+    assert out.returncode != 0 and "KernelsNotFixed" in out.stderr
+    assert leftover.exists()

@@ -1,10 +1,9 @@
 """Rules check_model and check_model_stan: the model alone, or against its Stan program."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.check_model import run_check_model
 
-logger = log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+logger = log.start_job(snakemake)
 report = run_check_model(
     snakemake.params.model,
     snakemake.params.scenarios,

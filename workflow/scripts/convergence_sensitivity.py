@@ -4,8 +4,7 @@ how the runs that did not converge failed."""
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_convergence_sensitivity
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p = snakemake.params
 run_convergence_sensitivity(
     dict(zip(p.scenarios, snakemake.input.tables, strict=True)),

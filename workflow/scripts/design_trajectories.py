@@ -1,11 +1,10 @@
 """Rule design_trajectories: design states and observations of one scenario."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.design import run_design_trajectories
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_design_trajectories(
     snakemake.input.disturbances,
     Scenario.from_config(snakemake.params.scenario),

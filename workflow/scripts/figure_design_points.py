@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.figures import figure_design_points
 
-logger = log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+logger = log.start_job(snakemake)
 f2 = snakemake.params.figure
 matrix, _ = io.read_disturbances(snakemake.input[0], q=2, K=f2["K"])
 figure_design_points(matrix, f2["a"], f2["x0"], [snakemake.output.pdf, snakemake.output.png])

@@ -4,8 +4,7 @@ from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.outputs import run_figure_exact_vs_stan
 
-logger = log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+logger = log.start_job(snakemake)
 table = run_figure_exact_vs_stan(
     Scenario.from_config(snakemake.params.scenario),
     snakemake.input.stan,

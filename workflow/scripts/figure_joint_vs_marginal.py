@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_figure_joint_vs_marginal
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 scenarios = snakemake.params.scenarios
 names = [sc["name"] for sc in scenarios]
 run_figure_joint_vs_marginal(

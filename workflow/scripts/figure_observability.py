@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_figure_observability
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_figure_observability(snakemake.input.summary, list(snakemake.output.figure))
 # what made these files (rule of the cache: the stamp holds their key)
 io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

@@ -4,8 +4,7 @@ from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.outputs import run_figure_profile_posterior
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_figure_profile_posterior(
     snakemake.input[0],
     Scenario.from_config(snakemake.params.scenario),

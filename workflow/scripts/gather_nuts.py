@@ -1,11 +1,10 @@
 """Rule gather_nuts: the Stan stage's summary of one scenario."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.stan import run_gather_nuts
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_gather_nuts(
     snakemake.input.trajectories,
     list(snakemake.input.batches),

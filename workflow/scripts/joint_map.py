@@ -1,11 +1,10 @@
 """Rule joint_map: joint MAP and numerical checks of one scenario (Sec. III.B)."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.joint_map import run_joint_map
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_joint_map(
     snakemake.input[0],
     Scenario.from_config(snakemake.params.scenario),

@@ -4,8 +4,7 @@ from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.outputs import run_joint_map_mu0_sweep
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p = snakemake.params
 names = [sc["name"] for sc in p.scenarios]
 run_joint_map_mu0_sweep(

@@ -1,11 +1,10 @@
 """Rule k_selection_grid: V_{K_i} of the choice of K for every K_i of one grid (Sec. IV.A)."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.k_selection import run_k_selection_grid
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 wc, p = snakemake.wildcards, snakemake.params
 run_k_selection_grid(
     p.design_dir,

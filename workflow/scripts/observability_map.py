@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stages.observability_map import write_map
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 out = snakemake.output
 write_map(
     snakemake.input.cells,

@@ -1,10 +1,9 @@
 """Rule observability_map_cells: every cell of one map, each cached on its own."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.stages.observability_map import run_map_cells
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p = snakemake.params
 run_map_cells(
     p.entry,

@@ -4,8 +4,7 @@ from ssmobs import io, log
 from ssmobs.observability_study import run_observability_study
 from ssmobs.scenario import Scenario
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p, inp = snakemake.params, snakemake.input
 run_observability_study(
     p.study,

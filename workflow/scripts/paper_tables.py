@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_paper_tables
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p, inp, out = snakemake.params, snakemake.input, snakemake.output
 run_paper_tables(
     p.scenarios,

@@ -1,11 +1,10 @@
 """Rule sample_nuts: NUTS + checks + marginal MAPs for one batch of trajectories."""
 
-from ssmobs import io, log
+from ssmobs import log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.stan import run_sample_batch
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p = snakemake.params
 run_sample_batch(
     snakemake.input.trajectories,

@@ -4,8 +4,7 @@ from ssmobs import io, log
 from ssmobs.scenario import Scenario
 from ssmobs.stages.outputs import run_select_k
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 p, out = snakemake.params, snakemake.output
 run_select_k(
     p.ksel,

@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stan_variants import read_spec, write_variant_table
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 write_variant_table(read_spec(snakemake.input.spec), snakemake.output.csv, snakemake.output.md)
 # what made these files (rule of the cache: the stamp holds their key)
 io.write_text(snakemake.output.stamp, snakemake.params.key + "\n")

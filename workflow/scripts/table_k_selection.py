@@ -3,8 +3,7 @@
 from ssmobs import io, log
 from ssmobs.stages.outputs import run_table_k_selection
 
-log.setup(snakemake.log[0])
-io.sweep_temporaries(snakemake.output)  # left by an interrupted earlier run
+log.start_job(snakemake)
 run_table_k_selection(
     list(snakemake.input), list(snakemake.output.table), list(snakemake.output.distribution)
 )

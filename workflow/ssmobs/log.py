@@ -1,14 +1,16 @@
-"""Logging set-up shared by every workflow script, and a progress reporter."""
+"""Logging set-up shared by every workflow script (:func:`start_job`), and a progress reporter."""
 
 from __future__ import annotations
 
 import logging
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from types import TracebackType
+from typing import Protocol
 
-from . import kernels
+from . import io, kernels
 
 LOGGER_NAME = "ssmobs"
 
@@ -42,6 +44,25 @@ def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logg
     logger = logging.getLogger(LOGGER_NAME)
     if logfile:  # a workflow job: it refuses to compute with this CPU's own kernels
         logger.info(kernels.require())
+    return logger
+
+
+class RuleJob(Protocol):
+    """What :func:`start_job` reads of the ``snakemake`` object a rule script is given."""
+
+    @property
+    def log(self) -> Sequence[str]: ...
+
+    @property
+    def output(self) -> Iterable[str]: ...
+
+
+def start_job(job: RuleJob) -> logging.Logger:
+    """The first call of every rule script: log to the job's log file (which checks the fixed
+    kernels, :func:`setup`), then delete the temporaries a killed earlier job left beside
+    its outputs (:func:`ssmobs.io.sweep_temporaries`); returns the package's logger."""
+    logger = setup(job.log[0])
+    io.sweep_temporaries(job.output)  # left by an interrupted earlier run
     return logger
 
 

@@ -58,7 +58,8 @@ def run_exact_marginal(
     config block ``exact_marginal`` as ``settings``)."""
     import time
 
-    from ..exact_marginal import ExactSettings, exact_marginal
+    from ..exact_marginal import exact_marginal
+    from ..exact_settings import ExactSettings
     from ..trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)

@@ -56,7 +56,8 @@ def cell_summary(
     """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
     model linear in the states) exact marginal; the row of the map's table (module
     docstring), without the map's own columns."""
-    from ..exact_marginal import ExactSettings, exact_marginal
+    from ..exact_marginal import exact_marginal
+    from ..exact_settings import ExactSettings
     from ..trajectories import make_trajectories
     from .design import disturbance_set
     from .joint_map import joint_map_of

@@ -1,0 +1,285 @@
+"""Building the native backend's programs (:mod:`.native`): the toolchain and the cache entries.
+
+Compiling
+    :meth:`.native.NativeBackend.compile` runs ``stanc`` and ``g++`` once per :func:`build_key`
+    into ``<cache_root>/native/<slug>-<key>/`` (:mod:`.cache`), under an exclusive lock, in a
+    temporary directory renamed into place when complete.  The driver is compiled once into
+    an object file of its own (:func:`driver_object`, ``<cache_root>/native/driver-<key>/``)
+    and linked with each program's object file, so a program costs one compile of the
+    stanc-generated C++ only (as CmdStan's ``main.o``).  A stanc or compiler error raises
+    RuntimeError with the tool's own message; nothing is written into the repository.
+
+Cached programs are self-contained
+    An entry holds the executable ``driver``, the shared libraries it needs from the wheel
+    (:data:`RUNTIME_LIBS`, i.e. TBB) copied beside it, and ``build.json`` (key, compiler
+    version, command).  The executable's RUNPATH is ``$ORIGIN`` only, so it finds the
+    copies wherever the entry is and whether or not the environment that built it still
+    exists; at run time it needs only the system's C and C++ runtime (glibc, libstdc++ at
+    least as new as the building compiler's, libgcc_s, libm).  Looking a program up runs
+    ``stanc --version`` from the wheel but never the C++ compiler, so a node without g++
+    uses programs built elsewhere (see :func:`build_key`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import shutil
+import subprocess
+import time
+from collections.abc import Mapping
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from ..io import json_default
+from .base import BackendError, log_captured
+from .cache import (
+    build_lock,
+    cache_root,
+    content_key,
+    entry_complete,
+    new_build_dir,
+    publish_entry,
+    shared_mode,
+    tail,
+)
+from .native_run import EXIT_USAGE
+
+LOG = logging.getLogger("ssmobs.stan")
+
+#: the driver's C++ source
+DRIVER_SOURCE = Path(__file__).resolve().parent / "native_driver" / "driver.cpp"
+#: preprocessor definitions httpstan builds its models with (same numerics as PyStan)
+DEFINES: tuple[str, ...] = (
+    "BOOST_DISABLE_ASSERTS",
+    "BOOST_PHOENIX_NO_VARIADIC_EXPRESSION",
+    "STAN_THREADS",
+    "_REENTRANT",
+    "_GLIBCXX_USE_CXX11_ABI=0",
+)
+#: compiler flags (optimisation as httpstan's; C++17 for the driver)
+CXXFLAGS: tuple[str, ...] = (
+    "-O3",
+    "-std=c++17",
+    "-Wno-sign-compare",
+    "-Wno-ignored-attributes",
+    "-Wno-deprecated-declarations",
+)
+#: linker flags: the executable finds its libraries beside itself, wherever the entry is
+LDFLAGS: tuple[str, ...] = ("-Wl,--enable-new-dtags", "-Wl,-rpath,$ORIGIN")
+#: shared libraries of the wheel's ``lib/`` the executable needs (copied into the entry)
+RUNTIME_LIBS: tuple[str, ...] = ("libtbb.so.2",)
+#: the executable's name in a cache entry
+EXE_NAME = "driver"
+#: the driver's object file in its own cache entry (:func:`driver_object`)
+DRIVER_OBJECT = "driver.o"
+
+
+@lru_cache(maxsize=1)
+def httpstan_dir() -> Path:
+    """The installed httpstan package directory (stanc, include/, lib/)."""
+    try:
+        import httpstan
+    except ImportError as err:  # pragma: no cover - httpstan is a dependency
+        raise BackendError(
+            "the native backend needs the httpstan wheel (pip install "
+            "httpstan): it ships stanc, the Stan sources and TBB"
+        ) from err
+    return Path(httpstan.__file__).resolve().parent
+
+
+def _tool_version(cmd: list[str]) -> str:
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        raise BackendError(f"cannot run {cmd[0]}: {err}") from err
+    if out.returncode != 0:
+        raise BackendError(f"{' '.join(cmd)} failed: {tail(out.stderr or out.stdout)}")
+    return (out.stdout or out.stderr).strip().splitlines()[0]
+
+
+@lru_cache(maxsize=1)
+def stan_version() -> str:
+    """stanc's version line, e.g. ``stanc3 v2.35.0 (Unix)``."""
+    return _tool_version([str(httpstan_dir() / "stanc"), "--version"])
+
+
+@lru_cache(maxsize=1)
+def httpstan_version() -> str:
+    """The httpstan wheel's version (its Stan Math, TBB and headers), read, not run."""
+    import httpstan
+
+    return str(getattr(httpstan, "__version__", "unknown"))
+
+
+def compiler() -> str:
+    """The C++ compiler (``$CXX``, default g++)."""
+    return os.environ.get("CXX", "g++")
+
+
+def compiler_version() -> str:
+    """The compiler's version line (runs it: only when building)."""
+    return _tool_version([compiler(), "--version"])
+
+
+def build_key(code: str) -> dict[str, str]:
+    """What determines the executable; its hash names the cache directory.
+
+    Program text, driver source, Stan version (``stanc --version`` of the wheel, which is
+    present wherever this package runs), httpstan version, compiler and linker flags and
+    the entry's layout.  Deliberately *not* the C++ compiler, neither its version nor its
+    path: the version can only be had by running the compiler and the path only by
+    finding it on PATH, and a lookup must work where there is no compiler (a cluster node
+    using programs built on the login node), which a key the node cannot compute would
+    defeat.  A finished program does not depend on the compiler still being there (it is
+    self-contained, see the module docstring), and programs built by different compilers
+    from the same sources run the same Stan service with IEEE arithmetic (no
+    ``-ffast-math``); the records are keyed by backend and Stan version, not by the
+    compiler, in any case.  The compiler's command, path and version are recorded in the
+    entry's ``build.json`` (and in the marker) instead; to rebuild with another compiler,
+    delete the cache.
+    """
+    return {
+        "program": content_key({"code": code}),
+        "objects": "driver.o + model.o",
+        "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
+        "stan": stan_version(),
+        "httpstan": httpstan_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + LDFLAGS),
+        "runtime_libs": ",".join(RUNTIME_LIBS),
+    }
+
+
+def write_json_file(path: Path, obj: Mapping[str, Any]) -> None:
+    """A data, init or point file in Stan's JSON (NumPy values converted)."""
+    path.write_text(json.dumps(dict(obj), default=json_default))
+
+
+def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
+    """Run the C++ compiler; RuntimeError with its error lines when it fails or cannot run."""
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as err:
+        raise RuntimeError(
+            f"compiling {what} failed: cannot run the C++ compiler {compiler()!r}: {err}"
+        ) from err
+    if out.returncode != 0:
+        errors = [ln for ln in out.stderr.splitlines() if "error" in ln]
+        raise RuntimeError(
+            f"compiling {what} failed ({compiler()} exit {out.returncode}):\n"
+            + "\n".join(errors[:20] or [tail(out.stderr)])
+        )
+    return out
+
+
+def compile_flags() -> list[str]:
+    """The C++ compiler's flags for the driver and the programs (httpstan's headers)."""
+    return [*CXXFLAGS, *("-D" + d for d in DEFINES), f"-I{httpstan_dir() / 'include'}"]
+
+
+def driver_object() -> Path:
+    """The driver compiled once into ``driver.o`` (cached, keyed by the driver's source, the
+    Stan version and the flags); every program's executable links it."""
+    parts = {
+        "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
+        "stan": stan_version(),
+        "httpstan": httpstan_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
+    }
+    cache_dir = cache_root() / "native" / f"driver-{content_key(parts)}"
+    if not entry_complete(cache_dir, DRIVER_OBJECT):
+        with build_lock(cache_dir):
+            if not entry_complete(cache_dir, DRIVER_OBJECT):
+                work = new_build_dir(cache_dir)
+                try:
+                    t0 = time.perf_counter()
+                    LOG.info("compiling the native driver once into %s", cache_dir)
+                    cmd = [compiler(), *compile_flags(), "-c", str(DRIVER_SOURCE)]
+                    cmd += ["-o", str(work / DRIVER_OBJECT)]
+                    cxx_version = compiler_version()
+                    log_captured("compiler for driver.cpp", run_compiler(cmd, "driver.cpp").stderr)
+                    publish_entry(work, cache_dir, {**parts, "compiler_version": cxx_version})
+                    LOG.info("compiled the native driver in %.1f s", time.perf_counter() - t0)
+                finally:
+                    shutil.rmtree(work, ignore_errors=True)
+    return cache_dir / DRIVER_OBJECT
+
+
+def check_self_contained(exe: Path) -> None:
+    """Start the new executable without ``LD_LIBRARY_PATH`` (it must stop at its usage
+    check): BackendError when the loader cannot find a library beside it."""
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    try:
+        out = subprocess.run([str(exe)], capture_output=True, text=True, env=env, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        raise BackendError(f"the new native driver {exe} does not start: {err}") from err
+    if out.returncode != EXIT_USAGE:
+        raise BackendError(
+            f"the new native driver {exe} does not start on its own (exit code "
+            f"{out.returncode}):\n{tail(out.stderr or out.stdout)}"
+        )
+
+
+def build_program(path: Path, code: str, cache_dir: Path, parts: dict[str, str]) -> None:
+    """stanc + g++ into a temporary sibling directory, with the wheel's runtime
+    libraries copied beside the executable, renamed to ``cache_dir``."""
+    work = new_build_dir(cache_dir)
+    try:
+        t0 = time.perf_counter()
+        LOG.info(
+            "compiling %s with the native backend (%s) into %s",
+            path.name,
+            parts["stan"],
+            cache_dir,
+        )
+        hdir = httpstan_dir()
+        model_name = re.sub(r"\W", "_", path.stem) + "_model"
+        (work / "program.stan").write_text(code)
+        stanc = subprocess.run(
+            [
+                str(hdir / "stanc"),
+                "--name",
+                model_name,
+                "--o",
+                str(work / "model.hpp"),
+                str(work / "program.stan"),
+            ],
+            capture_output=True,
+            text=True,
+        )
+        if stanc.returncode != 0:
+            msg = (stanc.stderr or stanc.stdout).replace(str(work / "program.stan"), str(path))
+            raise RuntimeError(f"stanc rejected {path}:\n{msg.strip()}")
+        log_captured(f"stanc warnings for {path.name}", stanc.stderr)
+        cxx_version = compiler_version()  # BackendError when there is no compiler
+        driver_o = driver_object()
+        exe = work / EXE_NAME
+        model_cmd = [compiler(), *compile_flags(), "-x", "c++", "-c"]
+        model_cmd += [str(work / "model.hpp"), "-o", str(work / "model.o")]
+        log_captured(f"compiler for {path.name}", run_compiler(model_cmd, str(path)).stderr)
+        link_cmd = [compiler(), str(driver_o), str(work / "model.o"), "-o", str(exe)]
+        link_cmd += [f"-L{hdir / 'lib'}", "-ltbb", *LDFLAGS]
+        log_captured(f"linker for {path.name}", run_compiler(link_cmd, str(path)).stderr)
+        (work / "model.o").unlink()
+        for lib in RUNTIME_LIBS:
+            shutil.copyfile(hdir / "lib" / lib, work / lib)
+            (work / lib).chmod(shared_mode())
+        check_self_contained(exe)
+        (work / "program.stan").unlink()
+        publish_entry(
+            work,
+            cache_dir,
+            {
+                **parts,
+                "compiler_version": cxx_version,
+                "compiler_path": shutil.which(compiler()),
+                "stan_file": str(path),
+                "command": [model_cmd, link_cmd],
+            },
+        )
+        LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
