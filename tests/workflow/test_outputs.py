@@ -67,6 +67,15 @@ def test_table_values_finite_where_they_must(smoke_run):
     ks = pd.read_csv(smoke_run / SMOKE_OUT / "table_k_selection.csv")
     assert set(ks["method"]) == {"design", "random"}
     assert set(ks["sets"]) == {"independent", "nested"}
+    # every seed of a design entry starts its own optimiser: the chosen K per seed, and how
+    # often each K was chosen (issue 34)
+    (ksel,) = smoke["k_selection"]
+    for _, sub in ks[ks["method"] == "design"].groupby("sets"):
+        assert sorted(sub["seed"]) == sorted(ksel["seeds"])
+    dist = pd.read_csv(smoke_run / SMOKE_OUT / "table_k_selection_distribution.csv")
+    design = dist[dist["method"] == "design"]
+    assert set(design["seeds"]) == {len(ksel["seeds"])}
+    assert design.groupby("sets")["n_seeds"].sum().tolist() == [len(ksel["seeds"])] * 2
     # the smoke's (c1, c2) = (0.05, 0.2) are not the paper's: no paper K beside them
     assert ks["K_paper"].isna().all() and ks["K_paper_range"].isna().all()
     sens = pd.read_csv(smoke_run / SMOKE_OUT / "table_convergence_sensitivity.csv")

@@ -269,13 +269,13 @@ def trajectory_inputs(wildcards):
 
 
 def k_selection_grids(name):
-    """Every (method, sets, seed) grid of one k_selection entry (design: first seed)."""
+    """Every (method, sets, seed) grid of one k_selection entry: every seed of every
+    method (a design set's seed starts its optimiser, so its K is a distribution too)."""
     ks = KSEL[name]
     out = []
     for method in ks["methods"]:
-        seeds = ks["seeds"][:1] if method == "design" else ks["seeds"]
         for sets in ks["sets"]:
-            for seed in seeds:
+            for seed in ks["seeds"]:
                 out.append(f"{ksel_grids_dir(name)}/{method}_{sets}_seed{seed}.json")
     return out
 
