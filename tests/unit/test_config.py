@@ -523,6 +523,23 @@ def test_outputs_dir_inside_the_working_directory_accepted(value):
     assert cfg.validate({**base(), "outputs_dir": value})["outputs_dir"] == value
 
 
+@pytest.mark.parametrize("value", [".git", "config", "results/x", "./workflow", ".", "stan/"])
+def test_outputs_dir_in_a_folder_of_the_workflow_refused(value):
+    """Issue 35: outputs_dir .git, config or results were accepted."""
+    msg = refused({**base(), "outputs_dir": value})
+    assert f"outputs_dir = {value!r}: would write into" in msg and "allowed: a folder" in msg
+
+
+def test_a_name_longer_than_a_file_name_can_hold_refused():
+    """Issue 35: a 300-character scenario name passed and failed the run (file name too long)."""
+    c = base()
+    c["scenarios"][0]["name"] = "s" * 101
+    msg = refused(c)
+    assert "scenarios[0].name" in msg and "101 characters; allowed: at most 100" in msg
+    c["scenarios"][0]["name"] = "s" * 100
+    assert cfg.validate(c)
+
+
 def test_scenario_names_differing_only_in_case_refused():
     c = base()
     c["scenarios"].append({**c["scenarios"][0], "name": "S"})

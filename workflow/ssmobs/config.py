@@ -252,13 +252,30 @@ def _mu0_sweep_problems(config: dict) -> list[str]:
     ]
 
 
+#: top-level folders of the working directory that hold the workflow, its cache or git's
+#: data: no outputs_dir lies in one of them
+RESERVED_DIRS = frozenset(
+    {".git", ".snakemake", ".venv", "benchmarks", "config", "docs", "envs", "profiles"}
+    | {"results", "site", "stan", "tests", "workflow"}
+)
+
+
 def _outputs_dir_problems(config: dict) -> list[str]:
-    """outputs_dir: a relative path that stays inside the working directory."""
+    """outputs_dir: a relative path that stays inside the working directory, outside the
+    folders of :data:`RESERVED_DIRS`."""
     value = config["outputs_dir"]
     if value.startswith("/") or ".." in value.split("/"):
         return [
             f"outputs_dir = {short_repr(value)}: must be a relative path inside the working "
             f"directory; allowed: no leading '/' and no '..' part (e.g. paper_figures/mine)"
+        ]
+    parts = [p for p in value.split("/") if p not in ("", ".")]
+    if not parts or parts[0] in RESERVED_DIRS:
+        return [
+            f"outputs_dir = {short_repr(value)}: would write into "
+            f"{'the working directory itself' if not parts else repr(parts[0] + '/')}, which "
+            f"holds the workflow, its cache or git's data; allowed: a folder outside "
+            f"{', '.join(sorted(RESERVED_DIRS))} (e.g. paper_figures/mine)"
         ]
     return []
 

@@ -149,6 +149,12 @@ def _describe(error: jsonschema.ValidationError) -> list[str]:
         return [f"{key} = {value}: allowed values are {error.validator_value}{_quote_hint(error)}"]
     if v == "pattern":
         return [f"{key} = {value}: must match {error.validator_value}"]
+    if v in ("maxLength", "minLength"):
+        bound = "at most" if v == "maxLength" else "at least"
+        return [
+            f"{key} = {value}: {len(error.instance)} characters; allowed: {bound} "
+            f"{error.validator_value} (it is part of file names)"
+        ]
     if v == "oneOf":
         inner = _branch_errors(error)
         if inner:
