@@ -61,6 +61,10 @@ repair_damaged_trajectories()
 repair_damaged_batches()
 
 
+onsuccess:
+    set_aside_leftovers()
+
+
 rule all:
     """Every output of the configured scenarios and the paper figures."""
     default_target: True

@@ -131,3 +131,35 @@ def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == {
         "stan_variant_table"
     }
+
+
+def test_outputs_of_an_earlier_config_are_moved_out_of_outputs_dir(tmp_path):
+    """Issue 35: after ``stan: false`` the earlier run's exact-vs-Stan tables and figures and
+    their stamp stayed, so outputs_dir showed a mix of two configs."""
+    from test_incremental import OUT
+
+    work = make_workdir(tmp_path / "w")
+    first = {**BASE, "k_selection": [], "observability_studies": []}
+    (work / CONFIG).write_text(yaml.safe_dump(first, sort_keys=False))
+    snakemake(work, "--cores", "2", "--configfile", CONFIG)
+    stan_only = sorted(p.name for p in (work / OUT).glob("*exact_vs_stan*"))
+    assert stan_only, sorted(p.name for p in (work / OUT).iterdir())
+    stamps = {p.name for p in (work / "results" / "outputs" / OUT).glob("*.key")}
+    second = {
+        **first,
+        "scenarios": [{**sc, "stan": False} for sc in first["scenarios"]],
+        "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
+    }
+    (work / CONFIG).write_text(yaml.safe_dump(second, sort_keys=False))
+    proc = snakemake(work, "--cores", "2", "--configfile", CONFIG)
+    assert f"file(s) that this config does not make out of {OUT}" in proc.stderr
+    assert not list((work / OUT).glob("*exact_vs_stan*"))
+    (aside,) = (work / "results" / "outputs" / OUT / "set_aside").iterdir()
+    assert stan_only == sorted(p.name for p in aside.glob("*exact_vs_stan*"))
+    left = {p.name for p in (work / "results" / "outputs" / OUT).glob("*.key")}
+    assert left < stamps and not any("exact_vs_stan" in s for s in left), (stamps, left)
+    # what stays is exactly what this config makes: a third run has nothing to do or move
+    again = snakemake(work, "--cores", "2", "--configfile", CONFIG)
+    assert (
+        "does not make" not in again.stderr and "Nothing to be done" in again.stdout + again.stderr
+    )

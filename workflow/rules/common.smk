@@ -2,6 +2,7 @@
 import functools
 import os
 import re
+import time
 import sys
 from pathlib import Path
 
@@ -437,6 +438,45 @@ def remove_stale_stamps():
                 Path(f).unlink(missing_ok=True)
         stamp_file.unlink(missing_ok=True)
         aside.unlink(missing_ok=True)
+
+
+#: suffixes of the tables and figures a run writes into outputs_dir
+OUTPUT_SUFFIXES = (".csv", ".md", ".tex", ".pdf", ".png")
+
+
+def set_aside_leftovers():
+    """After a successful run: move the tables and figures in outputs_dir that this config
+    does not make (an earlier config's) to ``results/outputs/<outputs_dir>/set_aside/<time>/``
+    with one line saying so, and remove the stamps of rules this config does not have, so
+    that outputs_dir holds exactly this config's outputs (README* files stay)."""
+    out, stamps_dir = Path(OUT), Path(f"results/outputs/{OUT}")
+    if is_dry_run() or not workflow.is_main_process or not out.is_dir():
+        return
+    made = {str(Path(t)) for t in all_targets()}
+    left = sorted(
+        p
+        for p in out.iterdir()
+        if p.is_file()
+        and p.suffix in OUTPUT_SUFFIXES
+        and not p.name.startswith("README")
+        and str(p) not in made
+    )
+    known = {*STAMPS, *STAMPS_ON_REQUEST}
+    if stamps_dir.is_dir():
+        for key_file in stamps_dir.glob("*.key"):
+            if str(key_file) not in known:
+                key_file.unlink()
+    if not left:
+        return
+    aside = stamps_dir / "set_aside" / time.strftime("%Y%m%dT%H%M%S")
+    aside.mkdir(parents=True, exist_ok=True)
+    for p in left:
+        p.replace(aside / p.name)
+    names = ", ".join(p.name for p in left[:6]) + (", ..." if len(left) > 6 else "")
+    logger.warning(
+        f"moved {len(left)} file(s) that this config does not make out of {OUT} "
+        f"(an earlier config's) to {aside}: {names}"
+    )
 
 
 def all_targets():
