@@ -151,12 +151,14 @@ def test_clustering_uses_the_tolerance_in_local_standard_deviations():
                 "n_maxima": [2, 1, 0, 1],
                 "log_post_gap": [0.5, np.nan, np.nan, np.nan],
                 "paper_start_highest": [False, True, False, True],
+                "boundary_higher": [False, True, False, False],
             }
         ),
         settings,
     )
     assert (ms["K_max_unique"], ms["K_max_any"], ms["K_max_several"]) == (2, 3, 1)
     assert ms["K_paper_start_highest"] == 2 and ms["log_post_gap_median"] == 0.5
+    assert ms["K_max_unique_boundary_higher"] == 1
     assert 0 < ms["K_max_unique_lo95"] < 0.5 < ms["K_max_unique_hi95"] < 1
 
 
@@ -246,6 +248,25 @@ def test_multiplicative_wrong_sign_maxima_show_up_as_extra_maxima():
         assert np.any(np.sign(best[1:]) != np.sign(paper[1:]))
 
 
+def test_sep_edge_of_the_support_is_reported_not_counted():
+    """(Sep, a = b = 0.9, T = 75): many starts run to the singular edge b -> 1 of the joint
+    posterior (Sec. IV.B); such trajectories have no maximum that passes, and a start that
+    ends there higher than an interior maximum is flagged."""
+    model = get_model("sep")
+    omega, x0 = np.array([0.9, 0.9]), np.array([8.0])
+    z = trajectories(model, omega, x0, T=75, K=30, seed=0)
+    bounds = model.prior_bounds(omega, "restricted")
+    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=4))
+    none = multi.n_maxima == 0
+    assert none.sum() >= 5
+    assert np.all(multi.n_starts_boundary[none] == 4)  # every start ended on the boundary
+    assert multi.boundary_higher[none].all()
+    for k in np.flatnonzero(multi.boundary_higher & ~none):
+        best = -2 * multi.maxima_log_post[k][0]
+        edge = [r.neg2_log_post[k] for r in multi.runs if r.status[k] == "boundary"]
+        assert min(edge) < best
+
+
 # --------------------------------------------------------------------------- stage and tables
 def test_stage_writes_the_columns_and_the_summary(tmp_path):
     from ssmobs.io import read_json, read_parquet
@@ -273,7 +294,9 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
     summary = read_json(tmp_path / "summary.json")
     assert summary["n_starts"] == 3 == info["n_starts"]
     assert summary["K_max_unique"] == int(frame["unique_max"].sum())
-    assert {"n_maxima", "log_post_gap", "paper_start_highest"} <= set(frame.columns)
+    assert {"n_maxima", "log_post_gap", "paper_start_highest", "boundary_higher"} <= set(
+        frame.columns
+    )
     # without the override, the block's n_starts = 1: the paper's table, no extra column
     single = Scenario.from_config(
         {k: v for k, v in entry.items() if k != "joint_map_n_starts"} | {"name": "one"}

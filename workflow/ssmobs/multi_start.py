@@ -32,7 +32,8 @@ K^max_unique: the trajectories with exactly one distinct maximum that passes the
 It is not a subset of K^max (which is the paper's start's result), since another start can
 pass where the paper's does not.  A start that ends on the boundary or fails a check adds
 no maximum (its count is reported), so K^max_unique can still hide a supremum at the edge
-of the support that no start passed.
+of the support; ``boundary_higher`` marks the trajectories where a start that ended on the
+boundary reached a higher log posterior than every maximum that passes.
 """
 
 from __future__ import annotations
@@ -131,6 +132,9 @@ class MultiStartResult:
         distinct maximum that passes the checks, highest first.
     maxima_first_start : per k, the first start that reached each of those maxima.
     paper_start_highest : (K,) the paper's start passed and reached the highest maximum.
+    boundary_higher : (K,) a start that ended with status ``boundary`` has a higher log
+        posterior there than every maximum that passes (or than -inf if none passes): the
+        supremum lies at the edge of the support, above the interior maxima.
     """
 
     starts: np.ndarray
@@ -140,6 +144,7 @@ class MultiStartResult:
     maxima_log_post: list[np.ndarray]
     maxima_first_start: list[np.ndarray]
     paper_start_highest: np.ndarray
+    boundary_higher: np.ndarray
 
     @property
     def n_maxima(self) -> np.ndarray:
@@ -161,6 +166,7 @@ class MultiStartResult:
                 "n_maxima": n_max,
                 "unique_max": n_max == 1,
                 "paper_start_highest": self.paper_start_highest.astype(bool),
+                "boundary_higher": self.boundary_higher.astype(bool),
                 "log_post_best": [v[0] if v.size else np.nan for v in self.maxima_log_post],
                 "log_post_gap": self.log_post_gap,
                 "maxima_log_post": [v.astype(float) for v in self.maxima_log_post],
@@ -233,6 +239,12 @@ def multi_start_joint_map(
         values.append(-0.5 * f)
         first.append(s)
         highest[k] = h
+    edge = np.stack([np.where(r.status == "boundary", r.neg2_log_post, np.inf) for r in runs]).min(
+        axis=0
+    )
+    best = np.array([-2.0 * v[0] if v.size else np.inf for v in values])
+    with np.errstate(invalid="ignore"):
+        boundary_higher = np.isfinite(edge) & (edge < best)
     return MultiStartResult(
         starts=starts,
         runs=runs,
@@ -241,6 +253,7 @@ def multi_start_joint_map(
         maxima_log_post=values,
         maxima_first_start=first,
         paper_start_highest=highest,
+        boundary_higher=boundary_higher,
     )
 
 
@@ -249,8 +262,10 @@ def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> di
 
     ``K_max_unique`` (= |K^max_unique|), ``K_max_any`` (one or more maxima pass),
     ``K_max_several``, ``K_paper_start_highest``, ``K_max_unique_lo95`` / ``_hi95`` (exact
-    binomial 95 % interval of |K^max_unique| / K), ``log_post_gap_median`` (over the
-    trajectories with several maxima) and the settings ``n_starts``, ``distinct_tol``.
+    binomial 95 % interval of |K^max_unique| / K), ``K_max_unique_boundary_higher`` (of
+    K^max_unique, those where a start on the boundary went higher), ``log_post_gap_median``
+    (over the trajectories with several maxima) and the settings ``n_starts``,
+    ``distinct_tol``.
     """
     K = int(len(columns))
     n_max = columns["n_maxima"].to_numpy()
@@ -267,5 +282,8 @@ def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> di
         "K_max_any": int((n_max >= 1).sum()),
         "K_max_several": int(several.sum()),
         "K_paper_start_highest": int(columns["paper_start_highest"].sum()),
+        "K_max_unique_boundary_higher": int(
+            ((n_max == 1) & columns["boundary_higher"].to_numpy(dtype=bool)).sum()
+        ),
         "log_post_gap_median": float(np.median(gaps[several])) if several.any() else np.nan,
     }
