@@ -41,6 +41,9 @@ CASES = [
     ("Same a=0.9 T=20", "same", [0.9], [8.0], 20, "restricted"),
     ("ranWalk T=4", "sep_ranwalk", [0.9], [8.0], 4, "half_line"),
     ("Sep a, b restricted T=75", "sep", [0.9, 0.9], [8.0], 75, "restricted"),
+    ("Same a=0.7 T=100", "same", [0.7], [8.0], 100, "restricted"),
+    ("ranWalk T=100", "sep_ranwalk", [0.9], [8.0], 100, "half_line"),
+    ("Sep d=2 p=1 a, b, c restricted T=50", "sep_d2_p1", [0.9, 0.9, 0.9], [8.0], 50, "restricted"),
 ]
 
 
@@ -88,6 +91,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--K", type=int, default=200)
     parser.add_argument("--starts", type=int, default=8)
+    parser.add_argument("--only", nargs="*", help="labels of the cases to run (default: all)")
     args = parser.parse_args()
     began = _dt.datetime.now(_dt.UTC)
     print(
@@ -100,6 +104,8 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---|---|---|---|")
     for label, slug, omega, x0, T, prior in CASES:
+        if args.only and label not in args.only:
+            continue
         table, k_max, k_unique, (c_multi, c_exact) = compare(
             slug, omega, x0, T, prior, args.K, args.starts
         )
