@@ -199,3 +199,29 @@ def test_one_mistake_gives_one_message_and_its_check_is_not_checked(monkeypatch,
     assert cm.main(["stoch_vol", "--no-stan"]) == 0
     out, err = capsys.readouterr()
     assert out.startswith("checked  python:") and "failed" not in err
+
+
+def test_a_sign_error_in_every_step_is_reported_at_every_step():
+    """A sign error in the transition mean makes every step wrong, and the message says so
+    instead of naming the first step only (issue 36)."""
+
+    class MinusPhi(StochVol):
+        def simulate(self, omega, x0, eta, eps):
+            phi, sigma = omega
+            return super().simulate(np.array([-phi, sigma]), x0, eta, eps)
+
+    model = MinusPhi()
+    case = CheckCase({"phi": 0.5, "sigma": 0.5}, [2.0])
+    (msg,) = simulate_problems(model, case, T=5)
+    assert "does not match the transition term at every t = 1..5" in msg
+
+    # a mistake in one step only is named at that step
+    class LastStep(StochVol):
+        def simulate(self, omega, x0, eta, eps):
+            x, z = super().simulate(omega, x0, eta, eps)
+            x, z = x.copy(), z.copy()
+            x[:, -1] += 1.0
+            return x, z
+
+    msgs = simulate_problems(LastStep(), case, T=5)
+    assert any("at t = 5 (of 1..5)" in m for m in msgs)
