@@ -173,3 +173,52 @@ def test_every_model_simulates_what_its_terms_say(slug):
     model = get_model(slug)
     for case in default_cases(model):
         assert simulate_problems(model, case) == []
+
+
+def test_one_mistake_gives_one_message_and_its_check_is_not_checked(monkeypatch, capsys):
+    """A swapped simulate is wrong in every case (3 default cases): one message, and the
+    check that found it is printed as failed, not as checked (issue 36)."""
+    import ssmobs.check_model as cm
+
+    model = SwappedSimulateStochVol()
+    assert len(default_cases(model)) == 3
+    monkeypatch.setattr(cm, "get_model", lambda slug: model)
+    report = cm.check_model("stoch_vol", stan=False)
+    assert len(report.problems) == 1
+    assert report.checks == [] and report.failed.startswith("python:")
+    assert report.to_dict()["failed"] == report.failed
+    assert cm.main(["stoch_vol", "--no-stan"]) == 1
+    out, err = capsys.readouterr()
+    assert "checked" not in out
+    assert f"failed   {report.failed}" in err and err.count("  - [python") == 1
+    # the model as shipped: the check passes and is printed as checked
+    monkeypatch.setattr(cm, "get_model", lambda slug: StochVol())
+    assert cm.main(["stoch_vol", "--no-stan"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("checked  python:") and "failed" not in err
+
+
+def test_a_sign_error_in_every_step_is_reported_at_every_step():
+    """A sign error in the transition mean makes every step wrong, and the message says so
+    instead of naming the first step only (issue 36)."""
+
+    class MinusPhi(StochVol):
+        def simulate(self, omega, x0, eta, eps):
+            phi, sigma = omega
+            return super().simulate(np.array([-phi, sigma]), x0, eta, eps)
+
+    model = MinusPhi()
+    case = CheckCase({"phi": 0.5, "sigma": 0.5}, [2.0])
+    (msg,) = simulate_problems(model, case, T=5)
+    assert "does not match the transition term at every t = 1..5" in msg
+
+    # a mistake in one step only is named at that step
+    class LastStep(StochVol):
+        def simulate(self, omega, x0, eta, eps):
+            x, z = super().simulate(omega, x0, eta, eps)
+            x, z = x.copy(), z.copy()
+            x[:, -1] += 1.0
+            return x, z
+
+    msgs = simulate_problems(LastStep(), case, T=5)
+    assert any("at t = 5 (of 1..5)" in m for m in msgs)

@@ -111,3 +111,16 @@ def test_ratios_carry_their_binomial_interval():
         1, 4
     )
     assert np.isnan(frame.loc[0, "K_stan_ratio_lo95"])  # no Stan stage
+
+
+def test_multi_start_adds_k_max_unique_beside_k_max():
+    from ssmobs.binomial import clopper_pearson
+
+    single = study_table([scenario(20)], {"sv_T20": joint(3)}, {}, {})
+    assert "K_max_unique" not in single.columns  # one start: the paper's columns only
+    multi = {**joint(3), "n_starts": 8, "K_max_unique": 1}
+    frame = study_table([scenario(20)], {"sv_T20": multi}, {}, {})
+    assert frame.loc[0, "K_max"] == 3 and frame.loc[0, "K_max_unique"] == 1
+    assert frame.loc[0, "K_max_unique_ratio"] == 0.25
+    lo, hi = frame.loc[0, "K_max_unique_ratio_lo95"], frame.loc[0, "K_max_unique_ratio_hi95"]
+    assert (lo, hi) == clopper_pearson(1, 4)

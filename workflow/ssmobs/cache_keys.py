@@ -329,7 +329,7 @@ def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
 #: the scenario fields that determine its design trajectories
 TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
 #: ... its joint MAP (beside the trajectories)
-JOINT_MAP_FIELDS = ("prior", "joint_map_start")
+JOINT_MAP_FIELDS = ("prior", "joint_map_start", "joint_map_n_starts")
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)

@@ -52,19 +52,29 @@ from .models import get_model
 
 @dataclass
 class CheckReport:
-    """What was checked and every problem found (empty ``problems``: the model passes)."""
+    """What was checked and passed, the check that failed (``failed``, "" if none) and the
+    problems it found (empty ``problems``: the model passes)."""
 
     slug: str
     checks: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    failed: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "slug": self.slug,
             "ok": not self.problems,
             "checks": self.checks,
+            "failed": self.failed,
             "problems": self.problems,
         }
+
+    def record(self, check: str, problems: Sequence[str]) -> None:
+        """A check's outcome: passed (``checks``) or the failed one with its problems."""
+        if problems:
+            self.failed, self.problems = check, [*self.problems, *problems]
+        else:
+            self.checks.append(check)
 
 
 # ----------------------------------------------------------------------------- driver
@@ -80,8 +90,8 @@ def check_model(
     """Every check of this module for one model; the report lists each problem found.
 
     ``cases`` default to :func:`default_cases`; ``stan=False`` skips the Stan checks (for a
-    config that never runs Stan for this model).  Checks stop at the first stage with
-    problems, so that one mistake gives one message.
+    config that never runs Stan for this model).  Checks stop at the first stage, and within
+    it at the first case, with problems, so that one mistake gives one message.
     """
     from .stan_backends import stan_file
 
@@ -89,29 +99,38 @@ def check_model(
     report = CheckReport(slug)
     cases = list(cases) if cases else default_cases(model)
     seed = zlib.crc32(slug.encode()) if seed is None else seed
+    found: list[str] = []
     for i, case in enumerate(cases):
         problems = model.check_true_values(case.omega, case.x0, case.prior)
         if not problems:
             problems = python_problems(model, case, T=T, seed=seed + i)
         if not problems:
             problems = simulate_problems(model, case, T=T, seed=seed + i)
-        report.problems += [f"[python, {case.label()}] {p}" for p in problems]
-    report.checks.append(
+        found = [f"[python, {case.label()}] {p}" for p in problems]
+        if found:  # the same mistake shows in every case: report the first
+            break
+    report.record(
         f"python: simulator shapes, initial_states, gradient and Hessian vs finite "
-        f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))"
+        f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))",
+        found,
     )
     if report.problems or not stan:
         return report
     path = Path(stan_path) if stan_path is not None else stan_file(slug)
-    report.problems += stan_source_problems(model, path)
-    report.checks.append(f"stan source {path.name}: parameter names/order, data declarations")
+    report.record(
+        f"stan source {path.name}: parameter names/order, data declarations",
+        stan_source_problems(model, path),
+    )
     if report.problems:
         return report
     for i, case in enumerate(cases):
-        report.problems += stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
-    report.checks.append(
+        found = stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
+        if found:
+            break
+    report.record(
         f"stan compiled: names, shapes, log density up to a constant, support "
-        f"bounds ({len(cases)} case(s))"
+        f"bounds ({len(cases)} case(s))",
+        found,
     )
     return report
 
@@ -181,6 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for line in report.checks:
         print(f"checked  {line}")
     if report.problems:
+        print(f"failed   {report.failed}", file=sys.stderr)
         print(f"model '{args.slug}': {len(report.problems)} problem(s):", file=sys.stderr)
         for p in report.problems:
             print(f"  - {p}", file=sys.stderr)

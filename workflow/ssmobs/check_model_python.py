@@ -170,9 +170,16 @@ def simulate_problems(
                 int(np.nanargmax(np.where(np.isnan(err), np.inf, err))), err.shape
             )
             name = "eps" if term == "observation" else "eta"
+            bad = np.flatnonzero(~(err[k] <= rtol)) + 1
+            where = (
+                f"at every t = 1..{T}"
+                if bad.size == T
+                else f"at t = {', '.join(str(v) for v in bad)} (of 1..{T})"
+            )
             problems.append(
-                f"simulate does not match the {term} term: at t={t + 1} of a trajectory simulated "
-                f"with |{name}_t|^2 = {want[k, t]:.6g}, the {term} term gives back "
+                f"simulate does not match the {term} term {where} of a trajectory simulated "
+                f"from known disturbances; at t={t + 1}, with |{name}_t|^2 = {want[k, t]:.6g}, "
+                f"the {term} term gives back "
                 f"{got[k, t]:.6g} at the same true values ({case.label()}); check the order of "
                 f"the parameters in simulate (param_names = {list(model.param_names)}) and its "
                 f"equations against {'obs_term' if term == 'observation' else 'trans_term'}"

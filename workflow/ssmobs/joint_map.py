@@ -203,6 +203,15 @@ class JointMapSettings:
     lanczos_steps: int = 24
     #: trajectories per vectorised batch (0: about 2e5 / |Theta|, between 64 and 2048)
     chunk_size: int = 0
+    #: starts per trajectory (:mod:`ssmobs.multi_start`): 1 is the paper's start alone; n > 1
+    #: adds n - 1 starts spread over the start box by a Halton sequence
+    n_starts: int = 1
+    #: two maxima that pass the checks are one if no component of Theta differs by more
+    #: than this many local standard deviations sqrt(LVar_j) (:mod:`ssmobs.multi_start`)
+    distinct_tol: float = 1e-2
+    #: start box: a side of Omega's prior box without a finite bound, and both sides of
+    #: x_0's, lie this many max(1, |true value|) from the true value
+    start_box_span: float = 3.0
 
     def __post_init__(self) -> None:
         positive = (
@@ -221,12 +230,20 @@ class JointMapSettings:
             "boundary_stop_tol",
             "boundary_near_tol",
             "divergence_limit",
+            "distinct_tol",
+            "start_box_span",
         )
         for name in positive:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"joint-MAP setting {name}={value!r} must be a positive number")
-        for name in ("max_newton_iter", "max_backtracks", "max_damping_tries", "lanczos_steps"):
+        for name in (
+            "max_newton_iter",
+            "max_backtracks",
+            "max_damping_tries",
+            "lanczos_steps",
+            "n_starts",
+        ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be >= 1")
         if not 0 < self.mu_factor < 1:

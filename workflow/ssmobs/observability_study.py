@@ -33,7 +33,8 @@ def study_row(
     stan: Mapping[str, Any] | None,
     stan_table: pd.DataFrame | None,
 ) -> dict[str, Any]:
-    """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega."""
+    """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega;
+    |K^max_unique| and its ratio where the joint MAP ran from several starts."""
     model = scenario.model
     row: dict[str, Any] = {
         "scenario": scenario.name,
@@ -50,6 +51,11 @@ def study_row(
     trials = {"K_max": scenario.K, "K_stan": ss.get("K", scenario.K)}
     for ratio, count in (("K_max_ratio", "K_max"), ("K_stan_ratio", "K_stan")):
         row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], trials[count])
+    if js.get("K_max_unique") is not None:  # multi-start joint MAP (ssmobs.multi_start)
+        unique = int(js.get("K_max_unique"))
+        row["K_max_unique"], row["K_max_unique_ratio"] = unique, unique / scenario.K
+        lo, hi = clopper_pearson(unique, scenario.K)
+        row["K_max_unique_ratio_lo95"], row["K_max_unique_ratio_hi95"] = lo, hi
     if js.present:
         failed = {st: js.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
         row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"

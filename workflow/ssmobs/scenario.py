@@ -91,6 +91,8 @@ class Scenario:
     stan: bool
     stan_init: str
     joint_map_start: str
+    #: starts of the joint MAP per trajectory, or None (the joint_map block's n_starts)
+    joint_map_n_starts: int | None
     #: the exact marginal stage is enabled (it runs only for models linear in the states)
     exact: bool
     exact_K: int | None
@@ -138,6 +140,7 @@ class Scenario:
             stan=bool(sc["stan"]),
             stan_init=sc["stan_init"],
             joint_map_start=sc["joint_map_start"],
+            joint_map_n_starts=sc.get("joint_map_n_starts"),
             exact=bool(sc.get("exact", True)),
             exact_K=sc.get("exact_K"),
             stan_batch_size=sc.get("stan_batch_size"),

@@ -175,13 +175,26 @@ FRACTIONS = (
 )
 
 
+def _multi_start_rows(rows: list[dict]) -> bool:
+    """Some scenario's joint MAP ran from several starts (its summary has K_max_unique)."""
+    return any("K_max_unique" in (r.get("joint") or {}) for r in rows)
+
+
 def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     """One row per scenario: settings, |K^max| and |K^Stan| (ours and the paper's, also as
     fractions of K, since our K may be smaller than the paper's) and the estimator
     properties of every Omega component and x0; ``exact_*`` columns: the exact marginal
     stage at its K (``K_exact``): Definition 3's counts (unique / several / none) and the
     same statistics over the ``K_exact_used`` trajectories with a unique maximum.  Every
-    fraction ``<f>`` has its exact binomial 95 % interval in ``<f>_lo95`` / ``<f>_hi95``."""
+    fraction ``<f>`` has its exact binomial 95 % interval in ``<f>_lo95`` / ``<f>_hi95``.
+
+    When a scenario's joint MAP ran from several starts (:mod:`ssmobs.multi_start`), the
+    table also has ``joint_n_starts``, ``K_max_unique`` (trajectories with exactly one
+    distinct maximum that passes the checks), ``K_max_several`` and
+    ``K_paper_start_highest``, and the fraction ``K_max_unique_frac`` with its interval
+    (NaN for single-start scenarios); without any, these columns are absent."""
+    rows = list(rows)
+    multi = _multi_start_rows(rows)
     out = []
     for r in rows:
         sc = r["config"]
@@ -217,6 +230,14 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         row["K_stan_frac_rel_diff"] = rel_diff(row["K_stan_frac"], row["K_stan_frac_paper"])
         for frac, count, total in FRACTIONS:  # exact binomial 95 % interval of every fraction
             row[f"{frac}_lo95"], row[f"{frac}_hi95"] = clopper_pearson(row[count], row[total])
+        if multi:
+            row["joint_n_starts"] = joint.get("n_starts", 1 if joint.present else math.nan)
+            for key in ("K_max_unique", "K_max_several", "K_paper_start_highest"):
+                row[key] = _num(joint.get(key))
+            row["K_max_unique_frac"] = row["K_max_unique"] / K
+            row["K_max_unique_frac_lo95"], row["K_max_unique_frac_hi95"] = clopper_pearson(
+                row["K_max_unique"], K
+            )
         comps = joint.get("components") or list(sc["omega"]) + ["x0"]
         for c in comps:
             for stat in ("mean", "var", "mse"):
@@ -251,9 +272,12 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     |K^Stan|/K with their exact binomial 95 % intervals beside the paper's (at the paper's
     K; ours over the Stan runs, K or every ``stan_every``-th of the K), and the
     marginal-MAP mean and Cover90 of every component of Omega and x0 (over K^Stan).  The
-    wide table (:func:`section_iv`) holds everything else."""
+    wide table (:func:`section_iv`) holds everything else.  When a scenario's joint MAP ran
+    from several starts, |K^max_unique|/K with its interval stands beside |K^max|/K."""
     from .models import get_model
 
+    rows = list(rows)
+    multi = _multi_start_rows(rows)
     out = []
     for r in rows:
         sc = r["config"]
@@ -265,12 +289,18 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         k_max = joint.count if sc["joint_map"] else math.nan
         k_stan = marg.count if sc["stan"] else math.nan
         runs = marg.get("K", math.nan) if sc["stan"] else math.nan
+        unique = (
+            {"K^max_unique/K (95 % CI)": format_fraction(_num(joint.get("K_max_unique")), K)}
+            if multi
+            else {}
+        )
         out.append(
             {
                 "scenario": sc["name"],
                 "T": sc["T"],
                 "K": K,
                 "K^max/K (95 % CI)": format_fraction(k_max, K),
+                **unique,
                 "paper K^max/K": format_fraction(_num(pv.get("K_max")), K_paper),
                 "Stan runs": runs,
                 "K^Stan/K (95 % CI)": format_fraction(k_stan, runs),

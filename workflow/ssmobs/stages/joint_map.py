@@ -47,6 +47,30 @@ def joint_map_of(
     return result, frame, joint_map_summary(frame, model, traj.omega, traj.x0), bounds
 
 
+def multi_start_of(
+    traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
+) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
+    """:func:`joint_map_of` from ``settings["n_starts"]`` starts (:mod:`ssmobs.multi_start`):
+    the paper's start's result, its table with the per-k columns of the distinct maxima
+    beside, and its summary with |K^max_unique| and the other multi-start counts."""
+    from ..joint_map import JointMapSettings, joint_map_summary
+    from ..multi_start import multi_start_joint_map, multi_start_summary
+
+    model = traj.model
+    bounds = model.prior_bounds(traj.omega, prior)
+    parsed = JointMapSettings.from_mapping(settings)
+    multi = multi_start_joint_map(
+        model, traj.z, bounds, traj.omega, traj.x0, parsed, progress=progress
+    )
+    result = multi.runs[0]
+    columns = multi.columns()
+    frame = result.to_frame(model, traj.T)
+    frame = frame.join(columns)
+    info = joint_map_summary(frame, model, traj.omega, traj.x0)
+    info.update(multi_start_summary(columns, parsed))
+    return result, frame, info, bounds
+
+
 def run_joint_map(
     trajectories: PathLike,
     scenario: Scenario,
@@ -60,9 +84,15 @@ def run_joint_map(
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    progress = Progress(f"joint MAP {scenario.name}", traj.K, logger)
     settings = {**settings, "start_states": scenario.joint_map_start}
-    result, frame, info, bounds = joint_map_of(traj, scenario.prior, settings, progress)
+    if scenario.joint_map_n_starts is not None:
+        settings["n_starts"] = scenario.joint_map_n_starts
+    n_starts = int(settings.get("n_starts", 1))
+    progress = Progress(f"joint MAP {scenario.name}", traj.K * n_starts, logger)
+    if n_starts > 1:
+        result, frame, info, bounds = multi_start_of(traj, scenario.prior, settings, progress)
+    else:
+        result, frame, info, bounds = joint_map_of(traj, scenario.prior, settings, progress)
     info.update(
         scenario=scenario.name,
         model=model.slug,
@@ -74,6 +104,14 @@ def run_joint_map(
         mu0_median=float(np.nanmedian(frame["mu0"])),
     )
     logger.info("scenario %s: |K^max| = %d of %d", scenario.name, info["K_max"], info["K"])
+    if n_starts > 1:
+        logger.info(
+            "scenario %s: |K^max_unique| = %d of %d (%d starts per trajectory)",
+            scenario.name,
+            info["K_max_unique"],
+            info["K"],
+            n_starts,
+        )
     io.write_parquet(table, frame)
     if theta is not None:
         io.write_netcdf(
