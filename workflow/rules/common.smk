@@ -445,14 +445,18 @@ OUTPUT_SUFFIXES = (".csv", ".md", ".tex", ".pdf", ".png")
 
 
 def set_aside_leftovers():
-    """After a successful run: move the tables and figures in outputs_dir that this config
-    does not make (an earlier config's) to ``results/outputs/<outputs_dir>/set_aside/<time>/``
-    with one line saying so, and remove the stamps of rules this config does not have, so
-    that outputs_dir holds exactly this config's outputs (README* files stay)."""
+    """After a successful run of every target (rule ``all``): move the tables and figures in
+    outputs_dir that no job of this config makes (an earlier config's) to
+    ``results/outputs/<outputs_dir>/set_aside/<time>/`` with one line saying so, and remove
+    the stamps of rules this config does not have, so that outputs_dir holds exactly this
+    config's outputs (README* files stay).  A run of chosen targets moves nothing."""
     out, stamps_dir = Path(OUT), Path(f"results/outputs/{OUT}")
     if is_dry_run() or not workflow.is_main_process or not out.is_dir():
         return
-    made = {str(Path(t)) for t in all_targets()}
+    dag = workflow.dag
+    if dag is None or not any(job.rule.name == "all" for job in dag.targetjobs):
+        return
+    made = {str(Path(f)) for job in dag.jobs for f in job.output}
     left = sorted(
         p
         for p in out.iterdir()
