@@ -52,16 +52,6 @@ GRAD_TOL: float = 1e-7
 #: Default iteration cap (toolbox value).
 MAX_ITER: int = 10_000
 
-_EULER_GAMMA = 0.57721566490153286061
-_SERIES_MAX = 1.0  # use the E1 power series for c <= 1
-_SERIES_COEF = np.array(
-    [(-1.0) ** (k + 1) / (k * math.factorial(k)) for k in range(1, 31)], dtype=np.float64
-)
-# smallest number of terms m so that the first omitted term c^{m+1}/((m+1)(m+1)!) <= 1e-17
-_SERIES_CMAX = np.array(
-    [(1e-17 * (m + 1) * math.factorial(m + 1)) ** (1.0 / (m + 1)) for m in range(1, 31)]
-)
-
 
 @dataclass(frozen=True, eq=False)
 class DesignResult:
