@@ -56,6 +56,7 @@ include: "workflow/rules/observability_map.smk"
 include: "workflow/rules/stan_variants.smk"
 
 
+stop_without_compiler()
 remove_stale_stamps()
 repair_damaged_trajectories()
 repair_damaged_batches()

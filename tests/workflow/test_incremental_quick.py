@@ -163,3 +163,19 @@ def test_outputs_of_an_earlier_config_are_moved_out_of_outputs_dir(tmp_path):
     assert (
         "does not make" not in again.stderr and "Nothing to be done" in again.stdout + again.stderr
     )
+
+
+def test_a_cold_cache_without_a_compiler_stops_before_any_job_with_one_line(tmp_path):
+    """Issue 35: a cold cache without g++ gave a 45-line traceback from a build job."""
+    import os
+
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    env = {**os.environ, "CXX": "no-such-compiler", "SSMOBS_CACHE": str(tmp_path / "cold")}
+    proc = snakemake(work, "--cores", "1", "--configfile", CONFIG, check=False, env=env)
+    assert proc.returncode != 0
+    text = proc.stdout + proc.stderr
+    assert "must build 1 program(s) (same) but finds no C++ compiler 'no-such-compiler'" in text
+    assert "Traceback" not in text and not (work / "results").exists()
+    dry = snakemake(work, "-n", "--cores", "1", "--configfile", CONFIG, env=env)
+    assert "finds no C++ compiler" in dry.stdout + dry.stderr

@@ -82,6 +82,40 @@ try:
     KEYS = CacheKeys.for_backend(config, STAN_BACKEND, repo=REPO)
 except (ValueError, BackendError) as err:
     raise WorkflowError(f"stan.backend {STAN_BACKEND!r} cannot start here: {err}") from None
+
+
+def missing_compiler_problem():
+    """One line when Stan programs must be built with the native driver here (the model
+    check always uses it) and no C++ compiler is found, else None: a cold cache without g++
+    fails before any job, not in a build job's traceback."""
+    import shutil
+    from ssmobs.stan_backends import stan_file
+    from ssmobs.stan_backends.native import NativeBackend
+    from ssmobs.stan_backends.native_build import compiler
+
+    models = sorted({sc["model"] for sc in SCENARIOS.values() if sc["stan"]})
+    if not models or shutil.which(compiler()):
+        return None
+    native = NativeBackend()
+    unbuilt = [m for m in models if not native.is_built(stan_file(m))]
+    if not unbuilt:
+        return None
+    return (
+        f"the native Stan backend must build {len(unbuilt)} program(s) ({', '.join(unbuilt)}) "
+        f"but finds no C++ compiler {compiler()!r}: install g++ (apt-get install g++), set "
+        f"CXX to a C++ compiler, or point SSMOBS_CACHE at a cache that holds the programs"
+    )
+
+
+def stop_without_compiler():
+    """Stop the run (a dry run: warn) with :func:`missing_compiler_problem`'s line."""
+    problem = missing_compiler_problem()
+    if problem is not None:
+        if not is_dry_run():
+            raise WorkflowError(problem)
+        logger.warning(problem)
+
+
 #: the design sets of this config's design settings and code
 DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
 # Every key up front: a cluster job plans only its own job and looks its key up directly.

@@ -102,7 +102,7 @@ class NativeBackend:
         if memo in self._markers:
             return self._markers[memo]
         parts = build_key(code)
-        cache_dir = cache_root() / "native" / f"{path.stem}-{content_key(parts)}"
+        cache_dir = self._cache_dir(path, parts)
         exe = cache_dir / EXE_NAME
         if not entry_complete(cache_dir, EXE_NAME):
             with build_lock(cache_dir):
@@ -123,6 +123,16 @@ class NativeBackend:
         }
         self._markers[memo] = marker
         return marker
+
+    @staticmethod
+    def _cache_dir(path: Path, parts: Mapping[str, str]) -> Path:
+        """The program's cache entry, named by its stem and :func:`build_key`."""
+        return cache_root() / "native" / f"{path.stem}-{content_key(dict(parts))}"
+
+    def is_built(self, stan_file: str | os.PathLike) -> bool:
+        """Whether the program's executable is in the cache already (runs no compiler)."""
+        path = Path(stan_file).resolve()
+        return entry_complete(self._cache_dir(path, build_key(program_code(path))), EXE_NAME)
 
     @contextlib.contextmanager
     def _run_dir(self, data: Mapping[str, Any]) -> Iterator[Path]:
