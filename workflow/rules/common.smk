@@ -479,7 +479,7 @@ OUTPUT_SUFFIXES = (".csv", ".md", ".tex", ".pdf", ".png")
 
 
 def set_aside_leftovers():
-    """After a successful run of every target (rule ``all``): move the tables and figures in
+    """After a successful run of every target (the target ``all``), move the tables and figures in
     outputs_dir that no job of this config makes (an earlier config's) to
     ``results/outputs/<outputs_dir>/set_aside/<time>/`` with one line saying so, and remove
     the stamps of rules this config does not have, so that outputs_dir holds exactly this
