@@ -127,17 +127,21 @@ def in_force() -> dict[str, Any]:
     features = _numpy_features()
     dispatch = [t for t in _numpy_dispatch() if features.get(t)]
     return {
-        "blas": [
-            {
-                "api": info.get("internal_api"),
-                "version": info.get("version"),
-                "kernel": info.get("architecture"),
-                "threads": info.get("num_threads"),
-                "library": Path(str(info.get("filepath", ""))).name,
-            }
-            for info in threadpool_info()
-            if info.get("user_api") == "blas"
-        ],
+        # sorted: the order in which NumPy and SciPy loaded their libraries is no setting
+        "blas": sorted(
+            (
+                {
+                    "api": info.get("internal_api"),
+                    "version": info.get("version"),
+                    "kernel": info.get("architecture"),
+                    "threads": info.get("num_threads"),
+                    "library": Path(str(info.get("filepath", ""))).name,
+                }
+                for info in threadpool_info()
+                if info.get("user_api") == "blas"
+            ),
+            key=lambda blas: str(blas["library"]),
+        ),
         "numpy": np.__version__,
         "numpy_dispatch": dispatch,
     }
