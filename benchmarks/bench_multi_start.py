@@ -28,9 +28,7 @@ sys.path.insert(0, str(REPO / "workflow"))
 
 from ssmobs import kernels  # noqa: E402  (no NumPy at import)
 
-if any(os.environ.get(k) != v for k, v in kernels.environment().items()):
-    kernels.apply()
-    os.execv(sys.executable, [sys.executable, *sys.argv])
+kernels.restart_with_fixed_kernels()
 
 import numpy as np  # noqa: E402
 from machine import machine_info  # noqa: E402

@@ -116,3 +116,16 @@ def test_the_environment_has_the_pinned_versions(module):
         if "==" in line and not line.startswith("#")
     )
     assert importlib.import_module(module).__version__ == pins[module]
+
+
+def test_a_script_restarts_itself_with_the_fixed_kernels(tmp_path):
+    script = tmp_path / "script.py"
+    script.write_text(
+        "import os\nfrom ssmobs import kernels\nkernels.restart_with_fixed_kernels()\n"
+        "print(os.environ['OPENBLAS_NUM_THREADS'], kernels.require().startswith('kernels:'))\n"
+    )
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"),
+           "OPENBLAS_NUM_THREADS": "4"}  # fmt: skip
+    out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["1", "True"]

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import os
 import platform
+import sys
 from collections.abc import Mapping, MutableMapping
 from functools import lru_cache
 from pathlib import Path
@@ -115,6 +116,14 @@ def apply(environ: MutableMapping[str, str] | None = None) -> dict[str, str]:
     env = environment()
     (os.environ if environ is None else environ).update(env)
     return env
+
+
+def restart_with_fixed_kernels() -> None:
+    """Run this script again in a process started with :func:`environment`, unless it was
+    (for benchmarks and scripts run outside Snakemake; call before NumPy loads)."""
+    if any(os.environ.get(k) != v for k, v in environment().items()):
+        apply()
+        os.execv(sys.executable, [sys.executable, *sys.argv])
 
 
 def in_force() -> dict[str, Any]:
