@@ -243,7 +243,7 @@ def job_counts(config: dict) -> dict[str, int]:
         if sc is None:
             continue
         sets = ks.get("sets") or ["nested"]
-        runs = sum(1 if m == "design" else len(ks["seeds"]) for m in ks["methods"]) * len(sets)
+        runs = len(ks["methods"]) * len(ks["seeds"]) * len(sets)  # every seed of every method
         # one k_selection_grid job per (method, set variant, seed), which makes its own
         # sets, and select_k
         counts[f"k_selection '{ks['name']}'"] = runs + 1
