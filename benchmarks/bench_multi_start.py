@@ -44,7 +44,8 @@ CASES = [
 
 def run_case(slug, omega, x0, T, prior, K, n_starts):
     import ssmobs.multi_start as ms
-    from ssmobs.joint_map import JointMapSettings, joint_map
+    from ssmobs.joint_map import joint_map
+    from ssmobs.joint_map_settings import JointMapSettings
     from ssmobs.models import get_model
 
     model = get_model(slug)

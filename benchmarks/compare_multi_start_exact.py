@@ -47,7 +47,7 @@ CASES = [
 
 def compare(slug, omega, x0, T, prior, K, n_starts):
     from ssmobs.exact_marginal import exact_marginal
-    from ssmobs.joint_map import JointMapSettings
+    from ssmobs.joint_map_settings import JointMapSettings
     from ssmobs.models import get_model
     from ssmobs.multi_start import multi_start_joint_map
 

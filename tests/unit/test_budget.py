@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from ssmobs import budget
 from ssmobs.design_disturbances import design_disturbances
-from ssmobs.joint_map import JointMapSettings, joint_map
+from ssmobs.joint_map import joint_map
+from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories

@@ -21,8 +21,8 @@ from ssmobs.cache_keys import (
     digest,
     file_digest,
     module_closure,
-    syntax_digest,
 )
+from ssmobs.code_hashing import syntax_digest
 from ssmobs.config import validate
 from ssmobs.record_cache import program_hash
 from ssmobs.stan_backends.base import program_code
@@ -64,44 +64,6 @@ def _write(root: Path, files: dict[str, str]) -> Path:
         (root / name).parent.mkdir(parents=True, exist_ok=True)
         (root / name).write_text(text)
     return root
-
-
-def test_module_closure_of_named_functions_follows_only_the_code_they_run(tmp_path):
-    """``"module.py:f"``: the module's top level, f and the functions f calls; imports under
-    ``if TYPE_CHECKING:`` run nowhere; the packages' ``__init__.py`` run on import."""
-    pkg = _write(
-        tmp_path / "pkg",
-        {
-            "__init__.py": "",
-            "a.py": "",
-            "b.py": "",
-            "c.py": "",
-            "d.py": "",
-            "typing_only.py": "",
-            "sub/__init__.py": "",
-            "sub/glue.py": (
-                "from typing import TYPE_CHECKING\n"
-                "from .. import a\n"
-                "if TYPE_CHECKING:\n"
-                "    from .. import typing_only\n"
-                "def f():\n"
-                "    from ..b import x\n"
-                "    return helper()\n"
-                "def helper():\n"
-                "    from ..c import y\n"
-                "def g():\n"
-                "    from ..d import z\n"
-            ),
-        },
-    )
-    base = {"__init__.py", "a.py", "sub/__init__.py", "sub/glue.py"}
-    assert set(module_closure(("sub/glue.py:f",), pkg)) == base | {"b.py", "c.py"}
-    assert set(module_closure(("sub/glue.py:g",), pkg)) == base | {"d.py"}
-    assert set(module_closure(("sub/glue.py",), pkg)) == base | {"b.py", "c.py", "d.py"}
-    with pytest.raises(ValueError, match="no function"):
-        module_closure(("sub/glue.py:nope",), pkg)
-    with pytest.raises(FileNotFoundError, match="no such module"):
-        module_closure(("gone.py",), pkg)
 
 
 @pytest.mark.parametrize(

@@ -6,7 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 from ssmobs import config as cfg
-from ssmobs.joint_map import JointMapSettings, _Barrier, initial_mu_values, initial_theta, joint_map
+from ssmobs.joint_map import initial_theta, joint_map
+from ssmobs.joint_map_barrier import LogBarrier, initial_mu_values
+from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.scenario import Scenario
 from ssmobs.trajectories import make_trajectories, write_trajectories
@@ -28,7 +30,7 @@ def test_gradient_balance_mu0_equals_the_hand_computed_ratio_for_sep():
     model, _, x, z = design("sep", [0.9, 0.9], [8.0], T=30, K=3, seed=1)
     bounds = model.prior_bounds([0.9, 0.9])
     theta0 = initial_theta(model, z, np.array([0.9, 0.9]), np.array([8.0]))
-    mu0 = initial_mu_values(model, z, theta0, _Barrier(model, bounds), JointMapSettings())
+    mu0 = initial_mu_values(model, z, theta0, LogBarrier(model, bounds), JointMapSettings())
     from ssmobs.models.log_posterior import neg2_log_posterior
 
     g = neg2_log_posterior(model, theta0, z, None, order=1)[1]
@@ -40,7 +42,7 @@ def test_gradient_balance_mu0_equals_the_hand_computed_ratio_for_sep():
     assert np.allclose(mu0, expect)
     assert np.all(mu0 > T)  # here the balance lands above the singular term's order T
     per_step = initial_mu_values(
-        model, z, theta0, _Barrier(model, bounds), JointMapSettings(mu0_rule="per_step")
+        model, z, theta0, LogBarrier(model, bounds), JointMapSettings(mu0_rule="per_step")
     )
     assert np.all(per_step == 60.0)
 

@@ -9,15 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.optimize import minimize
-from ssmobs.joint_map import (
-    STATUSES,
-    JointMapSettings,
-    _Barrier,
-    _ridge_check,
-    initial_theta,
-    joint_map,
-    joint_map_summary,
-)
+from ssmobs.joint_map import initial_theta, joint_map, joint_map_summary
+from ssmobs.joint_map_barrier import LogBarrier
+from ssmobs.joint_map_checks import STATUSES, ridge_check
+from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.models.base import PriorBounds, StateSpaceModel
 from ssmobs.models.log_posterior import log_posterior, neg2_log_posterior
@@ -169,21 +164,21 @@ def test_constant_height_ridge_is_detected():
     v[:, 0], v[:, 1] = res.theta_hat[:, 0], -res.theta_hat[:, 1]  # tangent of a b = const
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     f_hat = res.neg2_log_post
-    moved, dist, dval = _ridge_check(
-        model, z, res.theta_hat, f_hat, v, _Barrier(model, bounds), JointMapSettings()
+    moved, dist, dval = ridge_check(
+        model, z, res.theta_hat, f_hat, v, LogBarrier(model, bounds), JointMapSettings()
     )
     assert moved.all() and np.all(dist > 1e-2)
     # why the location test (issue 12): on a ridge of constant height the re-optimisation
     # ends elsewhere at the same value of -2 pi, so the paper's "different value", read as
     # the objective value, would call this ridge a unique maximum
     assert np.all(dval <= 1e-8 * (1 + np.abs(f_hat)))
-    by_value, _, _ = _ridge_check(
+    by_value, _, _ = ridge_check(
         model,
         z,
         res.theta_hat,
         f_hat,
         v,
-        _Barrier(model, bounds),
+        LogBarrier(model, bounds),
         JointMapSettings(ridge_test="value"),
     )
     assert not by_value.any()
@@ -200,7 +195,7 @@ def test_small_ratio_at_a_unique_maximum_stays_ok(same_t20):
 
 def test_ridge_status_when_the_reoptimisation_moves(same_t20, monkeypatch):
     """Wiring of the last check: ratio < r0 and a moved re-optimisation give "ridge"."""
-    import ssmobs.joint_map as jm
+    import ssmobs.joint_map_checks as checks
 
     model, z, bounds, res = same_t20
     calls = []
@@ -211,7 +206,7 @@ def test_ridge_status_when_the_reoptimisation_moves(same_t20, monkeypatch):
         n = theta_.shape[0]
         return np.ones(n, dtype=bool), np.full(n, 0.5), np.full(n, 0.25)
 
-    monkeypatch.setattr(jm, "_ridge_check", fake)
+    monkeypatch.setattr(checks, "ridge_check", fake)
     out = joint_map(model, z[:3], bounds, [0.9], [8.0], JointMapSettings(eig_ratio_min=0.9))
     assert calls == [3]
     assert (out.status == "ridge").all()

@@ -16,7 +16,8 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs.joint_map import JointMapResult, JointMapSettings, joint_map
+from ssmobs.joint_map import JointMapResult, joint_map
+from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.models.base import StateSpaceModel
 from ssmobs.multi_start import (

@@ -14,7 +14,7 @@ from ssmobs import config as cfg
 from ssmobs.cache_keys import SAMPLER_FIELDS
 from ssmobs.convergence import ConvergenceSettings
 from ssmobs.exact_settings import ExactSettings
-from ssmobs.joint_map import JointMapSettings
+from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends.base import SamplerSettings
 

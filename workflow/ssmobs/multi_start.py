@@ -45,7 +45,8 @@ import numpy as np
 import pandas as pd
 
 from .binomial import clopper_pearson
-from .joint_map import JointMapResult, JointMapSettings, _ProgressLike, joint_map
+from .joint_map import JointMapResult, _ProgressLike, joint_map
+from .joint_map_settings import JointMapSettings
 from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import compile_model
 

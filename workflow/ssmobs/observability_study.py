@@ -23,7 +23,7 @@ from . import io
 from .binomial import clopper_pearson
 from .convergence import CHECKS
 from .estimator_moments import EstimatorSummary
-from .joint_map import STATUSES
+from .joint_map_checks import STATUSES
 from .scenario import Scenario
 
 

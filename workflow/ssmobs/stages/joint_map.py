@@ -30,7 +30,8 @@ def joint_map_of(
     traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
 ) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
     """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
-    from ..joint_map import JointMapSettings, joint_map, joint_map_summary
+    from ..joint_map import joint_map, joint_map_summary
+    from ..joint_map_settings import JointMapSettings
 
     model = traj.model
     bounds = model.prior_bounds(traj.omega, prior)
@@ -53,7 +54,8 @@ def multi_start_of(
     """:func:`joint_map_of` from ``settings["n_starts"]`` starts (:mod:`ssmobs.multi_start`):
     the paper's start's result, its table with the per-k columns of the distinct maxima
     beside, and its summary with |K^max_unique| and the other multi-start counts."""
-    from ..joint_map import JointMapSettings, joint_map_summary
+    from ..joint_map import joint_map_summary
+    from ..joint_map_settings import JointMapSettings
     from ..multi_start import multi_start_joint_map, multi_start_summary
 
     model = traj.model

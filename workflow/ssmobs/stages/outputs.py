@@ -280,7 +280,7 @@ def mu0_sweep_rows(
     traj: Trajectories, prior: Any, settings: dict, mu0_per_T: list[float]
 ) -> list[dict]:
     """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
-    gradient-balance rule (:func:`ssmobs.joint_map.initial_mu_values`)."""
+    gradient-balance rule (:func:`ssmobs.joint_map_barrier.initial_mu_values`)."""
     from .joint_map import joint_map_of
 
     rows = []

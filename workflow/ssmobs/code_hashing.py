@@ -1,0 +1,185 @@
+"""Which modules of a Python package a piece of its code runs, and a hash of a module that
+ignores its docstrings: what keys a result by the code that made it.
+
+- :func:`import_closure`: the package modules that entries (``"module.py"``, or
+  ``"module.py:f,g"`` for the functions ``f``, ``g`` of a module) run, found by reading
+  their imports in the syntax tree, directly or not, with the ``__init__.py`` of their
+  packages;
+- :func:`syntax_digest`: a module's syntax tree without its docstrings, so that an edit of
+  a comment, a docstring or the layout keeps the hash.
+
+Nothing here knows the workflow: the package's directory and the modules to leave out are
+arguments (:mod:`ssmobs.cache_keys` names the workflow's).
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+from collections.abc import Iterable
+from pathlib import Path
+
+_DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def syntax_digest(path: str | Path) -> str:
+    """SHA-256 (16 hex digits) of a Python module's syntax tree (``ast.dump``, decoded as
+    Python decodes the file) without its docstrings: what the module computes, so an edit
+    of a comment, a docstring or the layout keeps it; another Python version may change
+    it (which recomputes)."""
+    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, _DOCUMENTED) and ast.get_docstring(node, clean=False) is not None:
+            node.body = node.body[1:] or [ast.Pass()]
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+
+
+def _module_file(name: str, package_dir: Path) -> Path | None:
+    """The file of module ``name`` (dotted, relative to the package), or None."""
+    base = package_dir.joinpath(*name.split(".")) if name else package_dir
+    if base.with_suffix(".py").is_file():
+        return base.with_suffix(".py")
+    if (base / "__init__.py").is_file():
+        return base / "__init__.py"
+    return None
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    """``if TYPE_CHECKING:`` or ``if typing.TYPE_CHECKING:`` (its body is never run)."""
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _walk(nodes: Iterable[ast.AST]) -> list[ast.AST]:
+    """``nodes`` and every node under them, without the bodies of ``if TYPE_CHECKING:``."""
+    out: list[ast.AST] = []
+    todo = list(nodes)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            todo.extend(node.orelse)
+            continue
+        out.append(node)
+        todo.extend(ast.iter_child_nodes(node))
+    return out
+
+
+_FUNCTION_DEFS = (ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def _runtime_nodes(tree: ast.Module, functions: frozenset[str] | None) -> list[ast.AST]:
+    """The nodes of a module that run: all of them (``functions`` None), or the module's
+    top level (with its functions' decorators and defaults) and the bodies of ``functions``
+    and of every function of the module they name, directly or not."""
+    if functions is None:
+        return _walk(tree.body)
+    defs = {n.name: n for n in tree.body if isinstance(n, _FUNCTION_DEFS)}
+    unknown = sorted(functions - set(defs))
+    if unknown:
+        raise ValueError(f"no function(s) {unknown} at the top level of the module")
+    top: list[ast.AST] = [n for n in tree.body if not isinstance(n, _FUNCTION_DEFS)]
+    for d in defs.values():  # run when the module is imported
+        top += [*d.decorator_list, *d.args.defaults]
+        top += [v for v in d.args.kw_defaults if v is not None]
+    nodes = _walk(top)
+    todo = [*functions, *(n.id for n in nodes if isinstance(n, ast.Name) and n.id in defs)]
+    done: set[str] = set()
+    while todo:
+        name = todo.pop()
+        if name in done:
+            continue
+        done.add(name)
+        body = _walk(defs[name].body)
+        nodes += body
+        todo += [n.id for n in body if isinstance(n, ast.Name) and n.id in defs]
+    return nodes
+
+
+def _imports(path: Path, package_dir: Path, functions: frozenset[str] | None = None) -> set[Path]:
+    """Package modules that ``path`` imports where its code runs (:func:`_runtime_nodes`:
+    relative and absolute imports of the package (named as ``package_dir``) at the top level
+    and inside functions, not those under ``if TYPE_CHECKING:``)."""
+    package = package_dir.name
+    rel = path.relative_to(package_dir)
+    pkg = list(rel.with_suffix("").parts)[:-1]
+    found: set[Path] = set()
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in _runtime_nodes(tree, functions):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                if not (node.module or "").startswith(package):
+                    continue
+                anchor: list[str] = []
+                module = (node.module or "").split(".")[1:]
+            else:
+                anchor = pkg[: len(pkg) - (node.level - 1)] if node.level > 1 else pkg
+                module = (node.module or "").split(".") if node.module else []
+            base = ".".join([*anchor, *module])
+            target = _module_file(base, package_dir)
+            if target is not None:
+                found.add(target)
+            for alias in node.names:  # "from . import io": io is a module
+                sub = _module_file(".".join(p for p in (base, alias.name) if p), package_dir)
+                if sub is not None:
+                    found.add(sub)
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith(f"{package}."):
+                    target = _module_file(".".join(alias.name.split(".")[1:]), package_dir)
+                    if target is not None:
+                        found.add(target)
+    return found
+
+
+def _packages(path: Path, package_dir: Path) -> set[Path]:
+    """The ``__init__.py`` of every package ``path`` lies in (run when it is imported)."""
+    found = set()
+    for parent in path.parents:
+        if parent != package_dir and package_dir not in parent.parents:
+            break
+        init = parent / "__init__.py"
+        if init.is_file():
+            found.add(init)
+    return found
+
+
+def _entry(entry: str, package_dir: Path) -> tuple[Path, frozenset[str] | None]:
+    """``"module.py"`` or ``"module.py:f,g"`` as (file, functions or None for all)."""
+    name, _, functions = entry.partition(":")
+    path = package_dir / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such module of the package (entry {entry!r})")
+    return path, (frozenset(functions.split(",")) if functions else None)
+
+
+def import_closure(
+    entries: tuple[str, ...], package_dir: Path, skip: frozenset[str] = frozenset()
+) -> tuple[str, ...]:
+    """The modules of the package in ``package_dir`` that ``entries`` run: the entries
+    (``"module.py"``, or ``"sub/module.py:f,g"`` for the functions ``f``, ``g`` of a module,
+    whose imports are followed at the module's top level and inside those functions and the
+    module's functions they call only), every package module they import, directly or not,
+    and the ``__init__.py`` of their packages, as sorted paths relative to ``package_dir``.
+    A module reached by an import is followed whole; a module in ``skip`` (relative paths)
+    is neither listed nor followed."""
+    todo = [_entry(e, package_dir) for e in entries]
+    whole: set[Path] = set()
+    partial: dict[Path, frozenset[str]] = {}
+    while todo:
+        path, functions = todo.pop()
+        if path in whole or not path.is_file():
+            continue
+        if str(path.relative_to(package_dir)) in skip:
+            continue  # neither hashed nor followed
+        if functions is None:
+            whole.add(path)
+        else:
+            functions -= partial.get(path, frozenset())
+            if not functions:
+                continue
+            partial[path] = partial.get(path, frozenset()) | functions
+        found = _imports(path, package_dir, functions) | _packages(path, package_dir)
+        todo.extend((p, None) for p in found)
+    return tuple(sorted(str(p.relative_to(package_dir)) for p in whole | set(partial)))
