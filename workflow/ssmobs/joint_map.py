@@ -99,7 +99,7 @@ class JointMapResult:
         return frame
 
 
-class _ProgressLike(Protocol):
+class ProgressLike(Protocol):
     def update(self, n: int = 1) -> None: ...
 
 
@@ -148,7 +148,7 @@ def joint_map(
     omega_true: np.ndarray,
     x0_true: np.ndarray,
     settings: JointMapSettings | None = None,
-    progress: _ProgressLike | None = None,
+    progress: ProgressLike | None = None,
 ) -> JointMapResult:
     """Joint MAP estimate and numerical checks for every design trajectory (Sec. III.B).
 

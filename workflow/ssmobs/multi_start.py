@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from .binomial import clopper_pearson
-from .joint_map import JointMapResult, _ProgressLike, joint_map
+from .joint_map import JointMapResult, ProgressLike, joint_map
 from .joint_map_settings import JointMapSettings
 from .models.base import PriorBounds, StateSpaceModel
 from .models.log_posterior import compile_model
@@ -216,7 +216,7 @@ def multi_start_joint_map(
     omega_true: np.ndarray,
     x0_true: np.ndarray,
     settings: JointMapSettings,
-    progress: _ProgressLike | None = None,
+    progress: ProgressLike | None = None,
 ) -> MultiStartResult:
     """Joint MAP of every trajectory from ``settings.n_starts`` starts (module docstring).
 
