@@ -100,6 +100,8 @@ class JointMapResult:
 
 
 class ProgressLike(Protocol):
+    """What the solver reports finished trajectories to (a counter with ``update``)."""
+
     def update(self, n: int = 1) -> None: ...
 
 
