@@ -133,3 +133,76 @@ def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
     assert (
         "slug 'stoch_vol' is used twice: by my_model.py (StochVol) and stoch_vol.py (StochVol)"
     ) in proc.stdout + proc.stderr
+
+
+SWAPPED_GROWTH = '''"""Growth model with a planted mistake: b and a swapped in simulate (issue 36)."""
+
+import numpy as np
+
+from .base import StateSpaceModel
+
+
+class Growth(StateSpaceModel):
+    slug = "growth"
+    title = "growth model"
+    obs_dim = 1
+    state_dim = 1
+    param_names = ("a", "b")
+    default_prior = {"a": "restricted", "b": "half_line"}
+    allowed_priors = {"a": ("restricted",), "b": ("half_line",)}
+
+    def obs_term(self, omega, x, z):
+        (xt,), (zt,) = x, z
+        return (zt - xt**2 / 20) ** 2
+
+    def trans_term(self, omega, x_prev, x):
+        (a, b), (xp,), (xt,) = omega, x_prev, x
+        return (xt - a * xp - b * xp / (1 + xp**2)) ** 2
+
+    def initial_states(self, omega, z):
+        return np.sqrt(20 * np.maximum(np.asarray(z, dtype=float), 0.0))
+
+    def simulate(self, omega, x0, eta, eps):
+        b, a = omega
+        K, T, _ = eta.shape
+        x = np.empty((K, T, 1))
+        prev = np.full(K, float(x0[0]))
+        for t in range(T):
+            prev = a * prev + b * prev / (1 + prev**2) + eta[:, t, 0]
+            x[:, t, 0] = prev
+        return x, x**2 / 20 + eps
+'''
+
+
+def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_path):
+    """`b, a = omega` swapped in simulate: `make run CONFIG=...` (its preflight, then
+    Snakemake with --configfile) names the model's mistake, not the config's true values,
+    whose noise-free trajectory the wrong simulate blows up to |x_t| = 4.3e+52 (issue 36)."""
+    import yaml
+
+    work = make_workdir(tmp_path)
+    (work / "workflow" / "ssmobs" / "models" / "growth.py").write_text(SWAPPED_GROWTH)
+    conf = {
+        "outputs_dir": "paper_figures/growth",
+        "scenarios": [
+            {
+                "name": "growth_T20",
+                "model": "growth",
+                "omega": {"a": 0.5, "b": 25},
+                "x0": 0.1,
+                "T": 20,
+                "K": 4,
+                "stan": False,
+            }
+        ],
+    }
+    (work / "config" / "growth.yaml").write_text(yaml.safe_dump(conf))
+    preflight = _python(work, "-m", "ssmobs.preflight", "config/growth.yaml")
+    dry = snakemake(work, "-n", "--configfile", "config/growth.yaml", check=False)
+    for proc in (preflight, dry):
+        text = proc.stdout + proc.stderr
+        assert proc.returncode != 0
+        assert "model 'growth' fails its own check" in text, text[-3000:]
+        assert "simulate does not match the transition term" in text
+        assert "check the order of the parameters in simulate" in text
+        assert "reach |x_t|" not in text

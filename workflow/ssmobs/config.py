@@ -357,6 +357,45 @@ def _paper_output_problems(config: dict) -> list[str]:
     return problems
 
 
+def _own_model_problems(config: dict) -> list[str]:
+    """The model's own Python check (``python -m ssmobs.check_model <slug> --no-stan``, at
+    its default cases) for every model whose noise-free trajectory at a configured entry's
+    true values exceeds the size bound: a wrong ``simulate`` (say two parameters swapped)
+    can blow that trajectory up, and the size check would then blame the config's values.
+    The model's problem is reported instead, and the size check only when the model passes
+    its own check.  Other problems of the entries are left to :func:`_scenario_problems`.
+    """
+    entries = list(config["scenarios"])
+    for entry in config.get("observability_maps", []):
+        model = MODELS.get(entry["base"].get("model"))
+        if model is not None and entry["vary"] in model.param_names:
+            entries += cell_entries(entry)
+    suspects = set()
+    for entry in entries:
+        model = MODELS.get(entry.get("model"))
+        if model is None or model.slug in suspects:
+            continue
+        omega, x0, prior = entry.get("omega"), entry.get("x0"), entry.get("prior")
+        if model.check_true_values(omega, x0, prior):
+            continue  # a problem of the values themselves: reported with the entry
+        if model.check_true_values(omega, x0, prior, T=entry.get("T")):
+            suspects.add(model.slug)
+    if not suspects:
+        return []
+    from .check_model import check_model
+
+    problems = []
+    for slug in sorted(suspects):
+        report = check_model(slug, stan=False)
+        if report.problems:
+            problems.append(
+                f"model {slug!r} fails its own check (python -m ssmobs.check_model {slug}), "
+                f"so the size of its trajectories at the config's true values says nothing "
+                f"about the config: {report.problems[0]}"
+            )
+    return problems
+
+
 def _backend_problems(config: dict) -> list[str]:
     backend = config["stan"]["backend"]
     if backend != "cmdstanpy" or not any(sc.get("stan", True) for sc in config["scenarios"]):
@@ -401,6 +440,8 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     scalars_from_command_line(config, schema)
     explicit_exact = frozenset(_explicit_exact(config))
     problems = nonfinite_problems(config) or schema_problems(config, schema)
+    if not problems:
+        problems = _own_model_problems(config)
     if not problems:
         problems = (
             _scenario_problems(config, explicit_exact)
