@@ -135,7 +135,7 @@ def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
     ) in proc.stdout + proc.stderr
 
 
-SWAPPED_GROWTH = '''"""Growth model with a planted mistake: b and a swapped in simulate (issue 36)."""
+SWAPPED_GROWTH = '''"""Growth model with a planted mistake: b, a swapped in simulate (issue 36)."""
 
 import numpy as np
 
