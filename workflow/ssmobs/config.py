@@ -396,6 +396,21 @@ def _own_model_problems(config: dict) -> list[str]:
     return problems
 
 
+def asks_for_paper_outputs(config: Mapping[str, Any]) -> bool:
+    """Whether a (validated) config asks for the paper's tables and figures: Figure 2,
+    Tables II and III with Figure 3, the Section IV summary with its figure, the convergence
+    tables, the table of barrier starts (mu0_sweep) and the table of the choice of K.
+
+    It does when it names a scenario of the paper (a scenario with a ``paper_ref``) or
+    chooses what the paper's tables show (``paper_outputs``).  A study of one's own model
+    names neither and gets its own outputs only (its observability studies and maps, and
+    the choice of K of its ``k_selection`` entries)."""
+    chosen = config["paper_outputs"]
+    return any(sc["paper_ref"] for sc in config["scenarios"]) or any(
+        chosen[key] for key in ("tables_2_3", "figure3", "figure4")
+    )
+
+
 def _backend_problems(config: dict) -> list[str]:
     backend = config["stan"]["backend"]
     if backend != "cmdstanpy" or not any(sc.get("stan", True) for sc in config["scenarios"]):
