@@ -63,17 +63,13 @@ test-slow: setup
 # `make smoke`: the smoke profile (every rule, tiny sizes).  `make smoke CONFIG=my.yaml`: that
 # study on the smoke profile's sizes (ssmobs/smoke_config.py writes the overlay to
 # results/smoke_configs/; its tables and figures go to paper_figures/smoke_<name>/).
-SMOKE_OVERLAY = results/smoke_configs/$(basename $(notdir $(CONFIG))).yaml
+SMOKE_OWN = $(filter-out config/config.yaml config/smoke.yaml,$(CONFIG))
+SMOKE_CONFIG = $(if $(SMOKE_OWN),results/smoke_configs/$(basename $(notdir $(CONFIG))).yaml,config/smoke.yaml)
 
 smoke: setup
-ifneq ($(filter config/config.yaml config/smoke.yaml,$(CONFIG)),)
-	$(PREFLIGHT) config/smoke.yaml
-	$(SNAKEMAKE) --configfile config/smoke.yaml
-else
-	$(BIN)/python -m ssmobs.smoke_config $(CONFIG) --out $(SMOKE_OVERLAY)
-	$(PREFLIGHT) $(SMOKE_OVERLAY)
-	$(SNAKEMAKE) --configfile $(SMOKE_OVERLAY)
-endif
+	$(if $(SMOKE_OWN),$(BIN)/python -m ssmobs.smoke_config $(CONFIG) --out $(SMOKE_CONFIG))
+	$(PREFLIGHT) $(SMOKE_CONFIG)
+	$(SNAKEMAKE) --configfile $(SMOKE_CONFIG)
 
 paper: setup
 	$(PREFLIGHT) config/paper.yaml

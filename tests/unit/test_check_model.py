@@ -247,6 +247,10 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     assert "simulate does not match the transition term" in msg
     assert "check the order of the parameters in simulate" in msg
     assert "reach |x_t|" not in msg
+    # the message of `python -m ssmobs.check_model test_growth`, word for word
+    from ssmobs.check_model import check_model
+
+    assert check_model("test_growth", stan=False).problems[0] in msg
     # an observability map of that model is judged by the model's check too
     grid = {"name": "m", "base": {k: entry[k] for k in ("model", "omega", "x0")}}
     grid.update(vary="a", values=[0.5], T=[20], K=4)
