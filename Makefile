@@ -60,9 +60,16 @@ test: setup lint
 test-slow: setup
 	$(BIN)/pytest -m "slow or pystan"
 
+# `make smoke`: the smoke profile (every rule, tiny sizes).  `make smoke CONFIG=my.yaml`: that
+# study on the smoke profile's sizes (ssmobs/smoke_config.py writes the overlay to
+# results/smoke_configs/; its tables and figures go to paper_figures/smoke_<name>/).
+SMOKE_OWN = $(filter-out config/config.yaml config/smoke.yaml,$(CONFIG))
+SMOKE_CONFIG = $(if $(SMOKE_OWN),results/smoke_configs/$(basename $(notdir $(CONFIG))).yaml,config/smoke.yaml)
+
 smoke: setup
-	$(PREFLIGHT) config/smoke.yaml
-	$(SNAKEMAKE) --configfile config/smoke.yaml
+	$(if $(SMOKE_OWN),$(BIN)/python -m ssmobs.smoke_config $(CONFIG) --out $(SMOKE_CONFIG))
+	$(PREFLIGHT) $(SMOKE_CONFIG)
+	$(SNAKEMAKE) --configfile $(SMOKE_CONFIG)
 
 paper: setup
 	$(PREFLIGHT) config/paper.yaml

@@ -222,3 +222,43 @@ def test_a_sign_error_in_every_step_is_reported_at_every_step():
 
     msgs = simulate_problems(LastStep(), case, T=5)
     assert any("at t = 5 (of 1..5)" in m for m in msgs)
+
+
+def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkeypatch):
+    """Issue 36: the growth model with ``b, a = omega`` swapped in simulate explodes the
+    noise-free trajectory at (a, b) = (0.5, 25); the config's validation must report the
+    model's own check, not that the config's true values reach |x_t| = 4.3e+52."""
+    from ssmobs import config as cfg
+    from ssmobs.models import MODELS
+    from test_multi_start import Growth
+
+    class Swapped(Growth):
+        def simulate(self, omega, x0, eta, eps):
+            b, a = omega  # the planted mistake: param_names = ("a", "b")
+            return super().simulate(np.array([a, b]), x0, eta, eps)
+
+    entry = {"name": "g", "model": "test_growth", "omega": {"a": 0.5, "b": 25.0}, "x0": 0.1}
+    entry.update(T=20, K=4, stan=False)
+    monkeypatch.setitem(MODELS._load(), "test_growth", Swapped())
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate({"scenarios": [dict(entry)]})
+    msg = str(err.value)
+    assert "model 'test_growth' fails its own check (python -m ssmobs.check_model" in msg
+    assert "simulate does not match the transition term" in msg
+    assert "check the order of the parameters in simulate" in msg
+    assert "reach |x_t|" not in msg
+    # the message of `python -m ssmobs.check_model test_growth`, word for word
+    from ssmobs.check_model import check_model
+
+    assert check_model("test_growth", stan=False).problems[0] in msg
+    # an observability map of that model is judged by the model's check too
+    grid = {"name": "m", "base": {k: entry[k] for k in ("model", "omega", "x0")}}
+    grid.update(vary="a", values=[0.5], T=[20], K=4)
+    with pytest.raises(cfg.ConfigError, match="fails its own check"):
+        cfg.validate({"scenarios": [{**entry, "T": 2}], "observability_maps": [grid]})
+    # the correct model at the same values passes; a correct model at values that do blow
+    # up is still refused by the size check, naming the config's values
+    monkeypatch.setitem(MODELS._load(), "test_growth", Growth())
+    cfg.validate({"scenarios": [dict(entry)]})
+    with pytest.raises(cfg.ConfigError, match=r"reach \|x_t\| or \|z_t\| = .* within T=20"):
+        cfg.validate({"scenarios": [{**entry, "omega": {"a": 0.99, "b": 1e4}}]})

@@ -678,3 +678,22 @@ def test_subsets_of_design_sets_keep_their_point_symmetry(name):
     for sc in cfg.validate(load(name))["scenarios"]:
         m = sc.get("stan_every", 1)
         assert sc["method"] == "design" and (sc["K"] // 2) % m == 0, (sc["name"], sc["K"], m)
+
+
+@pytest.mark.parametrize("name", PROFILES)
+def test_every_profile_but_the_own_study_asks_for_the_papers_outputs(name):
+    """The committed profiles keep the paper's tables and figures; the SV study, a model of
+    one's own, asks for none of them (issue 36)."""
+    assert cfg.asks_for_paper_outputs(cfg.validate(load(name))) == (name != "stoch_vol.yaml")
+
+
+def test_a_paper_scenario_or_paper_outputs_asks_for_the_papers_outputs():
+    own = {"name": "sv", "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}}
+    own.update(x0=0, T=5, K=4)
+    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
+    assert not cfg.asks_for_paper_outputs(cfg.validate({"scenarios": [dict(own)]}))
+    assert not cfg.asks_for_paper_outputs(cfg.validate({"scenarios": [dict(own), dict(same)]}))
+    named = {**same, "paper_ref": "same_a09_T4"}
+    assert cfg.asks_for_paper_outputs(cfg.validate({"scenarios": [dict(own), named]}))
+    chosen = {"scenarios": [dict(own), dict(same)], "paper_outputs": {"figure4": "same_T4"}}
+    assert cfg.asks_for_paper_outputs(cfg.validate(chosen))

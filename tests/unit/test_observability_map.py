@@ -171,3 +171,62 @@ def test_random_walk_at_T4_is_unobservable(tmp_path):
     )
     assert row["K_max"] == 0 and row["K_max_frac_hi95"] < 0.1
     assert row["exact"] and row["exact_unique_frac"] < 0.5
+
+
+MULT = {
+    "name": "m",
+    "base": {"model": "sep_mult", "omega": {"a": 0.9}, "x0": 8, "prior": "half_line"},
+    "vary": "a",
+    "values": [0.9],
+    "T": [10],
+    "K": 10,
+}
+
+
+def test_cell_keys_follow_the_number_of_starts():
+    """Multi-start is turned on for a map by its base (joint_map_n_starts) or by the
+    joint_map block (n_starts); either moves the keys of its cells (issue 36)."""
+    base = _keys(config(MAP))
+    assert _keys(config(MAP, joint_map={"n_starts": 1})) == base  # the default
+    by_block = _keys(config(MAP, joint_map={"n_starts": 4}))
+    by_base = _keys(config({**MAP, "base": {**MAP["base"], "joint_map_n_starts": 4}}))
+    for other in (by_block, by_base):
+        assert set(other) == set(base) and set(other.values()).isdisjoint(base.values())
+
+
+def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
+    """|K^max_unique| of a cell is the joint-MAP stage's count (trajectories with exactly one
+    distinct maximum that passes the checks, ssmobs.multi_start) on the same trajectories:
+    with one start it equals |K^max|; from 4 starts (the base's joint_map_n_starts) it is
+    the count over 4 starts, and |K^max| stays the paper's start's (issue 36)."""
+    from ssmobs.joint_map import JointMapSettings
+    from ssmobs.multi_start import multi_start_joint_map, multi_start_summary
+    from ssmobs.scenario import Scenario
+    from ssmobs.stages.design import disturbance_set
+    from ssmobs.trajectories import make_trajectories
+
+    rows = {}
+    for n in (1, 4):
+        entry = {**MULT, "base": {**MULT["base"], "joint_map_n_starts": n}}
+        conf = config(entry)
+        ((cell, _),) = CacheKeys(conf, "native").map_cells("m")
+        sc = Scenario.from_config(cell)
+        path = tmp_path / f"q{sc.disturbance_dim}_K{sc.K}_design_seed1.nc"
+        rows[n] = om.cell_summary(sc, path, conf["design"], conf["joint_map"], None)
+        matrix, attrs = disturbance_set(path, sc.disturbance_dim, sc.K, sc.method, sc.seed, {})
+        traj = make_trajectories(sc, matrix, provenance=attrs)
+        settings = JointMapSettings.from_mapping({**conf["joint_map"], "n_starts": n})
+        bounds = sc.model.prior_bounds(sc.omega, sc.prior)
+        multi = multi_start_joint_map(sc.model, traj.z, bounds, sc.omega, sc.x0, settings)
+        expected = multi_start_summary(multi.columns(), settings)
+        assert rows[n]["n_starts"] == n
+        assert rows[n]["K_max_unique"] == expected["K_max_unique"]
+        assert rows[n]["K_max"] == int((multi.runs[0].status == "ok").sum())
+        assert rows[n]["K_max_unique_frac"] == expected["K_max_unique"] / 10
+        lo, hi = expected["K_max_unique_lo95"], expected["K_max_unique_hi95"]
+        assert (rows[n]["K_max_unique_frac_lo95"], rows[n]["K_max_unique_frac_hi95"]) == (lo, hi)
+    assert rows[1]["K_max_unique"] == rows[1]["K_max"]
+    assert rows[4]["K_max"] == rows[1]["K_max"]
+    # the Multiplicative model's wrong-sign maxima: every trajectory passes from the paper's
+    # start (10 of 10 here), but the other starts find a second maximum (0 of 10 unique)
+    assert rows[4]["K_max_unique"] < rows[4]["K_max"]

@@ -23,6 +23,7 @@ def test_map_cell_equals_the_scenario_with_the_same_trajectories(smoke_run):
     exact = json.loads(only(smoke_run, "results/same_T4/exact_marginal/*/summary.json").read_text())
     assert cell["K"] == joint["K"] == 12
     assert cell["K_max"] == joint["K_max"]
+    assert cell["n_starts"] == 1 and cell["K_max_unique"] == cell["K_max"]  # one start
     assert cell["exact_unique"] == exact["n_unique"]
     assert bool(cell["paper_point"]) and cells["paper_point"].sum() == 1
     for col in ("K_max_frac", "exact_unique_frac"):
@@ -40,6 +41,13 @@ def test_own_model_map_has_the_joint_map_only(smoke_run):
     assert cells["K_max_frac"].between(0, 1).all()
     for ext in ("png", "pdf", "md"):
         assert (smoke_run / SMOKE_OUT / f"map_stoch_vol.{ext}").stat().st_size > 0
+    # 4 starts per trajectory (the base's joint_map_n_starts): cell phi = 0.9 has the
+    # trajectories and settings of scenario stoch_vol_T5, so its |K^max_unique| (issue 36)
+    joint = json.loads(only(smoke_run, "results/stoch_vol_T5/joint_map/*/summary.json").read_text())
+    cell = cells[cells["value"] == 0.9].iloc[0]
+    assert (cells["n_starts"] == 4).all() and joint["n_starts"] == 4
+    assert cell["K_max_unique"] == joint["K_max_unique"] and cell["K_max"] == joint["K_max"]
+    assert cell["K_max_unique_frac_lo95"] <= cell["K_max_unique_frac"]
 
 
 MAP_PROFILE = REPO / "config" / "map.yaml"

@@ -13,6 +13,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -99,8 +100,12 @@ def test_step_study_command_makes_every_output(tmp_path):
     # what `make run CONFIG=config/mine.yaml` runs after its set-up: no target named
     snakemake(work, "--cores", "2", "--rerun-incomplete", "--configfile", "config/mine.yaml")
     out = work / "paper_figures" / "mine"
-    for name in ("ours_mine_observability.csv", "section4_summary.csv", "fig2_design_points.png"):
+    for name in ("ours_mine_observability.csv", "ours_mine_observability.png"):
         assert (out / name).stat().st_size > 0, name
+    # the study's outputs only: none of the paper's tables and figures (issue 36)
+    assert sorted(p.name for p in out.iterdir()) == [
+        f"ours_mine_observability.{ext}" for ext in ("csv", "md", "png")
+    ]
 
 
 def test_mistake_swapped_stan_parameters(tmp_path):
@@ -133,3 +138,167 @@ def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
     assert (
         "slug 'stoch_vol' is used twice: by my_model.py (StochVol) and stoch_vol.py (StochVol)"
     ) in proc.stdout + proc.stderr
+
+
+SWAPPED_GROWTH = '''"""Growth model with a planted mistake: b, a swapped in simulate (issue 36)."""
+
+import numpy as np
+
+from .base import StateSpaceModel
+
+
+class Growth(StateSpaceModel):
+    slug = "growth"
+    title = "growth model"
+    obs_dim = 1
+    state_dim = 1
+    param_names = ("a", "b")
+    default_prior = {"a": "restricted", "b": "half_line"}
+    allowed_priors = {"a": ("restricted",), "b": ("half_line",)}
+
+    def obs_term(self, omega, x, z):
+        (xt,), (zt,) = x, z
+        return (zt - xt**2 / 20) ** 2
+
+    def trans_term(self, omega, x_prev, x):
+        (a, b), (xp,), (xt,) = omega, x_prev, x
+        return (xt - a * xp - b * xp / (1 + xp**2)) ** 2
+
+    def initial_states(self, omega, z):
+        return np.sqrt(20 * np.maximum(np.asarray(z, dtype=float), 0.0))
+
+    def simulate(self, omega, x0, eta, eps):
+        b, a = omega
+        K, T, _ = eta.shape
+        x = np.empty((K, T, 1))
+        prev = np.full(K, float(x0[0]))
+        for t in range(T):
+            prev = a * prev + b * prev / (1 + prev**2) + eta[:, t, 0]
+            x[:, t, 0] = prev
+        return x, x**2 / 20 + eps
+'''
+
+
+def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_path):
+    """`b, a = omega` swapped in simulate: `make run CONFIG=...` (its preflight, then
+    Snakemake with --configfile) names the model's mistake, not the config's true values,
+    whose noise-free trajectory the wrong simulate blows up to |x_t| = 4.3e+52 (issue 36)."""
+    import yaml
+
+    work = make_workdir(tmp_path)
+    (work / "workflow" / "ssmobs" / "models" / "growth.py").write_text(SWAPPED_GROWTH)
+    conf = {
+        "outputs_dir": "paper_figures/growth",
+        "scenarios": [
+            {
+                "name": "growth_T20",
+                "model": "growth",
+                "omega": {"a": 0.5, "b": 25},
+                "x0": 0.1,
+                "T": 20,
+                "K": 4,
+                "stan": False,
+            }
+        ],
+    }
+    (work / "config" / "growth.yaml").write_text(yaml.safe_dump(conf))
+    preflight = _python(work, "-m", "ssmobs.preflight", "config/growth.yaml")
+    dry = snakemake(work, "-n", "--configfile", "config/growth.yaml", check=False)
+    for proc in (preflight, dry):
+        text = proc.stdout + proc.stderr
+        assert proc.returncode != 0
+        assert "model 'growth' fails its own check" in text, text[-3000:]
+        assert "simulate does not match the transition term" in text
+        assert "check the order of the parameters in simulate" in text
+        assert "reach |x_t|" not in text
+
+
+def _planned(proc) -> set[str]:
+    """Every output file of the jobs a dry run plans."""
+    from helpers import logged_units
+
+    text = proc.stdout + "\n" + proc.stderr
+    return {f for unit in logged_units(text) for job in unit.jobs for f in job.output}
+
+
+#: the paper's tables and figures, as a config that asks for them gets them
+PAPER_STEMS = (
+    "fig2_design_points",
+    "fig3_joint_vs_marginal",
+    "fig_observability_ratios",
+    "table2_joint_vs_marginal",
+    "table3_coverage",
+    "section4_summary",
+    "table_mu0_sweep",
+    "table_k_selection",
+    "table_convergence_sensitivity",
+)
+
+
+def test_a_study_config_plans_its_study_outputs_only(tmp_path):
+    """An own study (no scenario of the paper, no paper_outputs) gets its study's table and
+    figure and none of the paper's ~30 files; naming one scenario of the paper (its
+    paper_ref) brings them back, in the same outputs_dir (issue 36)."""
+    import yaml
+
+    work = make_workdir(tmp_path)
+    conf = yaml.safe_load((work / "config" / "stoch_vol.yaml").read_text())
+    conf["outputs_dir"] = "paper_figures/mine"
+    (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
+    proc = snakemake(work, "-n", "--configfile", "config/mine.yaml")
+    mine = sorted(f for f in _planned(proc) if f.startswith("paper_figures/"))
+    assert mine == [
+        f"paper_figures/mine/ours_stoch_vol_observability.{ext}" for ext in ("csv", "md", "png")
+    ]
+    assert "outputs_dir is not set" not in proc.stdout + proc.stderr
+    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
+    conf["scenarios"].append({**same, "stan": False, "paper_ref": "same_a09_T4"})
+    (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
+    planned = _planned(snakemake(work, "-n", "--configfile", "config/mine.yaml"))
+    stems = {Path(f).stem for f in planned if f.startswith("paper_figures/mine/")}
+    assert set(PAPER_STEMS) <= stems and "ours_stoch_vol_observability" in stems
+
+
+def test_a_config_without_outputs_dir_says_where_its_outputs_go(tmp_path):
+    """No outputs_dir: the tables and figures go to the top of paper_figures/, and the run
+    says so in one line (once), naming the config file (issue 36)."""
+    import yaml
+
+    work = make_workdir(tmp_path)
+    conf = yaml.safe_load((work / "config" / "stoch_vol.yaml").read_text())
+    del conf["outputs_dir"]
+    (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
+    proc = snakemake(work, "-n", "--configfile", "config/mine.yaml")
+    lines = [l for l in (proc.stdout + proc.stderr).splitlines() if "outputs_dir is not set" in l]
+    assert lines == [
+        "outputs_dir is not set in config/mine.yaml: its tables and figures go to the top of "
+        "paper_figures/, beside the committed profiles' folders; set outputs_dir (e.g. "
+        "paper_figures/my_study) to give them a folder of their own"
+    ]
+    assert "paper_figures/ours_stoch_vol_observability.png" in _planned(proc)
+
+
+def test_smoke_of_ones_own_study_plans_its_jobs_on_small_sizes(tmp_path):
+    """`make smoke CONFIG=config/stoch_vol.yaml`: the overlay (the smoke profile's sizes)
+    plans every stage of the study's three scenarios, K = 4 each, and writes its tables and
+    figures to paper_figures/smoke_stoch_vol/, never to the study's committed folder."""
+    work = make_workdir(tmp_path)
+    overlay = "results/smoke_configs/stoch_vol.yaml"
+    made = _python(work, "-m", "ssmobs.smoke_config", "config/stoch_vol.yaml", "--out", overlay)
+    assert made.returncode == 0, made.stderr
+    proc = snakemake(work, "-n", "--configfile", overlay)
+    text = proc.stdout + "\n" + proc.stderr
+    from helpers import logged_units
+
+    jobs = [job for unit in logged_units(text) for job in unit.jobs]
+    scenarios = ("stoch_vol_T20", "stoch_vol_T50", "stoch_vol_T100")
+    for rule in ("check_model", "design_trajectories", "joint_map", "sample_nuts", "gather_nuts"):
+        planned = {f.split("/")[1] for job in jobs if job.rule == rule for f in job.output}
+        assert planned == set(scenarios), (rule, planned)
+    outputs = sorted(f for job in jobs for f in job.output if f.startswith("paper_figures/"))
+    assert outputs == [
+        f"paper_figures/smoke_stoch_vol/ours_stoch_vol_observability.{ext}"
+        for ext in ("csv", "md", "png")
+    ]
+    nuts = [job for job in jobs if job.rule == "sample_nuts"]
+    assert len(nuts) == 3  # one batch of the K = 4 trajectories per scenario

@@ -20,6 +20,9 @@ from ssmobs.preflight import lock_holders, use_package_of  # noqa: E402
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
 
+#: no config file (nor --config) names outputs_dir: the schema's default, the top of paper_figures/
+OUTPUTS_DIR_UNSET = "outputs_dir" not in config
+
 try:
     ssmobs_config.validate(config)  # also finds and checks every model module
 except (ConfigError, ModelDefinitionError) as err:
@@ -33,6 +36,13 @@ except ValueError as err:
 
 #: where the tables and figures go (config key outputs_dir)
 OUT = config["outputs_dir"]
+if OUTPUTS_DIR_UNSET and workflow.is_main_process:
+    _files = ", ".join(os.path.relpath(f) for f in workflow.configfiles) or "the config"
+    logger.warning(
+        f"outputs_dir is not set in {_files}: "
+        f"its tables and figures go to the top of {OUT}/, beside the committed profiles' "
+        f"folders; set outputs_dir (e.g. {OUT}/my_study) to give them a folder of their own"
+    )
 
 
 def committed_outputs_guard(out, configfiles):
@@ -68,6 +78,9 @@ MU0_SCENARIOS = [
     for n, sc in SCENARIOS.items()
     if sc["joint_map"] and sc["model"] in config["mu0_sweep"]["models"]
 ]
+#: the config asks for the paper's tables and figures (it names a scenario of the paper or
+#: sets paper_outputs); a study of one's own model gets its own outputs only
+PAPER_OUTPUTS = ssmobs_config.asks_for_paper_outputs(config)
 #: the scenarios the paper's tables and figures show (config key paper_outputs)
 TABLE_II_SCENARIOS = list(config["paper_outputs"]["tables_2_3"])
 FIGURE3_SCENARIOS = list(config["paper_outputs"]["figure3"])
@@ -259,6 +272,11 @@ def register_stamp(name, inputs, params):
 
 def stamp_key(wildcards, output):
     """The ``key`` param of a table or figure rule (its stamp's content)."""
+    if output.stamp not in STAMPS:  # asked for by name, but not one of this config's outputs
+        raise WorkflowError(
+            f"{output.stamp}: this config does not make this table or figure (the paper's "
+            f"are made for a config that names a scenario of the paper or sets paper_outputs)"
+        )
     return STAMPS[output.stamp]
 
 
@@ -523,7 +541,7 @@ def all_targets():
     targets += [stan_summary(name) for name, sc in SCENARIOS.items() if sc["stan"]]
     for name in KSEL:
         targets += expand(f"{OUT}/fig_k_convergence_{name}.{{ext}}", ext=["pdf", "png"])
-    if KSEL:
+    if KSEL or PAPER_OUTPUTS:
         targets += expand(
             f"{OUT}/table_k_selection{{part}}.{{ext}}",
             part=["", "_distribution"],
@@ -546,6 +564,9 @@ def all_targets():
         targets += expand(f"{OUT}/ours_{name}_observability.{{ext}}", ext=["csv", "md", "png"])
     for name in MAPS:
         targets += expand(f"{OUT}/map_{name}.{{ext}}", ext=["csv", "md", "png", "pdf"])
+    targets += list(STAMPS)
+    if not PAPER_OUTPUTS:
+        return targets
     targets += [f"{OUT}/fig2_design_points.pdf", f"{OUT}/fig2_design_points.png"]
     targets += expand(
         f"{OUT}/{{stem}}.{{ext}}",
@@ -565,5 +586,4 @@ def all_targets():
             stem=["table_convergence_sensitivity", "table_convergence_failures"],
             ext=["csv", "md", "tex"],
         )
-    targets += list(STAMPS)
     return targets

@@ -1,12 +1,14 @@
 # Every figure of paper_figures/ (the paper's Figures 2-4 and ours); the figure of the choice
 # of K comes with its rule select_k (k_selection.smk), the observability studies' with theirs.
 
-# the figure draws model Same's trajectories: its module keys the figure too
-register_stamp(
-    "figure_design_points",
-    [figure2_disturbances()],
-    {"figure": config["figure2"], "model_code": KEYS.model_code("same")},
-)
+# the paper's figures where the config asks for them (PAPER_OUTPUTS); the figure draws model
+# Same's trajectories: its module keys the figure too
+if PAPER_OUTPUTS:
+    register_stamp(
+        "figure_design_points",
+        [figure2_disturbances()],
+        {"figure": config["figure2"], "model_code": KEYS.model_code("same")},
+    )
 
 
 rule figure_design_points:
@@ -34,11 +36,12 @@ FIGURE3_INPUTS = {
     "joint": [f"{joint_dir(n)}/joint_map.parquet" for n in FIGURE3_SCENARIOS],
     "marginal": [stan_table(n) for n in FIGURE3_SCENARIOS],
 }
-register_stamp(
-    "figure_joint_vs_marginal",
-    [*FIGURE3_INPUTS["joint"], *FIGURE3_INPUTS["marginal"]],
-    [SCENARIOS[n] for n in FIGURE3_SCENARIOS],
-)
+if PAPER_OUTPUTS:
+    register_stamp(
+        "figure_joint_vs_marginal",
+        [*FIGURE3_INPUTS["joint"], *FIGURE3_INPUTS["marginal"]],
+        [SCENARIOS[n] for n in FIGURE3_SCENARIOS],
+    )
 
 
 rule figure_joint_vs_marginal:
@@ -96,9 +99,10 @@ rule figure_profile_posterior:
 
 
 # its input is a stamped table: the table's key keys the figure
-register_stamp(
-    "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[stamp("paper_tables")]
-)
+if PAPER_OUTPUTS:
+    register_stamp(
+        "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[stamp("paper_tables")]
+    )
 
 
 rule figure_observability:

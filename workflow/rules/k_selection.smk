@@ -64,10 +64,12 @@ rule select_k:
 
 
 SELECTIONS = [f"results/k_selection/{name}/selection.json" for name in KSEL]
-# the selections are stamped files: their stamps' keys key the table
-register_stamp(
-    "table_k_selection", SELECTIONS, [STAMPS[stamp(f"select_k_{name}")] for name in KSEL]
-)
+# the selections are stamped files: their stamps' keys key the table; made for this
+# config's k_selection entries, or (empty) with the paper's outputs
+if KSEL or PAPER_OUTPUTS:
+    register_stamp(
+        "table_k_selection", SELECTIONS, [STAMPS[stamp(f"select_k_{name}")] for name in KSEL]
+    )
 
 
 rule table_k_selection:

@@ -13,16 +13,19 @@ PAPER_TABLES_PARAMS = {
     "marginal_names": STAN_SCENARIOS,
     "exact_names": EXACT_SCENARIOS,
 }
-register_stamp(
-    "paper_tables",
-    [
-        *PAPER_TABLES_INPUTS["joint"],
-        *PAPER_TABLES_INPUTS["marginal"],
-        *PAPER_TABLES_INPUTS["exact"],
-        "config/paper_values.yaml",
-    ],
-    PAPER_TABLES_PARAMS,
-)
+# the paper's tables, and the convergence tables below, where the config asks for them
+# (PAPER_OUTPUTS: it names a scenario of the paper or sets paper_outputs)
+if PAPER_OUTPUTS:
+    register_stamp(
+        "paper_tables",
+        [
+            *PAPER_TABLES_INPUTS["joint"],
+            *PAPER_TABLES_INPUTS["marginal"],
+            *PAPER_TABLES_INPUTS["exact"],
+            "config/paper_values.yaml",
+        ],
+        PAPER_TABLES_PARAMS,
+    )
 
 
 rule paper_tables:
@@ -60,11 +63,12 @@ rule paper_tables:
 
 
 SENSITIVITY_INPUTS = [stan_table(n) for n in STAN_SCENARIOS]
-register_stamp(
-    "convergence_sensitivity",
-    SENSITIVITY_INPUTS,
-    {"scenarios": STAN_SCENARIOS, "convergence": config["convergence"]},
-)
+if PAPER_OUTPUTS:
+    register_stamp(
+        "convergence_sensitivity",
+        SENSITIVITY_INPUTS,
+        {"scenarios": STAN_SCENARIOS, "convergence": config["convergence"]},
+    )
 
 
 rule convergence_sensitivity:

@@ -37,7 +37,7 @@ from .config_schema import (
 from .config_schema import README as README
 from .config_schema import ConfigError as ConfigError
 from .config_schema import short_list as short_list
-from .models import MODELS
+from .models import MODELS, StateSpaceModel
 from .scenario import entry_problems
 
 #: folders directly under results/ that the workflow uses itself; no scenario may take them
@@ -357,6 +357,77 @@ def _paper_output_problems(config: dict) -> list[str]:
     return problems
 
 
+def _own_model_problems(config: dict) -> list[str]:
+    """The model's own Python check (``python -m ssmobs.check_model <slug> --no-stan``, at
+    its default cases) for every model whose noise-free trajectory at a configured entry's
+    true values exceeds the size bound: a wrong ``simulate`` (say two parameters swapped)
+    can blow that trajectory up, and the size check would then blame the config's values.
+    The model's problem is reported instead, and the size check only when the model passes
+    its own check.  Other problems of the entries are left to :func:`_scenario_problems`.
+    """
+    entries = list(config["scenarios"])
+    for entry in config.get("observability_maps", []):
+        model = MODELS.get(entry["base"].get("model"))
+        if model is not None and entry["vary"] in model.param_names:
+            entries += cell_entries(entry)
+    suspects: set[str] = set()
+    for entry in entries:
+        model = MODELS.get(entry.get("model"))
+        if model is None or model.slug in suspects:
+            continue
+        omega, x0, prior = entry.get("omega"), entry.get("x0"), entry.get("prior")
+        if model.check_true_values(omega, x0, prior):
+            continue  # a problem of the values themselves: reported with the entry
+        if model.check_true_values(omega, x0, prior, T=entry.get("T")):
+            suspects.add(model.slug)
+    problems = []
+    for slug in sorted(suspects):
+        found = _own_python_check(MODELS[slug])
+        if found:
+            problems.append(
+                f"model {slug!r} fails its own check (python -m ssmobs.check_model {slug}), "
+                f"so the size of its trajectories at the config's true values says nothing "
+                f"about the config: {found}"
+            )
+    return problems
+
+
+def _own_python_check(model: StateSpaceModel) -> str:
+    """The first problem of the Python stage of :func:`ssmobs.check_model.check_model` at
+    the model's default cases, with its T and seeds (so the message is the one ``python -m
+    ssmobs.check_model <slug>`` prints), or "" (that module imports this one)."""
+    import zlib
+
+    from .check_model_cases import default_cases
+    from .check_model_python import python_problems, simulate_problems
+
+    seed = zlib.crc32(model.slug.encode())
+    for i, case in enumerate(default_cases(model)):
+        problems = model.check_true_values(case.omega, case.x0, case.prior)
+        if not problems:
+            problems = python_problems(model, case, T=6, seed=seed + i)
+        if not problems:
+            problems = simulate_problems(model, case, T=6, seed=seed + i)
+        if problems:
+            return f"[python, {case.label()}] {problems[0]}"
+    return ""
+
+
+def asks_for_paper_outputs(config: Mapping[str, Any]) -> bool:
+    """Whether a (validated) config asks for the paper's tables and figures: Figure 2,
+    Tables II and III with Figure 3, the Section IV summary with its figure, the convergence
+    tables, the table of barrier starts (mu0_sweep) and the table of the choice of K.
+
+    It does when it names a scenario of the paper (a scenario with a ``paper_ref``) or
+    chooses what the paper's tables show (``paper_outputs``).  A study of one's own model
+    names neither and gets its own outputs only (its observability studies and maps, and
+    the choice of K of its ``k_selection`` entries)."""
+    chosen = config["paper_outputs"]
+    return any(sc["paper_ref"] for sc in config["scenarios"]) or any(
+        chosen[key] for key in ("tables_2_3", "figure3", "figure4")
+    )
+
+
 def _backend_problems(config: dict) -> list[str]:
     backend = config["stan"]["backend"]
     if backend != "cmdstanpy" or not any(sc.get("stan", True) for sc in config["scenarios"]):
@@ -401,6 +472,8 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     scalars_from_command_line(config, schema)
     explicit_exact = frozenset(_explicit_exact(config))
     problems = nonfinite_problems(config) or schema_problems(config, schema)
+    if not problems:
+        problems = _own_model_problems(config)
     if not problems:
         problems = (
             _scenario_problems(config, explicit_exact)

@@ -7,7 +7,11 @@ scenario (model, Omega, x0, prior, method, seed) with one parameter set to each 
 :func:`ssmobs.config.cell_entries`).  Every cell gets K design trajectories
 (Sec. III.A) and
 - the joint MAP (Sec. III.B): |K^max|/K with its exact binomial 95 % interval and, over
-  K^max, the median local variance of every Omega component;
+  K^max, the median local variance of every Omega component; |K^max_unique|/K with its
+  interval, the trajectories with exactly one distinct maximum that passes the checks over
+  the cell's ``n_starts`` starts (:mod:`ssmobs.multi_start`; the base's
+  ``joint_map_n_starts``, else the ``joint_map`` block's ``n_starts``): with one start, the
+  default, it equals |K^max| (no other start looked for a second maximum);
 - for a model linear in the states, the exact marginal posterior p(Omega | z) (Kalman filter
   and grid, :mod:`ssmobs.exact_marginal`): the fraction of trajectories with a unique interior
   maximum (Definition 3) with its interval, and over those the median Laplace standard
@@ -60,7 +64,7 @@ def cell_summary(
     from ..exact_settings import ExactSettings
     from ..trajectories import make_trajectories
     from .design import disturbance_set
-    from .joint_map import joint_map_of
+    from .joint_map import multi_start_of
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -72,11 +76,21 @@ def cell_summary(
         dict(design_cfg),
     )
     traj = make_trajectories(scenario, matrix, provenance=attrs)
-    _, frame, info, bounds = joint_map_of(traj, scenario.prior, dict(joint_settings))
+    # the scenario's own settings, as the joint-MAP stage takes them (run_joint_map)
+    settings = {**joint_settings, "start_states": scenario.joint_map_start}
+    if scenario.joint_map_n_starts is not None:
+        settings["n_starts"] = scenario.joint_map_n_starts
+    # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
+    _, frame, info, bounds = multi_start_of(traj, scenario.prior, settings)
     K = scenario.K
     row: dict[str, Any] = {"K_max": int(info["K_max"])}
     row["K_max_frac"] = row["K_max"] / K
     row["K_max_frac_lo95"], row["K_max_frac_hi95"] = clopper_pearson(row["K_max"], K)
+    row["n_starts"] = int(info["n_starts"])
+    row["K_max_unique"] = int(info["K_max_unique"])
+    row["K_max_unique_frac"] = row["K_max_unique"] / K
+    row["K_max_unique_frac_lo95"] = float(info["K_max_unique_lo95"])
+    row["K_max_unique_frac_hi95"] = float(info["K_max_unique_hi95"])
     ok = (frame["status"] == "ok").to_numpy()
     for name in model.param_names:
         row[f"lvar_median_{name}"] = _median(frame.loc[ok, f"lvar_{name}"].to_numpy(float))
@@ -102,7 +116,9 @@ def cell_summary(
 def cell_columns(param_names: Sequence[str], row: Mapping[str, Any]) -> list[str]:
     """The columns of a cell's row in the order :func:`cell_summary` makes them (a cell file
     sorts its keys), any others after them."""
-    order = ["K_max", "K_max_frac", "K_max_frac_lo95", "K_max_frac_hi95"]
+    order = ["K_max", "K_max_frac", "K_max_frac_lo95", "K_max_frac_hi95", "n_starts"]
+    order += ["K_max_unique", "K_max_unique_frac", "K_max_unique_frac_lo95"]
+    order += ["K_max_unique_frac_hi95"]
     order += [f"lvar_median_{n}" for n in param_names]
     order += ["exact", "exact_unique", "exact_unique_frac", "exact_unique_frac_lo95"]
     order += ["exact_unique_frac_hi95", "exact_used", "spike_frac"]
@@ -173,14 +189,17 @@ def figure_map(
     frame: pd.DataFrame, entry: Mapping[str, Any], title: str, paths: Sequence[str]
 ) -> None:
     """Left: the observable fraction over the varied parameter, one colour per T (exact
-    marginal: solid with its 95 % band; joint MAP |K^max|/K: dashed); the paper's cells
-    ringed.  Right: how well, the median 90 % interval width of the varied parameter (exact)
-    or 2 x 1.645 x sqrt(median local variance) (joint MAP, models without the exact stage)."""
+    marginal: solid with its 95 % band; joint MAP |K^max|/K: dashed; where a cell ran
+    several starts, |K^max_unique|/K: dotted); the paper's cells ringed.  Right: how well,
+    the median 90 % interval width of the varied parameter (exact) or 2 x 1.645 x
+    sqrt(median local variance) (joint MAP, models without the exact stage)."""
     from ..figures import _plt, save_figure
 
     plt = _plt()
     vary = entry["vary"]
     exact = bool(frame["exact"].any())
+    # several starts: |K^max_unique|/K beside |K^max|/K (with one start the two are equal)
+    multi = "n_starts" in frame and bool((frame["n_starts"] > 1).any())
     fig, (left, right) = plt.subplots(1, 2, figsize=(9.0, 3.4))
     for i, (T, cells) in enumerate(frame.groupby("T", sort=True)):
         cells = cells.sort_values("value")
@@ -202,6 +221,8 @@ def figure_map(
             left.plot(x, cells["K_max_frac"], "x--", color=colour, label=f"T = {T}")
             width = 2 * 1.645 * np.sqrt(cells[f"lvar_median_{vary}"].to_numpy(float))
             right.plot(x, width, "x--", color=colour, label=f"T = {T}")
+        if multi:
+            left.plot(x, cells["K_max_unique_frac"], "+:", color=colour, lw=0.8)
         marked = cells[cells["paper_point"]]
         if len(marked):
             y = marked["exact_unique_frac"] if exact else marked["K_max_frac"]
@@ -209,12 +230,14 @@ def figure_map(
     left.set_ylim(-0.03, 1.03)
     left.set_xlabel(vary)
     left.set_ylabel("fraction of the K trajectories")
-    left.set_title(
+    fractions = (
         "unique interior maximum of p(Ω | z) (solid), |K^max|/K (dashed)"
         if exact
-        else "|K^max|/K (joint MAP)",
-        fontsize=8,
+        else "|K^max|/K (joint MAP)"
     )
+    if multi:
+        fractions += ", |K^max_unique|/K (dotted)"
+    left.set_title(fractions, fontsize=8)
     right.set_yscale("log")
     right.set_xlabel(vary)
     right.set_ylabel(f"median 90 % width of {vary}")
