@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +43,7 @@ from .check_model_cases import (
     default_cases,
     prior_variant_cases,
 )
-from .check_model_python import python_problems, simulate_problems
+from .check_model_python import CHECK_T, model_check_seed, python_stage_problems
 from .check_model_stan import CHECK_BACKENDS, stan_problems
 from .check_model_stan_source import stan_source_problems
 from .models import get_model
@@ -83,7 +82,7 @@ def check_model(
     cases: Sequence[CheckCase] | None = None,
     stan: bool = True,
     stan_path: str | Path | None = None,
-    T: int = 6,
+    T: int = CHECK_T,
     seed: int | None = None,
     backend: str = "native",
 ) -> CheckReport:
@@ -98,17 +97,8 @@ def check_model(
     model = get_model(slug)
     report = CheckReport(slug)
     cases = list(cases) if cases else default_cases(model)
-    seed = zlib.crc32(slug.encode()) if seed is None else seed
-    found: list[str] = []
-    for i, case in enumerate(cases):
-        problems = model.check_true_values(case.omega, case.x0, case.prior)
-        if not problems:
-            problems = python_problems(model, case, T=T, seed=seed + i)
-        if not problems:
-            problems = simulate_problems(model, case, T=T, seed=seed + i)
-        found = [f"[python, {case.label()}] {p}" for p in problems]
-        if found:  # the same mistake shows in every case: report the first
-            break
+    seed = model_check_seed(model) if seed is None else seed
+    found = python_stage_problems(model, cases, T=T, seed=seed)
     report.record(
         f"python: simulator shapes, initial_states, gradient and Hessian vs finite "
         f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))",

@@ -6,14 +6,46 @@ disturbances recovered by the log-density terms.
 from __future__ import annotations
 
 import functools
+import zlib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import sympy as sp
 
-from .check_model_cases import CheckCase, sample_theta
+from .check_model_cases import CheckCase, default_cases, sample_theta
 from .models import StateSpaceModel
 from .models.log_posterior import neg2_log_posterior
+
+#: the horizon of the model check's trajectories (short: the checks are of the formulas)
+CHECK_T = 6
+
+
+def model_check_seed(model: StateSpaceModel) -> int:
+    """The model check's default seed: fixed per model, so a message is reproducible."""
+    return zlib.crc32(model.slug.encode())
+
+
+def python_stage_problems(
+    model: StateSpaceModel,
+    cases: Sequence[CheckCase] | None = None,
+    T: int = CHECK_T,
+    seed: int | None = None,
+) -> list[str]:
+    """Step 1 of the model check over its cases (default :func:`default_cases`): the true
+    values, :func:`python_problems`, then :func:`simulate_problems`; the problems of the
+    first case that has any, each labelled with the case (one mistake, one message)."""
+    cases = list(cases) if cases else default_cases(model)
+    seed = model_check_seed(model) if seed is None else seed
+    for i, case in enumerate(cases):
+        problems = model.check_true_values(case.omega, case.x0, case.prior)
+        if not problems:
+            problems = python_problems(model, case, T=T, seed=seed + i)
+        if not problems:
+            problems = simulate_problems(model, case, T=T, seed=seed + i)
+        if problems:  # the same mistake shows in every case: report the first
+            return [f"[python, {case.label()}] {p}" for p in problems]
+    return []
 
 
 def python_problems(

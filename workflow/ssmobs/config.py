@@ -393,24 +393,12 @@ def _own_model_problems(config: dict) -> list[str]:
 
 
 def _own_python_check(model: StateSpaceModel) -> str:
-    """The first problem of the Python stage of :func:`ssmobs.check_model.check_model` at
-    the model's default cases, with its T and seeds (so the message is the one ``python -m
-    ssmobs.check_model <slug>`` prints), or "" (that module imports this one)."""
-    import zlib
+    """The first problem of the model check's Python stage at its default cases (the
+    message ``python -m ssmobs.check_model <slug>`` prints), or ""."""
+    from .check_model_python import python_stage_problems
 
-    from .check_model_cases import default_cases
-    from .check_model_python import python_problems, simulate_problems
-
-    seed = zlib.crc32(model.slug.encode())
-    for i, case in enumerate(default_cases(model)):
-        problems = model.check_true_values(case.omega, case.x0, case.prior)
-        if not problems:
-            problems = python_problems(model, case, T=6, seed=seed + i)
-        if not problems:
-            problems = simulate_problems(model, case, T=6, seed=seed + i)
-        if problems:
-            return f"[python, {case.label()}] {problems[0]}"
-    return ""
+    found = python_stage_problems(model)
+    return found[0] if found else ""
 
 
 def asks_for_paper_outputs(config: Mapping[str, Any]) -> bool:
