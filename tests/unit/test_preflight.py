@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -88,6 +89,63 @@ def test_command_line_prints_one_line_and_fails(tmp_path):
     )
     assert proc.returncode == 1
     assert proc.stderr == f"error: config file {tmp_path / 'x.yaml'} does not exist\n"
+
+
+def not_a_config(tmp_path: Path, kind: str) -> Path:
+    """A path Snakemake's own reader of --configfile fails on with a traceback."""
+    if kind == "directory":
+        return tmp_path
+    path = tmp_path / kind
+    if kind == "fifo":  # a named pipe: reading it would block until a writer comes
+        os.mkfifo(path)
+    elif kind == "binary":  # the start of an executable: not UTF-8
+        path.write_bytes(b"\x7fELF\x02\x01\x01\x00" + bytes(range(128, 256)) * 4)
+    else:  # UTF-8, but binary: NUL bytes
+        path.write_bytes(b"\x00" * 64 + b"scenarios: []\n")
+    return path
+
+
+@pytest.mark.parametrize("kind", ["directory", "fifo", "binary", "nul_bytes"])
+def test_a_file_that_is_no_config_text_is_one_line_from_the_command_line(tmp_path, kind):
+    """Issue 35: `--configfile` with a binary file or a directory.  Snakemake reads
+    --configfile itself before any code of the workflow runs (see the next test), so the
+    preflight of the make targets must say it in one line: before, a NUL byte gave two
+    lines and a named pipe (or /dev/null) 'does not exist'."""
+    path = not_a_config(tmp_path, kind)
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        timeout=60,
+    )
+    assert proc.returncode == 1
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr
+    what = {
+        "directory": "is a directory, not a file",
+        "fifo": "is not a regular file",
+        "binary": "is not a text file",
+        "nul_bytes": "is not a text file",
+    }[kind]
+    assert proc.stderr.startswith(f"error: config file {path} {what}"), proc.stderr
+    assert "a config file is YAML or JSON text" in proc.stderr
+
+
+@pytest.mark.parametrize("kind", ["directory", "binary"])
+def test_snakemakes_own_reader_of_configfile_fails_before_the_workflow_runs(tmp_path, kind):
+    """Why the preflight checks these files (docs/getting-started.md says so): Snakemake
+    reads --configfile while it parses its command line, before the Snakefile, and raises
+    an error of Python, not one of its own one-line WorkflowErrors, so `snakemake
+    --configfile <directory>` prints a traceback no code of ours can shorten.  If a
+    Snakemake release reads them itself in one line, this fails: update the docs."""
+    from snakemake.common.configfile import load_configfile
+    from snakemake_interface_common.exceptions import WorkflowError
+
+    with pytest.raises(Exception) as err:
+        load_configfile(not_a_config(tmp_path, kind))
+    assert not isinstance(err.value, WorkflowError)
+    assert isinstance(err.value, (IsADirectoryError, UnicodeDecodeError))
 
 
 # ------------------------------------------------------------------------ stale locks
