@@ -20,8 +20,9 @@ from ssmobs.preflight import lock_holders, use_package_of  # noqa: E402
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
 
-try:
-    ssmobs_config.validate(config)  # also finds and checks every model module
+try:  # also finds and checks every model module
+    _files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+    ssmobs_config.validate(config, config_file=_files[-1])
 except (ConfigError, ModelDefinitionError) as err:
     files = ", ".join(map(str, workflow.configfiles)) or "(none)"
     raise WorkflowError(f"config file(s) {files}: {err}") from None

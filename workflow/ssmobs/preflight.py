@@ -6,7 +6,8 @@
   and prints one line per problem instead of Snakemake's traceback: a file that does not
   exist or is larger than 5 MiB, a YAML syntax error or a key given twice in one mapping
   (file, line, column), aliases that expand to too many values, an empty file or one
-  without the required key ``scenarios``;
+  without the required key ``scenarios``; problems of one kind that many scenarios share
+  come as one line with their number and first names, every one of them with ``--all``;
 * with ``--unlock-stale``: when a killed run left Snakemake's lock in ``.snakemake/locks``
   and no Snakemake process runs in this directory, removes it with ``snakemake --unlock``
   (Snakemake would otherwise refuse to start).  Whether a process runs here is read from
@@ -48,11 +49,12 @@ def load_config_file(path: str | os.PathLike) -> dict[str, Any]:
     return config
 
 
-def check_config_file(path: str | os.PathLike) -> dict[str, Any]:
-    """Load and validate ``path``; ConfigError naming the file and every problem."""
+def check_config_file(path: str | os.PathLike, every_problem: bool = False) -> dict[str, Any]:
+    """Load and validate ``path``; ConfigError naming the file and its problems (problems
+    of one kind that many scenarios share in one line, unless ``every_problem``)."""
     config = load_config_file(path)
     try:
-        return validate(config)
+        return validate(config, every_problem=every_problem, config_file=str(path))
     except ConfigError as err:
         raise ConfigError(f"config file {path}: {err}") from None
 
@@ -148,13 +150,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("configfile", help="the config file Snakemake will be given")
     parser.add_argument(
+        "--all",
+        action="store_true",
+        help="list every problem of the config one by one (else problems that many "
+        "scenarios share are given in one line, with their number and first names)",
+    )
+    parser.add_argument(
         "--unlock-stale",
         action="store_true",
         help="remove a stale Snakemake lock when no Snakemake runs here",
     )
     args = parser.parse_args(argv)
     try:
-        check_config_file(args.configfile)
+        check_config_file(args.configfile, every_problem=args.all)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
