@@ -268,3 +268,21 @@ def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path
     ) in text
     assert jobs_started(proc) == [] and "Traceback" not in text
     assert not (work / "results").exists()  # nothing was made, not even the design set
+
+
+def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path):
+    """Issue 35: 50 large scenarios gave a message of about 100-250 lines at the parse."""
+    work = make_workdir(tmp_path / "w")
+    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    conf = {
+        "outputs_dir": "paper_figures/big",
+        "scenarios": [{"name": f"big_{i:02d}", **base} for i in range(50)],
+        "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
+    }
+    (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+    proc = snakemake(work, "-n", "--configfile", CONFIG, check=False, timeout=300)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert len(text.splitlines()) <= 20, text
+    assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
+    assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
