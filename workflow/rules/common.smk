@@ -525,8 +525,8 @@ def remove_stale(changes):
 
 
 def stale_stamps():
-    """Every stamp whose key is not the current one (see :func:`stamp`), with the files its
-    rule made under the old key, to be removed (:func:`remove_stale`), so that a run asking
+    """Every stamp whose key is not the current one (see :func:`stamp`), with the files
+    made under the old key, to be removed by :func:`remove_stale`, so that a run asking
     for one of those files by name (``make tables``) remakes it too, not only a run of every
     target.  In the process that plans the run (not again in cluster jobs).  A dry run
     keeps the files: it moves the stamp aside to ``<stamp>.stale``, which the next real run
