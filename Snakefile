@@ -57,9 +57,12 @@ include: "workflow/rules/stan_variants.smk"
 
 
 stop_without_compiler()
-remove_stale_stamps()
-repair_damaged_trajectories()
-repair_damaged_batches()
+# stale stamps and damaged files are removed before the DAG is built, all or none
+remove_stale(stale_stamps() + damaged_trajectories() + damaged_batches())
+
+
+onstart:
+    stop_where_jobs_cannot_write()
 
 
 onsuccess:

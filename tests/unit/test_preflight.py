@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -88,6 +90,63 @@ def test_command_line_prints_one_line_and_fails(tmp_path):
     )
     assert proc.returncode == 1
     assert proc.stderr == f"error: config file {tmp_path / 'x.yaml'} does not exist\n"
+
+
+def not_a_config(tmp_path: Path, kind: str) -> Path:
+    """A path Snakemake's own reader of --configfile fails on with a traceback."""
+    if kind == "directory":
+        return tmp_path
+    path = tmp_path / kind
+    if kind == "fifo":  # a named pipe: reading it would block until a writer comes
+        os.mkfifo(path)
+    elif kind == "binary":  # the start of an executable: not UTF-8
+        path.write_bytes(b"\x7fELF\x02\x01\x01\x00" + bytes(range(128, 256)) * 4)
+    else:  # UTF-8, but binary: NUL bytes
+        path.write_bytes(b"\x00" * 64 + b"scenarios: []\n")
+    return path
+
+
+@pytest.mark.parametrize("kind", ["directory", "fifo", "binary", "nul_bytes"])
+def test_a_file_that_is_no_config_text_is_one_line_from_the_command_line(tmp_path, kind):
+    """Issue 35: `--configfile` with a binary file or a directory.  Snakemake reads
+    --configfile itself before any code of the workflow runs (see the next test), so the
+    preflight of the make targets must say it in one line: before, a NUL byte gave two
+    lines and a named pipe (or /dev/null) 'does not exist'."""
+    path = not_a_config(tmp_path, kind)
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        timeout=60,
+    )
+    assert proc.returncode == 1
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr
+    what = {
+        "directory": "is a directory, not a file",
+        "fifo": "is not a regular file",
+        "binary": "is not a text file",
+        "nul_bytes": "is not a text file",
+    }[kind]
+    assert proc.stderr.startswith(f"error: config file {path} {what}"), proc.stderr
+    assert "a config file is YAML or JSON text" in proc.stderr
+
+
+@pytest.mark.parametrize("kind", ["directory", "binary"])
+def test_snakemakes_own_reader_of_configfile_fails_before_the_workflow_runs(tmp_path, kind):
+    """Why the preflight checks these files (docs/getting-started.md says so): Snakemake
+    reads --configfile while it parses its command line, before the Snakefile, and raises
+    an error of Python, not one of its own one-line WorkflowErrors, so `snakemake
+    --configfile <directory>` prints a traceback no code of ours can shorten.  If a
+    Snakemake release reads them itself in one line, this fails: update the docs."""
+    from snakemake.common.configfile import load_configfile
+    from snakemake_interface_common.exceptions import WorkflowError
+
+    with pytest.raises(Exception) as err:
+        load_configfile(not_a_config(tmp_path, kind))
+    assert not isinstance(err.value, WorkflowError)
+    assert isinstance(err.value, (IsADirectoryError, UnicodeDecodeError))
 
 
 # ------------------------------------------------------------------------ stale locks
@@ -248,3 +307,122 @@ def test_every_make_target_that_runs_snakemake_runs_the_preflight_first():
     wrapped = [t for t, r in recipes.items() if any("with_provenance" in x for x in r)]
     assert {"tables", "section4", "map", "committed"} <= set(wrapped)
     assert "$(PREFLIGHT) $(1)" in (REPO / "Makefile").read_text()  # inside with_provenance
+
+
+# ------------------------------------------------------------------------ writable folders
+REMEDIES = {"results": "make results/ writable", "paper_figures/mine": "set outputs_dir"}
+
+
+def test_folders_that_can_be_written_give_no_problem_and_nothing_is_written(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results").mkdir()
+    files = ["results/a/b/c.json", "paper_figures/mine/t.csv", ".snakemake/locks/-"]
+    assert preflight.write_problem(files, REMEDIES, "D") is None
+    assert preflight.snakemake_folder_problem() is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results"]  # asks, never writes
+
+
+def test_a_file_where_a_folder_must_be_is_named_with_what_to_do(tmp_path, monkeypatch):
+    """Works as any user (root too): no permission bit is involved."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper_figures").write_text("not a folder\n")
+    problem = preflight.write_problem(
+        ["results/x.json", "paper_figures/mine/t.csv", "paper_figures/mine/t.md"], REMEDIES, "D"
+    )
+    assert problem == (
+        "this run cannot write where its jobs write: paper_figures (a file, not a folder); "
+        "set outputs_dir"
+    )
+
+
+def in_child(code: str, cwd: Path, prefix: list[str] | None = None) -> str:
+    """Run ``code`` in a child Python in ``cwd`` (after ``prefix``); its stdout."""
+    proc = subprocess.run(
+        [*(prefix or []), sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.strip()
+
+
+ASK = (
+    "from ssmobs.preflight import write_problem\n"
+    "print(write_problem(['results/a/x.json', 'results/b/y.json', 'results/z.json'], "
+    "{'results': 'make results/ writable'}, 'D'))\n"
+    "try:\n"
+    "    open('results/probe', 'w')\n"
+    "except OSError as err:\n"
+    "    print('refused', err.errno)\n"
+)
+
+
+def test_a_folder_without_write_permission_is_named_once(tmp_path):
+    """chmod a-w results.  Root writes through permission bits, so as root the check runs
+    in a child without root's override of them (setpriv drops CAP_DAC_OVERRIDE): the
+    child is then refused the write exactly as another user would be."""
+    prefix = []
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root, and setpriv (to drop root's override) is missing")
+        prefix = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search"]
+    for sub in ("results/a", "results/b"):
+        (tmp_path / sub).mkdir(parents=True)
+    for folder in (tmp_path / "results/a", tmp_path / "results/b", tmp_path / "results"):
+        folder.chmod(0o555)
+    try:
+        out = in_child(ASK, tmp_path, prefix).splitlines()
+    finally:
+        for folder in (tmp_path / "results", tmp_path / "results/a", tmp_path / "results/b"):
+            folder.chmod(0o755)
+    uid = os.geteuid()
+    assert out == [
+        f"this run cannot write where its jobs write: results (not writable by user {uid} "
+        f"(mode 555, owner {uid})); make results/ writable",
+        "refused 13",  # the check agrees with what a write meets
+    ]
+
+
+def test_a_read_only_file_system_is_named(tmp_path):
+    """A read-only bind mount of results/ in a private mount namespace (root in a container
+    or VM may do it; elsewhere skipped): read-only even for root."""
+    (tmp_path / "results" / "a").mkdir(parents=True)
+    ro = str(tmp_path / "results")
+    script = f'mount --bind {ro} {ro} && mount -o remount,bind,ro {ro} && exec "$@"'
+    prefix = ["unshare", "-m", "--propagation", "private", "sh", "-c", script, "sh"]
+    try:
+        probe = subprocess.run([*prefix, "true"], capture_output=True, timeout=30)
+    except FileNotFoundError:
+        pytest.skip("unshare is not installed")
+    if probe.returncode != 0:
+        pytest.skip(f"a read-only bind mount cannot be made here: {probe.stderr.decode()[-200:]}")
+    out = in_child(ASK, tmp_path, prefix).splitlines()
+    assert out == [
+        "this run cannot write where its jobs write: results (on a read-only file system); "
+        "make results/ writable",
+        "refused 30",  # EROFS
+    ]
+
+
+def test_the_make_targets_stop_when_snakemake_cannot_write_its_folder(tmp_path):
+    """Snakemake keeps its lock in .snakemake/ and fails with a traceback (a dry run too)
+    when it cannot write there; the preflight says it in one line (here a file is in the
+    way, which holds for root too)."""
+    (tmp_path / ".snakemake").write_text("not a folder\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", str(REPO / "config" / "smoke.yaml")],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+    assert proc.returncode == 1
+    assert proc.stderr == (
+        "error: this run cannot write where its jobs write: .snakemake (a file, not a "
+        "folder); Snakemake keeps its lock and records in .snakemake/ of the working "
+        "directory: make it writable, or run in a writable copy of the workflow\n"
+    )

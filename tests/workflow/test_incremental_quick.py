@@ -179,3 +179,110 @@ def test_a_cold_cache_without_a_compiler_stops_before_any_job_with_one_line(tmp_
     assert "Traceback" not in text and not (work / "results").exists()
     dry = snakemake(work, "-n", "--cores", "1", "--configfile", CONFIG, env=env)
     assert "finds no C++ compiler" in dry.stdout + dry.stderr
+
+
+#: Figure 2 of the tiny config: one design set and one figure job (seconds)
+FIGURE2 = f"{BASE['outputs_dir']}/fig2_design_points.png"
+
+
+def snakemake_as(prefix: list[str], work: Path, *args: str) -> subprocess.CompletedProcess:
+    """Snakemake in ``work`` after ``prefix`` (e.g. a command that drops a privilege)."""
+    return subprocess.run(
+        [*prefix, sys.executable, "-m", "snakemake", *args],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def jobs_started(proc: subprocess.CompletedProcess) -> list[str]:
+    """The rules of the jobs Snakemake started (its 'rule x:' / 'localrule x:' lines)."""
+    import re
+
+    return re.findall(r"^(?:local)?rule (\w+):$", proc.stdout + proc.stderr, re.M)
+
+
+def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_reads_it(
+    tmp_path,
+):
+    """Issue 35: jobs started in a read-only results/ and failed with tracebacks (the clear
+    line only in their logs).  Now the run stops before its first job with one line naming
+    results/ and what to do, while a run with nothing to do, and a dry run, need no writing.
+    results/ is made read-only with chmod; root writes through permission bits, so as root
+    Snakemake runs without that override (setpriv drops CAP_DAC_OVERRIDE), as another user
+    would (tests/unit/test_preflight.py also checks a read-only file system)."""
+    import os
+
+    prefix = []
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root, and setpriv (to drop root's override) is missing")
+        prefix = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search"]
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    snakemake(work, FIGURE2, "--cores", "2", "--configfile", CONFIG)
+    folders = [p for p in (work / "results").rglob("*") if p.is_dir()] + [work / "results"]
+    for folder in folders:
+        folder.chmod(0o555)
+    # Figure 2 edited: its stamp is stale, which the parse moves aside (dry) or removes
+    edited = "config/edited.yaml"
+    (work / edited).write_text(yaml.safe_dump({**BASE, "figure2": {"a": 0.5}}, sort_keys=False))
+    try:
+        same = snakemake_as(prefix, work, FIGURE2, "--cores", "2", "--configfile", CONFIG)
+        dry = snakemake_as(prefix, work, "-n", "--cores", "2", "--configfile", CONFIG)
+        full = snakemake_as(prefix, work, "--cores", "2", "--configfile", CONFIG)
+        stale_dry = snakemake_as(
+            prefix, work, "-n", FIGURE2, "--cores", "2", "--configfile", edited
+        )
+        stale = snakemake_as(prefix, work, FIGURE2, "--cores", "2", "--configfile", edited)
+    finally:
+        for folder in folders:
+            folder.chmod(0o755)
+    assert same.returncode == 0 and "Nothing to be done" in same.stdout + same.stderr
+    assert dry.returncode == 0, dry.stderr[-2000:]
+    for proc in (full, stale):
+        text = proc.stdout + proc.stderr
+        assert proc.returncode != 0
+        assert "this run cannot write where its jobs write: results (not writable by user" in text
+        assert "make results/ (this working directory's cache) writable" in text
+        assert jobs_started(proc) == [] and "Traceback" not in text, text[-3000:]
+    assert stale_dry.returncode == 0, stale_dry.stderr[-2000:]
+    assert "this dry run leaves the stale results/outputs/" in stale_dry.stdout + stale_dry.stderr
+    # the refused run removed nothing, not even Figure 2 in the writable outputs_dir
+    assert (work / FIGURE2).is_file()
+
+
+def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path):
+    """No permission bit involved (so it holds for root too): paper_figures is a file."""
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    (work / "paper_figures").write_text("a file, not a folder\n")
+    proc = snakemake(work, FIGURE2, "--cores", "2", "--configfile", CONFIG, check=False)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert (
+        "this run cannot write where its jobs write: paper_figures (a file, not a folder); "
+        f"make outputs_dir = {BASE['outputs_dir']} writable, or set outputs_dir to a "
+        "writable folder; no job was started"
+    ) in text
+    assert jobs_started(proc) == [] and "Traceback" not in text
+    assert not (work / "results").exists()  # nothing was made, not even the design set
+
+
+def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path):
+    """Issue 35: 50 large scenarios gave a message of about 100-250 lines at the parse."""
+    work = make_workdir(tmp_path / "w")
+    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    conf = {
+        "outputs_dir": "paper_figures/big",
+        "scenarios": [{"name": f"big_{i:02d}", **base} for i in range(50)],
+        "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
+    }
+    (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+    proc = snakemake(work, "-n", "--configfile", CONFIG, check=False, timeout=300)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert len(text.splitlines()) <= 20, text
+    assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
+    assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text

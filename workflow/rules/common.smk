@@ -15,7 +15,7 @@ from ssmobs.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
-from ssmobs.preflight import lock_holders, use_package_of  # noqa: E402
+from ssmobs.preflight import lock_holders, use_package_of, write_problem  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
@@ -23,8 +23,9 @@ ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
 #: no config file (nor --config) names outputs_dir: the schema's default, the top of paper_figures/
 OUTPUTS_DIR_UNSET = "outputs_dir" not in config
 
-try:
-    ssmobs_config.validate(config)  # also finds and checks every model module
+try:  # also finds and checks every model module
+    _files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
+    ssmobs_config.validate(config, config_file=_files[-1])
 except (ConfigError, ModelDefinitionError) as err:
     files = ", ".join(map(str, workflow.configfiles)) or "(none)"
     raise WorkflowError(f"config file(s) {files}: {err}") from None
@@ -102,15 +103,11 @@ def missing_compiler_problem():
     check always uses it) and no C++ compiler is found, else None: a cold cache without g++
     fails before any job, not in a build job's traceback."""
     import shutil
-    from ssmobs.stan_backends import stan_file
-    from ssmobs.stan_backends.native import NativeBackend
     from ssmobs.stan_backends.native_build import compiler
 
-    models = sorted({sc["model"] for sc in SCENARIOS.values() if sc["stan"]})
-    if not models or shutil.which(compiler()):
+    if not STAN_SCENARIOS or shutil.which(compiler()):
         return None
-    native = NativeBackend()
-    unbuilt = [m for m in models if not native.is_built(stan_file(m))]
+    unbuilt = unbuilt_programs()
     if not unbuilt:
         return None
     return (
@@ -118,6 +115,62 @@ def missing_compiler_problem():
         f"but finds no C++ compiler {compiler()!r}: install g++ (apt-get install g++), set "
         f"CXX to a C++ compiler, or point SSMOBS_CACHE at a cache that holds the programs"
     )
+
+
+def write_remedies():
+    """What to do when a folder the run writes cannot be written, by folder."""
+    from ssmobs.stan_backends.cache import cache_root
+
+    return {
+        "results": (
+            "make results/ (this working directory's cache) writable, or run in a "
+            "writable copy of the workflow"
+        ),
+        OUT: f"make outputs_dir = {OUT} writable, or set outputs_dir to a writable folder",
+        str(cache_root()): (
+            "point SSMOBS_CACHE at a writable folder (the cache of compiled Stan "
+            "programs; a read-only one that holds this run's programs is fine)"
+        ),
+    }
+
+
+def unwritable_problem(files):
+    """One line when a folder that ``files`` go into cannot be written, else None."""
+    return write_problem(files, write_remedies(), default="make it writable")
+
+
+def unbuilt_programs():
+    """The models of this run whose Stan program the native backend has not built yet
+    (the model check always evaluates with it)."""
+    from ssmobs.stan_backends import stan_file
+    from ssmobs.stan_backends.native import NativeBackend
+
+    models = sorted({sc["model"] for sc in SCENARIOS.values() if sc["stan"]})
+    native = NativeBackend()
+    return [m for m in models if not native.is_built(stan_file(m))]
+
+
+def stop_where_jobs_cannot_write():
+    """Stop with one line, before the first job, when a job of this run would write into a
+    folder that cannot be written: a read-only results/ or outputs_dir, a file where a
+    folder must be, a program cache that must build but cannot be written.  Called by
+    ``onstart:``, so only when jobs are to run: a dry run, or a run with nothing to do,
+    reads a read-only cache (an archived run, a shared copy) without complaint.  On a
+    cluster the folders are shared, so the planning process's answer holds for the jobs."""
+    from ssmobs.stan_backends.cache import cache_root
+
+    jobs = list(workflow.dag.needrun_jobs())
+    files = []
+    for job in jobs:
+        files += [str(f) for f in (*job.output, *job.log)]
+        if getattr(job, "benchmark", None):
+            files.append(str(job.benchmark))
+    builds = {"build_stan_model", "check_model_stan"}
+    if any(job.rule.name in builds for job in jobs) and unbuilt_programs():
+        files.append(str(cache_root() / "native" / "-"))
+    problem = unwritable_problem(files)
+    if problem is not None:
+        raise WorkflowError(f"{problem}; no job was started")
 
 
 def stop_without_compiler():
@@ -341,16 +394,17 @@ def nuts_batches(name):
     return [f"{batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
 
-def repair_damaged_batches():
-    """Remove the table of every batch whose records were damaged, deleted or changed after
-    it was written (or whose kept draws no longer match their checksum), before the DAG is
-    built (Snakemake takes stock of the files then), so that batch reruns: it recomputes
-    exactly the damaged records and reuses every valid one.  A batch table deleted by hand
-    reruns too."""
+def damaged_batches():
+    """The table of every batch whose records were damaged, deleted or changed after it
+    was written (or whose kept draws no longer match their checksum), to be removed before
+    the DAG is built (Snakemake takes stock of the files then; :func:`remove_stale`), so
+    that batch reruns: it recomputes exactly the damaged records and reuses every valid
+    one.  A batch table deleted by hand reruns too."""
     from ssmobs.record_cache import changed_batch_records
 
     if not may_change_files_before_the_lock():
-        return
+        return []
+    changes = []
     keep = config["stan"]["keep_draws"]
     for name in STAN_SCENARIOS:
         for table in nuts_batches(name):
@@ -361,8 +415,8 @@ def repair_damaged_batches():
                 logger.warning(f"this batch reruns: {problem.split('; this batch')[0]}")
                 # Snakemake does not remake a missing intermediate file whose consumers are
                 # up to date: the scenario's gathered table goes too, so both are remade
-                for path in (table, stan_summary(name), stan_table(name)):
-                    Path(path).unlink(missing_ok=True)
+                changes += [(path, None) for path in (table, stan_summary(name), stan_table(name))]
+    return changes
 
 
 def select_k_params(name):
@@ -398,20 +452,23 @@ def figure2_disturbances(wildcards=None):
     return disturbance_path(2, f2["K"], "design", f2["seed"])
 
 
-def repair_damaged_trajectories():
-    """Remove every design-trajectory file that no longer matches its checksum or has lost
-    it (damage that kept its time), before the DAG is built, so it is made again."""
+def damaged_trajectories():
+    """Every design-trajectory file that no longer matches its checksum or has lost it
+    (damage that kept its time), to be removed before the DAG is built, so it is made
+    again."""
     from ssmobs.io import checksum_problem
 
     if not may_change_files_before_the_lock():
-        return
+        return []
+    changes = []
     for name, sc in SCENARIO_OBJECTS.items():
         for K in {sc.K, sc.exact_trajectories}:
             path = trajectories_path(name, K)
             problem = checksum_problem(path)
             if problem:
                 logger.warning(f"made again: {problem}")
-                Path(path).unlink()
+                changes.append((path, None))
+    return changes
 
 
 def stamped_outputs(path):
@@ -463,14 +520,38 @@ def may_change_files_before_the_lock():
     )
 
 
-def remove_stale_stamps():
-    """Remove every stamp whose key is not the current one (see :func:`stamp`), and the files
-    its rule made under the old key, so that a run asking for one of those files by name
-    (``make tables``) remakes it too, not only a run of every target.  In the process that
-    plans the run (not again in cluster jobs).  A dry run keeps the files: it moves the
-    stamp aside to ``<stamp>.stale``, which the next real run honours."""
-    if not may_change_files_before_the_lock():
+def remove_stale(changes):
+    """Remove the stale files of ``changes`` (pairs of a path and None), or move them
+    (pairs of a path and where to), before the DAG is built.  Where one cannot be changed
+    (its folder cannot be written) nothing is: a run stops with one line (its jobs would
+    write there too), a dry run says so and goes on."""
+    changes = [(p, a) for p, a in dict.fromkeys((Path(p), a) for p, a in changes)]
+    changes = [(p, a) for p, a in changes if os.path.lexists(p)]
+    problem = unwritable_problem([f for p, a in changes for f in (p, a) if f is not None])
+    if problem is not None:
+        if not is_dry_run():
+            raise WorkflowError(f"{problem}; no job was started")
+        stale = ", ".join(str(p) for p, _ in changes[:3])
+        more = f" and {len(changes) - 3} more" if len(changes) > 3 else ""
+        logger.warning(f"this dry run leaves the stale {stale}{more}: {problem}")
         return
+    for path, aside in changes:
+        if aside is not None:
+            path.replace(aside)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def stale_stamps():
+    """Every stamp whose key is not the current one (see :func:`stamp`), with the files
+    made under the old key, to be removed by :func:`remove_stale`, so that a run asking
+    for one of those files by name (``make tables``) remakes it too, not only a run of every
+    target.  In the process that plans the run (not again in cluster jobs).  A dry run
+    keeps the files: it moves the stamp aside to ``<stamp>.stale``, which the next real run
+    honours."""
+    if not may_change_files_before_the_lock():
+        return []
+    changes = []
     for path, key in {**STAMPS, **STAMPS_ON_REQUEST}.items():
         stamp_file, aside = Path(path), Path(f"{path}.stale")
         try:
@@ -480,16 +561,14 @@ def remove_stale_stamps():
         if not stale:
             continue
         if is_dry_run():
-            if stamp_file.exists():
-                stamp_file.replace(aside)
+            changes.append((stamp_file, aside))
             continue
         # a rule made on request keeps its files (committed, e.g. the variant table) until
         # it is asked for: its missing stamp makes it rerun then
         if path not in STAMPS_ON_REQUEST:
-            for f in stamped_outputs(path):
-                Path(f).unlink(missing_ok=True)
-        stamp_file.unlink(missing_ok=True)
-        aside.unlink(missing_ok=True)
+            changes += [(Path(f), None) for f in stamped_outputs(path)]
+        changes += [(stamp_file, None), (aside, None)]
+    return changes
 
 
 #: suffixes of the tables and figures a run writes into outputs_dir

@@ -33,6 +33,7 @@ from .config_schema import (
     scenario_schema,
     schema_problems,
     short_repr,
+    summarise_problems,
 )
 from .config_schema import README as README
 from .config_schema import ConfigError as ConfigError
@@ -441,10 +442,17 @@ def _exact_settings_problems(config: dict[str, Any]) -> list[str]:
     ]
 
 
-def validate(config: dict[str, Any]) -> dict[str, Any]:
+def validate(
+    config: dict[str, Any], every_problem: bool = False, config_file: str | None = None
+) -> dict[str, Any]:
     """Fill schema defaults into ``config`` (in place) and check it.
 
-    Raises :class:`ConfigError` listing every problem (key, value, what is allowed).
+    Raises :class:`ConfigError` listing every problem (key, value, what is allowed), one
+    per line; problems of one kind shared by more than a few entries of a config list (50
+    scenarios over the memory limit) in one line with their number and first names
+    (:func:`~ssmobs.config_schema.summarise_problems`), unless ``every_problem``.  The
+    header of such a message says how to get every one: the preflight with ``--all`` and
+    ``config_file``.
     """
     if not isinstance(config, dict):
         raise ConfigError(
@@ -473,8 +481,28 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
 
         problems = budget.problems(config)
     if problems:
-        raise ConfigError("invalid configuration:\n  - " + "\n  - ".join(problems))
+        raise ConfigError(_problems_message(config, problems, every_problem, config_file))
     return config
+
+
+def _problems_message(
+    config: dict[str, Any], problems: list[str], every_problem: bool, config_file: str | None
+) -> str:
+    header = "invalid configuration"
+    if not every_problem:
+        names = {
+            section: [e.get("name") if isinstance(e, dict) else None for e in entries]
+            for section, entries in config.items()
+            if isinstance(entries, list)
+        }
+        lines = summarise_problems(problems, names)
+        if len(lines) < len(problems):
+            header += (
+                f" ({len(problems)} problems of {len(lines)} kinds; every one: "
+                f".venv/bin/python -m ssmobs.preflight --all {config_file or 'CONFIGFILE'})"
+            )
+        problems = lines
+    return f"{header}:\n  - " + "\n  - ".join(problems)
 
 
 def x0_list(sc: dict) -> list[float]:

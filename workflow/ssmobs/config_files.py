@@ -23,6 +23,10 @@ MAX_CONFIG_BYTES = 5 * 2**20
 MAX_CONFIG_VALUES = 100_000
 
 
+#: what a config file must be, for the messages about files that are not one
+CONFIG_TEXT = "a config file is YAML or JSON text (see config/README.md)"
+
+
 class RefusedYAMLError(yaml.MarkedYAMLError):
     """Valid YAML that would silently mean something else (a duplicate key) or is too big."""
 
@@ -121,12 +125,19 @@ def read_config_file(path: str | os.PathLike) -> Any:
     """The document in the config file ``path`` (None when empty).
 
     Raises ConfigError with one line naming the file (and line and column) when it does not
-    exist, cannot be read, is larger than :data:`MAX_CONFIG_BYTES`, is not valid YAML, has a
-    key twice in one mapping, or expands to more than :data:`MAX_CONFIG_VALUES` values.
+    exist, is a directory, a device or a named pipe (never opened), cannot be read, is larger
+    than :data:`MAX_CONFIG_BYTES`, is not text (not UTF-8, or with NUL bytes: a binary file),
+    is not valid YAML, has a key twice in one mapping, or expands to more than
+    :data:`MAX_CONFIG_VALUES` values.
     """
     path = Path(path)
     if not path.is_file():
-        what = "is a directory, not a file" if path.is_dir() else "does not exist"
+        if path.is_dir():
+            what = f"is a directory, not a file; {CONFIG_TEXT}"
+        elif path.exists():  # a device (/dev/null), a named pipe or a socket: not read
+            what = f"is not a regular file (a device, named pipe or socket); {CONFIG_TEXT}"
+        else:
+            what = "does not exist"
         raise ConfigError(f"config file {path} {what}")
     try:
         size = path.stat().st_size
@@ -136,9 +147,21 @@ def read_config_file(path: str | os.PathLike) -> Any:
                 f"bytes ({MAX_CONFIG_BYTES / 2**20:g} MiB) a config file may have; a config "
                 f"has a few kB"
             )
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
+        data = path.read_bytes()
+    except OSError as err:
         raise ConfigError(f"config file {path} cannot be read: {err}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"config file {path} is not a text file (byte {data[err.start]:#04x} at "
+            f"position {err.start} is not UTF-8); {CONFIG_TEXT}"
+        ) from None
+    if "\0" in text:
+        raise ConfigError(
+            f"config file {path} is not a text file (it holds a NUL byte at position "
+            f"{text.index(chr(0))}); {CONFIG_TEXT}"
+        )
     try:
         return parse_config_text(text)
     except ConfigError as err:
@@ -150,8 +173,9 @@ def read_config_file(path: str | os.PathLike) -> Any:
         if not isinstance(err, RefusedYAMLError):
             problem = f"YAML syntax error: {problem}"
         raise ConfigError(f"config file {path}{where}: {cut_text(problem, 2 * MAX_REPR)}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"config file {path}: YAML syntax error: {cut_text(str(err))}") from None
+    except yaml.YAMLError as err:  # one line: the reader's error spans two
+        problem = cut_text(" ".join(str(err).split()))
+        raise ConfigError(f"config file {path}: YAML syntax error: {problem}") from None
     except RecursionError:
         raise ConfigError(f"config file {path}: nested too deeply to be a config") from None
 

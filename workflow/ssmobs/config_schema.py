@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import functools
 import math
+import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,85 @@ def short_list(names: list[str], n: int = 20) -> str:
     """The first ``n`` of ``names`` as a list, with how many more there are."""
     shown = short_repr(names[:n])
     return shown if len(names) <= n else f"{shown} and {len(names) - n} more"
+
+
+# ------------------------------------------------------------------------ many alike
+#: problems of one kind given one by one up to this many; more are summarised in one line
+ALIKE_GIVEN_ONE_BY_ONE = 3
+#: names of the other entries a summary line shows
+ALIKE_NAMES_SHOWN = 3
+#: the entry a problem is about, as the messages write it: ``scenarios[3]``, with its name
+#: (``scenarios[3] ('x')``) where the check adds it, or ``scenario 'x'`` (the size budget)
+_ENTRY = re.compile(
+    r"^(?:(?P<section>scenarios|k_selection|observability_studies|observability_maps)"
+    r"\[(?P<index>\d+)\](?: \((?P<quoted>'[^']*'|\"[^\"]*\")\))?"
+    r"|(?P<owner>scenario|k_selection|observability map) '(?P<name>[^']*)')"
+)
+#: values inside a message: quoted text, numbers (not digits inside names), then lists
+_TEXT = re.compile(r"'[^']*'|\"[^\"]*\"")
+_NUMBER = re.compile(r"(?<![\w.])[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?(?![\w])")
+_LIST = re.compile(r"\[[^\[\]]*\]")
+_PLURAL = {
+    "scenarios": "scenarios",
+    "scenario": "scenarios",
+    "k_selection": "k_selection entries",
+    "observability_studies": "observability studies",
+    "observability_maps": "observability maps",
+    "observability map": "observability maps",
+}
+
+
+def _entry_and_kind(problem: str, names: dict[str, list[Any]]) -> tuple[str, str, str] | None:
+    """(section, the entry's name, the problem's kind) of a problem about one entry of a
+    config list, None for others.  The kind is the message without its entry and with
+    every value (quoted text, number, list) blanked: problems that differ only in the
+    entry and its values are of one kind."""
+    found = _ENTRY.match(problem)
+    if found is None:
+        return None
+    if found["owner"]:
+        section, name = found["owner"], found["name"]
+    else:
+        section, index = found["section"], int(found["index"])
+        entries = names.get(section, [])
+        if found["quoted"]:
+            name = found["quoted"][1:-1]
+        else:
+            name = entries[index] if index < len(entries) else f"[{index}]"
+    rest = _TEXT.sub("'…'", problem[found.end() :])
+    rest = _LIST.sub("[…]", _NUMBER.sub("…", rest))
+    return _PLURAL[section], str(name), rest
+
+
+def summarise_problems(problems: list[str], names: dict[str, list[Any]]) -> list[str]:
+    """``problems`` with every kind that more than :data:`ALIKE_GIVEN_ONE_BY_ONE` entries
+    of one config list share (see :func:`_entry_and_kind`) given as one line: how many, the
+    first problem in full, the names of the first few others.  Fewer stay as they are, in
+    their order; a summary line takes its first problem's place.
+
+    ``names``: the ``name`` of every entry of each config list (``scenarios``, ...), by
+    position, for the schema's messages that give only the position (``scenarios[3].K``).
+    """
+    kinds: dict[tuple[str, str], list[tuple[int, str]]] = {}
+    for i, problem in enumerate(problems):
+        found = _entry_and_kind(problem, names)
+        if found is not None:
+            kinds.setdefault((found[0], found[2]), []).append((i, found[1]))
+    out: dict[int, str] = dict(enumerate(problems))
+    for (section, _), alike in kinds.items():
+        if len(alike) <= ALIKE_GIVEN_ONE_BY_ONE:
+            continue
+        others = [repr(name) for _, name in alike[1:]]
+        shown = ", ".join(others[:ALIKE_NAMES_SHOWN])
+        if len(others) > ALIKE_NAMES_SHOWN:
+            shown += f" and {len(others) - ALIKE_NAMES_SHOWN} more"
+        first = alike[0][0]
+        out[first] = (
+            f"{len(alike)} {section} alike, the first: {problems[first]}; the others: {shown}"
+        )
+        for i, _ in alike[1:]:
+            del out[i]
+    return [out[i] for i in sorted(out)]
 
 
 # ------------------------------------------------------------------------ the schema
