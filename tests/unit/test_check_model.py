@@ -228,9 +228,9 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     """Issue 36: the growth model with ``b, a = omega`` swapped in simulate explodes the
     noise-free trajectory at (a, b) = (0.5, 25); the config's validation must report the
     model's own check, not that the config's true values reach |x_t| = 4.3e+52."""
+    from growth_model import Growth
     from ssmobs import config as cfg
     from ssmobs.models import MODELS
-    from test_multi_start import Growth
 
     class Swapped(Growth):
         def simulate(self, omega, x0, eta, eps):

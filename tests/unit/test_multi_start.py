@@ -1,12 +1,8 @@
 """Multi-start joint MAP (ssmobs.multi_start; issue 36): starts, distinct maxima, K^max_unique.
 
-Ships a test model that the paper does not treat, the univariate growth model
-
-    x_t = a x_{t-1} + b x_{t-1} / (1 + x_{t-1}^2) + eta_t,   z_t = x_t^2 / 20 + eps_t,
-
-whose joint posterior is symmetric under x -> -x (the transition mean is odd in x_{t-1},
-z_t sees only x_t^2): every maximum has a mirror image of the same height, so one start
-per trajectory overstates how many trajectories have a unique maximum.
+On the growth test model (tests/growth_model.py), whose every maximum has a mirror image of
+the same height, one start per trajectory overstates how many trajectories have a unique
+maximum.
 """
 
 from __future__ import annotations
@@ -16,10 +12,10 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from growth_model import Growth
 from ssmobs.joint_map import JointMapResult, joint_map
 from ssmobs.joint_map_settings import JointMapSettings
 from ssmobs.models import get_model
-from ssmobs.models.base import StateSpaceModel
 from ssmobs.multi_start import (
     distinct_maxima,
     halton,
@@ -32,45 +28,6 @@ from ssmobs.scenario import Scenario
 from ssmobs.tables import section_iv, section_iv_compact
 
 pytestmark = pytest.mark.unit
-
-
-class Growth(StateSpaceModel):
-    """The growth model above, unit noise variances (a test model, not a paper model)."""
-
-    slug = "test_growth"
-    title = "x_t = a x + b x / (1 + x^2) + eta_t, z_t = x_t^2 / 20 + eps_t"
-    obs_dim = 1
-    state_dim = 1
-    param_names = ("a", "b")
-    default_prior = {"a": "restricted", "b": "half_line"}
-    allowed_priors = {"a": ("restricted",), "b": ("half_line",)}
-    has_sign_consistent_start = True
-
-    def obs_term(self, omega, x, z):
-        (xt,), (zt,) = x, z
-        return (zt - xt**2 / 20) ** 2
-
-    def trans_term(self, omega, x_prev, x):
-        (a, b), (xp,), (xt,) = omega, x_prev, x
-        return (xt - a * xp - b * xp / (1 + xp**2)) ** 2
-
-    def initial_states(self, omega, z):
-        """x_t = sqrt(20 max(z_t, 0)): the positive root of z_t = x_t^2 / 20."""
-        return np.sqrt(20 * np.maximum(np.asarray(z, dtype=float), 0.0))
-
-    def sign_consistent_states(self, omega, x0, z):
-        sign = 1.0 if float(np.ravel(x0)[0]) >= 0 else -1.0
-        return sign * self.initial_states(omega, z)
-
-    def simulate(self, omega, x0, eta, eps):
-        a, b = omega
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 1))
-        prev = np.full(K, float(x0[0]))
-        for t in range(T):
-            prev = a * prev + b * prev / (1 + prev**2) + eta[:, t, 0]
-            x[:, t, 0] = prev
-        return x, x**2 / 20 + eps
 
 
 def trajectories(model, omega, x0, T, K, seed):

@@ -140,43 +140,17 @@ def test_mistake_copied_module_keeps_the_old_slug(tmp_path):
     ) in proc.stdout + proc.stderr
 
 
-SWAPPED_GROWTH = '''"""Growth model with a planted mistake: b, a swapped in simulate (issue 36)."""
-
-import numpy as np
-
-from .base import StateSpaceModel
-
-
-class Growth(StateSpaceModel):
-    slug = "growth"
-    title = "growth model"
-    obs_dim = 1
-    state_dim = 1
-    param_names = ("a", "b")
-    default_prior = {"a": "restricted", "b": "half_line"}
-    allowed_priors = {"a": ("restricted",), "b": ("half_line",)}
-
-    def obs_term(self, omega, x, z):
-        (xt,), (zt,) = x, z
-        return (zt - xt**2 / 20) ** 2
-
-    def trans_term(self, omega, x_prev, x):
-        (a, b), (xp,), (xt,) = omega, x_prev, x
-        return (xt - a * xp - b * xp / (1 + xp**2)) ** 2
-
-    def initial_states(self, omega, z):
-        return np.sqrt(20 * np.maximum(np.asarray(z, dtype=float), 0.0))
-
-    def simulate(self, omega, x0, eta, eps):
-        b, a = omega
-        K, T, _ = eta.shape
-        x = np.empty((K, T, 1))
-        prev = np.full(K, float(x0[0]))
-        for t in range(T):
-            prev = a * prev + b * prev / (1 + prev**2) + eta[:, t, 0]
-            x[:, t, 0] = prev
-        return x, x**2 / 20 + eps
-'''
+def swapped_growth() -> str:
+    """The growth test model (tests/growth_model.py) as a model module of its own, slug
+    "growth", with a planted mistake: ``b, a = omega`` swapped in simulate (issue 36)."""
+    text = (Path(__file__).resolve().parents[1] / "growth_model.py").read_text()
+    for right, wrong in (
+        ('slug = "test_growth"', 'slug = "growth"'),
+        ("a, b = omega\n        K", "b, a = omega\n        K"),
+    ):
+        assert text.count(right) == 1, right
+        text = text.replace(right, wrong)
+    return text
 
 
 def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_path):
@@ -186,7 +160,7 @@ def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_p
     import yaml
 
     work = make_workdir(tmp_path)
-    (work / "workflow" / "ssmobs" / "models" / "growth.py").write_text(SWAPPED_GROWTH)
+    (work / "workflow" / "ssmobs" / "models" / "growth.py").write_text(swapped_growth())
     conf = {
         "outputs_dir": "paper_figures/growth",
         "scenarios": [
