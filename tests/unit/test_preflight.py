@@ -26,6 +26,18 @@ def message(path) -> str:
     return text
 
 
+def run_preflight(config_file: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``python -m ssmobs.preflight <config_file>`` in ``cwd``, as the make targets run it."""
+    return subprocess.run(
+        [sys.executable, "-m", "ssmobs.preflight", config_file],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        timeout=120,
+    )
+
+
 def test_missing_file_is_one_line(tmp_path):
     msg = message(tmp_path / "nope.yaml")
     assert msg == f"config file {tmp_path / 'nope.yaml'} does not exist"
@@ -81,13 +93,7 @@ def test_profiles_pass(name):
 
 
 def test_command_line_prints_one_line_and_fails(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", str(tmp_path / "x.yaml")],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
-    )
+    proc = run_preflight(str(tmp_path / "x.yaml"), cwd=tmp_path)
     assert proc.returncode == 1
     assert proc.stderr == f"error: config file {tmp_path / 'x.yaml'} does not exist\n"
 
@@ -113,14 +119,7 @@ def test_a_file_that_is_no_config_text_is_one_line_from_the_command_line(tmp_pat
     preflight of the make targets must say it in one line: before, a NUL byte gave two
     lines and a named pipe (or /dev/null) 'does not exist'."""
     path = not_a_config(tmp_path, kind)
-    proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", str(path)],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
-        timeout=60,
-    )
+    proc = run_preflight(str(path), cwd=tmp_path)
     assert proc.returncode == 1
     assert len(proc.stderr.splitlines()) == 1, proc.stderr
     what = {
@@ -269,13 +268,7 @@ def test_yaml_alias_bomb_refused_quickly(tmp_path, levels):
 def test_command_line_prints_the_duplicate_key(tmp_path):
     path = tmp_path / "c.yaml"
     path.write_text(SCENARIO + "    T: 4\n    K: 12\n    K: 2\n")
-    proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", str(path)],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
-    )
+    proc = run_preflight(str(path), cwd=tmp_path)
     assert proc.returncode == 1
     assert proc.stderr.startswith(f"error: config file {path}, line 8, column 5: key 'K'")
 
@@ -412,14 +405,7 @@ def test_the_make_targets_stop_when_snakemake_cannot_write_its_folder(tmp_path):
     when it cannot write there; the preflight says it in one line (here a file is in the
     way, which holds for root too)."""
     (tmp_path / ".snakemake").write_text("not a folder\n")
-    proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", str(REPO / "config" / "smoke.yaml")],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
-        timeout=120,
-    )
+    proc = run_preflight(str(REPO / "config" / "smoke.yaml"), cwd=tmp_path)
     assert proc.returncode == 1
     assert proc.stderr == (
         "error: this run cannot write where its jobs write: .snakemake (a file, not a "
