@@ -87,7 +87,7 @@ def test_the_overlay_file_and_the_make_recipe(tmp_path, capsys):
     assert not (tmp_path / "bad_overlay.yaml").exists()
     # the make target: the overlay, its preflight and Snakemake on it (printed, not run)
     plan = subprocess.run(
-        ["make", "-n", "smoke", "CONFIG=config/stoch_vol.yaml"],
+        ["make", "--no-print-directory", "-n", "smoke", "CONFIG=config/stoch_vol.yaml"],
         cwd=REPO,
         capture_output=True,
         text=True,
