@@ -42,6 +42,7 @@ CASES = [
     ("Same a=0.7 T=100", "same", [0.7], [8.0], 100, "restricted"),
     ("ranWalk T=100", "sep_ranwalk", [0.9], [8.0], 100, "half_line"),
     ("Sep d=2 p=1 a, b, c restricted T=50", "sep_d2_p1", [0.9, 0.9, 0.9], [8.0], 50, "restricted"),
+    ("Sep d=1 p=2 T=50", "sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0], 50, "restricted"),
 ]
 
 
