@@ -24,8 +24,8 @@ ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
 OUTPUTS_DIR_UNSET = "outputs_dir" not in config
 
 try:  # also finds and checks every model module
-    _files = [str(f) for f in workflow.configfiles] or ["config/config.yaml"]
-    ssmobs_config.validate(config, config_file=_files[-1])
+    _last_file = str(workflow.configfiles[-1]) if workflow.configfiles else "config/config.yaml"
+    ssmobs_config.validate(config, config_file=_last_file)
 except (ConfigError, ModelDefinitionError) as err:
     files = ", ".join(map(str, workflow.configfiles)) or "(none)"
     raise WorkflowError(f"config file(s) {files}: {err}") from None
@@ -525,8 +525,8 @@ def remove_stale(changes):
     (pairs of a path and where to), before the DAG is built.  Where one cannot be changed
     (its folder cannot be written) nothing is: a run stops with one line (its jobs would
     write there too), a dry run says so and goes on."""
-    changes = [(p, a) for p, a in dict.fromkeys((Path(p), a) for p, a in changes)]
-    changes = [(p, a) for p, a in changes if os.path.lexists(p)]
+    unique = dict.fromkeys((Path(p), a) for p, a in changes)
+    changes = [(p, a) for p, a in unique if os.path.lexists(p)]
     problem = unwritable_problem([f for p, a in changes for f in (p, a) if f is not None])
     if problem is not None:
         if not is_dry_run():

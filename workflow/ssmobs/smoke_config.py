@@ -12,7 +12,7 @@ sizes of ``config/smoke.yaml`` for *how much*:
   ``batch_size`` (also over a scenario's own ``stan_settings``);
 - the ESS minima lowered with the chains, to 100 x chains (the rule of
   ``config/README.md``: with 2 chains, 200 instead of 400), so that a run can pass;
-- a choice of K (``k_selection``): the grid :data:`SMOKE_K_GRID` and its first two seeds;
+- a choice of K (``k_selection``): the smoke profile's grid and its first two seeds;
 - ``outputs_dir``: ``paper_figures/smoke_<name>``, its own folder, so no committed output
   and not the study's own outputs_dir is written.
 
@@ -36,8 +36,6 @@ from .config import ConfigError, validate
 #: design trajectories per scenario and per map cell in a smoke run (the smoke profile's
 #: own model scenario has K = 4)
 SMOKE_K = 4
-#: the grid of a choice of K in a smoke run (the smoke profile's)
-SMOKE_K_GRID = [8, 16, 24]
 #: the NUTS sizes taken from the smoke profile's stan block
 STAN_SIZES = ("chains", "iter_warmup", "iter_sampling", "batch_size")
 #: the smoke profile
@@ -53,6 +51,7 @@ def smoke_overlay(
     if smoke is None:
         smoke = yaml.safe_load(SMOKE_PROFILE.read_text())
     sizes = {key: smoke["stan"][key] for key in STAN_SIZES}
+    k_grid = smoke["k_selection"][0]["K_grid"]
     out = copy.deepcopy(config)
     out["outputs_dir"] = f"paper_figures/smoke_{name}"
     for sc in out.get("scenarios", []):
@@ -68,7 +67,7 @@ def smoke_overlay(
     for entry in out.get("observability_maps", []):
         entry["K"] = min(int(entry.get("K", SMOKE_K)), SMOKE_K)
     for entry in out.get("k_selection", []):
-        entry["K_grid"] = list(SMOKE_K_GRID)
+        entry["K_grid"] = list(k_grid)
         if "seeds" in entry:
             entry["seeds"] = entry["seeds"][:2]
     stan = out["stan"] = {**(out.get("stan") or {}), **sizes}

@@ -64,7 +64,7 @@ def cell_summary(
     from ..exact_settings import ExactSettings
     from ..trajectories import make_trajectories
     from .design import disturbance_set
-    from .joint_map import multi_start_of
+    from .joint_map import multi_start_of, scenario_settings
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -76,10 +76,7 @@ def cell_summary(
         dict(design_cfg),
     )
     traj = make_trajectories(scenario, matrix, provenance=attrs)
-    # the scenario's own settings, as the joint-MAP stage takes them (run_joint_map)
-    settings = {**joint_settings, "start_states": scenario.joint_map_start}
-    if scenario.joint_map_n_starts is not None:
-        settings["n_starts"] = scenario.joint_map_n_starts
+    settings = scenario_settings(scenario, joint_settings)
     # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
     _, frame, info, bounds = multi_start_of(traj, scenario.prior, settings)
     K = scenario.K
