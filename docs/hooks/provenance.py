@@ -30,6 +30,18 @@ def _minutes(seconds: Any) -> str:
     return f"{seconds:.0f} s ({seconds / 60:.1f} min)"
 
 
+def _uncommitted(prov: dict[str, Any], shown: int = 3) -> str:
+    """`` (with uncommitted changes ...)`` naming the changed files where they were recorded."""
+    if not prov.get("uncommitted_changes"):
+        return ""
+    files = prov.get("uncommitted_files")
+    if not files:
+        return " (with uncommitted changes)"
+    names = ", ".join(f"`{f}`" for f in files[:shown])
+    more = f" and {len(files) - shown} more" if len(files) > shown else ""
+    return f" (with uncommitted changes to {names}{more})"
+
+
 def render(prov: dict[str, Any]) -> str:
     """The provenance as a short Markdown list."""
     machine = prov.get("machine", {})
@@ -37,7 +49,7 @@ def render(prov: dict[str, Any]) -> str:
     lines = [
         f"- **made by** `{prov['command']}` with `{prov['config_file']}` at commit "
         f"`{prov['commit'][:12]}`"
-        + (" (with uncommitted changes)" if prov.get("uncommitted_changes") else "")
+        + _uncommitted(prov)
         + f", finished {prov['date_utc'][:16].replace('T', ' ')} UTC",
         f"- **machine**: {machine.get('cpus')} CPUs ({machine.get('cpu_model')}), "
         f"{machine.get('memory_gib')} GiB, Python {machine.get('python')}; Stan backend "

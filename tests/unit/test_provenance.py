@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 
 import pytest
@@ -80,3 +81,25 @@ def test_provenance_records_what_the_numbers_depended_on():
     if kernels.covered():
         assert {b["kernel"] for b in numerics["blas"]} == {"Haswell"}
         assert not set(numerics["numpy_dispatch"]) & set(kernels.NUMPY_DISABLED)
+
+
+def test_uncommitted_changes_name_the_files_outside_the_runs_outputs(tmp_path, monkeypatch):
+    """A run in a worktree with changed tracked files records which (not only that some
+    changed), leaving out the outputs folder the run itself writes."""
+    monkeypatch.chdir(tmp_path)
+    for args in (["init", "-q"], ["config", "user.email", "t@t"], ["config", "user.name", "t"]):
+        subprocess.run(["git", *args], check=True)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "other").mkdir()
+    for path in ("c.yaml", "out/table.csv", "other/table.csv"):
+        (tmp_path / path).write_text(CONFIG)
+    subprocess.run(["git", "add", "."], check=True)
+    subprocess.run(["git", "commit", "-qm", "x"], check=True)
+    assert provenance.uncommitted_files("out") == []
+    (tmp_path / "out" / "table.csv").write_text("new")
+    assert provenance.uncommitted_files("out") == []
+    (tmp_path / "other" / "table.csv").write_text("new")
+    assert provenance.uncommitted_files("out") == ["other/table.csv"]
+    record = provenance.provenance("c.yaml", 0.0, 1.0, "cmd", outputs_dir="out")
+    assert record["uncommitted_changes"] is True
+    assert record["uncommitted_files"] == ["other/table.csv"]

@@ -34,6 +34,16 @@ def _git(*args: str) -> str:
     return out.stdout.strip() if out.returncode == 0 else "unknown"
 
 
+def uncommitted_files(outputs_dir: str | os.PathLike = "") -> list[str]:
+    """Tracked files that differ from the commit, other than those under ``outputs_dir``
+    (the outputs this run writes); ``["unknown"]`` when git cannot tell."""
+    exclude = [f":!{outputs_dir}"] if str(outputs_dir) else []
+    out = _git("diff", "--name-only", "HEAD", "--", ".", *exclude)
+    if out == "unknown":
+        return ["unknown"]
+    return out.splitlines()
+
+
 def machine() -> dict[str, Any]:
     """CPU count and model, memory, OS and Python of this machine."""
     cpu, mem = "unknown CPU", None
@@ -106,15 +116,15 @@ def provenance(
     """The provenance record of one run of ``config_path`` (see the module docstring)."""
     text = Path(config_path).read_text()
     config = read_config_file(config_path)  # duplicate keys refused
+    changed = uncommitted_files(outputs_dir)
     return {
         "date_utc": dt.datetime.fromtimestamp(finished, dt.timezone.utc).isoformat(
             timespec="seconds"
         ),
         "commit": _git("rev-parse", "HEAD"),
-        # changes to tracked files other than the outputs this run writes
-        "uncommitted_changes": bool(
-            _git("status", "--porcelain", "--untracked-files=no", "--", ".", f":!{outputs_dir}")
-        ),
+        # changes to tracked files other than the outputs this run writes, and which
+        "uncommitted_changes": bool(changed),
+        "uncommitted_files": changed,
         "machine": machine(),
         "numerics": numerics(),
         "stan": backend_info(config),
