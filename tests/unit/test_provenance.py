@@ -87,14 +87,12 @@ def test_uncommitted_changes_name_the_files_outside_the_runs_outputs(tmp_path, m
     """A run in a worktree with changed tracked files records which (not only that some
     changed), leaving out the outputs folder the run itself writes."""
     monkeypatch.chdir(tmp_path)
-    for args in (["init", "-q"], ["config", "user.email", "t@t"], ["config", "user.name", "t"]):
-        subprocess.run(["git", *args], check=True)
     (tmp_path / "out").mkdir()
     (tmp_path / "other").mkdir()
     for path in ("c.yaml", "out/table.csv", "other/table.csv"):
         (tmp_path / path).write_text(CONFIG)
-    subprocess.run(["git", "add", "."], check=True)
-    subprocess.run(["git", "commit", "-qm", "x"], check=True)
+    for args in ("init -q", "add .", "-c user.name=t -c user.email=t@t commit -qm x"):
+        subprocess.run(["git", *args.split()], check=True)
     assert provenance.uncommitted_files("out") == []
     (tmp_path / "out" / "table.csv").write_text("new")
     assert provenance.uncommitted_files("out") == []
