@@ -86,13 +86,16 @@ def kernels(prov: dict[str, Any]) -> str:
 
 
 def status_table(root: Path) -> str:
-    """Every committed folder with the date, commit and kernels of its run."""
-    rows = ["| folder | made | commit | kernels |", "|---|---|---|---|"]
+    """Every committed folder with the date, commit, CPU and kernels of its run."""
+    rows = ["| folder | made | commit | CPU | kernels |", "|---|---|---|---|---|"]
     for path in sorted((root / "paper_figures").rglob("provenance.json")):
         prov = json.loads(path.read_text())
         folder = path.parent.relative_to(root)
         fixed = "fixed" if prov.get("numerics") else "before the fixed kernels"
-        rows.append(f"| `{folder}` | {prov['date_utc'][:10]} | `{prov['commit'][:8]}` | {fixed} |")
+        cpu = prov.get("machine", {}).get("cpu_model", "not recorded")
+        rows.append(
+            f"| `{folder}` | {prov['date_utc'][:10]} | `{prov['commit'][:8]}` | {cpu} | {fixed} |"
+        )
     return "\n".join(rows)
 
 
