@@ -42,6 +42,11 @@ class Growth(StateSpaceModel):
         sign = 1.0 if float(np.ravel(x0)[0]) >= 0 else -1.0
         return sign * self.initial_states(omega, z)
 
+    def mirror_images(self, theta):
+        """x_0, x_1..x_T -> their negatives, Omega unchanged: -2 pi stays the same."""
+        theta = np.asarray(theta, dtype=float)
+        return [np.concatenate([theta[:, :2], -theta[:, 2:]], axis=1)]
+
     def simulate(self, omega, x0, eta, eps):
         a, b = omega
         K, T, _ = eta.shape

@@ -107,6 +107,7 @@ def test_clustering_uses_the_tolerance_in_local_standard_deviations():
         pd.DataFrame(
             {
                 "n_maxima": [2, 1, 0, 1],
+                "maxima_verdict": ["several", "unique", "none", "unique"],
                 "log_post_gap": [0.5, np.nan, np.nan, np.nan],
                 "paper_start_highest": [False, True, False, True],
                 "boundary_higher": [False, True, False, False],
@@ -163,7 +164,9 @@ def test_same_has_one_maximum_per_trajectory_from_every_start(same_case):
     assert np.all(multi.n_starts_ok[ok0] >= 2)  # the same maximum found again from elsewhere
 
 
-def test_growth_model_unique_maxima_far_below_k_max():
+def test_growth_model_has_no_unique_maximum_every_maximum_has_its_mirror():
+    """Issue 47: -2 pi is unchanged by x -> -x, so no trajectory has one maximum; the image
+    starts find the mirror of every maximum, at a gap of 0."""
     model = Growth()
     omega, x0 = np.array([0.5, 25.0]), np.array([5.0])
     z = trajectories(model, omega, x0, T=20, K=24, seed=0)
@@ -171,17 +174,46 @@ def test_growth_model_unique_maxima_far_below_k_max():
     multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=8))
     cols = multi.columns()
     k_max = int(multi.runs[0].ok.sum())
-    k_unique = int(cols["unique_max"].sum())
     assert k_max >= 16  # one start: most trajectories look observable
-    assert k_unique <= k_max // 4  # several starts: few have one maximum
-    # the mirror image -x of a maximum is another maximum of the same height
-    several = np.flatnonzero(multi.n_maxima >= 2)
-    assert several.size >= k_max // 2
-    ties = [k for k in several if abs(multi.log_post_gap[k]) < 1e-8]
-    assert len(ties) >= several.size // 2
+    assert int(cols["unique_max"].sum()) == 0  # |K^max_unique| = 0
+    assert multi_start_summary(cols, JointMapSettings(n_starts=8))["K_max_unique"] == 0
+    # the Halton starts take their states from two branches in turn
+    assert multi.start_states[1:4] == ["sign_of_x0", "simulate", "sign_of_x0"]
+    found = np.flatnonzero(multi.n_maxima >= 1)
+    assert found.size >= k_max
+    assert np.all(multi.n_maxima[found] % 2 == 0)  # maxima come in mirrored pairs
+    for k in found:
+        best = multi.maxima_log_post[k][0]
+        assert abs(multi.log_post_gap[k]) <= 1e-9 * (1 + abs(best))  # gap 0: its mirror
+        # every maximum's mirror image is one of the maxima, of the same height (other
+        # ties exist too: x0 enters only through x_1's mean, which several x0 can match)
+        points = [multi.runs[s].theta_hat[k] for s in multi.maxima_first_start[k]]
+        for theta, value in zip(points, multi.maxima_log_post[k]):
+            mirror = np.concatenate([theta[:2], -theta[2:]])
+            gaps = [np.max(np.abs(mirror - other)) for other in points]
+            twin = int(np.argmin(gaps))
+            assert gaps[twin] < 1e-5 and np.max(np.abs(theta[2:])) > 1e-3  # not itself
+            assert abs(multi.maxima_log_post[k][twin] - value) <= 1e-9 * (1 + abs(value))
     # the per-k columns the stage writes beside the joint-MAP table
     assert (cols["maxima_log_post"].map(len) == cols["n_maxima"]).all()
     assert (cols["n_starts_ok"] <= 8).all()
+    assert set(cols["maxima_verdict"]) <= {"several", "none"}
+
+
+def test_one_maximum_from_too_few_passing_starts_is_undetermined():
+    from ssmobs.multi_start import maxima_verdict
+
+    verdict = maxima_verdict(np.array([1, 1, 1, 2, 0]), np.array([8, 4, 3, 8, 0]), 8, 0.5)
+    assert verdict.tolist() == ["unique", "unique", "undetermined", "several", "none"]
+    assert maxima_verdict(np.array([1]), np.array([1]), 8, 0.125).tolist() == ["unique"]
+    with pytest.raises(ValueError, match="unique_min_share"):
+        JointMapSettings(unique_min_share=0.0)
+    runs = [fake_run([[1.0, 2.0]], [10.0], ["ok"])] + [
+        fake_run([[5.0, 5.0]], [1.0], ["gradient"]) for _ in range(7)
+    ]
+    values, _, _ = distinct_maxima(runs, 0, JointMapSettings())
+    assert values.size == 1  # one maximum, but 1 of 8 starts passed: not unique
+    assert maxima_verdict(np.array([values.size]), np.array([1]), 8, 0.5)[0] == "undetermined"
 
 
 def test_multiplicative_wrong_sign_maxima_show_up_as_extra_maxima():
@@ -299,3 +331,21 @@ def test_section_iv_gains_k_max_unique_only_with_multi_start():
     compact = section_iv_compact(section_rows(True), {}).set_index("scenario")
     assert compact.loc["m", "K^max_unique/K (95 % CI)"].startswith("0.25 [")
     assert compact.loc["s", "K^max_unique/K (95 % CI)"] == ""
+
+
+def test_no_start_lands_on_a_point_the_model_excludes():
+    """Issue 47: the cubic sensor's states start at cbrt(z / b); the first Halton point of
+    b's box (-1, 1) is b = 0 exactly, where that start is not finite: it is skipped."""
+    from cubic_sensor_model import CubicSensor
+
+    model = CubicSensor()
+    omega, x0 = np.array([0.5, 0.8]), np.array([1.0])
+    z = trajectories(model, omega, x0, T=8, K=6, seed=1)
+    bounds = model.prior_bounds(omega)
+    lo, hi = start_box(bounds, omega, x0, 3.0)
+    raw = lo + halton(3, 3) * (hi - lo)
+    assert raw[0, 0] == 0.0  # the plain sequence would start at b = 0
+    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=5))
+    assert np.all(multi.starts[:, 0] != 0.0)
+    assert len(np.unique(multi.starts, axis=0)) == 5
+    assert all(np.all(r.status != "failed") for r in multi.runs[:5])

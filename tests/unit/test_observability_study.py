@@ -118,9 +118,14 @@ def test_multi_start_adds_k_max_unique_beside_k_max():
 
     single = study_table([scenario(20)], {"sv_T20": joint(3)}, {}, {})
     assert "K_max_unique" not in single.columns  # one start: the paper's columns only
-    multi = {**joint(3), "n_starts": 8, "K_max_unique": 1}
+    multi = {**joint(3), "n_starts": 8, "K_max_unique": 1, "K_max_undetermined": 2}
     frame = study_table([scenario(20)], {"sv_T20": multi}, {}, {})
     assert frame.loc[0, "K_max"] == 3 and frame.loc[0, "K_max_unique"] == 1
+    assert frame.loc[0, "K_max_undetermined"] == 2  # one maximum, too few starts passed
+    older = {**joint(3), "n_starts": 8, "K_max_unique": 1}  # a summary without the key
+    assert np.isnan(
+        study_table([scenario(20)], {"sv_T20": older}, {}, {}).loc[0, "K_max_undetermined"]
+    )
     assert frame.loc[0, "K_max_unique_ratio"] == 0.25
     lo, hi = frame.loc[0, "K_max_unique_ratio_lo95"], frame.loc[0, "K_max_unique_ratio_hi95"]
     assert (lo, hi) == clopper_pearson(1, 4)

@@ -111,6 +111,18 @@ def _chunks(K: int, n: int, settings: JointMapSettings) -> list[slice]:
     return [slice(s, min(s + size, K)) for s in range(0, K, size)]
 
 
+def simulated_states(
+    model: StateSpaceModel, omega: np.ndarray, x0: np.ndarray, K: int, T: int
+) -> np.ndarray:
+    """(K, T, p) the model's own noise-free path from x_0: ``simulate`` with eta = eps = 0
+    (a start of the states on the branch the dynamics choose, whatever z says)."""
+    eta = np.zeros((K, T, model.state_dim))
+    eps = np.zeros((K, T, model.obs_dim))
+    with np.errstate(all="ignore"):
+        x, _ = model.simulate(np.asarray(omega, float), np.asarray(x0, float), eta, eps)
+    return np.asarray(x, dtype=float)
+
+
 def initial_theta(
     model: StateSpaceModel,
     z: np.ndarray,
@@ -121,11 +133,14 @@ def initial_theta(
     """Start of Sec. III.B: (Omega_true, x0_true, initial_states(Omega_true, z)) for every k.
 
     ``start_states="sign_of_x0"``: the states start at
-    ``model.sign_consistent_states(Omega_true, x0_true, z)`` instead.
+    ``model.sign_consistent_states(Omega_true, x0_true, z)`` instead; ``"simulate"``: at
+    :func:`simulated_states` (the model's own path from x0_true, the data unused).
     """
     K, T, _ = z.shape
     if start_states == "sign_of_x0":
         x = np.asarray(model.sign_consistent_states(omega_true, x0_true, z), dtype=float)
+    elif start_states == "simulate":
+        x = simulated_states(model, omega_true, x0_true, K, T)
     else:
         x = np.asarray(model.initial_states(omega_true, z), dtype=float)
     if x.shape != (K, T, model.state_dim):
@@ -151,6 +166,7 @@ def joint_map(
     x0_true: np.ndarray,
     settings: JointMapSettings | None = None,
     progress: ProgressLike | None = None,
+    theta_start: np.ndarray | None = None,
 ) -> JointMapResult:
     """Joint MAP estimate and numerical checks for every design trajectory (Sec. III.B).
 
@@ -163,6 +179,9 @@ def joint_map(
     settings : thresholds and tuning (:class:`JointMapSettings`; defaults = paper values).
     progress : optional object with ``update(n)`` (e.g. :class:`ssmobs.log.Progress`),
         called after each batch with the number of trajectories finished.
+    theta_start : optional (K, |Theta|) start of every trajectory's optimisation instead of
+        :func:`initial_theta` (the multi-start's images of maxima, :mod:`ssmobs.multi_start`);
+        each row's Omega must lie strictly inside the support.
 
     Returns
     -------
@@ -208,7 +227,10 @@ def joint_map(
     )
     for sl in _chunks(K, n, settings):
         zc = z[sl]
-        theta0 = initial_theta(model, zc, omega, x0, settings.start_states)
+        if theta_start is None:
+            theta0 = initial_theta(model, zc, omega, x0, settings.start_states)
+        else:
+            theta0 = np.array(theta_start[sl], dtype=float)
         mu_start = initial_mu_values(model, zc, theta0, barrier, settings)
         theta, iters, mu, stop = minimize_barrier(model, zc, theta0, barrier, settings, mu_start)
         res = check_maxima(model, zc, theta, mu, stop, barrier, settings)

@@ -64,8 +64,9 @@ class JointMapSettings:
     #: equals that of -2 pi at the start; :mod:`ssmobs.joint_map_barrier`) or "per_step"
     #: (the formula above)
     mu0_rule: str = "gradient_balance"
-    #: start of the states: "observations" (the paper's x = z) or "sign_of_x0"
-    #: (model.sign_consistent_states; only models that define it)
+    #: start of the states: "observations" (the paper's x = z), "sign_of_x0"
+    #: (model.sign_consistent_states; only models that define it) or "simulate" (the
+    #: model's noise-free path from x_0; the multi-start's extra starts)
     start_states: str = "observations"
     #: mu <- mu * mu_factor after each barrier stage
     mu_factor: float = 0.01
@@ -113,6 +114,9 @@ class JointMapSettings:
     #: two maxima that pass the checks are one if no component of Theta differs by more
     #: than this many local standard deviations sqrt(LVar_j) (:mod:`ssmobs.multi_start`)
     distinct_tol: float = 1e-2
+    #: a trajectory has one maximum (K^max_unique) only when at least this share of its
+    #: n_starts starts pass the checks and all reach it; with fewer it is "undetermined"
+    unique_min_share: float = 0.5
     #: start box: a side of Omega's prior box without a finite bound, and both sides of
     #: x_0's, lie this many max(1, |true value|) from the true value
     start_box_span: float = 3.0
@@ -170,7 +174,7 @@ class JointMapSettings:
             )
         for name, allowed in (
             ("mu0_rule", ("gradient_balance", "per_step")),
-            ("start_states", ("observations", "sign_of_x0")),
+            ("start_states", ("observations", "sign_of_x0", "simulate")),
             ("ridge_test", ("location", "value")),
         ):
             if getattr(self, name) not in allowed:
@@ -181,6 +185,10 @@ class JointMapSettings:
         if self.eigen_method not in ("lanczos", "dense"):
             raise ValueError(
                 f"joint-MAP setting eigen_method={self.eigen_method!r} must be 'lanczos' or 'dense'"
+            )
+        if not 0 < self.unique_min_share <= 1:
+            raise ValueError(
+                f"joint-MAP setting unique_min_share={self.unique_min_share!r} must be in (0, 1]"
             )
         if self.pd_tol < 0:
             raise ValueError(f"joint-MAP setting pd_tol={self.pd_tol!r} must be >= 0")

@@ -27,6 +27,11 @@ from .joint_map_checks import STATUSES
 from .scenario import Scenario
 
 
+def _int_or_nan(value: Any) -> float | int:
+    """An integer count, or NaN where the summary lacks it (made before the key existed)."""
+    return int(value) if value is not None else np.nan
+
+
 def study_row(
     scenario: Scenario,
     joint: Mapping[str, Any] | None,
@@ -34,7 +39,8 @@ def study_row(
     stan_table: pd.DataFrame | None,
 ) -> dict[str, Any]:
     """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega;
-    |K^max_unique| and its ratio where the joint MAP ran from several starts."""
+    |K^max_unique|, its ratio and |K^max_undetermined| where the joint MAP ran from several
+    starts."""
     model = scenario.model
     row: dict[str, Any] = {
         "scenario": scenario.name,
@@ -56,6 +62,8 @@ def study_row(
         row["K_max_unique"], row["K_max_unique_ratio"] = unique, unique / scenario.K
         lo, hi = clopper_pearson(unique, scenario.K)
         row["K_max_unique_ratio_lo95"], row["K_max_unique_ratio_hi95"] = lo, hi
+        # one maximum, but from fewer passing starts than unique_min_share of them
+        row["K_max_undetermined"] = _int_or_nan(js.get("K_max_undetermined"))
     if js.present:
         failed = {st: js.get(f"n_{st}", 0) for st in STATUSES if st != "ok"}
         row["joint_not_ok"] = ", ".join(f"{st} {n}" for st, n in failed.items() if n) or "none"

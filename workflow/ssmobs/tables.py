@@ -190,7 +190,8 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
 
     When a scenario's joint MAP ran from several starts (:mod:`ssmobs.multi_start`), the
     table also has ``joint_n_starts``, ``K_max_unique`` (trajectories with exactly one
-    distinct maximum that passes the checks), ``K_max_several`` and
+    distinct maximum that passes the checks, from enough starts), ``K_max_undetermined``
+    (one maximum, from too few passing starts), ``K_max_several`` and
     ``K_paper_start_highest``, and the fraction ``K_max_unique_frac`` with its interval
     (NaN for single-start scenarios); without any, these columns are absent."""
     rows = list(rows)
@@ -232,7 +233,12 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
             row[f"{frac}_lo95"], row[f"{frac}_hi95"] = clopper_pearson(row[count], row[total])
         if multi:
             row["joint_n_starts"] = joint.get("n_starts", 1 if joint.present else math.nan)
-            for key in ("K_max_unique", "K_max_several", "K_paper_start_highest"):
+            for key in (
+                "K_max_unique",
+                "K_max_undetermined",
+                "K_max_several",
+                "K_paper_start_highest",
+            ):
                 row[key] = _num(joint.get(key))
             row["K_max_unique_frac"] = row["K_max_unique"] / K
             row["K_max_unique_frac_lo95"], row["K_max_unique_frac_hi95"] = clopper_pearson(

@@ -188,6 +188,17 @@ class StateSpaceModel:
             f"use joint_map_start: observations"
         )
 
+    def mirror_images(self, theta: np.ndarray) -> list[np.ndarray]:
+        """Images of Theta = (Omega, x_0, x_1..x_T), rows (K, |Theta|), under maps that leave
+        -2 pi unchanged for every z (symmetries of the model, e.g. x -> -x when z sees only
+        x^2 and the dynamics are odd); none by default.
+
+        The multi-start (:mod:`ssmobs.multi_start`) starts again from the image of every
+        maximum it finds, so that a maximum and its mirror image, of the same height, are
+        both found and the trajectory is not counted as having one maximum.
+        """
+        return []
+
     # ----------------------------------------------------------------- derived facts
     @property
     def n_params(self) -> int:
