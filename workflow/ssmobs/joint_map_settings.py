@@ -34,7 +34,7 @@ class JointMapSettings:
       ``max_damping_tries``, ``eigen_method``, ``lanczos_steps``;
     - the thresholds of our checks that the paper does not name: ``pd_tol``,
       ``ridge_shift``, ``boundary_tol``, ``boundary_stop_tol``, ``boundary_near_tol``,
-      ``divergence_limit``.
+      ``divergence_limit``, ``runoff_iter``.
 
     A fixed value changes by an edit of this module, which moves the key of every result
     computed with it (:mod:`ssmobs.cache_keys` hashes the code a stage runs), so no cached
@@ -100,8 +100,12 @@ class JointMapSettings:
     #: a run that did not converge and ends with a slack below this while -2 pi still
     #: decreases towards that constraint (gradient check would fail) is ``boundary``
     boundary_near_tol: float = 1e-4
-    #: |Theta|_inf above this means the iterates run off to infinity (boundary at infinity)
+    #: |Theta|_inf above this means the iterates run off to infinity (status unbounded)
     divergence_limit: float = 1e6
+    #: a run stopped by max_newton_iter or the line search is followed for this many more
+    #: iterations to tell a run-off (unbounded) or a flat direction (ridge) from a slow
+    #: convergence (:func:`ssmobs.joint_map_checks.runoff_check`)
+    runoff_iter: int = 50
     #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
     eigen_method: str = "lanczos"
     #: Lanczos steps (exact spectrum when >= |Theta|)
@@ -151,6 +155,7 @@ class JointMapSettings:
             "max_damping_tries",
             "lanczos_steps",
             "n_starts",
+            "runoff_iter",
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be >= 1")

@@ -163,7 +163,8 @@ class MultiStartResult:
         distinct maximum that passes the checks, highest first.
     maxima_first_start : per k, the first start (index into ``runs``) reaching each of them.
     paper_start_highest : (K,) the paper's start passed and reached the highest maximum.
-    boundary_higher : (K,) one of the S starts ended with status ``boundary`` at a higher
+    boundary_higher : (K,) one of the S starts ended with status ``boundary`` (or
+        ``unbounded``: ran off) at a higher
         log posterior than every maximum that passes (or than -inf if none passes): the
         supremum lies at the edge of the support, above the interior maxima.
     unique_min_share : the share of the S starts that must pass for ``unique``.
@@ -419,7 +420,10 @@ def multi_start_joint_map(
             values, first, highest = _distinct_all(runs, K, settings)
     status = np.stack([r.status for r in runs[:S]])
     edge = np.stack(
-        [np.where(r.status == "boundary", r.neg2_log_post, np.inf) for r in runs[:S]]
+        [
+            np.where(np.isin(r.status, ("boundary", "unbounded")), r.neg2_log_post, np.inf)
+            for r in runs[:S]
+        ]
     ).min(axis=0)
     best = np.array([-2.0 * v[0] if v.size else np.inf for v in values])
     with np.errstate(invalid="ignore"):
