@@ -129,3 +129,26 @@ def test_multi_start_adds_k_max_unique_beside_k_max():
     assert frame.loc[0, "K_max_unique_ratio"] == 0.25
     lo, hi = frame.loc[0, "K_max_unique_ratio_lo95"], frame.loc[0, "K_max_unique_ratio_hi95"]
     assert (lo, hi) == clopper_pearson(1, 4)
+
+
+def test_an_estimate_off_the_support_or_from_draws_that_ran_off_is_not_a_number():
+    """Issue 47: sigma has support (0, inf); a KDE mode of -9e306 (draws that ran off) or
+    -0.2 (off the support), or a marginal mean off the support, is left out and named."""
+    frame = stan_frame([True] * 4, [""] * 4)
+    frame["sigma_map"] = [0.5, -0.2, -8.98e306, 0.7]
+    stan = {"n_stan": 4, "ratio": 1.0, "phi_mean": 0.85, "sigma_mean": -1.45e307}
+    row = study_table([scenario(20)], {"sv_T20": joint(2)}, {"sv_T20": stan}, {"sv_T20": frame})
+    row = row.iloc[0]
+    assert row["sigma_map_median_all_k"] == 0.6  # the median of 0.5 and 0.7 only
+    assert np.isnan(row["sigma_mean_marginal"]) and row["phi_mean_marginal"] == 0.85
+    note = row["not_shown"]
+    assert "sigma_map of 1 k off the support (0, inf)" in note
+    assert "sigma_map of 1 k from draws that ran off" in note
+    assert "sigma_mean_marginal from draws that ran off" in note
+    clean = study_table(
+        [scenario(20)],
+        {"sv_T20": joint(2)},
+        {"sv_T20": {"n_stan": 4}},
+        {"sv_T20": stan_frame([True] * 4, [""] * 4)},
+    )
+    assert clean.loc[0, "not_shown"] == "none"

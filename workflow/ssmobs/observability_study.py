@@ -74,19 +74,53 @@ def study_row(
         row["stan_failed_checks"] = (
             ", ".join(f"{c} {counts[c]}" for c in CHECKS if counts[c]) or "none"
         )
-    for n in model.param_names:
-        row[f"{n}_mean_marginal"] = ss.stat(n, "mean")
-        row[f"{n}_mean_joint"] = js.stat(n, "mean")
+    bounds = model.prior_bounds(scenario.omega, scenario.prior)
+    dropped: list[str] = []
+    for i, n in enumerate(model.param_names):
+        support = (float(bounds.lower[i]), float(bounds.upper[i]))
+        for col, value in (
+            (f"{n}_mean_marginal", ss.stat(n, "mean")),
+            (f"{n}_mean_joint", js.stat(n, "mean")),
+        ):
+            why = unusable(value, support)
+            row[col] = np.nan if why else value
+            if why:
+                dropped.append(f"{col} {why}")
     if stan_table is not None:
-        # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not
-        for n in model.param_names:
+        # diagnostic, not an estimate: KDE modes of the draws of every k, converged or not;
+        # a mode off the support or from draws that ran off is left out and counted
+        for i, n in enumerate(model.param_names):
             col = f"{n}_map"
-            row[f"{n}_map_median_all_k"] = (
-                float(np.nanmedian(stan_table[col]))
-                if col in stan_table and stan_table[col].notna().any()
-                else np.nan
-            )
+            support = (float(bounds.lower[i]), float(bounds.upper[i]))
+            modes = stan_table[col].to_numpy(dtype=float) if col in stan_table else np.array([])
+            finite = modes[np.isfinite(modes)]
+            reasons = [unusable(float(v), support) for v in finite]
+            kept = finite[np.array([not r for r in reasons], dtype=bool)]
+            row[f"{n}_map_median_all_k"] = float(np.median(kept)) if kept.size else np.nan
+            for reason, n_k in Counter(r for r in reasons if r).items():
+                dropped.append(f"{col} of {n_k} k {reason}")
+        row["not_shown"] = "; ".join(dropped) or "none"
+    elif dropped:
+        row["not_shown"] = "; ".join(dropped)
     return row
+
+
+#: a marginal MAP, quantile or mean beyond this magnitude comes from draws that ran off
+RUNOFF_MAGNITUDE = 1e100
+
+
+def unusable(value: float, support: tuple[float, float]) -> str:
+    """Why ``value`` (an estimate of a parameter with prior support ``support``) is not
+    shown as a number: off the support or from draws that ran off ("" if usable; NaN is
+    "not computed", not a reason)."""
+    if not np.isfinite(value):
+        return ""
+    if abs(value) > RUNOFF_MAGNITUDE:
+        return f"from draws that ran off (|value| > {RUNOFF_MAGNITUDE:g})"
+    lo, hi = support
+    if not lo <= value <= hi:
+        return f"off the support ({lo:g}, {hi:g})"
+    return ""
 
 
 def study_table(
