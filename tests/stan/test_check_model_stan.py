@@ -47,6 +47,23 @@ def test_prior_bound_stan_does_not_share(tmp_path):
     assert "does not share this prior bound" in msg
 
 
+def test_interval_prior_of_the_config_is_checked_against_stan(tmp_path):
+    """Issue 47: a config's interval [0.1, 5] for sigma is compared with Stan's bounds: the
+    program that declares only the lower bound accepts sigma beyond 5."""
+    from ssmobs.check_model_cases import prior_variant_cases
+
+    model = get_model("stoch_vol")
+    case = CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], {"sigma": [0.1, 5.0]})
+    assert case in prior_variant_cases(model, case)  # the configured interval is a case
+    path = _broken(
+        tmp_path, "real<lower=sigma_lo, upper=sigma_upper> sigma;", "real<lower=sigma_lo> sigma;"
+    )
+    problems = stan_problems(model, path, case)
+    assert len(problems) == 1
+    assert "Stan accepts sigma=5.00" in problems[0] and "interval(0.1, 5)" in problems[0]
+    assert stan_problems(model, stan_file("stoch_vol"), case) == []
+
+
 def test_log_density_that_differs_is_named(tmp_path):
     # exp(x) instead of exp(x / 2): the observation standard deviation is wrong
     path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));", "z ~ normal(0, exp(x));  // wrong scale")

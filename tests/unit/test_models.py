@@ -277,3 +277,33 @@ def test_extreme_values_stop_the_config_before_any_job():
     }
     with pytest.raises(ConfigError, match=r"a=1e\+06 is too large"):
         validate(config)
+
+
+def test_an_interval_prior_sets_the_bounds_as_given():
+    """Issue 47: [lower, upper] per parameter, either bound infinite, whatever the model's
+    allowed variants (the model check compares it with Stan's bounds)."""
+    sv = get_model("stoch_vol")
+    b = sv.prior_bounds([0.9, 0.5], {"sigma": [0.0, np.inf], "phi": (-np.inf, np.inf)})
+    assert b.lower.tolist() == [-np.inf, 0.0] and b.upper.tolist() == [np.inf, np.inf]
+    assert b.variants == ("interval(-inf, inf)", "interval(0, inf)")
+    b = get_model("same").prior_bounds([0.9], {"a": [0.5, 0.95]})
+    assert (b.lower[0], b.upper[0]) == (0.5, 0.95)
+    assert get_model("same").check_true_values({"a": 0.3}, 8, {"a": [0.5, 0.95]}) == [
+        "true value a=0.3 lies outside the support (0.5, 0.95) of its prior 'interval(0.5, 0.95)'"
+    ]
+
+
+@pytest.mark.parametrize(
+    "interval, words",
+    [
+        ([1.0, 0.0], ["'a'", "lower < upper", "[1.0, 0.0]"]),
+        ([0.0, 1.0, 2.0], ["'a'", "two numbers"]),
+        (["x", 1.0], ["'a'", "two numbers"]),
+        ([np.nan, 1.0], ["'a'", "lower < upper"]),
+    ],
+)
+def test_a_bad_interval_prior_names_the_problem(interval, words):
+    with pytest.raises(ValueError) as err:
+        get_model("same").prior_bounds([0.9], {"a": interval})
+    for w in words:
+        assert w in str(err.value)

@@ -196,3 +196,18 @@ def test_one_check_of_an_entry_for_scenarios_map_cells_and_the_scenario_object(c
             cfg.validate({"scenarios": [good], "observability_maps": [the_map]})
     with pytest.raises(cfg.ConfigError, match=r"invalid scenario 's'"):
         Scenario.from_config(entry)
+
+
+def test_a_config_prior_interval_reaches_the_bounds():
+    """Issue 47: the YAML form [0, .inf] is accepted by the schema and used as the support;
+    a list of three numbers is a config error naming the key and the value."""
+    import yaml
+    from ssmobs.config import ConfigError
+
+    entry = {**ENTRY, "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0}
+    prior = yaml.safe_load("{sigma: [0, .inf], phi: [-1, 1]}")
+    sc = Scenario.from_config({**entry, "prior": prior})
+    bounds = sc.prior_bounds()
+    assert bounds.lower.tolist() == [-1.0, 0.0] and bounds.upper.tolist() == [1.0, np.inf]
+    with pytest.raises(ConfigError, match=r"prior\.sigma = \[0, 1, 2\]"):
+        Scenario.from_config({**entry, "prior": {"sigma": [0, 1, 2]}})

@@ -24,7 +24,7 @@ class CheckCase:
 
     omega: dict[str, float]
     x0: list[float]
-    prior: str | dict[str, str] | None = None
+    prior: str | dict[str, Any] | None = None
 
     def label(self) -> str:
         return f"omega={self.omega}, x0={self.x0}, prior={self.prior}"
@@ -50,12 +50,16 @@ def prior_variant_cases(model: StateSpaceModel, case: CheckCase) -> list[CheckCa
     """``case``'s true values with the default prior and each allowed variant of each
     parameter in turn (prior bounds are per parameter, so every bound is compared): the
     check of a scenario does not depend on which prior the scenario picks, and changing
-    the prior needs no new check (and no new design trajectories)."""
+    the prior needs no new check (and no new design trajectories).  A prior with an interval
+    [lower, upper] (the config's own bounds) is checked as configured besides."""
     cases = [CheckCase(case.omega, case.x0, None)]
     for name in model.param_names:
         for variant in model.allowed_priors[name]:
             if variant != model.default_prior[name]:
                 cases.append(CheckCase(case.omega, case.x0, {name: variant}))
+    # an interval prior of the config is the user's own: checked as configured (issue 47)
+    if isinstance(case.prior, Mapping) and any(not isinstance(v, str) for v in case.prior.values()):
+        cases.append(case)
     return [c for c in cases if not model.check_true_values(c.omega, c.x0, c.prior)]
 
 

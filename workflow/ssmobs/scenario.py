@@ -23,6 +23,7 @@ import numpy as np
 
 from .config_schema import ConfigError, scenario_schema, schema_problems, short_repr
 from .models import MODELS, StateSpaceModel, get_model
+from .models.base import PriorChoice
 
 
 def entry_problems(entry: dict[str, Any]) -> list[str]:
@@ -82,9 +83,10 @@ class Scenario:
     x0: np.ndarray
     T: int
     K: int
-    #: prior variant for all parameters, a mapping parameter -> variant, or None (the
-    #: paper's choice per parameter; see :meth:`StateSpaceModel.prior_bounds`)
-    prior: str | Mapping[str, str] | None
+    #: prior variant for all parameters, a mapping parameter -> variant or interval
+    #: [lower, upper], or None (the paper's choice per parameter; see
+    #: :meth:`StateSpaceModel.prior_bounds`)
+    prior: str | Mapping[str, PriorChoice] | None
     method: str
     seed: int
     joint_map: bool
@@ -167,7 +169,7 @@ class Scenario:
         return (self.model.obs_dim + self.model.state_dim) * self.T
 
     @property
-    def prior_config(self) -> str | dict[str, str] | None:
+    def prior_config(self) -> str | dict[str, PriorChoice] | None:
         """The prior as the config gives it (plain data, e.g. for JSON)."""
         return dict(self.prior) if isinstance(self.prior, Mapping) else self.prior
 

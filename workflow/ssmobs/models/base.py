@@ -37,6 +37,15 @@ import sympy as sp
 #: ``half_line``: flat on (0, inf) if the true value is positive, (-inf, 0) if negative (Eq. (14)).
 PRIOR_VARIANTS: tuple[str, ...] = ("restricted", "unrestricted", "half_line")
 
+#: the prior of one parameter as a config gives it: a variant name, or an interval
+#: [lower, upper] of a flat prior (either bound may be infinite; issue 47)
+PriorChoice = str | Sequence[float]
+
+
+def interval_label(lower: float, upper: float) -> str:
+    """The name of a flat prior on (lower, upper), as :attr:`PriorBounds.variants` shows it."""
+    return f"interval({lower:g}, {upper:g})"
+
 
 #: Largest |true value| and |noise-free state or observation| a scenario may have: the terms
 #: of -2 log pi then stay below about 1e8, so double precision keeps 8 significant digits in
@@ -221,21 +230,30 @@ class StateSpaceModel:
     def prior_bounds(
         self,
         omega_true: Mapping[str, float] | Sequence[float] | np.ndarray,
-        prior: str | Mapping[str, str] | None = None,
+        prior: str | Mapping[str, PriorChoice] | None = None,
     ) -> PriorBounds:
         """Bounds of the flat prior on Omega for the given variants (Eq. (3), Eq. (14)).
 
-        ``prior`` is one variant for all parameters, a mapping parameter -> variant
-        (missing parameters take :attr:`default_prior`), or None for the paper's choice.
-        Raises ValueError naming the parameter and value when a variant is unknown,
-        not allowed for the model, or undefined for the true value (sign 0).
+        ``prior`` is one variant for all parameters, a mapping parameter -> variant or
+        interval [lower, upper] (missing parameters take :attr:`default_prior`), or None for
+        the paper's choice.  An interval is used as given (flat on (lower, upper), either
+        bound possibly infinite), whatever :attr:`allowed_priors` says: the model check
+        compares it with the Stan program's bounds.  Raises ValueError naming the parameter
+        and value when a variant is unknown, not allowed for the model, or undefined for the
+        true value (sign 0), or an interval is not two numbers lower < upper.
         """
         omega = self.omega_array(omega_true)
         variants = self.resolve_prior(prior)
         lower = np.empty(self.n_params)
         upper = np.empty(self.n_params)
+        labels: list[str] = []
         for i, (name, variant) in enumerate(zip(self.param_names, variants)):
             value = omega[i]
+            if not isinstance(variant, str):
+                lower[i], upper[i] = variant
+                labels.append(interval_label(*variant))
+                continue
+            labels.append(variant)
             if variant == "unrestricted":
                 lower[i], upper[i] = -1.0, 1.0
                 continue
@@ -249,12 +267,15 @@ class StateSpaceModel:
                 lower[i], upper[i] = (0.0, 1.0) if value > 0 else (-1.0, 0.0)
             else:  # half_line
                 lower[i], upper[i] = (0.0, math.inf) if value > 0 else (-math.inf, 0.0)
-        return PriorBounds(lower=lower, upper=upper, variants=tuple(variants))
+        return PriorBounds(lower=lower, upper=upper, variants=tuple(labels))
 
-    def resolve_prior(self, prior: str | Mapping[str, str] | None) -> list[str]:
-        """Prior variant per parameter, validated against :attr:`allowed_priors`."""
+    def resolve_prior(
+        self, prior: str | Mapping[str, PriorChoice] | None
+    ) -> list[str | tuple[float, float]]:
+        """Prior per parameter: a variant validated against :attr:`allowed_priors`, or an
+        interval (lower, upper) checked to be two numbers with lower < upper."""
         if prior is None:
-            chosen = dict(self.default_prior)
+            chosen: dict[str, PriorChoice] = dict(self.default_prior)
         elif isinstance(prior, str):
             chosen = {name: prior for name in self.param_names}
         else:
@@ -265,27 +286,47 @@ class StateSpaceModel:
                     f"have; its parameters are {list(self.param_names)}"
                 )
             chosen = {**self.default_prior, **prior}
-        out = []
+        out: list[str | tuple[float, float]] = []
         for name in self.param_names:
             variant = chosen[name]
+            if not isinstance(variant, str):
+                out.append(self._interval(name, variant))
+                continue
             if variant not in PRIOR_VARIANTS:
                 raise ValueError(
                     f"unknown prior variant '{variant}' for parameter '{name}'; "
-                    f"allowed: {list(PRIOR_VARIANTS)}"
+                    f"allowed: {list(PRIOR_VARIANTS)} or an interval [lower, upper]"
                 )
             if variant not in self.allowed_priors[name]:
                 raise ValueError(
                     f"prior variant '{variant}' is not allowed for parameter '{name}' of model "
-                    f"'{self.slug}'; allowed: {list(self.allowed_priors[name])}"
+                    f"'{self.slug}'; allowed: {list(self.allowed_priors[name])} or an "
+                    f"interval [lower, upper]"
                 )
             out.append(variant)
         return out
+
+    def _interval(self, name: str, value: object) -> tuple[float, float]:
+        """(lower, upper) of an interval prior, or ValueError naming the parameter."""
+        try:
+            lo, hi = (float(v) for v in value)  # type: ignore[attr-defined]
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"prior of parameter '{name}' of model '{self.slug}' must be a variant name or "
+                f"an interval [lower, upper] of two numbers (.inf allowed), got {value!r}"
+            ) from None
+        if isinstance(value, str) or math.isnan(lo) or math.isnan(hi) or not lo < hi:
+            raise ValueError(
+                f"prior interval of parameter '{name}' of model '{self.slug}' must have "
+                f"lower < upper, got {list(value)!r}"  # type: ignore[call-overload]
+            )
+        return lo, hi
 
     def check_true_values(
         self,
         omega_true: Mapping[str, float] | Sequence[float],
         x0_true: Sequence[float] | float,
-        prior: str | Mapping[str, str] | None = None,
+        prior: str | Mapping[str, PriorChoice] | None = None,
         T: int | None = None,
     ) -> list[str]:
         """Problems with true values (empty list when valid): each names key, value and range.
