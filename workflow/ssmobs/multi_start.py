@@ -294,8 +294,13 @@ def halton_start_rule(
     if index % 2 == 0:
         rules.insert(0, "simulate")
     for rule in rules:
-        with np.errstate(all="ignore"):
-            theta = initial_theta(model, z, point[:m], point[m:], rule)
+        try:
+            with np.errstate(all="ignore"):
+                theta = initial_theta(model, z, point[:m], point[m:], rule)
+        except (ArithmeticError, ValueError, NotImplementedError):
+            if rule == "simulate":  # a simulator that fails here: the data's construction
+                continue
+            raise
         if start_is_admissible(model, z, bounds, theta):
             return rule
     return None
