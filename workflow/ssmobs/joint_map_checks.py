@@ -5,9 +5,10 @@ The checks are applied in this order (the first that applies wins):
 ``failed``
     value, gradient, Hessian or Theta_hat not finite (reason in ``reason``).
 ``unbounded``
-    the iterates ran off to infinity (``|Theta|_inf`` above ``divergence_limit``): the
-    supremum is approached at the edge of an unbounded support, and there is no maximum.
-    The reason names the direction (the components beyond the limit).
+    the iterates ran off to infinity (``|Theta|_inf`` above ``divergence_limit``), or a run
+    that did not converge still gains while running outward (``gradient`` below): the
+    supremum is approached at infinity, and there is no maximum.  The reason names the
+    direction (``b -> +inf``).
 ``boundary``
     the optimum lies on the boundary of the prior's support: a slack below
     ``boundary_tol``, or (for a converged run) a barrier multiplier mu / s_i above
@@ -19,8 +20,9 @@ The checks are applied in this order (the first that applies wins):
     or its smallest eigenvalue is not above ``pd_tol``.
 ``gradient``
     largest absolute gradient component of -2 pi not below ``grad_tol`` (1e-5 in the paper).
-    A run stopped by ``max_newton_iter`` or the line search is followed for
-    ``runoff_iter`` more iterations (:func:`runoff_check`) to say why it did not converge:
+    A run stopped by ``max_newton_iter`` or the line search is followed for up to two
+    segments of ``runoff_iter`` more iterations (:func:`runoff_check`) to say why it did
+    not converge:
     ``unbounded`` (with the direction) if -2 pi keeps decreasing while Theta moves outward
     (some component grows in magnitude), as at a supremum at infinity of any size;
     ``ridge`` if the continued run converges to a point whose checks find a ridge (a flat
@@ -281,8 +283,8 @@ def beyond_limit(model: StateSpaceModel, theta: np.ndarray, limit: float) -> str
 def runoff_direction(model: StateSpaceModel, before: np.ndarray, after: np.ndarray) -> str:
     """Where one Theta ran in a continued run: the components of Omega and x_0, and the
     states' largest magnitude (``x``), whose magnitude changed fastest (log ratio at least
-    half the largest and above log 1.1), as ``b -> +inf`` (growing) or ``x0 -> 0``
-    (shrinking)."""
+    half the largest and above log 1.1), as ``b -> +inf`` (growing), ``x -> inf`` or
+    ``x0 -> 0`` (shrinking)."""
     head = model.n_params + model.state_dim
     names = [*model.theta_names(0), "x"]
     with np.errstate(all="ignore"):
@@ -294,7 +296,7 @@ def runoff_direction(model: StateSpaceModel, before: np.ndarray, after: np.ndarr
     parts = []
     for j, c in enumerate(change):
         if abs(c) >= max(0.5 * top, np.log(1.1)):
-            sign = "+" if (after[j] if j < head else 1.0) > 0 else "-"
+            sign = ("+" if after[j] > 0 else "-") if j < head else ""  # x: its magnitude
             parts.append(f"{names[j]} -> {sign + 'inf' if c > 0 else '0'}")
     return ", ".join(parts)
 
