@@ -99,3 +99,23 @@ def test_header_arithmetic_is_the_python_model(slug):
     v, g = neg2_log_posterior(model, theta, z, order=1)
     np.testing.assert_allclose(value, -0.5 * v, rtol=1e-13)
     np.testing.assert_allclose(grad, -0.5 * g, rtol=1e-12, atol=1e-13)
+
+
+def test_whole_program_declares_what_the_model_check_reads():
+    from ssmobs.analytic_gradients import generated_stan_code
+    from ssmobs.check_model_stan_source import declared_names, expected_parameters
+
+    model = get_model("sep_d2_p1")
+    code = generated_stan_code(model)
+    assert declared_names(stan_block(code, "parameters")) == expected_parameters(model)
+    data = declared_names(stan_block(code, "data"))
+    assert data == ["T", "z", "a_lower", "a_upper", "b_lower", "b_upper", "c_lower", "c_upper"]
+    assert "matrix[T, 2] z;" in code and "real<lower=a_lo, upper=a_hi> a;" in code
+    assert stan_block(code, "model").strip() == stan_call(model)
+
+
+def test_whole_program_refuses_support_constraints():
+    from ssmobs.analytic_gradients import generated_stan_code
+
+    with pytest.raises(ValueError, match="a\\^2 \\+ b\\^2 < 1|support constraints"):
+        generated_stan_code(get_model("sep_d1_p2"))
