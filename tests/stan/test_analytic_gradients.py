@@ -99,3 +99,47 @@ def test_generated_whole_program_equals_the_hand_written_one():
     program = write_analytic_program(model, None)
     for i, case in enumerate(default_cases(model)[:2]):
         assert analytic_problems(model, stan_file("stoch_vol"), case, seed=i, program=program) == []
+
+
+def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
+    from ssmobs.convergence import ConvergenceSettings
+    from ssmobs.nuts_stage import run_trajectories
+    from ssmobs.record_cache import program_hash
+    from ssmobs.stages.stan import stan_program
+
+    model = get_model("same")
+    program, header = stan_program("same", "analytic")
+    assert header is not None and program != stan_file("same")
+    assert stan_program("same", "autodiff") == (stan_file("same"), None)
+    omega = model.omega_array({"a": 0.7})
+    rng = np.random.default_rng(2)
+    x, z = model.simulate(
+        omega, np.array([8.0]), rng.normal(size=(1, 20, 1)), rng.normal(size=(1, 20, 1))
+    )
+    sampler = SamplerSettings(chains=2, iter_warmup=200, iter_sampling=200)
+
+    def run():
+        return run_trajectories(
+            model,
+            NativeBackend(),
+            program,
+            z,
+            x,
+            [0],
+            model.prior_bounds(omega),
+            omega,
+            np.array([8.0]),
+            "same_T20",
+            1,
+            sampler,
+            ConvergenceSettings(),
+            records_dir=tmp_path / "records",
+            user_header=header,
+        )[0]
+
+    rec = run()
+    assert rec["status"] == "ok" and rec["map"] is not None
+    assert rec["key"]["program_hash"] == program_hash(program, header)
+    assert rec["key"]["program_hash"] != program_hash(stan_file("same"))
+    again = run()  # the stored record, found again under the same key, not a new run
+    assert again["key"] == rec["key"] and again["timings"] == rec["timings"]
