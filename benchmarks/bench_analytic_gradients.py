@@ -4,10 +4,11 @@ For each case (same a = 0.7 T = 100, sep_d2_p1 a = b = c = 0.9 T = 50, sep_ranwa
 T = 100; one trajectory from random disturbances, x0 = 8; the paper's settings: 4 chains x
 (4000 + 6000), one chain at a time) the native backend samples ``--reps`` times with the
 hand-written program (autodiff) and with the generated one (analytic,
-:mod:`ssmobs.analytic_gradients`), the two interleaved (autodiff, analytic, autodiff, ...),
-rep r with Stan seed 20261205 + r for both.  Reported: the driver's CPU seconds per run
-(its rusage), the post-warmup leapfrog steps per draw, and the ratios autodiff / analytic of
-the summed CPU seconds and of CPU seconds per leapfrog step.  Appends a section to
+:mod:`ssmobs.analytic_gradients`), the two interleaved (autodiff first in even reps,
+analytic first in odd ones), rep r with Stan seed 20261205 + r for both.  Reported: the
+driver's CPU seconds per run (its rusage), the post-warmup leapfrog steps per draw, the
+ratio autodiff / analytic of each rep (median and range), of the summed CPU seconds and of
+CPU seconds per leapfrog step.  Appends a section to
 BENCHMARKS.md unless ``--no-write``.
 
     python benchmarks/bench_analytic_gradients.py [--reps 3]
@@ -72,7 +73,9 @@ def main() -> None:
         cpu: dict[str, list[float]] = {k: [] for k in paths}
         leap: dict[str, list[float]] = {k: [] for k in paths}
         for r in range(args.reps):
-            for name, (path, header) in paths.items():
+            order = list(paths) if r % 2 == 0 else list(paths)[::-1]  # ABBA: no drift bias
+            for name in order:
+                path, header = paths[name]
                 draws = native.sample(path, data, 20261205 + r, PAPER, user_header=header)
                 cpu[name].append(draws.timings["sample_cpu"])
                 leap[name].append(float(draws.sample_stats["n_leapfrog__"].mean()))
@@ -99,7 +102,7 @@ def main() -> None:
             f"- Command: `python benchmarks/bench_analytic_gradients.py --reps {args.reps}` (at `nice`)",
             f"- System load (1-min load average): {min(loads):.1f}-{max(loads):.1f} on "
             f"{os.cpu_count()} CPUs, so the ratios count, not the seconds; the two paths run "
-            f"interleaved, rep by rep, with the same Stan seed.",
+            f"interleaved, rep by rep (order alternating), with the same Stan seed.",
             "- Settings: the paper's, 4 chains x (4000 + 6000), one chain at a time, native "
             "backend; one trajectory per case from random disturbances (seed 1), x0 = 8.",
             "- CPU: the driver's CPU seconds per whole NUTS run (its rusage); leapfrog: mean "
