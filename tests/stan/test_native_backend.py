@@ -141,7 +141,9 @@ def test_cache_keyed_by_program_not_environment(native, tmp_path, monkeypatch):
     # which entry a changed program is built into (a recording build saves a compile)
     built: list[Path] = []
 
-    def record_build(path: Path, code: str, cache_dir: Path, parts: dict) -> None:
+    def record_build(
+        path: Path, code: str, cache_dir: Path, parts: dict, user_header: Path | None = None
+    ) -> None:
         built.append(cache_dir)
         cache_dir.mkdir(parents=True)
         for name in (BUILD_RECORD, EXE_NAME):

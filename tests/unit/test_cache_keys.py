@@ -535,3 +535,23 @@ def test_a_model_is_keyed_by_what_it_computes_not_its_comments(tmp_path):
     assert model_keys() == before
     same.write_text(text + "\nEDITED = 1\n")
     assert all(b != a for b, a in zip(before, model_keys()))
+
+
+def test_analytic_gradients_key_every_nuts_output_and_autodiff_keys_nothing():
+    base = smoke()  # validated: stan.gradients is its default, autodiff
+    analytic, absent = copy.deepcopy(base), copy.deepcopy(base)
+    analytic["stan"]["gradients"] = "analytic"
+    del absent["stan"]["gradients"]  # a config made before the key: the same keys
+    a, b, c = keys(base), keys(analytic), keys(absent)
+    assert a.program("same") != b.program("same")
+    assert a.nuts_records("same_T4") != b.nuts_records("same_T4")
+    assert a.gather("same_T4", 4) != b.gather("same_T4", 4)
+    assert a.check_model("same_T4", stan=True) != b.check_model("same_T4", stan=True)
+    assert a.check_model("same_T4") == b.check_model("same_T4")
+    assert a.trajectories("same_T4") == b.trajectories("same_T4")
+    assert a.joint_map("same_T4") == b.joint_map("same_T4")
+    assert (a.program("same"), a.gather("same_T4", 4)) == (
+        c.program("same"),
+        c.gather("same_T4", 4),
+    )
+    assert a.check_model("same_T4", stan=True) == c.check_model("same_T4", stan=True)

@@ -123,3 +123,15 @@ def test_preflight_prints_the_summary_and_every_problem_with_all(tmp_path):
     assert every.returncode == 1
     assert len(every.stderr.splitlines()) == 1 + 101
     assert "scenario 'big_scenario_49': a gather_nuts job needs" in every.stderr
+
+
+def test_analytic_gradients_with_pystan_is_one_line_naming_key_and_choices():
+    conf = config_of([{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}])
+    conf["stan"] = {"backend": "pystan", "gradients": "analytic"}
+    lines = [ln for ln in problem_lines(conf) if "stan.gradients" in ln]
+    assert len(lines) == 1
+    assert "'analytic'" in lines[0] and "pystan" in lines[0] and "'autodiff'" in lines[0]
+    conf["stan"]["gradients"] = "autodiff"
+    cfg.validate(conf)
+    conf["stan"] = {"backend": "native", "gradients": "analytic"}
+    assert cfg.validate(conf)["stan"]["gradients"] == "analytic"

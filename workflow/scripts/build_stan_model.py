@@ -4,4 +4,9 @@ from ssmobs import log
 from ssmobs.stages.stan import run_build_stan_model
 
 log.start_job(snakemake)
-run_build_stan_model(snakemake.wildcards.model, snakemake.params.backend, snakemake.output[0])
+run_build_stan_model(
+    snakemake.wildcards.model,
+    snakemake.params.backend,
+    snakemake.output[0],
+    snakemake.config["stan"]["gradients"],
+)

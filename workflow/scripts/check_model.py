@@ -10,6 +10,7 @@ report = run_check_model(
     snakemake.output[0],
     stan=snakemake.params.stan,
     stan_path=snakemake.input.stan if snakemake.params.stan else None,
+    gradients=snakemake.config["stan"]["gradients"] if snakemake.params.stan else "autodiff",
 )
 for line in report.checks:
     logger.info("model %s: checked %s", snakemake.params.model, line)

@@ -304,6 +304,8 @@ class CacheKeys:
             payload["stan"] = self.stan_program(sc["model"])
             payload["check_backend"] = self.check_backend
             payload["driver"] = file_digest(self.package_dir / NATIVE_DRIVER)
+            # with analytic gradients the check compares them with Stan's autodiff as well
+            payload.update(self.gradients())
         return self._key("check_model_stan" if stan else "check_model", name, payload)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
@@ -328,13 +330,22 @@ class CacheKeys:
         }
         return self._key("joint_map", name, payload)
 
+    def gradients(self) -> dict[str, str]:
+        """``{"gradients": "analytic"}`` when NUTS runs the generated analytic gradients
+        (config key ``stan.gradients``), else nothing, so the keys of autodiff runs stay."""
+        mode = self.config["stan"].get("gradients", "autodiff")
+        return {} if mode == "autodiff" else {"gradients": mode}
+
     def program(self, model: str) -> str:
         """The compiled-program marker of ``model`` for the configured backend and its Stan
-        version (so another Stan gives new programs, records and everything after them)."""
+        version (so another Stan gives new programs, records and everything after them),
+        and for analytic gradients the model's terms they are generated from."""
         payload = {
             "backend": self.backend,
             "stan": self.stan_program(model),
             "code": self.code("program"),
+            **self.gradients(),
+            **({"model_code": self.model_code(model)} if self.gradients() else {}),
         }
         return self._key("program", model, payload)
 
@@ -356,6 +367,8 @@ class CacheKeys:
             "program": self.program(sc["model"]),
             "model_code": self.model_code(sc["model"]),
             "code": self.code("nuts_records"),
+            # analytic gradients: draws equal in distribution, not bit for bit
+            **self.gradients(),
         }
         return self._key("nuts_records", name, payload)
 

@@ -17,6 +17,9 @@ comparison of the two is only meaningful when both encode the same log posterior
    points inside the support; the support itself equal to Python's (points just inside
    every finite prior bound are accepted, points just outside and points violating a model
    constraint are rejected).
+4. With analytic gradients (config key ``stan.gradients``): the log density and gradient
+   generated from the model's terms against Stan's autodiff of the program, at random
+   points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.check_model_analytic`).
 
 Each step lives in its own module: the cases in :mod:`ssmobs.check_model_cases`, step 1 in
 :mod:`ssmobs.check_model_python`, step 2 in :mod:`ssmobs.check_model_stan_source`, step 3 in
@@ -85,6 +88,7 @@ def check_model(
     T: int = CHECK_T,
     seed: int | None = None,
     backend: str = "native",
+    gradients: str = "autodiff",
 ) -> CheckReport:
     """Every check of this module for one model; the report lists each problem found.
 
@@ -122,6 +126,19 @@ def check_model(
         f"bounds ({len(cases)} case(s))",
         found,
     )
+    if report.problems or gradients == "autodiff":
+        return report
+    from .check_model_analytic import ANALYTIC_RTOL, analytic_problems
+
+    for i, case in enumerate(cases):
+        found = analytic_problems(model, path, case, T=T, seed=seed + i)
+        if found:
+            break
+    report.record(
+        f"analytic gradients: log density up to a constant and gradient equal to Stan's "
+        f"autodiff to {ANALYTIC_RTOL:g} relative ({len(cases)} case(s))",
+        found,
+    )
     return report
 
 
@@ -131,17 +148,19 @@ def run_check_model(
     out: str | Path,
     stan: bool = True,
     stan_path: str | Path | None = None,
+    gradients: str = "autodiff",
 ) -> CheckReport:
     """Rule check_model: check the model for the default cases and the true values of every
-    configured case under every prior variant (:func:`prior_variant_cases`); write the
-    report; raise :class:`ModelCheckError` listing every problem."""
+    configured case under every prior variant (:func:`prior_variant_cases`), and its
+    analytic gradients when NUTS uses them; write the report; raise
+    :class:`ModelCheckError` listing every problem."""
     model = get_model(slug)
     cases = default_cases(model)
     for scenario_case in cases_from_scenarios(scenarios, slug):
         for case in prior_variant_cases(model, scenario_case):
             if case not in cases:
                 cases.append(case)
-    report = check_model(slug, cases, stan=stan, stan_path=stan_path)
+    report = check_model(slug, cases, stan=stan, stan_path=stan_path, gradients=gradients)
     if report.problems:
         raise ModelCheckError(
             f"model '{slug}': the Python model and the Stan program "
@@ -170,6 +189,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         default="native",
         help="what evaluates Stan's log density (default: the native driver)",
     )
+    parser.add_argument(
+        "--gradients",
+        choices=("autodiff", "analytic"),
+        default="autodiff",
+        help="analytic: also check the generated gradients against Stan's autodiff",
+    )
     args = parser.parse_args(argv)
     try:
         model = get_model(args.slug)
@@ -186,7 +211,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"error: {err}", file=sys.stderr)
             return 2
         cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug) if c not in cases]
-    report = check_model(args.slug, cases, stan=not args.no_stan, backend=args.backend)
+    report = check_model(
+        args.slug, cases, stan=not args.no_stan, backend=args.backend, gradients=args.gradients
+    )
     for line in report.checks:
         print(f"checked  {line}")
     if report.problems:

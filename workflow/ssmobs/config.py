@@ -419,6 +419,12 @@ def asks_for_paper_outputs(config: Mapping[str, Any]) -> bool:
 
 def _backend_problems(config: dict) -> list[str]:
     backend = config["stan"]["backend"]
+    if backend == "pystan" and config["stan"].get("gradients", "autodiff") == "analytic":
+        return [
+            "stan.gradients = 'analytic': the pystan backend takes no external C++ "
+            "(it keeps Stan's autodiff); allowed with pystan: 'autodiff', or choose "
+            "stan.backend 'native', 'cmdstanpy' or 'auto'"
+        ]
     if backend != "cmdstanpy" or not any(sc.get("stan", True) for sc in config["scenarios"]):
         return []
     from .stan_backends import have_cmdstan

@@ -118,6 +118,7 @@ def _one_trajectory(
     init: str,
     keep_draws: Path | None,
     init_point: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    header: dict[str, Path] | None = None,
 ) -> dict[str, Any]:
     T = int(np.asarray(z_k).shape[0])
     names = model.theta_names(T)
@@ -163,7 +164,9 @@ def _one_trajectory(
         t1, c1 = time.perf_counter(), time.process_time()
         timings["prepare"] = t1 - t0
         try:
-            draws = backend.sample(stan_file, data, key["stan_seed"], sampler, inits)
+            draws = backend.sample(
+                stan_file, data, key["stan_seed"], sampler, inits, **(header or {})
+            )
         finally:
             timings["sample_call"] = time.perf_counter() - t1
             sample_cpu = time.process_time() - c1
@@ -280,6 +283,7 @@ def run_trajectories(
     retry_errors: bool = False,
     stan_seed: int | None = None,
     init_theta: np.ndarray | None = None,
+    user_header: str | Path | None = None,
 ) -> list[dict[str, Any]]:
     """Sample, check and summarise the design trajectories ``ks`` of one scenario.
 
@@ -309,6 +313,8 @@ def run_trajectories(
         included); if None, one is made for the trajectories that need sampling.
     retry_errors : recompute stored records whose status is "error" (e.g. after fixing
         the cause of an exception); by default every valid record is reused.
+    user_header : the C++ header defining the program's external functions (the analytic
+        gradients of :mod:`ssmobs.analytic_gradients`); keyed with the program.
 
     Returns
     -------
@@ -341,7 +347,8 @@ def run_trajectories(
     if keep and draws_dir is None:
         raise ValueError("keep_draws_for needs draws_dir")
     stan_file = str(stan_file)
-    prog = program_hash(stan_file)
+    prog = program_hash(stan_file, user_header)
+    header = {} if user_header is None else {"user_header": Path(user_header)}
     set_hash = settings_hash(model, T, sampler, convergence, init, bounds, omega_true, x0_true)
     n_theta = len(model.theta_names(T))
     ident = backend_identity(backend)
@@ -391,7 +398,7 @@ def run_trajectories(
         progress = Progress(f"{scenario} NUTS", total=max(len(todo), 1), logger=LOG)
     assert progress is not None  # given, or made just above
     if todo:
-        backend.compile(stan_file)
+        backend.compile(stan_file, **header)
     for k, key in todo:
         rec = _one_trajectory(
             model,
@@ -410,6 +417,7 @@ def run_trajectories(
             init,
             draws_path(draws_dir, k) if k in keep and draws_dir is not None else None,
             points[k],
+            header,
         )
         t_w = time.perf_counter()
         write_record(record_path(records_dir, k), rec)

@@ -90,11 +90,14 @@ def numerics() -> dict[str, Any]:
 
 
 def backend_info(config: dict[str, Any]) -> dict[str, str]:
-    """The concrete Stan backend the config resolves to, and its Stan version."""
+    """The concrete Stan backend the config resolves to, its Stan version and the path of
+    NUTS's gradients (``autodiff`` or ``analytic``)."""
     from .stan_backends import get_backend, resolve_backend
 
     name = resolve_backend(config.get("stan", {}).get("backend", "auto"))
-    return dict(get_backend(name).identity())
+    # how NUTS got its gradients (config key stan.gradients; ssmobs.analytic_gradients)
+    gradients = config.get("stan", {}).get("gradients", "autodiff")
+    return {**get_backend(name).identity(), "gradients": gradients}
 
 
 def results_empty(results: str | os.PathLike = "results") -> bool:

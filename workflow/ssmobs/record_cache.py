@@ -83,9 +83,14 @@ def _sha(obj: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def program_hash(stan_file: str | Path) -> str:
-    """SHA-256 (16 hex digits) of the Stan program's text with its ``#include`` files."""
-    return program_digest(stan_file)
+def program_hash(stan_file: str | Path, user_header: str | Path | None = None) -> str:
+    """SHA-256 (16 hex digits) of the Stan program's text with its ``#include`` files, and
+    with the C++ header of its external functions when it has one."""
+    if user_header is None:
+        return program_digest(stan_file)
+    return _sha(
+        {"program": program_digest(stan_file), "user_header": Path(user_header).read_text()}
+    )
 
 
 def settings_hash(

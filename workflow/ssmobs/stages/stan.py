@@ -7,6 +7,7 @@ The checks that a batch table still matches its records are in :mod:`ssmobs.reco
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import io
@@ -42,11 +43,39 @@ def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
     )
 
 
-def run_build_stan_model(model: str, backend: str, out: PathLike) -> dict:
-    """Rule build_stan_model: compile stan/<model>.stan once; write the backend's marker."""
-    from ..stan_backends import get_backend, stan_file
+def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
+    """The Stan program NUTS runs for ``model`` and its C++ header (config key
+    ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
+    program with its model block calling the log density and gradient generated from the
+    model's terms (:mod:`ssmobs.analytic_gradients`), in the cache."""
+    from ..stan_backends import stan_file
 
-    marker = get_backend(backend).compile(stan_file(model))
+    path = stan_file(model)
+    if gradients == "autodiff":
+        return path, None
+    if gradients != "analytic":
+        raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
+    from ..analytic_gradients import write_analytic_program
+    from ..models import get_model
+
+    generated = write_analytic_program(get_model(model), path)
+    return generated.stan_file, generated.header
+
+
+def header_kwargs(header: Path | None) -> dict[str, Path]:
+    """``user_header=header`` for a backend call, nothing without one (PyStan takes none)."""
+    return {} if header is None else {"user_header": header}
+
+
+def run_build_stan_model(
+    model: str, backend: str, out: PathLike, gradients: str = "autodiff"
+) -> dict:
+    """Rule build_stan_model: compile the model's program (:func:`stan_program`) once;
+    write the backend's marker."""
+    from ..stan_backends import get_backend
+
+    program, header = stan_program(model, gradients)
+    marker = get_backend(backend).compile(program, **header_kwargs(header))
     io.write_json(out, marker)
     return marker
 
@@ -75,7 +104,7 @@ def run_sample_batch(
     from ..nuts_stage import run_trajectories
     from ..record_cache import draws_path, record_path
     from ..record_format import records_to_frame
-    from ..stan_backends import get_backend, stan_file
+    from ..stan_backends import get_backend
     from ..trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
@@ -91,10 +120,11 @@ def run_sample_batch(
     )
     bounds = model.prior_bounds(traj.omega, scenario.prior)
     progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
+    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
     records = run_trajectories(
         model,
         get_backend(backend_name),
-        stan_file(model.slug),
+        program,
         traj.z,
         traj.x,
         ks,
@@ -112,6 +142,7 @@ def run_sample_batch(
         progress=progress,
         stan_seed=scenario.stan_seed,
         init_theta=None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K),
+        user_header=header,
     )
     settings = ConvergenceSettings(**convergence_cfg)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))

@@ -159,9 +159,12 @@ class StanBackend(Protocol):
         """What determines the draws besides program, data and settings: backend name and
         Stan version (part of every record's key)."""
 
-    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+    def compile(
+        self, stan_file: str | os.PathLike, user_header: str | os.PathLike | None = None
+    ) -> dict[str, Any]:
         """Compile (or find compiled) the program; return a JSON-able marker (backend,
-        program hash, paths)."""
+        program hash, paths).  ``user_header``: a C++ header defining the program's external
+        functions (``stanc --allow-undefined``; native and cmdstanpy only)."""
 
     def sample(
         self,
@@ -170,6 +173,7 @@ class StanBackend(Protocol):
         seed: int,
         settings: SamplerSettings,
         inits: list[dict] | None = None,
+        user_header: str | os.PathLike | None = None,
     ) -> Draws:
         """Run NUTS; raise SamplingError with the reason when no draws can be had."""
 

@@ -155,26 +155,37 @@ class CmdStanPyBackend:
         ident = cmdstan_identity(cmdstanpy.cmdstan_path())
         return {"backend": self.name, "stan_version": f"cmdstan {ident['cmdstan_version']}"}
 
-    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+    def compile(
+        self, stan_file: str | os.PathLike, user_header: str | os.PathLike | None = None
+    ) -> dict[str, Any]:
         """Compile a copy of the program in the cache (once); return its marker.
 
         Marker keys: ``backend``, ``stan_file`` (the repository file), ``program_sha256``,
         ``model_name``, ``cache_dir``, ``exe_file``, ``cmdstan_path``, ``cmdstan_version``,
         ``cmdstanpy_version``.  Raises RuntimeError when the program does not compile,
-        BackendError when the cache cannot be written.
+        BackendError when the cache cannot be written.  ``user_header``: a C++ header
+        defining the program's external functions, copied beside the program and passed as
+        cmdstanpy's ``user_header`` (``--allow-undefined``); keyed with the program.
         """
         import cmdstanpy
 
         path = Path(stan_file).resolve()
         code = program_code(path)
         sha = hashlib.sha256(code.encode()).hexdigest()
-        key = (str(path), sha)
+        header_text = None if user_header is None else Path(user_header).read_text()
+        header_key = (
+            {}
+            if header_text is None
+            else {"user_header": hashlib.sha256(header_text.encode()).hexdigest()}
+        )
+        key = (str(path), sha + str(header_key))
         if key in self._markers:
             return self._markers[key]
         ident = cmdstan_identity(cmdstanpy.cmdstan_path())
         version_tag = ident["cmdstan_version"]
         slug = path.stem
-        cache_dir = cache_root() / "cmdstan" / f"{slug}-{content_key({'program': sha, **ident})}"
+        entry_key = content_key({"program": sha, **ident, **header_key})
+        cache_dir = cache_root() / "cmdstan" / f"{slug}-{entry_key}"
         exe_name = slug + (".exe" if os.name == "nt" else "")
         exe = cache_dir / exe_name
         if not entry_complete(cache_dir, exe_name):
@@ -188,9 +199,15 @@ class CmdStanPyBackend:
                     try:
                         copy = work / f"{slug}.stan"
                         copy.write_text(code)
+                        header_copy = None
+                        if header_text is not None:
+                            header_copy = str(work / f"{slug}.hpp")
+                            Path(header_copy).write_text(header_text)
                         try:
                             with quiet_loggers(forward=("cmdstanpy",)):
-                                model = cmdstanpy.CmdStanModel(stan_file=str(copy))
+                                model = cmdstanpy.CmdStanModel(
+                                    stan_file=str(copy), user_header=header_copy
+                                )
                         except Exception as err:
                             raise RuntimeError(f"compiling {path} failed: {err}") from err
                         if model.exe_file is None or not Path(model.exe_file).is_file():
@@ -201,6 +218,7 @@ class CmdStanPyBackend:
                         record = {
                             "program": sha,
                             **ident,
+                            **header_key,
                             "stan_file": str(path),
                             "cmdstanpy_version": cmdstanpy.__version__,
                         }
@@ -219,6 +237,7 @@ class CmdStanPyBackend:
             "cmdstan_version": version_tag,
             "make_local_sha256": ident["make_local"],
             "cmdstanpy_version": cmdstanpy.__version__,
+            **header_key,
         }
         self._markers[key] = marker
         return marker
@@ -230,6 +249,7 @@ class CmdStanPyBackend:
         seed: int,
         settings: SamplerSettings,
         inits: list[dict] | None = None,
+        user_header: str | os.PathLike | None = None,
     ) -> Draws:
         """Run NUTS and return the post-warmup draws (same contract as the PyStan backend).
 
@@ -240,7 +260,7 @@ class CmdStanPyBackend:
 
         t_start = time.perf_counter()
         check_sample_args(seed, settings, inits)
-        marker = self.compile(stan_file)
+        marker = self.compile(stan_file, user_header)
         label = Path(marker["stan_file"]).name
         if not self._swept:
             sweep_stale(Path(self.tmp_root), TMP_PREFIX)

@@ -87,27 +87,32 @@ class NativeBackend:
         return {"backend": self.name, "stan_version": stan_version()}
 
     # ------------------------------------------------------------------ compile
-    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+    def compile(
+        self, stan_file: str | os.PathLike, user_header: str | os.PathLike | None = None
+    ) -> dict[str, Any]:
         """Build the program's executable in the cache (once); return its marker.
 
         Marker keys: ``backend``, ``stan_file``, ``program_sha256``, ``stan_version``,
         ``compiler`` (the version line recorded at build time), ``cache_dir``,
         ``exe_file``.  Finding a built program runs no compiler.  RuntimeError with stanc's
         or the compiler's message when the program does not build; BackendError when the
-        cache cannot be written or the build cannot run (no compiler).
+        cache cannot be written or the build cannot run (no compiler).  ``user_header``: a
+        C++ header defining the program's external functions (keyed with the program).
         """
         path = Path(stan_file).resolve()
         code = program_code(path)
-        memo = (str(path), code)
+        header = None if user_header is None else Path(user_header).resolve()
+        header_text = None if header is None else header.read_text()
+        memo = (str(path), code + "\n" + (header_text or ""))
         if memo in self._markers:
             return self._markers[memo]
-        parts = build_key(code)
+        parts = build_key(code, header_text)
         cache_dir = self._cache_dir(path, parts)
         exe = cache_dir / EXE_NAME
         if not entry_complete(cache_dir, EXE_NAME):
             with build_lock(cache_dir):
                 if not entry_complete(cache_dir, EXE_NAME):
-                    build_program(path, code, cache_dir, parts)
+                    build_program(path, code, cache_dir, parts, header)
         try:
             record = json.loads((cache_dir / BUILD_RECORD).read_text())
         except (OSError, ValueError):
@@ -120,6 +125,7 @@ class NativeBackend:
             "compiler": str(record.get("compiler_version", "unknown")),
             "cache_dir": str(cache_dir),
             "exe_file": str(exe),
+            **({} if header is None else {"user_header": str(header)}),
         }
         self._markers[memo] = marker
         return marker
@@ -129,10 +135,14 @@ class NativeBackend:
         """The program's cache entry, named by its stem and :func:`build_key`."""
         return cache_root() / "native" / f"{path.stem}-{content_key(dict(parts))}"
 
-    def is_built(self, stan_file: str | os.PathLike) -> bool:
+    def is_built(
+        self, stan_file: str | os.PathLike, user_header: str | os.PathLike | None = None
+    ) -> bool:
         """Whether the program's executable is in the cache already (runs no compiler)."""
         path = Path(stan_file).resolve()
-        return entry_complete(self._cache_dir(path, build_key(program_code(path))), EXE_NAME)
+        header = None if user_header is None else Path(user_header).read_text()
+        parts = build_key(program_code(path), header)
+        return entry_complete(self._cache_dir(path, parts), EXE_NAME)
 
     @contextlib.contextmanager
     def _run_dir(self, data: Mapping[str, Any]) -> Iterator[Path]:
@@ -151,13 +161,17 @@ class NativeBackend:
 
     # ------------------------------------------------------------------ log density
     def log_density(
-        self, stan_file: str | os.PathLike, data: Mapping[str, Any], points: list[dict]
+        self,
+        stan_file: str | os.PathLike,
+        data: Mapping[str, Any],
+        points: list[dict],
+        user_header: str | os.PathLike | None = None,
     ) -> LogDensities:
         """The model block's log density (no Jacobian, constants kept) and its gradient on
         the unconstrained scale at each point (constrained values, Stan's names), by the
         program's executable in its ``--log-density`` mode: one compile serves sampling and
         the model check.  ValueError when the data are rejected; BackendError otherwise."""
-        marker = self.compile(stan_file)
+        marker = self.compile(stan_file, user_header)
         label = Path(marker["stan_file"]).name
         with self._run_dir(data) as tmp:
             cmd = [marker["exe_file"], "--log-density", "--data", str(tmp / "data.json")]
@@ -186,6 +200,7 @@ class NativeBackend:
         seed: int,
         settings: SamplerSettings,
         inits: list[dict] | None = None,
+        user_header: str | os.PathLike | None = None,
     ) -> Draws:
         """Run NUTS and return the post-warmup draws (the contract of the other backends).
 
@@ -196,7 +211,7 @@ class NativeBackend:
         process ends (:func:`sigterm_unwinds`).
         """
         with sigterm_unwinds():
-            return self._sample(stan_file, data, seed, settings, inits)
+            return self._sample(stan_file, data, seed, settings, inits, user_header)
 
     def _sample(
         self,
@@ -205,10 +220,11 @@ class NativeBackend:
         seed: int,
         settings: SamplerSettings,
         inits: list[dict] | None,
+        user_header: str | os.PathLike | None = None,
     ) -> Draws:
         t_start = time.perf_counter()
         check_sample_args(seed, settings, inits)
-        marker = self.compile(stan_file)
+        marker = self.compile(stan_file, user_header)
         label = Path(marker["stan_file"]).name
         with self._run_dir(data) as tmp:
             data_file = tmp / "data.json"

@@ -70,6 +70,9 @@ CXXFLAGS: tuple[str, ...] = (
 )
 #: linker flags: the executable finds its libraries beside itself, wherever the entry is
 LDFLAGS: tuple[str, ...] = ("-Wl,--enable-new-dtags", "-Wl,-rpath,$ORIGIN")
+#: extra flags of a program with a user header (generated C++ of ours): no contraction of
+#: a * b + c into fused multiply-adds, whatever the compiler's default
+USER_HEADER_FLAGS: tuple[str, ...] = ("-ffp-contract=off",)
 #: shared libraries of the wheel's ``lib/`` the executable needs (copied into the entry)
 RUNTIME_LIBS: tuple[str, ...] = ("libtbb.so.2",)
 #: the executable's name in a cache entry
@@ -125,7 +128,7 @@ def compiler_version() -> str:
     return _tool_version([compiler(), "--version"])
 
 
-def build_key(code: str) -> dict[str, str]:
+def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
     """What determines the executable; its hash names the cache directory.
 
     Program text, driver source, Stan version (``stanc --version`` of the wheel, which is
@@ -141,8 +144,21 @@ def build_key(code: str) -> dict[str, str]:
     compiler, in any case.  The compiler's command, path and version are recorded in the
     entry's ``build.json`` (and in the marker) instead; to rebuild with another compiler,
     delete the cache.
+
+    ``user_header``: the text of a C++ header that defines the program's external functions
+    (``stanc --allow-undefined``, included before the generated model), keyed as well;
+    absent without one, so the keys of the stock programs stay.
     """
+    extra = (
+        {}
+        if user_header is None
+        else {
+            "user_header": content_key({"code": user_header}),
+            "user_header_flags": " ".join(USER_HEADER_FLAGS),
+        }
+    )
     return {
+        **extra,
         "program": content_key({"code": code}),
         "objects": "driver.o + model.o",
         "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
@@ -223,9 +239,17 @@ def check_self_contained(exe: Path) -> None:
         )
 
 
-def build_program(path: Path, code: str, cache_dir: Path, parts: dict[str, str]) -> None:
+def build_program(
+    path: Path,
+    code: str,
+    cache_dir: Path,
+    parts: dict[str, str],
+    user_header: Path | None = None,
+) -> None:
     """stanc + g++ into a temporary sibling directory, with the wheel's runtime
-    libraries copied beside the executable, renamed to ``cache_dir``."""
+    libraries copied beside the executable, renamed to ``cache_dir``.  ``user_header``:
+    a C++ header defining the program's external functions (``stanc --allow-undefined``,
+    force-included before the generated model, as CmdStan's ``USER_HEADER``)."""
     work = new_build_dir(cache_dir)
     try:
         t0 = time.perf_counter()
@@ -243,6 +267,7 @@ def build_program(path: Path, code: str, cache_dir: Path, parts: dict[str, str])
                 str(hdir / "stanc"),
                 "--name",
                 model_name,
+                *(["--allow-undefined"] if user_header is not None else []),
                 "--o",
                 str(work / "model.hpp"),
                 str(work / "program.stan"),
@@ -258,6 +283,8 @@ def build_program(path: Path, code: str, cache_dir: Path, parts: dict[str, str])
         driver_o = driver_object()
         exe = work / EXE_NAME
         model_cmd = [compiler(), *compile_flags(), "-x", "c++", "-c"]
+        if user_header is not None:
+            model_cmd += [*USER_HEADER_FLAGS, "-include", str(user_header)]
         model_cmd += [str(work / "model.hpp"), "-o", str(work / "model.o")]
         log_captured(f"compiler for {path.name}", run_compiler(model_cmd, str(path)).stderr)
         link_cmd = [compiler(), str(driver_o), str(work / "model.o"), "-o", str(exe)]

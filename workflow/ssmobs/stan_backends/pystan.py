@@ -312,6 +312,14 @@ def _failure_reason(err: BaseException) -> str:
     return " ".join(text.replace("\\n", " ").split())
 
 
+def _no_user_header(user_header: str | os.PathLike | None) -> None:
+    if user_header is not None:
+        raise ValueError(
+            "the pystan backend takes no external C++ header (stan.gradients 'analytic' "
+            "needs the native or cmdstanpy backend)"
+        )
+
+
 class PyStanBackend:
     """Stan backend on PyStan 3 (see the module docstring for cache and pool handling).
 
@@ -336,15 +344,19 @@ class PyStanBackend:
         self._markers: dict[tuple[str, str], dict[str, Any]] = {}
 
     # ------------------------------------------------------------------ compile
-    def compile(self, stan_file: str | os.PathLike) -> dict[str, Any]:
+    def compile(
+        self, stan_file: str | os.PathLike, user_header: str | os.PathLike | None = None
+    ) -> dict[str, Any]:
         """Build the program into the shared httpstan cache (once); return its marker.
 
         The marker is JSON-able and deterministic for a given program and installation:
         ``backend``, ``stan_file``, ``program_sha256``, ``model_name`` (httpstan's
         ``models/<id>``), ``cache_dir`` (the shared model directory), ``pystan_version``,
         ``httpstan_version``.  Raises RuntimeError with stanc's/the compiler's message when
-        the program does not compile.
+        the program does not compile.  PyStan takes no external C++: a ``user_header``
+        raises ValueError (config key ``stan.gradients`` must be ``autodiff`` here).
         """
+        _no_user_header(user_header)
         import httpstan
         import httpstan.cache
         import httpstan.models
@@ -454,6 +466,7 @@ class PyStanBackend:
         seed: int,
         settings: SamplerSettings,
         inits: list[dict] | None = None,
+        user_header: str | os.PathLike | None = None,
     ) -> Draws:
         """Run NUTS (``hmc_nuts_diag_e_adapt``) and return the post-warmup draws.
 
@@ -466,8 +479,9 @@ class PyStanBackend:
 
         Raises SamplingError when Stan cannot initialise or fails while sampling,
         ValueError when the data are rejected (missing keys, empty prior support) or the
-        arguments are invalid.
+        arguments are invalid (a ``user_header``: PyStan keeps Stan's autodiff).
         """
+        _no_user_header(user_header)
         import stan
 
         t_start = time.perf_counter()
