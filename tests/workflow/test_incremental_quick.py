@@ -7,6 +7,7 @@ variant x row table, which is made on request from committed files.
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -286,3 +287,24 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     assert len(text.splitlines()) <= 20, text
     assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
+
+
+def test_the_model_check_runs_after_the_build_of_its_program(tmp_path):
+    """Issue 48: with the native backend every check_model_stan job takes its program's
+    build_stan_model marker as input, so the one compile happens in the build job and no
+    check compiles or waits on the build lock (here: a dry run of every job of the smoke
+    profile)."""
+    work = make_workdir(tmp_path)
+    conf = yaml.safe_load((work / "config" / "smoke.yaml").read_text())
+    conf["stan"] = {**conf.get("stan", {}), "backend": "native"}
+    (work / "config" / "native.yaml").write_text(yaml.safe_dump(conf))
+    proc = snakemake(work, "-n", "--forceall", "--cores", "2", "--configfile", "config/native.yaml")
+    jobs = []  # (rule, {"input": [...], "output": [...]}) of every planned job
+    for block in re.split(r"^(?:local)?rule ", proc.stdout, flags=re.M)[1:]:
+        fields = re.findall(r"^\s+(input|output): (.*)$", block, flags=re.M)
+        jobs.append((block.split(":", 1)[0], {k: v.split(", ") for k, v in fields}))
+    builds = {p for rule, f in jobs if rule == "build_stan_model" for p in f["output"]}
+    checks = [f["input"] for rule, f in jobs if rule == "check_model_stan"]
+    assert builds and checks
+    for inputs in checks:
+        assert builds & set(inputs), inputs
