@@ -56,7 +56,9 @@ docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
-# damage tests, the cluster runs, the PyStan smoke run) and those that build with PyStan (marker
+# damage tests, the cluster runs, the PyStan smoke run, and the rare paths that cost a compile
+# or workflow runs: broken Stan programs, fresh-cache builds, read-only caches, live locks, the
+# SLURM profile; BENCHMARKS.md, "make test in five minutes") and those that build with PyStan (marker
 # `pystan`: the second backend and the native backend's oracle); `make test-slow` runs those
 # (CI runs both).
 # `make test` runs on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test
