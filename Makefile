@@ -9,10 +9,18 @@ CORES ?= 2
 .PHONY: setup run lint docs test test-slow smoke paper tables section4 section4-rows variant-table map committed clean
 
 # envs/constraints.txt pins every package to the version the committed outputs were made with.
-$(STAMP): pyproject.toml envs/constraints.txt
+# uv installs them (several times faster than pip; BENCHMARKS.md, "Set-up"), taking pip's wheel
+# where a version has two (envs/uv-wheels.txt); pip is the fallback where uv cannot be installed
+# or fails (e.g. an index only pip's configuration names).
+UV_INSTALL = $(BIN)/pip install --quiet -c envs/constraints.txt uv \
+	&& $(BIN)/uv pip install --quiet --python $(BIN)/python \
+		-c envs/constraints.txt -c envs/uv-wheels.txt -e '.[test,cluster]'
+PIP_INSTALL = $(BIN)/pip install --quiet --upgrade pip \
+	&& $(BIN)/pip install --quiet -c envs/constraints.txt -e '.[test,cluster]'
+
+$(STAMP): pyproject.toml envs/constraints.txt envs/uv-wheels.txt
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -c envs/constraints.txt -e '.[test,cluster]'
+	$(UV_INSTALL) || { echo "make setup: uv failed, installing with pip" >&2; $(PIP_INSTALL); }
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -48,7 +56,9 @@ docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
-# damage tests, the cluster runs, the PyStan smoke run) and those that build with PyStan (marker
+# damage tests, the cluster runs, the PyStan smoke run, and the rare paths that cost a compile
+# or workflow runs: broken Stan programs, fresh-cache builds, read-only caches, live locks, the
+# SLURM profile; BENCHMARKS.md, "make test in five minutes") and those that build with PyStan (marker
 # `pystan`: the second backend and the native backend's oracle); `make test-slow` runs those
 # (CI runs both).
 # `make test` runs on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test

@@ -26,6 +26,13 @@ def test_every_model_agrees_with_its_stan_program(slug):
     assert any("stan compiled" in c for c in report.checks)
 
 
+#: a test that compiles a broken copy of a program (about 30-50 CPU-s each, cached by content
+#: only for that copy): the check's messages for a user's mistake, a rare path, so in
+#: `make test-slow` (issue 48); the check on the real programs and a program that stanc
+#: rejects (no C++ compile) stay in `make test`
+BROKEN_PROGRAM = pytest.mark.slow
+
+
 def _broken(tmp_path, old: str, new: str):
     code = stan_file("stoch_vol").read_text()
     assert old in code
@@ -34,6 +41,7 @@ def _broken(tmp_path, old: str, new: str):
     return path
 
 
+@BROKEN_PROGRAM
 def test_prior_bound_stan_does_not_share(tmp_path):
     # sigma bounded below only: the Python prior U(0, 1) ('restricted') is not Stan's
     path = _broken(
@@ -47,6 +55,7 @@ def test_prior_bound_stan_does_not_share(tmp_path):
     assert "does not share this prior bound" in msg
 
 
+@BROKEN_PROGRAM
 def test_interval_prior_of_the_config_is_checked_against_stan(tmp_path):
     """Issue 47: a config's interval [0.1, 5] for sigma is compared with Stan's bounds: the
     program that declares only the lower bound accepts sigma beyond 5."""
@@ -64,6 +73,7 @@ def test_interval_prior_of_the_config_is_checked_against_stan(tmp_path):
     assert stan_problems(model, stan_file("stoch_vol"), case) == []
 
 
+@BROKEN_PROGRAM
 def test_log_density_that_differs_is_named(tmp_path):
     # exp(x) instead of exp(x / 2): the observation standard deviation is wrong
     path = _broken(tmp_path, "z ~ normal(0, exp(x / 2));", "z ~ normal(0, exp(x));  // wrong scale")
@@ -77,6 +87,7 @@ def test_log_density_that_differs_is_named(tmp_path):
     assert "look at the observation term" in problems[0]
 
 
+@BROKEN_PROGRAM
 def test_transition_that_differs_is_located(tmp_path):
     # the transition's mean ignores phi: a term in Omega and the states, not in the data
     path = _broken(

@@ -184,6 +184,7 @@ def cluster_run(tmp_path_factory) -> ClusterRun:
     )
 
 
+@pytest.mark.slow  # a dry run through the SLURM profile (a rare path): test-slow (issue 48)
 def test_profile_sets_runtime_and_memory_of_every_job():
     """Account and partition on the command line replace the profile's default-resources
     whole; every submitted job must still get a time limit and a memory request."""

@@ -1,12 +1,13 @@
 """Incremental runs equal fresh runs: the quick cases, on single targets (issue 19).
 
 The mutation suite (``test_incremental.py``, slow) edits a whole run; these cases need only
-one rule's outputs, so they run in ``make test``: the grid of the choice of K, and the
-variant x row table, which is made on request from committed files.
+one rule's outputs: the grid of the choice of K, and the variant x row table, which is made
+on request from committed files.  Those on a rare path run in ``make test-slow``.
 """
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -18,6 +19,10 @@ from helpers import REPO, make_workdir, snakemake
 from test_incremental import BASE, rules_run
 
 pytestmark = pytest.mark.workflow
+#: cases on a rare path (a live lock, the on-request variant table, a config that drops its
+#: Stan stage, a read-only results/), one to three workflow runs each: `make test-slow`
+#: (issue 48)
+RARE_PATH = pytest.mark.slow
 
 CONFIG = "config/ksel.yaml"
 KSEL = {
@@ -65,6 +70,7 @@ def test_a_changed_k_grid_gives_the_fresh_runs_choice_of_k(tmp_path):
     assert rules_run(ksel_run(work, [4, 12])) == set()  # and nothing to do again
 
 
+@RARE_PATH
 def test_a_run_refused_by_a_live_lock_changes_nothing(tmp_path):
     """Found before (issue 35): a second run in a directory whose lock a live run held
     removed stale stamps and their files at its parse, before Snakemake refused it."""
@@ -108,6 +114,7 @@ def variant_table_workdir(dest: Path) -> Path:
     return work
 
 
+@RARE_PATH
 def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     """Found stale before: its key was a params value, which Snakemake's rerun by file
     times does not see, so a code edit left the table as it was. Now its stamp holds the
@@ -133,6 +140,7 @@ def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     }
 
 
+@RARE_PATH
 def test_outputs_of_an_earlier_config_are_moved_out_of_outputs_dir(tmp_path):
     """Issue 35: after ``stan: false`` the earlier run's exact-vs-Stan tables and figures and
     their stamp stayed, so outputs_dir showed a mix of two configs."""
@@ -203,6 +211,7 @@ def jobs_started(proc: subprocess.CompletedProcess) -> list[str]:
     return re.findall(r"^(?:local)?rule (\w+):$", proc.stdout + proc.stderr, re.M)
 
 
+@RARE_PATH
 def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_reads_it(
     tmp_path,
 ):
@@ -286,3 +295,24 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     assert len(text.splitlines()) <= 20, text
     assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
+
+
+def test_the_model_check_runs_after_the_build_of_its_program(tmp_path):
+    """Issue 48: with the native backend every check_model_stan job takes its program's
+    build_stan_model marker as input, so the one compile happens in the build job and no
+    check compiles or waits on the build lock (here: a dry run of every job of the smoke
+    profile)."""
+    work = make_workdir(tmp_path)
+    conf = yaml.safe_load((work / "config" / "smoke.yaml").read_text())
+    conf["stan"] = {**conf.get("stan", {}), "backend": "native"}
+    (work / "config" / "native.yaml").write_text(yaml.safe_dump(conf))
+    proc = snakemake(work, "-n", "--forceall", "--cores", "2", "--configfile", "config/native.yaml")
+    jobs = []  # (rule, {"input": [...], "output": [...]}) of every planned job
+    for block in re.split(r"^(?:local)?rule ", proc.stdout, flags=re.M)[1:]:
+        fields = re.findall(r"^\s+(input|output): (.*)$", block, flags=re.M)
+        jobs.append((block.split(":", 1)[0], {k: v.split(", ") for k, v in fields}))
+    builds = {p for rule, f in jobs if rule == "build_stan_model" for p in f["output"]}
+    checks = [f["input"] for rule, f in jobs if rule == "check_model_stan"]
+    assert builds and checks
+    for inputs in checks:
+        assert builds & set(inputs), inputs

@@ -173,6 +173,7 @@ def test_report_lists_every_table_and_figure(smoke_run):
         assert stem in names, stem
 
 
+@pytest.mark.slow  # the SLURM profile (a rare path: clusters): test-slow (issue 48)
 def test_slurm_profile_dry_run():
     proc = slurm_profile_dry_run("--configfile", "config/paper.yaml")
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -108,6 +108,7 @@ def test_step_study_command_makes_every_output(tmp_path):
     ]
 
 
+@pytest.mark.slow  # compiles the swapped program, then the check names the mistake (issue 48)
 def test_mistake_swapped_stan_parameters(tmp_path):
     work = make_workdir(tmp_path)
     stan = work / "stan" / "stoch_vol.stan"

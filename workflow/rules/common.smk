@@ -250,6 +250,14 @@ def program_marker(model):
     return f"results/shared/stan/{STAN_BACKEND}/{model}/{KEYS.program(model)}.json"
 
 
+def checked_program(model):
+    """What the model check evaluates, when sampling builds it too: with the native backend,
+    build_stan_model's program, so the check runs the cached executable after the one
+    compile (no check job compiles, none waits on another's build lock).  An order only:
+    ancient(), so the marker's file time never reruns a check (its key holds the program)."""
+    return [ancient(program_marker(model))] if STAN_BACKEND == "native" else []
+
+
 def records_dir(name):
     return f"results/{name}/sample_nuts/records/{KEYS.nuts_records(name)}"
 

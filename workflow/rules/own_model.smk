@@ -35,6 +35,7 @@ rule check_model_stan:
             wc.key,
             f"stan/{SCENARIOS[wc.scenario]['model']}.stan",
         ),
+        program=lambda wc: checked_program(SCENARIOS[wc.scenario]["model"]),
     output:
         "results/{scenario}/check_model_stan/{key}.json",
     log:
