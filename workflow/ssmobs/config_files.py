@@ -77,6 +77,9 @@ class ConfigLoader(yaml.SafeLoader):
 
 
 _INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+_STR_TAG = "tag:yaml.org,2002:str"
+#: numbers of YAML 1.2 that PyYAML (YAML 1.1) reads as strings: octal 0o7, 1e3, 1.5e3
+_YAML12_ONLY = re.compile(r"[-+]?(0o[0-7]+|0x[0-9a-fA-F]+|[0-9]+(\.[0-9]*)?[eE][-+]?[0-9]+)")
 #: the numbers YAML 1.2 (core schema) and YAML 1.1 both read alike: a decimal integer
 #: without leading zeros, a decimal float, .inf, .nan
 _PLAIN_INT = re.compile(r"[-+]?(0|[1-9][0-9]*)")
@@ -109,6 +112,15 @@ def _refuse_yaml11_numbers(
         return
     seen.add(id(node))
     if isinstance(node, yaml.ScalarNode):
+        where = f"key {'.'.join(path)!r}: " if path else ""
+        if node.tag == _STR_TAG and node.style is None and _YAML12_ONLY.fullmatch(node.value):
+            raise RefusedYAMLError(
+                problem=(
+                    f"{where}{node.value} is a number in YAML 1.2 but a string here (YAML "
+                    f"1.1); write the number in plain decimal digits (e.g. 1000 or 1.0e+3)"
+                ),
+                problem_mark=node.start_mark,
+            )
         if node.tag not in (_INT_TAG, _FLOAT_TAG):
             return
         text = str(node.value)
@@ -119,7 +131,6 @@ def _refuse_yaml11_numbers(
             read = loader.construct_object(node)
         except (yaml.YAMLError, ValueError):
             read = None
-        where = f"key {'.'.join(path)!r}: " if path else ""
         shown = f"it would run as {read!r}" if read is not None else "it is no number"
         raise RefusedYAMLError(
             problem=(
