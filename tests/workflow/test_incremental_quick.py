@@ -7,6 +7,7 @@ variant x row table, which is made on request from committed files.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -286,3 +287,30 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     assert len(text.splitlines()) <= 20, text
     assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
+
+
+def _damage_keeping_time(path: Path, content: bytes) -> None:
+    st = path.stat()
+    path.write_bytes(content)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_outputs_damaged_after_their_job_are_made_again_not_read(tmp_path):
+    """Found reused before (issue 46): an output edited or truncated with its time kept
+    gave "Nothing to be done" and flowed into the tables after a later edit.  Every job
+    records its outputs' checksums; a mismatch is said once and the file made again: a
+    requested table at once, an intermediate grid file when a job reads it."""
+    work = make_workdir(tmp_path / "damaged")
+    ksel_run(work, [4, 8])
+    table = work / KSEL_TARGET
+    (grid,) = work.glob("results/k_selection/same_T4/*/design_independent_seed1.json")
+    intact = {p: p.read_bytes() for p in (table, grid)}
+    _damage_keeping_time(table, b"")  # truncated to 0 bytes
+    _damage_keeping_time(grid, intact[grid].replace(b"1", b"2", 1))  # edited in place
+    proc = ksel_run(work, [4, 8])
+    said = [line for line in proc.stderr.splitlines() if "made again, not reused" in line]
+    assert len(said) == 2, said
+    assert any(f"{table.relative_to(work)} is empty" in line for line in said)
+    assert {"k_selection_grid", "select_k"} <= set(rules_run(proc))
+    assert {p: p.read_bytes() for p in intact} == intact
+    assert rules_run(ksel_run(work, [4, 8])) == set()  # and nothing to do again

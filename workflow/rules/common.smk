@@ -471,6 +471,35 @@ def damaged_trajectories():
     return changes
 
 
+#: the intermediate outputs of this config found damaged: targets of this run (rule all)
+DAMAGED_TARGETS = []
+
+
+def damaged_outputs(found):
+    """Every output of an earlier job that no longer matches the checksum its job recorded
+    (``results/checksums/``, :func:`ssmobs.io.record_checksums`): truncated, edited or
+    damaged, whatever its time.  Removed before the DAG is built, so that no job reads it:
+    a requested output (a table, a summary) is made again in this run, and so is an
+    intermediate one of this config's keys when the run makes every target (``all``).  The files of ``found`` (changes the other checks found)
+    are said there only."""
+    from ssmobs.io import damaged_files
+
+    if not may_change_files_before_the_lock():
+        return []
+    changes = []
+    skip = {Path(p) for p, _ in found}
+    current = {name.rsplit(":", 1)[1] for name in KEYS.describe()}
+    for path, problem in damaged_files():
+        if path in skip or path.with_suffix("") in skip and path.suffix == ".sha256":
+            continue
+        logger.warning(f"made again, not reused: {problem}")
+        changes.append((path, None))
+        keys = [p for p in (*path.parent.parts, path.stem) if re.fullmatch("[0-9a-f]{12}", p)]
+        if path.parts[0] == "results" and keys and all(k in current for k in keys):
+            DAMAGED_TARGETS.append(str(path))  # an intermediate output of this config
+    return changes
+
+
 def stamped_outputs(path):
     """The other outputs of the rule whose stamp is ``path`` (its wildcards applied)."""
     from snakemake.io import apply_wildcards
@@ -615,7 +644,7 @@ def set_aside_leftovers():
 
 
 def all_targets():
-    targets = [trajectories_path(name) for name in SCENARIOS]
+    targets = [trajectories_path(name) for name in SCENARIOS] + DAMAGED_TARGETS
     targets += [joint_summary(name) for name, sc in SCENARIOS.items() if sc["joint_map"]]
     targets += [stan_summary(name) for name, sc in SCENARIOS.items() if sc["stan"]]
     for name in KSEL:
