@@ -254,6 +254,44 @@ def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_rea
     assert (work / FIGURE2).is_file()
 
 
+def test_a_read_only_cold_cache_stops_nuts_jobs_whose_program_results_knows(tmp_path):
+    """Found before (issue 46): with the program's marker and Stan check already in
+    results/, a read-only SSMOBS_CACHE without the program let two sample_nuts jobs start
+    (rc 2, 8 tracebacks).  Now one line names the cache and the remedy, before any job."""
+    import os
+
+    prefix = []
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root, and setpriv (to drop root's override) is missing")
+        prefix = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search"]
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    until = ["--until", "build_stan_model", "check_model_stan"]
+    snakemake(work, *until, "--cores", "2", "--configfile", CONFIG)
+    assert list(work.glob("results/shared/stan/*/same/*.json"))  # the program's marker
+    cold = tmp_path / "cold"
+    cold.mkdir()
+    cold.chmod(0o555)
+    env = {**os.environ, "SSMOBS_CACHE": str(cold)}
+    try:
+        proc = subprocess.run(
+            [*prefix, sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", CONFIG],
+            cwd=work,
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env=env,
+        )
+    finally:
+        cold.chmod(0o755)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert f"this run cannot write where its jobs write: {cold} (not writable by user" in text
+    assert "point SSMOBS_CACHE at a writable folder" in text
+    assert jobs_started(proc) == [] and "Traceback" not in text, text[-3000:]
+
+
 def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path):
     """No permission bit involved (so it holds for root too): paper_figures is a file."""
     work = make_workdir(tmp_path / "w")
