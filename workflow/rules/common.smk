@@ -189,10 +189,12 @@ DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
 # Every key up front: a cluster job plans only its own job and looks its key up directly.
 for _name, _sc in SCENARIO_OBJECTS.items():
     KEYS.check_model(_name)
-    KEYS.check_model(_name, stan=True)
     KEYS.joint_map(_name)
-    KEYS.program(_sc.model.slug)
-    KEYS.gather(_name, _sc.batch_size(config["stan"]))  # and its batches, records, trajectories
+    KEYS.trajectories(_name)
+    if SCENARIOS[_name]["stan"]:  # a model may have no Stan program where none runs
+        KEYS.check_model(_name, stan=True)
+        KEYS.program(_sc.model.slug)
+        KEYS.gather(_name, _sc.batch_size(config["stan"]))  # its batches, records
     for _K in {_sc.K, _sc.exact_trajectories}:
         KEYS.exact(_name, _K)  # and the trajectories at K
 for _name in KSEL:
