@@ -38,7 +38,13 @@ class CorruptFileError(RuntimeError):
     """
 
     def __str__(self) -> str:
-        return f"{super().__str__()} -- delete this file and rerun to recompute it"
+        return f"{self.what} -- delete this file and rerun to recompute it"
+
+    @property
+    def what(self) -> str:
+        """The file and what is wrong with it, without the remedy: for a warning where the
+        file is recomputed at once."""
+        return super().__str__()
 
 
 _UMASK_LOCK = threading.Lock()

@@ -84,7 +84,7 @@ def run_k_selection_grid(
                 try:
                     info = io.read_checked_json(point, required=["K_i", "method", "seed"])
                 except io.CorruptFileError as err:
-                    logger.warning("recomputing: %s", err)
+                    logger.warning("recomputing: %s", err.what)
             if info is None:
                 s = set_seed(seed, K, sets)
                 path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"

@@ -129,7 +129,7 @@ def _read_cell(path: Path) -> dict[str, Any] | None:
     try:
         return io.read_checked_json(path, required=list(CELL_KEYS))
     except io.CorruptFileError as err:
-        logger.warning("recomputing: %s", err)
+        logger.warning("recomputing: %s", err.what)
         return None
 
 
