@@ -179,7 +179,9 @@ CASES = {
 #: a model of ours that imports a helper (skipped by model discovery) and subclasses Same,
 #: with a Stan program made of ``#include`` files
 OWN_MODEL = {
-    "workflow/ssmobs/models/_mix.py": "SCALE = 1.0\n",
+    # a module of the project tree outside the package (jobs import it from workflow/)
+    "workflow/mixhelper.py": "BASE_SCALE = 1.0\n",
+    "workflow/ssmobs/models/_mix.py": "from mixhelper import BASE_SCALE\n\nSCALE = BASE_SCALE\n",
     "workflow/ssmobs/models/same_mix.py": (
         '"""Same under another slug, from a helper and its base model."""\n\n'
         "from ._mix import SCALE\nfrom .same import Same\n\n\n"
@@ -191,6 +193,11 @@ OWN_MODEL = {
 OWN_MODEL_CASES = {
     "helper module": (
         _append("workflow/ssmobs/models/_mix.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "helper in the project tree": (  # issue 46: it was not keyed ("Nothing to be done")
+        _append("workflow/mixhelper.py", "\nEDITED = 1\n"),
         EVERY_STAGE | {"check_model", "check_model_stan"},
         {"design_disturbances", "build_stan_model"},
     ),

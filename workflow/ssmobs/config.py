@@ -43,7 +43,7 @@ from .scenario import entry_problems
 
 #: folders directly under results/ that the workflow uses itself; no scenario may take them
 #: (compared case-insensitively, for case-insensitive file systems)
-RESERVED_SCENARIO_NAMES = ("shared", "k_selection")
+RESERVED_SCENARIO_NAMES = ("shared", "k_selection", "checksums")
 
 #: the paper's values; every non-empty ``paper_ref`` must be one of its keys
 PAPER_VALUES_PATH = Path(__file__).resolve().parents[2] / "config" / "paper_values.yaml"
