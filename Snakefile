@@ -58,7 +58,8 @@ include: "workflow/rules/stan_variants.smk"
 
 stop_without_compiler()
 # stale stamps and damaged files are removed before the DAG is built, all or none
-remove_stale(stale_stamps() + damaged_trajectories() + damaged_batches())
+STALE = stale_stamps() + damaged_trajectories() + damaged_batches()
+remove_stale(STALE + damaged_outputs(STALE))
 
 
 onstart:

@@ -460,6 +460,60 @@ def test_what_a_model_imports_keys_its_outputs(tmp_path, edit, moves):
     assert (before[1] != after[1]) == moves and (before[2] != after[2]) == moves
 
 
+#: a model that imports a module of the project tree (``workflow/<name>.py``), which
+#: imports one in a user's folder on PYTHONPATH, which imports a package module
+OUTSIDE_MODELS = {
+    "models/same5.py": (
+        "import myhelper_k46\nfrom .same import Same\n\n\n"
+        "class Same5(Same):\n    slug = 'same5'\n    scale = myhelper_k46.SCALE\n"
+    ),
+}
+
+
+@pytest.mark.parametrize("edit", ["tree", "user", "package", "none"])
+def test_modules_a_model_imports_from_outside_the_package_key_its_outputs(
+    tmp_path, monkeypatch, edit
+):
+    """Found stale before (issue 46): a model importing ``myhelper`` from ``workflow/``
+    kept its numbers when ``SCALE`` in the helper was edited.  Every module outside the
+    package and the pinned environment that a model runs, directly or not, keys it."""
+    package = _write(_workflow_copy(tmp_path), OUTSIDE_MODELS)
+    tree_helper = package.parent / "myhelper_k46.py"
+    user_helper = tmp_path / "userlib" / "userhelper_k46" / "__init__.py"
+    _write(
+        package.parent, {"myhelper_k46.py": "import numpy\nimport userhelper_k46\n\nSCALE = 1.0\n"}
+    )
+    _write(
+        tmp_path / "userlib",
+        {"userhelper_k46/__init__.py": "from ssmobs import banded_linalg\nOFFSET = 0\n"},
+    )
+    monkeypatch.syspath_prepend(str(package.parent))
+    monkeypatch.syspath_prepend(str(tmp_path / "userlib"))
+    shutil.copytree(REPO / "stan", tmp_path / "stan")
+    conf = smoke()
+    next(sc for sc in conf["scenarios"] if sc["name"] == "same_T4")["model"] = "same5"
+
+    def model_keys():
+        module_closure.cache_clear()
+        k = keys(conf, repo=tmp_path, package_dir=package)
+        return k.model_code("same5"), k.trajectories("same_T4"), k.joint_map("same_T4")
+
+    before = model_keys()
+    assert {"import:myhelper_k46", "import:userhelper_k46", "banded_linalg.py"} <= set(before[0])
+    assert not any("numpy" in f for f in before[0])  # the pinned environment is not keyed
+    edited = {
+        "tree": (tree_helper, "SCALE = 1.0", "SCALE = 1.5"),
+        "user": (user_helper, "OFFSET = 0", "OFFSET = 1"),
+        "package": (package / "banded_linalg.py", "", "\nEDITED = 1\n"),
+        "none": (tree_helper, "SCALE = 1.0", "SCALE = 1.0  # a comment"),
+    }[edit]
+    path, old, new = edited
+    path.write_text(path.read_text().replace(old, new) if old else path.read_text() + new)
+    after = model_keys()
+    moves = edit != "none"
+    assert (before[1] != after[1]) == moves and (before[2] != after[2]) == moves
+
+
 def test_a_model_without_package_imports_is_keyed_by_its_module_alone():
     """The registry's code (models/base.py, ...) keys every stage that takes a model."""
     assert CacheKeys(smoke(), "native").model_code("same") == {

@@ -262,3 +262,19 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     cfg.validate({"scenarios": [dict(entry)]})
     with pytest.raises(cfg.ConfigError, match=r"reach \|x_t\| or \|z_t\| = .* within T=20"):
         cfg.validate({"scenarios": [{**entry, "omega": {"a": 0.99, "b": 1e4}}]})
+
+
+def test_the_check_command_on_a_cold_cache_without_a_compiler_says_one_line(
+    tmp_path, monkeypatch, capsys
+):
+    """Found before (issue 46): the tutorial's step 3 on a cold cache without g++ gave a
+    57-line traceback and no remedy."""
+    from ssmobs.check_model import main
+
+    monkeypatch.setenv("CXX", "no-such-compiler")
+    monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "cold"))
+    assert main(["same"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "finds no C++ compiler 'no-such-compiler': install g++" in err
+    assert "same.stan" in err and "--no-stan" in err

@@ -277,7 +277,7 @@ def test_keep_draws_checked_against_the_largest_stan_scenario():
         cfg.validate(c)
 
 
-@pytest.mark.parametrize("name", ["shared", "k_selection", "Shared"])
+@pytest.mark.parametrize("name", ["shared", "k_selection", "Shared", "checksums"])
 def test_reserved_scenario_names(name):
     c = with_(["scenarios", 0, "name"], name)
     with pytest.raises(cfg.ConfigError, match=rf"name = '{name}': reserved"):

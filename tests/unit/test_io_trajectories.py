@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -232,3 +233,71 @@ def test_a_file_without_its_checksum_cannot_be_trusted(tmp_path):
     assert "has no checksum trajectories.nc.sha256" in io.checksum_problem(path)
     path.unlink()
     assert io.checksum_problem(path) is None  # a missing file is remade by Snakemake
+
+
+def test_recorded_checksums_find_every_damage_and_nothing_else(tmp_path, monkeypatch):
+    """Issue 46: every job records its outputs' checksums; a file truncated, edited with
+    its size kept or emptied is found, an intact, missing or unrecorded one is not."""
+    monkeypatch.chdir(tmp_path)
+    outside = tmp_path.parent / f"{tmp_path.name}_outside.csv"
+    files = {
+        "results/a/summary.json": b'{"a_mse": 0.00351}',
+        "results/a/table.parquet": b"PAR1" + bytes(100),
+        "paper_figures/x/table.csv": b"K,a\n4,0.1\n",
+        "results/a/intact.json": b"{}",
+        "results/a/gone.json": b"{}",
+    }
+    for name, content in files.items():
+        Path(name).parent.mkdir(parents=True, exist_ok=True)
+        Path(name).write_bytes(content)
+    outside.write_bytes(b"1,2\n")
+    io.record_checksums([*files, outside, "results/a/never_written.json"])
+    assert io.damaged_files() == []
+    Path("results/a/summary.json").write_bytes(b'{"a_mse": 0.50000}')  # same size
+    Path("results/a/table.parquet").write_bytes(b"PAR1")  # truncated
+    Path("paper_figures/x/table.csv").write_bytes(b"")  # emptied
+    Path("results/a/gone.json").unlink()
+    Path("results/a/unrecorded.json").write_text("{}")
+    outside.write_bytes(b"1,3\n")
+    found = dict(io.damaged_files())
+    assert set(found) == {
+        Path("results/a/summary.json"),
+        Path("results/a/table.parquet"),
+        Path("paper_figures/x/table.csv"),
+        outside,
+    }
+    assert found[Path("paper_figures/x/table.csv")].endswith(
+        "is empty (damaged or changed after it was written)"
+    )
+    # a job that writes the file again records it again
+    io.record_checksums(["results/a/summary.json"])
+    assert Path("results/a/summary.json") not in dict(io.damaged_files())
+    outside.unlink()
+
+
+def test_a_job_that_fails_records_no_checksum(tmp_path, monkeypatch):
+    from ssmobs import log
+
+    monkeypatch.chdir(tmp_path)
+    Path("out.json").write_text("{}")
+    monkeypatch.setattr(log, "_FAILED", ["RuntimeError"])
+    log._record_outputs(["out.json"])
+    assert not io.CHECKSUM_STORE.exists()
+    monkeypatch.setattr(log, "_FAILED", [])
+    log._record_outputs(["out.json"])
+    assert io.checksum_record("out.json").read_text().endswith("  out.json\n")
+
+
+def test_checked_json_finds_an_edit_and_a_missing_checksum(tmp_path):
+    """Issue 46: the caches jobs keep beside their outputs (a point of the choice of K, a
+    cell of a map) carry their content's checksum; an edit is refused, not read."""
+    path = tmp_path / "K4.json"
+    io.write_checked_json(path, {"K_i": 4, "v": np.float64(0.25), "nan": float("nan")})
+    back = io.read_checked_json(path, required=["K_i"])
+    assert back["K_i"] == 4 and back["v"] == 0.25 and io.CONTENT_CHECKSUM not in back
+    path.write_text(path.read_text().replace("0.25", "0.5"))
+    with pytest.raises(io.CorruptFileError, match="checksum does not match"):
+        io.read_checked_json(path)
+    io.write_json(path, {"K_i": 4})  # written before checksums: not trusted
+    with pytest.raises(io.CorruptFileError, match="content_sha256"):
+        io.read_checked_json(path)

@@ -3,6 +3,7 @@ and pins them (issue 34)."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -129,3 +130,29 @@ def test_a_script_restarts_itself_with_the_fixed_kernels(tmp_path):
     out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["1", "True"]
+
+
+def _direct_call(env: dict[str, str]) -> subprocess.CompletedProcess:
+    code = (
+        "import warnings; warnings.simplefilter('always')\n"
+        "from ssmobs.design_disturbances import design_disturbances\n"
+        "design_disturbances(4, 6); design_disturbances(4, 6, method='random')\n"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+
+
+def test_a_direct_call_warns_once_when_the_fixed_kernels_are_not_in_force():
+    """Issue 46: design_disturbances(...) in plain Python ran with the machine's kernels
+    and 2 BLAS threads, silently.  Now it warns once, in one line, with the settings that
+    give the workflow's numbers; with them set it says nothing."""
+    base = {k: v for k, v in os.environ.items() if k not in kernels.environment()}
+    base["PYTHONPATH"] = str(Path(kernels.__file__).resolve().parents[1])
+    own = _direct_call({**base, "OPENBLAS_NUM_THREADS": "2"})
+    assert own.returncode == 0, own.stderr[-2000:]
+    said = [line for line in own.stderr.splitlines() if "KernelsWarning" in line]
+    assert len(said) == 1 and "runs 2 threads, not 1" in said[0]
+    assert "OPENBLAS_CORETYPE=Haswell" in said[0]
+    fixed = _direct_call({**base, **kernels.environment()})
+    assert fixed.returncode == 0 and "KernelsWarning" not in fixed.stderr, fixed.stderr[-2000:]

@@ -6,6 +6,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from ssmobs.config import ConfigError
 from ssmobs.models import MODELS, ModelDefinitionError, discover_models, model_files
 
 pytestmark = pytest.mark.unit
@@ -127,3 +128,49 @@ def test_contract_problems(tmp_path, old, new, words):
         discover_models(tmp_path)
     for w in words:
         assert w in str(err.value)
+
+
+def test_a_broken_module_stops_only_the_lookups_of_its_model(tmp_path, monkeypatch):
+    """Found before (issue 46): a model file with a syntax error stopped every config with
+    a 29-line traceback, also configs that do not use it.  Now the registry finds the other
+    models and a lookup of the broken one gives one line naming its file."""
+    import ssmobs.models as models
+
+    write(tmp_path, "toy", GOOD.format(cls="Toy", slug="toy"))
+    write(tmp_path, "broken", "def broken(:\n")
+    real = models._discover
+    monkeypatch.setattr(models, "_discover", lambda directory: real(tmp_path))
+    registry = models._Registry()
+    assert list(registry) == ["toy"] and registry["toy"].slug == "toy"
+    with pytest.raises(ModelDefinitionError) as err:
+        registry["broken"]
+    msg = str(err.value)
+    assert "\n" not in msg and f"{tmp_path / 'broken.py'}: import failed: SyntaxError" in msg
+    assert "configs that do not use model 'broken' run" in msg
+    with pytest.raises(KeyError):
+        registry["unknown"]
+    with pytest.raises(ModelDefinitionError, match="broken.py: import failed"):
+        discover_models(tmp_path)  # the strict discovery lists every problem
+
+
+def test_the_preflight_names_a_broken_model_a_config_uses_in_one_line(tmp_path, monkeypatch):
+    import ssmobs.config as config_module
+    import ssmobs.models as models
+    from ssmobs.preflight import check_config_file
+
+    write(tmp_path, "broken", "def broken(:\n")
+    real = models._discover
+    monkeypatch.setattr(
+        models, "_discover", lambda d: (real(models.MODELS_DIR)[0], real(tmp_path)[1])
+    )
+    registry = models._Registry()
+    monkeypatch.setattr(config_module, "MODELS", registry)
+    scenario = "scenarios:\n  - {name: s, model: %s, omega: {a: 0.9}, x0: 8, T: 4, K: 4}\n"
+    good, bad = tmp_path / "good.yaml", tmp_path / "bad.yaml"
+    good.write_text(scenario % "same")
+    bad.write_text(scenario % "broken")
+    check_config_file(good)
+    with pytest.raises(ConfigError) as err:
+        check_config_file(bad)
+    assert str(err.value).startswith(f"config file {bad}: model module {tmp_path / 'broken.py'}")
+    assert "\n" not in str(err.value)

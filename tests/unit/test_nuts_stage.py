@@ -633,3 +633,18 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
         )
     assert not any(p.exists() for p in ours)
     assert other.exists()
+
+
+def test_a_damaged_record_that_is_recomputed_is_not_said_to_need_deleting(tmp_path, caplog):
+    """Issue 46: while a damaged record was recomputed, the warning still said "delete this
+    file and rerun"."""
+    from ssmobs.record_cache import load_record, write_record
+
+    path = tmp_path / "k00000.json"
+    write_record(path, {"record_version": 1, "a": 1.0})
+    path.write_text(path.read_text().replace("1.0", "2.0"))
+    with caplog.at_level(logging.WARNING):
+        assert load_record(path) is None
+    (line,) = [r.getMessage() for r in caplog.records if "recomputing" in r.getMessage()]
+    assert line.startswith(f"recomputing: {path}: missing keys")
+    assert "delete this file" not in line

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from ssmobs import preflight
-from ssmobs.config import ConfigError
+from ssmobs.config import ConfigError, check_config_files, read_config_file
 
 pytestmark = pytest.mark.unit
 
@@ -412,3 +412,53 @@ def test_the_make_targets_stop_when_snakemake_cannot_write_its_folder(tmp_path):
         "folder); Snakemake keeps its lock and records in .snakemake/ of the working "
         "directory: make it writable, or run in a writable copy of the workflow\n"
     )
+
+
+@pytest.mark.parametrize(
+    ("written", "form", "yaml11"),
+    [
+        ("010", "a leading zero", "8"),
+        ("050", "a leading zero", "40"),
+        ("4:00", "base-60 (sexagesimal)", "240"),
+        ("1_0", "underscores", "10"),
+        ("0x8", "hexadecimal", "8"),
+        ("0o7", "a number in YAML 1.2 but a string here", None),
+        ("1e3", "a number in YAML 1.2 but a string here", None),
+        ("0b11", "octal or binary", "3"),
+        ("1_000.5", "underscores", "1000.5"),
+        ("010.5", "a leading zero", "10.5"),
+    ],
+)
+def test_numbers_in_yaml_11_forms_are_refused_with_key_and_line(tmp_path, written, form, yaml11):
+    """Found read silently before (issue 46): ``K: 010`` ran K = 8, ``K: 4:00`` 240,
+    ``K: 1_0`` 10, ``K: 0x8`` 8; YAML 1.2 reads them otherwise (or as strings)."""
+    path = tmp_path / "c.yaml"
+    path.write_text(SCENARIO + f"    T: 4\n    K: {written}\n")
+    msg = message(path)
+    assert msg.startswith(f"config file {path}, line 7, column 8: key 'scenarios[0].K': {written}")
+    assert form in msg and "\n" not in msg
+    if yaml11 is not None:
+        assert f"as {yaml11}" in msg
+    # Snakemake's own reading of --configfile is checked by the same reader (common.smk)
+    with pytest.raises(RuntimeError, match=r"scenarios\[0\]\.K"):
+        check_config_files([path], error=RuntimeError)
+
+
+def test_numbers_in_yaml_12_forms_are_read_as_written(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(
+        SCENARIO + "    T: 0\n    K: -12\nstan: {adapt_delta: 0.95, init_radius: 2., x: .5}\n"
+        "figure2: {K: +3, seed: 1.5e+3, q: [1, 20, 300]}\nother: {a: .inf, b: -.inf, c: .nan}\n"
+    )
+    data = read_config_file(path)
+    assert data["scenarios"][0]["K"] == -12 and data["scenarios"][0]["T"] == 0
+    assert data["stan"] == {"adapt_delta": 0.95, "init_radius": 2.0, "x": 0.5}
+    assert data["figure2"] == {"K": 3, "seed": 1500.0, "q": [1, 20, 300]}
+
+
+def test_a_number_form_in_a_list_names_its_place(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text(SCENARIO + "    T: 4\n    K: 2\nk_selection: [{K_grid: [10, 020]}]\n")
+    assert "key 'k_selection[0].K_grid[1]': 020 is a number with a leading zero" in message(path)
+    path.write_text(SCENARIO + "    T: 4\n    K: 2\nname: '010'\n")  # a quoted string stays
+    assert read_config_file(path)["name"] == "010"

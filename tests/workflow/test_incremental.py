@@ -14,6 +14,7 @@ Reverting an edit finds the earlier outputs again, also without ``.snakemake/``.
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -178,7 +179,9 @@ CASES = {
 #: a model of ours that imports a helper (skipped by model discovery) and subclasses Same,
 #: with a Stan program made of ``#include`` files
 OWN_MODEL = {
-    "workflow/ssmobs/models/_mix.py": "SCALE = 1.0\n",
+    # a module of the project tree outside the package (jobs import it from workflow/)
+    "workflow/mixhelper.py": "BASE_SCALE = 1.0\n",
+    "workflow/ssmobs/models/_mix.py": "from mixhelper import BASE_SCALE\n\nSCALE = BASE_SCALE\n",
     "workflow/ssmobs/models/same_mix.py": (
         '"""Same under another slug, from a helper and its base model."""\n\n'
         "from ._mix import SCALE\nfrom .same import Same\n\n\n"
@@ -190,6 +193,11 @@ OWN_MODEL = {
 OWN_MODEL_CASES = {
     "helper module": (
         _append("workflow/ssmobs/models/_mix.py", "\nEDITED = 1\n"),
+        EVERY_STAGE | {"check_model", "check_model_stan"},
+        {"design_disturbances", "build_stan_model"},
+    ),
+    "helper in the project tree": (  # issue 46: it was not keyed ("Nothing to be done")
+        _append("workflow/mixhelper.py", "\nEDITED = 1\n"),
         EVERY_STAGE | {"check_model", "check_model_stan"},
         {"design_disturbances", "build_stan_model"},
     ),
@@ -301,6 +309,71 @@ def test_an_edit_reruns_what_it_touches_and_equals_a_fresh_run(base, tmp_path, c
     again = snakemake(work, *ARGS, "-n")
     assert "Nothing to be done" in again.stdout + again.stderr
     assert_fresh_equal(work, fresh)
+
+
+#: one output of every stage, each damaged another way with its time kept (issue 46)
+DAMAGED_OUTPUTS = {
+    "results/shared/design_disturbances/*/q*.nc": "truncate",
+    "results/same_T4/check_model/*.json": "edit",
+    "results/same_T4/joint_map/*/summary.json": "edit",
+    "results/same_T4/joint_map/*/theta_hat.nc": "empty",
+    "results/same_T4/sample_nuts/*/batch0.parquet": "flip",
+    "results/same_T4/gather_nuts/*/summary.json": "edit",
+    "results/same_T4/exact_marginal/*/marginal_map.parquet": "truncate",
+    f"{OUT}/table2_joint_vs_marginal.csv": "empty",
+    f"{OUT}/section4_summary.md": "edit",
+}
+
+
+def _damage(path: Path, how: str) -> None:
+    st = path.stat()
+    data = path.read_bytes()
+    if how == "truncate":
+        data = data[: len(data) // 2]
+    elif how == "empty":
+        data = b""
+    elif how == "flip":  # one byte in the middle, the size kept
+        data = (
+            data[: len(data) // 2] + bytes([data[len(data) // 2] ^ 1]) + data[len(data) // 2 + 1 :]
+        )
+    else:  # an edit into other valid content, e.g. a_mse 0.5, K_max 3
+        data = re.sub(rb"\d", b"3", data, count=3)
+    path.write_bytes(data)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_a_damaged_output_of_every_stage_is_made_again_not_read(base, tmp_path):
+    """Found reused before (issue 46): joint_map's summary.json edited with its time kept
+    flowed into the summary table after a threshold edit; a table truncated to 0 bytes
+    stayed.  One output of every stage damaged: the same command says each once, makes each
+    again (the same bytes as the run that made it) and equals a fresh run after a threshold
+    edit that rereads them; then there is nothing to do."""
+    work = _copy(base, tmp_path / "damaged")
+    damaged = {}
+    for pattern, how in DAMAGED_OUTPUTS.items():
+        path = first(work, pattern)
+        damaged[path] = path.read_bytes()
+        _damage(path, how)
+    proc = snakemake(work, *ARGS)
+    text = proc.stdout + proc.stderr
+    for path, content in damaged.items():
+        name = str(path.relative_to(work))
+        said = [line for line in text.splitlines() if name in line and "made again" in line]
+        assert len(said) == 1, (name, said)
+        assert path.read_bytes() == content, f"{name} not made again as it was"
+    again = snakemake(work, *ARGS, "-n")
+    assert "Nothing to be done" in again.stdout + again.stderr
+    fresh = make_workdir(tmp_path / "fresh")
+    for w in (work, fresh):
+        write_config(w, _set("convergence.rhat_max", 1.05))
+    run_both(work, fresh)
+    assert_fresh_equal(work, fresh)
+
+
+def first(work: Path, pattern: str) -> Path:
+    found = sorted(work.glob(pattern))
+    assert found, pattern
+    return found[0]
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ on request from committed files.  Those on a rare path run in ``make test-slow``
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -262,6 +263,44 @@ def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_rea
     assert (work / FIGURE2).is_file()
 
 
+def test_a_read_only_cold_cache_stops_nuts_jobs_whose_program_results_knows(tmp_path):
+    """Found before (issue 46): with the program's marker and Stan check already in
+    results/, a read-only SSMOBS_CACHE without the program let two sample_nuts jobs start
+    (rc 2, 8 tracebacks).  Now one line names the cache and the remedy, before any job."""
+    import os
+
+    prefix = []
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root, and setpriv (to drop root's override) is missing")
+        prefix = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search"]
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    until = ["--until", "build_stan_model", "check_model_stan"]
+    snakemake(work, *until, "--cores", "2", "--configfile", CONFIG)
+    assert list(work.glob("results/shared/stan/*/same/*.json"))  # the program's marker
+    cold = tmp_path / "cold"
+    cold.mkdir()
+    cold.chmod(0o555)
+    env = {**os.environ, "SSMOBS_CACHE": str(cold)}
+    try:
+        proc = subprocess.run(
+            [*prefix, sys.executable, "-m", "snakemake", "--cores", "2", "--configfile", CONFIG],
+            cwd=work,
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env=env,
+        )
+    finally:
+        cold.chmod(0o755)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert f"this run cannot write where its jobs write: {cold} (not writable by user" in text
+    assert "point SSMOBS_CACHE at a writable folder" in text
+    assert jobs_started(proc) == [] and "Traceback" not in text, text[-3000:]
+
+
 def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path):
     """No permission bit involved (so it holds for root too): paper_figures is a file."""
     work = make_workdir(tmp_path / "w")
@@ -316,3 +355,30 @@ def test_the_model_check_runs_after_the_build_of_its_program(tmp_path):
     assert builds and checks
     for inputs in checks:
         assert builds & set(inputs), inputs
+
+
+def _damage_keeping_time(path: Path, content: bytes) -> None:
+    st = path.stat()
+    path.write_bytes(content)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+
+def test_outputs_damaged_after_their_job_are_made_again_not_read(tmp_path):
+    """Found reused before (issue 46): an output edited or truncated with its time kept
+    gave "Nothing to be done" and flowed into the tables after a later edit.  Every job
+    records its outputs' checksums; a mismatch is said once and the file made again: a
+    requested table at once, an intermediate grid file when a job reads it."""
+    work = make_workdir(tmp_path / "damaged")
+    ksel_run(work, [4, 8])
+    table = work / KSEL_TARGET
+    (grid,) = work.glob("results/k_selection/same_T4/*/design_independent_seed1.json")
+    intact = {p: p.read_bytes() for p in (table, grid)}
+    _damage_keeping_time(table, b"")  # truncated to 0 bytes
+    _damage_keeping_time(grid, intact[grid].replace(b"1", b"2", 1))  # edited in place
+    proc = ksel_run(work, [4, 8])
+    said = [line for line in proc.stderr.splitlines() if "made again, not reused" in line]
+    assert len(said) == 2, said
+    assert any(f"{table.relative_to(work)} is empty" in line for line in said)
+    assert {"k_selection_grid", "select_k"} <= set(rules_run(proc))
+    assert {p: p.read_bytes() for p in intact} == intact
+    assert rules_run(ksel_run(work, [4, 8])) == set()  # and nothing to do again

@@ -277,3 +277,60 @@ def test_smoke_of_ones_own_study_plans_its_jobs_on_small_sizes(tmp_path):
     ]
     nuts = [job for job in jobs if job.rule == "sample_nuts"]
     assert len(nuts) == 3  # one batch of the K = 4 trajectories per scenario
+
+
+NO_STAN_CONFIG = """outputs_dir: paper_figures/ns
+scenarios:
+  - {name: ns_T4, model: %s, omega: {a: 0.9}, x0: 8, T: 4, K: 4, prior: restricted, stan: %s}
+paper_outputs: {tables_2_3: [], figure3: [], figure4: null}
+k_selection: []
+observability_studies: []
+"""
+
+
+def test_own_model_without_stan_program_runs_with_stan_false_and_is_named_with_stan(tmp_path):
+    """Found before (issue 46): an own model without a Stan program and ``stan: false``
+    passed the preflight, then gave a traceback at the parse (its Stan keys were made)."""
+    work = make_workdir(tmp_path)
+    models = work / "workflow" / "ssmobs" / "models"
+    (models / "nostan.py").write_text(
+        'from .same import Same\n\n\nclass NoStan(Same):\n    slug = "nostan"\n'
+    )
+    (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "false"))
+    proc = snakemake(work, "-n", "--configfile", "config/ns.yaml")
+    assert {"joint_map", "design_trajectories"} <= _planned_rules(proc)
+    (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "true"))
+    for cmd in (
+        [sys.executable, "-m", "ssmobs.preflight", "config/ns.yaml"],
+        [sys.executable, "-m", "snakemake", "-n", "--configfile", "config/ns.yaml"],
+    ):
+        out = subprocess.run(
+            cmd,
+            cwd=work,
+            capture_output=True,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(work / "workflow")},
+        )
+        text = out.stdout + out.stderr
+        assert out.returncode != 0 and "Traceback" not in text
+        assert f"model 'nostan' has no Stan program {work / 'stan' / 'nostan.stan'}" in text
+        assert "or set stan: false for this scenario" in text
+
+
+def test_a_broken_model_module_stops_only_the_configs_that_use_it(tmp_path):
+    """Found before (issue 46): a model file with a syntax error gave a 29-line traceback
+    for every config, also those that do not use it."""
+    work = make_workdir(tmp_path)
+    (work / "workflow" / "ssmobs" / "models" / "broken.py").write_text("def broken(:\n")
+    (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("same", "false"))
+    snakemake(work, "-n", "--configfile", "config/ns.yaml")
+    (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("broken", "false"))
+    proc = snakemake(work, "-n", "--configfile", "config/ns.yaml", check=False)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0 and "Traceback" not in text
+    assert "broken.py: import failed: SyntaxError" in text
+    assert "configs that do not use model 'broken' run" in text
+
+
+def _planned_rules(proc) -> set[str]:
+    return set(re.findall(r"^(?:local)?rule (\w+):$", proc.stdout + proc.stderr, flags=re.M))

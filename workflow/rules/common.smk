@@ -165,7 +165,9 @@ def stop_where_jobs_cannot_write():
         files += [str(f) for f in (*job.output, *job.log)]
         if getattr(job, "benchmark", None):
             files.append(str(job.benchmark))
-    builds = {"build_stan_model", "check_model_stan"}
+    # a NUTS job builds its program too when the cache lacks it (its marker in results/
+    # says only that it was built once, maybe in another cache)
+    builds = {"build_stan_model", "check_model_stan", "sample_nuts"}
     if any(job.rule.name in builds for job in jobs) and unbuilt_programs():
         files.append(str(cache_root() / "native" / "-"))
     problem = unwritable_problem(files)
@@ -187,10 +189,12 @@ DESIGN_DIR = f"results/shared/design_disturbances/{KEYS.design}"
 # Every key up front: a cluster job plans only its own job and looks its key up directly.
 for _name, _sc in SCENARIO_OBJECTS.items():
     KEYS.check_model(_name)
-    KEYS.check_model(_name, stan=True)
     KEYS.joint_map(_name)
-    KEYS.program(_sc.model.slug)
-    KEYS.gather(_name, _sc.batch_size(config["stan"]))  # and its batches, records, trajectories
+    KEYS.trajectories(_name)
+    if SCENARIOS[_name]["stan"]:  # a model may have no Stan program where none runs
+        KEYS.check_model(_name, stan=True)
+        KEYS.program(_sc.model.slug)
+        KEYS.gather(_name, _sc.batch_size(config["stan"]))  # its batches, records
     for _K in {_sc.K, _sc.exact_trajectories}:
         KEYS.exact(_name, _K)  # and the trajectories at K
 for _name in KSEL:
@@ -479,6 +483,35 @@ def damaged_trajectories():
     return changes
 
 
+#: the intermediate outputs of this config found damaged: targets of this run (rule all)
+DAMAGED_TARGETS = []
+
+
+def damaged_outputs(found):
+    """Every output of an earlier job that no longer matches the checksum its job recorded
+    (``results/checksums/``, :func:`ssmobs.io.record_checksums`): truncated, edited or
+    damaged, whatever its time.  Removed before the DAG is built, so that no job reads it:
+    a requested output (a table, a summary) is made again in this run, and so is an
+    intermediate one of this config's keys when the run makes every target (``all``).  The files of ``found`` (changes the other checks found)
+    are said there only."""
+    from ssmobs.io import damaged_files
+
+    if not may_change_files_before_the_lock():
+        return []
+    changes = []
+    skip = {Path(p) for p, _ in found}
+    current = {name.rsplit(":", 1)[1] for name in KEYS.describe()}
+    for path, problem in damaged_files():
+        if path in skip or path.with_suffix("") in skip and path.suffix == ".sha256":
+            continue
+        logger.warning(f"made again, not reused: {problem}")
+        changes.append((path, None))
+        keys = [p for p in (*path.parent.parts, path.stem) if re.fullmatch("[0-9a-f]{12}", p)]
+        if path.parts[0] == "results" and keys and all(k in current for k in keys):
+            DAMAGED_TARGETS.append(str(path))  # an intermediate output of this config
+    return changes
+
+
 def stamped_outputs(path):
     """The other outputs of the rule whose stamp is ``path`` (its wildcards applied)."""
     from snakemake.io import apply_wildcards
@@ -623,7 +656,7 @@ def set_aside_leftovers():
 
 
 def all_targets():
-    targets = [trajectories_path(name) for name in SCENARIOS]
+    targets = [trajectories_path(name) for name in SCENARIOS] + DAMAGED_TARGETS
     targets += [joint_summary(name) for name, sc in SCENARIOS.items() if sc["joint_map"]]
     targets += [stan_summary(name) for name, sc in SCENARIOS.items() if sc["stan"]]
     for name in KSEL:

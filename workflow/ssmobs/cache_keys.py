@@ -6,9 +6,11 @@ a SHA-256 over everything that determines them (the rule of the cache):
 - the config values the stage reads (a scenario's model, Omega, x0, T, K, method, seed,
   prior, the stage's settings block),
 - the keys of the stage's inputs (so a change upstream moves every output downstream),
-- the code: the model's module, its Stan program, and the source of the package modules
-  the stage runs (:data:`STAGE_MODULES`: its glue in :mod:`ssmobs.stages`, closed over its
-  imports inside the package by :func:`module_closure`), so an edit of a log-density term
+- the code: the model's module with every module it imports outside the pinned
+  environment (the package's, the project tree's, a user's own), its Stan program, and
+  the source of the package modules the stage runs (:data:`STAGE_MODULES`: its glue in
+  :mod:`ssmobs.stages`, closed over its imports inside the package by
+  :func:`module_closure`), so an edit of a log-density term
   or of a stage's numerics gives new keys and a recomputation, never an old result; an
   edit of code a stage does not run (a figure's glue) leaves its keys alone,
 - the numerical kernels every job computes with (:data:`ssmobs.kernels.SETTINGS_ID`), in
@@ -31,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from . import io, kernels
-from .code_hashing import import_closure, syntax_digest
+from .code_hashing import environment_dirs, import_closure, outside_modules, syntax_digest
 from .stan_backends.base import program_digest, sampler_key
 
 #: the package's own directory (``workflow/ssmobs``)
@@ -155,6 +157,44 @@ def model_closure(model: str, package_dir: Path = PACKAGE_DIR) -> tuple[str, ...
     return tuple(f for f in own if f not in registry)
 
 
+def _module_name(relative: str, package_dir: Path) -> tuple[str, bool]:
+    """The dotted name of the package module ``relative`` (a path below ``package_dir``),
+    with whether it is a package's ``__init__.py``."""
+    parts = [package_dir.name, *Path(relative).with_suffix("").parts]
+    is_package = parts[-1] == "__init__"
+    return ".".join(parts[:-1] if is_package else parts), is_package
+
+
+def outside_code(files: Iterable[str], package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
+    """``"import:<name>"`` -> hash of every module outside the package and outside the
+    pinned environment (its standard library and site-packages) that the package modules
+    ``files`` import, directly or not (:func:`ssmobs.code_hashing.outside_modules`): a
+    user's helper on ``PYTHONPATH``, a module of the project tree such as
+    ``workflow/myhelper.py``; with the package modules those import (by their paths).  A
+    Python module by its :func:`syntax_digest`, a compiled one by its bytes.  Found as the
+    running interpreter imports them (the workflow's jobs inherit its ``PYTHONPATH``)."""
+    modules = [(*_module_name(f, package_dir), package_dir / f) for f in files]
+    outside, own = outside_modules(
+        [(name, path, is_pkg) for name, is_pkg, path in modules],
+        package_dir.name,
+        environment_dirs(),
+    )
+    out: dict[str, str] = {}
+    for name, path in sorted(outside.items()):
+        out[f"import:{name}"] = syntax_digest(path) if path.suffix == ".py" else file_digest(path)
+    entries = []
+    for name in own:
+        parts = name.split(".")[1:]
+        candidates = [Path(*parts).with_suffix(".py")] if parts else []
+        for candidate in [*candidates, Path(*parts, "__init__.py")]:
+            if (package_dir / candidate).is_file():
+                entries.append(str(candidate))
+    if entries:
+        for f in module_closure(tuple(sorted(entries)), package_dir):
+            out.setdefault(f, syntax_digest(package_dir / f))
+    return out
+
+
 def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
     """File -> hash of the code a stage runs: its module closure (its stage module in
     :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
@@ -246,11 +286,13 @@ class CacheKeys:
     @functools.cache  # noqa: B019
     def model_code(self, model: str) -> dict[str, str]:
         """The model's Python module and the package modules it runs, directly or not (a
-        helper ``models/_*.py``, a model it subclasses), by :func:`model_closure`, each by
-        its :func:`syntax_digest` (a comment-only edit reruns nothing; its Stan program keys
-        what it determines: :meth:`stan_program`)."""
+        helper ``models/_*.py``, a model it subclasses), by :func:`model_closure`, and every
+        module outside the package and the pinned environment they import, directly or
+        not (:func:`outside_code`), each by its :func:`syntax_digest` (a comment-only edit
+        reruns nothing; its Stan program keys what it determines: :meth:`stan_program`)."""
         files = model_closure(model, self.package_dir)
-        return {f: syntax_digest(self.package_dir / f) for f in files}
+        out = {f: syntax_digest(self.package_dir / f) for f in files}
+        return {**out, **outside_code(files, self.package_dir)}
 
     def stan_program(self, model: str) -> str:
         """The model's Stan program with its ``#include`` files."""

@@ -171,6 +171,34 @@ def run_check_model(
     return report
 
 
+def _stan_problem(slug: str, backend: str) -> str | None:
+    """One line when the Stan check of ``slug`` cannot start here: no Stan program, or the
+    native driver must build it and finds no C++ compiler (the workflow's own line)."""
+    import shutil
+
+    from .stan_backends import stan_file
+
+    try:
+        program = stan_file(slug)
+    except FileNotFoundError as err:
+        return (
+            f"{err}; write it (docs/your-own-model.md) or check the Python model alone: --no-stan"
+        )
+    if backend != "native":
+        return None
+    from .stan_backends.native import NativeBackend
+    from .stan_backends.native_build import compiler
+
+    if shutil.which(compiler()) or NativeBackend().is_built(program):
+        return None
+    return (
+        f"the native Stan backend must build {program} but finds no C++ compiler "
+        f"{compiler()!r}: install g++ (apt-get install g++), set CXX to a C++ compiler, or "
+        f"point SSMOBS_CACHE at a cache that holds the program (or check the Python model "
+        f"alone: --no-stan)"
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """The command line: check one model, print what was checked; exit 1 on a problem."""
     parser = argparse.ArgumentParser(
@@ -211,6 +239,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"error: {err}", file=sys.stderr)
             return 2
         cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug) if c not in cases]
+    problem = None if args.no_stan else _stan_problem(args.slug, args.backend)
+    if problem is not None:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
     report = check_model(
         args.slug, cases, stan=not args.no_stan, backend=args.backend, gradients=args.gradients
     )

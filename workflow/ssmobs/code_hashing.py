@@ -6,7 +6,10 @@ ignores its docstrings: what keys a result by the code that made it.
   their imports in the syntax tree, directly or not, with the ``__init__.py`` of their
   packages;
 - :func:`syntax_digest`: a module's syntax tree without its docstrings, so that an edit of
-  a comment, a docstring or the layout keeps the hash.
+  a comment, a docstring or the layout keeps the hash;
+- :func:`outside_modules`: the modules outside the package and outside the pinned
+  environment (:func:`environment_dirs`) that package modules import, directly or not (a
+  user's helper module on ``PYTHONPATH``, a module of the project tree).
 
 Nothing here knows the workflow: the package's directory and the modules to leave out are
 arguments (:mod:`ssmobs.cache_keys` names the workflow's).
@@ -16,6 +19,11 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import importlib.machinery
+import importlib.util
+import site
+import sys
+import sysconfig
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -183,3 +191,110 @@ def import_closure(
         found = _imports(path, package_dir, functions) | _packages(path, package_dir)
         todo.extend((p, None) for p in found)
     return tuple(sorted(str(p.relative_to(package_dir)) for p in whole | set(partial)))
+
+
+# --------------------------------------------------------------------------- outside the package
+def imported_names(path: str | Path, module: str, is_package: bool = False) -> set[str]:
+    """The absolute names that module ``module`` (its file ``path``; ``is_package`` for an
+    ``__init__.py``) imports anywhere in its code but under ``if TYPE_CHECKING:``: ``import
+    a.b`` gives ``a`` and ``a.b``, ``from a import b`` gives ``a`` and ``a.b`` (``b`` may be
+    a module), relative imports are resolved against ``module``'s package."""
+    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
+    package = module if is_package else module.rpartition(".")[0]
+    names: set[str] = set()
+
+    def add(name: str) -> None:
+        parts = name.split(".")
+        names.update(".".join(parts[: i + 1]) for i in range(len(parts)))
+
+    for node in _walk(tree.body):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                add(alias.name)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                anchor = package.split(".") if package else []
+                anchor = anchor[: len(anchor) - (node.level - 1)] if node.level > 1 else anchor
+                if not anchor:  # beyond the top level: the import fails where it runs
+                    continue
+                base = ".".join([*anchor, *([node.module] if node.module else [])])
+            else:
+                base = node.module or ""
+            if not base:
+                continue
+            add(base)
+            for alias in node.names:
+                if alias.name != "*":
+                    names.add(f"{base}.{alias.name}")
+    return names
+
+
+def module_file(name: str) -> tuple[Path, bool] | None:
+    """The file of the module ``name`` as the running interpreter would import it, with
+    whether it is a package (``__init__``), found without importing anything (a submodule is
+    looked up on its parent's path); None for a name that is no module (an attribute), a
+    built-in or frozen module, or a namespace package."""
+    parts = name.split(".")
+    try:
+        spec = importlib.util.find_spec(parts[0])  # a top-level name: nothing is imported
+    except (ImportError, ValueError):
+        return None
+    for i in range(1, len(parts)):
+        locations = spec.submodule_search_locations if spec is not None else None
+        if not locations:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(".".join(parts[: i + 1]), list(locations))
+    if spec is None or not spec.has_location or not spec.origin:
+        return None
+    origin = Path(spec.origin)
+    return (origin, spec.submodule_search_locations is not None) if origin.is_file() else None
+
+
+def environment_dirs() -> tuple[Path, ...]:
+    """The folders of the pinned environment: the interpreter's standard library and the
+    site-packages of the virtual environment (and of the installation it was made from)."""
+    found: set[str] = set()
+    for scheme_vars in ({}, {"base": sys.base_prefix, "platbase": sys.base_exec_prefix}):
+        paths = sysconfig.get_paths(vars=scheme_vars or None)
+        found.update(paths[k] for k in ("stdlib", "platstdlib", "purelib", "platlib"))
+    found.update(site.getsitepackages())
+    found.add(site.getusersitepackages())
+    found.update(p for p in sys.path if Path(p).name in ("site-packages", "dist-packages"))
+    return tuple(sorted({Path(p).resolve() for p in found if p}))
+
+
+def outside_modules(
+    modules: Iterable[tuple[str, Path, bool]], package: str, environment: Iterable[Path]
+) -> tuple[dict[str, Path], set[str]]:
+    """What code ``modules`` (name, file, is a package) of ``package`` run outside it and
+    outside the pinned ``environment`` folders: every module they import, directly or through
+    each other, whose file lies elsewhere (a user's own module on ``PYTHONPATH``, a module of
+    the project tree), by name; and the names of ``package``'s modules those import."""
+    env = tuple(environment)
+    outside: dict[str, Path] = {}
+    own: set[str] = set()
+    todo = list(modules)
+    seen: set[str] = set()
+    while todo:
+        name, path, is_package = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        for imported in sorted(imported_names(path, name, is_package)):
+            top = imported.partition(".")[0]
+            if top == package:
+                if not name.startswith(f"{package}.") and name != package:
+                    own.add(imported)
+                continue
+            if imported in outside or imported in seen:
+                continue
+            found = module_file(imported)
+            if found is None:
+                continue
+            file = found[0].resolve()
+            if any(file.is_relative_to(d) for d in env):
+                continue
+            outside[imported] = file
+            if file.suffix == ".py":
+                todo.append((imported, file, found[1]))
+    return outside, own

@@ -43,7 +43,7 @@ from .scenario import entry_problems
 
 #: folders directly under results/ that the workflow uses itself; no scenario may take them
 #: (compared case-insensitively, for case-insensitive file systems)
-RESERVED_SCENARIO_NAMES = ("shared", "k_selection")
+RESERVED_SCENARIO_NAMES = ("shared", "k_selection", "checksums")
 
 #: the paper's values; every non-empty ``paper_ref`` must be one of its keys
 PAPER_VALUES_PATH = Path(__file__).resolve().parents[2] / "config" / "paper_values.yaml"
@@ -74,6 +74,15 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             )
         problems += [f"{where}: {cut_text(p, 2 * MAX_REPR)}" for p in entry_problems(sc)]
         model = MODELS.get(sc["model"])
+        if sc.get("stan") and model is not None:
+            from .stan_backends import STAN_DIR
+
+            if not (STAN_DIR / f"{sc['model']}.stan").is_file():
+                problems.append(
+                    f"{where}.stan = True: model {sc['model']!r} has no Stan program "
+                    f"{STAN_DIR / (sc['model'] + '.stan')}; write it (docs/your-own-model.md) "
+                    f"or set stan: false for this scenario"
+                )
         if i in explicit_exact and model is not None and not model.linear_in_states:
             problems.append(
                 f"{where}.exact = True: model {sc['model']!r} is not linear in the states, "

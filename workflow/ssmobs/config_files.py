@@ -1,4 +1,5 @@
-"""Strict reading of config files: duplicate keys, size and YAML alias expansion are refused.
+"""Strict reading of config files: duplicate keys, size, YAML alias expansion and numbers in
+YAML 1.1 forms (``010``, ``4:00``, ``1_0``, ``0x8``) are refused.
 
 :func:`read_config_file` reads one file; :func:`check_config_files` applies it to the files
 Snakemake read itself (``--configfile``).  Imports only :mod:`ssmobs.config_schema`.
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -32,8 +34,9 @@ class RefusedYAMLError(yaml.MarkedYAMLError):
 
 
 class ConfigLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that refuses duplicate keys in a mapping (PyYAML keeps the last)
-    and documents whose YAML aliases expand to more than :data:`MAX_CONFIG_VALUES` values."""
+    """``yaml.SafeLoader`` that refuses duplicate keys in a mapping (PyYAML keeps the last),
+    documents whose YAML aliases expand to more than :data:`MAX_CONFIG_VALUES` values and
+    numbers in forms only YAML 1.1 reads as numbers (:func:`_refuse_yaml11_numbers`)."""
 
     def get_single_node(self) -> yaml.Node | None:
         node = super().get_single_node()
@@ -45,6 +48,8 @@ class ConfigLoader(yaml.SafeLoader):
                 ),
                 problem_mark=node.start_mark,
             )
+        if node is not None:
+            _refuse_yaml11_numbers(node, self, [], set())
         return node
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -69,6 +74,81 @@ class ConfigLoader(yaml.SafeLoader):
                     problem_mark=key_node.start_mark,
                 )
         return super().construct_mapping(node, deep=deep)
+
+
+_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+_STR_TAG = "tag:yaml.org,2002:str"
+#: numbers of YAML 1.2 that PyYAML (YAML 1.1) reads as strings: octal 0o7, 1e3, 1.5e3
+_YAML12_ONLY = re.compile(r"[-+]?(0o[0-7]+|0x[0-9a-fA-F]+|[0-9]+(\.[0-9]*)?[eE][-+]?[0-9]+)")
+#: the numbers YAML 1.2 (core schema) and YAML 1.1 both read alike: a decimal integer
+#: without leading zeros, a decimal float, .inf, .nan
+_PLAIN_INT = re.compile(r"[-+]?(0|[1-9][0-9]*)")
+_PLAIN_FLOAT = re.compile(
+    r"[-+]?(\.[0-9]+|(0|[1-9][0-9]*)(\.[0-9]*)?)([eE][-+]?[0-9]+)?|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN)"
+)
+
+
+def _number_form(text: str) -> str:
+    """What makes ``text`` a YAML 1.1 number form that YAML 1.2 reads otherwise or not at all."""
+    body = text.lstrip("+-")
+    if "_" in body:
+        return "digits with underscores"
+    if ":" in body:
+        return "a base-60 (sexagesimal) number"
+    if body[:2].lower() == "0x":
+        return "a hexadecimal number"
+    if body[:2].lower() == "0o" or body[:2].lower() == "0b":
+        return "an octal or binary number"
+    return "a number with a leading zero (YAML 1.1 reads it as octal)"
+
+
+def _refuse_yaml11_numbers(
+    node: yaml.Node, loader: yaml.SafeLoader, path: list[str], seen: set[int]
+) -> None:
+    """Raise :class:`RefusedYAMLError` at the first number written in a form only YAML 1.1
+    reads as a number (``010``, ``4:00``, ``1_0``, ``0x8``, ``0o7``): PyYAML reads them
+    (8, 240, 10, 8, ...) where a person, or YAML 1.2, reads another value or a string."""
+    if id(node) in seen:
+        return
+    seen.add(id(node))
+    if isinstance(node, yaml.ScalarNode):
+        where = f"key {'.'.join(path)!r}: " if path else ""
+        if node.tag == _STR_TAG and node.style is None and _YAML12_ONLY.fullmatch(node.value):
+            raise RefusedYAMLError(
+                problem=(
+                    f"{where}{node.value} is a number in YAML 1.2 but a string here (YAML "
+                    f"1.1); write the number in plain decimal digits (e.g. 1000 or 1.0e+3)"
+                ),
+                problem_mark=node.start_mark,
+            )
+        if node.tag not in (_INT_TAG, _FLOAT_TAG):
+            return
+        text = str(node.value)
+        plain = _PLAIN_INT if node.tag == _INT_TAG else _PLAIN_FLOAT
+        if plain.fullmatch(text) or (node.tag == _FLOAT_TAG and _PLAIN_INT.fullmatch(text)):
+            return
+        try:
+            read = loader.construct_object(node)
+        except (yaml.YAMLError, ValueError):
+            read = None
+        shown = f"it would run as {read!r}" if read is not None else "it is no number"
+        raise RefusedYAMLError(
+            problem=(
+                f"{where}{text} is {_number_form(text)}, a YAML 1.1 form that YAML 1.2 "
+                f"reads otherwise ({shown}); write the number in plain decimal digits"
+            ),
+            problem_mark=node.start_mark,
+        )
+    if isinstance(node, yaml.SequenceNode):
+        for i, child in enumerate(node.value):
+            _refuse_yaml11_numbers(
+                child, loader, [*path[:-1], f"{path[-1]}[{i}]"] if path else [f"[{i}]"], seen
+            )
+    elif isinstance(node, yaml.MappingNode):
+        for key_node, value_node in node.value:
+            _refuse_yaml11_numbers(key_node, loader, path, seen)
+            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else "?"
+            _refuse_yaml11_numbers(value_node, loader, [*path, str(key)], seen)
 
 
 def _expanded_size(node: yaml.Node, memo: dict[int, int | None]) -> int:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
+from . import kernels
 from .lcd_distance import (
     b_max_rule,
     check_b_max,
@@ -296,6 +297,7 @@ def design_disturbances(
         If q < 1, K < 1, the method is unknown, the seed is not an integer in
         [0, 2**32 - 1] or b_max is not positive.
     """
+    kernels.warn_once_if_not_fixed("ssmobs.design_disturbances.design_disturbances")
     q = check_positive_int("q", q)
     K = check_positive_int("K", K)
     if method not in METHODS:

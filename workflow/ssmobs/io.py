@@ -38,7 +38,13 @@ class CorruptFileError(RuntimeError):
     """
 
     def __str__(self) -> str:
-        return f"{super().__str__()} -- delete this file and rerun to recompute it"
+        return f"{self.what} -- delete this file and rerun to recompute it"
+
+    @property
+    def what(self) -> str:
+        """The file and what is wrong with it, without the remedy: for a warning where the
+        file is recomputed at once."""
+        return super().__str__()
 
 
 _UMASK_LOCK = threading.Lock()
@@ -195,6 +201,63 @@ def checksum_problem(path: str | os.PathLike) -> str | None:
     return None
 
 
+#: where every workflow job records the checksums of its outputs (:func:`record_checksums`),
+#: one file ``<output path>.sha256`` per output, relative to the working directory
+CHECKSUM_STORE = Path("results") / "checksums"
+
+
+def checksum_record(path: str | os.PathLike, store: Path = CHECKSUM_STORE) -> Path:
+    """The file of ``store`` that holds the checksum of output ``path``: its path relative
+    to the working directory, or for a path outside it, a name made from its absolute path."""
+    absolute = os.path.abspath(path)
+    relative = os.path.relpath(absolute)
+    if relative == ".." or relative.startswith(".." + os.sep) or relative.startswith(str(store)):
+        relative = os.path.join("_outside", hashlib.sha256(absolute.encode()).hexdigest()[:32])
+    return store / f"{relative}.sha256"
+
+
+def record_checksums(paths: Iterable[str | os.PathLike], store: Path = CHECKSUM_STORE) -> None:
+    """Record the SHA-256 of every existing file of ``paths`` (a job's outputs, once they are
+    complete) in ``store``: ``<hash>  <path>`` as ``sha256sum`` writes it, so that damage
+    which keeps a file's time is found before a later job reads it (:func:`damaged_files`)."""
+    for path in paths:
+        if os.path.isfile(path):
+            record = checksum_record(path, store)
+            inside = record.relative_to(store).parts[0] != "_outside"
+            where = os.path.relpath(path) if inside else os.path.abspath(path)
+            write_text(record, f"{file_sha256(path)}  {where}\n")
+
+
+def damaged_files(store: Path = CHECKSUM_STORE) -> list[tuple[Path, str]]:
+    """Every file with a checksum record in ``store`` whose bytes no longer match it
+    (truncated, edited, damaged on disk; whatever its time), with why.  A recorded file that
+    no longer exists is no damage (Snakemake makes a missing output); a record that cannot
+    be read is ignored (its file is then unchecked, as one made before records existed)."""
+    found: list[tuple[Path, str]] = []
+    if not store.is_dir():
+        return found
+    for folder, _, names in os.walk(store):
+        for name in sorted(names):
+            if not name.endswith(".sha256"):
+                continue
+            try:
+                expected, _, where = (Path(folder) / name).read_text().rstrip("\n").partition("  ")
+            except (OSError, UnicodeDecodeError):
+                continue
+            path = Path(where)
+            if (
+                not where
+                or not path.is_file()
+                or checksum_record(path, store) != Path(folder) / name
+            ):
+                continue
+            size = path.stat().st_size
+            if file_sha256(path) != expected:
+                what = "is empty" if size == 0 else "does not match the checksum its job recorded"
+                found.append((path, f"{path} {what} (damaged or changed after it was written)"))
+    return sorted(found)
+
+
 def json_default(obj: Any) -> Any:
     """JSON form of NumPy scalars and arrays and of paths (for ``json.dumps(default=...)``)."""
     if isinstance(obj, np.generic):
@@ -223,6 +286,34 @@ def read_json(path: str | os.PathLike, required: Sequence[str] = ()) -> Any:
     missing = [k for k in required if not isinstance(obj, dict) or k not in obj]
     if missing:
         raise CorruptFileError(f"{path}: missing keys {missing}")
+    return obj
+
+
+#: the key of a checked JSON file (:func:`write_checked_json`) that holds its checksum
+CONTENT_CHECKSUM = "content_sha256"
+
+
+def _content_checksum(obj: dict[str, Any]) -> str:
+    text = json.dumps(obj, sort_keys=True, default=json_default, allow_nan=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def write_checked_json(path: str | os.PathLike, obj: dict[str, Any]) -> None:
+    """Write the mapping ``obj`` as JSON with the checksum of its content
+    (:data:`CONTENT_CHECKSUM`): a cache file that later jobs read (a point of the choice of
+    K, a cell of a map), so that an edit that keeps the file's time is found."""
+    plain = json.loads(json.dumps(obj, default=json_default, allow_nan=True))
+    write_json(path, {**plain, CONTENT_CHECKSUM: _content_checksum(plain)})
+
+
+def read_checked_json(path: str | os.PathLike, required: Sequence[str] = ()) -> dict[str, Any]:
+    """A mapping written by :func:`write_checked_json`, without its checksum;
+    CorruptFileError naming the file when it does not parse, lacks keys, or its checksum
+    is missing or does not match its content."""
+    obj = read_json(path, required=[*required, CONTENT_CHECKSUM])
+    expected = obj.pop(CONTENT_CHECKSUM)
+    if expected != _content_checksum(obj):
+        raise CorruptFileError(f"{path}: its checksum does not match (damaged or edited)")
     return obj
 
 

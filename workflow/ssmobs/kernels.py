@@ -192,6 +192,38 @@ def require() -> str:
     return f"kernels: BLAS {blas}; NumPy {state['numpy']} up to {top[0]}; {guarantee()}"
 
 
+class KernelsWarning(UserWarning):
+    """A direct call of the library computes with this machine's kernels, not the fixed ones."""
+
+
+#: whether :func:`warn_once_if_not_fixed` has looked in this process
+_LOOKED: list[bool] = []
+
+
+def warn_once_if_not_fixed(entry: str) -> None:
+    """Warn once per process (:class:`KernelsWarning`, one line) when a public entry point
+    of the library, ``entry``, is called in a process that does not compute with the fixed
+    kernels: a direct call in plain Python, where NumPy loaded before they could be set.
+    Its numbers may then differ in the last bits from the workflow's (whose every job
+    checks the kernels, :func:`require`), and so may the optimum a design set ends in."""
+    if _LOOKED:
+        return
+    _LOOKED.append(True)
+    found = problems()
+    if found:
+        import shlex
+        import warnings
+
+        settings = " ".join(f"{k}={shlex.quote(v)}" for k, v in environment().items())
+        warnings.warn(
+            f"{entry} computes with this machine's kernels ({'; '.join(found)}), not the "
+            f"workflow's fixed ones: its numbers may differ from the workflow's on another CPU; "
+            f"for the workflow's numbers start Python with {settings} (docs/reproducibility.md)",
+            KernelsWarning,
+            stacklevel=3,
+        )
+
+
 def guarantee() -> str:
     """What the fixed kernels guarantee on this CPU, in one phrase."""
     if covered():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import logging
 import sys
 import time
@@ -37,6 +38,7 @@ def setup(logfile: str | None = None, level: int = logging.INFO) -> logging.Logg
         logging.getLogger(noisy).setLevel(logging.WARNING)
 
     def _hook(exc_type: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
+        _FAILED.append(exc_type.__name__)
         logging.getLogger(LOGGER_NAME).error("uncaught exception", exc_info=(exc_type, exc, tb))
         sys.__excepthook__(exc_type, exc, tb)
 
@@ -57,12 +59,26 @@ class RuleJob(Protocol):
     def output(self) -> Iterable[str]: ...
 
 
+#: an uncaught exception ended this process (set by :func:`setup`'s hook)
+_FAILED: list[str] = []
+
+
+def _record_outputs(outputs: list[str]) -> None:
+    """At the end of a job that raised nothing: record its outputs' checksums."""
+    if not _FAILED:
+        io.record_checksums(outputs)
+
+
 def start_job(job: RuleJob) -> logging.Logger:
     """The first call of every rule script: log to the job's log file (which checks the fixed
     kernels, :func:`setup`), then delete the temporaries a killed earlier job left beside
-    its outputs (:func:`ssmobs.io.sweep_temporaries`); returns the package's logger."""
+    its outputs (:func:`ssmobs.io.sweep_temporaries`); returns the package's logger.  When
+    the script ends without an uncaught exception, the checksum of every output is recorded
+    (:func:`ssmobs.io.record_checksums`), so that a later run finds an output damaged or
+    edited after its job and makes it again instead of reading it."""
     logger = setup(job.log[0])
     io.sweep_temporaries(job.output)  # left by an interrupted earlier run
+    atexit.register(_record_outputs, [str(f) for f in job.output])
     return logger
 
 

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import README, ConfigError, read_config_file, short_list, validate
+from .models import ModelDefinitionError
 
 
 def load_config_file(path: str | os.PathLike) -> dict[str, Any]:
@@ -60,7 +61,7 @@ def check_config_file(path: str | os.PathLike, every_problem: bool = False) -> d
     config = load_config_file(path)
     try:
         return validate(config, every_problem=every_problem, config_file=str(path))
-    except ConfigError as err:
+    except (ConfigError, ModelDefinitionError) as err:  # a broken model module it uses
         raise ConfigError(f"config file {path}: {err}") from None
 
 

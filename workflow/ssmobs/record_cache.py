@@ -214,7 +214,7 @@ def load_record(
     try:
         rec = read_record(path)
     except io.CorruptFileError as err:
-        LOG.warning("recomputing: %s", err)
+        LOG.warning("recomputing: %s", err.what)
         return None
     if rec.get("record_version") != RECORD_VERSION:
         LOG.debug(

@@ -164,6 +164,42 @@ def _model_class(path: Path, module: ModuleType) -> type[StateSpaceModel]:
     return classes[0]
 
 
+def _discover(directory: Path) -> tuple[dict[str, StateSpaceModel], dict[str, list[str]]]:
+    """The models of ``directory`` that fulfil the contract, by slug, and the problems of
+    the others by the slug their file name gives them (see :func:`discover_models`)."""
+    problems: dict[str, list[str]] = {}
+    found: list[tuple[Path, type[StateSpaceModel]]] = []
+    for path in model_files(directory):
+        try:
+            module = _import(path, directory)
+            found.append((path, _model_class(path, module)))
+        except ModelDefinitionError as err:
+            problems.setdefault(path.stem, []).append(str(err))
+        except Exception as err:  # noqa: BLE001 - reported with the file it came from
+            why = " ".join(f"{type(err).__name__}: {err}".split())  # one line
+            problems.setdefault(path.stem, []).append(f"model module {path}: import failed: {why}")
+    by_slug: dict[str, list[tuple[Path, type[StateSpaceModel]]]] = {}
+    for path, cls in found:
+        by_slug.setdefault(getattr(cls, "slug", path.stem), []).append((path, cls))
+    for slug, owners in by_slug.items():
+        if len(owners) > 1:
+            where = " and ".join(f"{p.name} ({c.__name__})" for p, c in owners)
+            for p, _ in owners:
+                problems.setdefault(p.stem, []).append(
+                    f"slug {slug!r} is used twice: by {where}; each model needs its own "
+                    f"slug, equal to its file name"
+                )
+    for path, cls in found:
+        if len(by_slug[getattr(cls, "slug", path.stem)]) > 1:
+            continue
+        for msg in definition_problems(cls, path.stem):
+            problems.setdefault(path.stem, []).append(
+                f"model module {path} ({cls.__name__}): {msg}"
+            )
+    models = {cls.slug: cls() for path, cls in found if path.stem not in problems}
+    return models, problems
+
+
 def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
     """Import every model module of ``directory`` and return its models by slug.
 
@@ -171,50 +207,38 @@ def discover_models(directory: Path = MODELS_DIR) -> dict[str, StateSpaceModel]:
     file) when a module fails to import, does not define exactly one model class, breaks the
     contract of :func:`definition_problems`, or declares a slug that another module uses.
     """
-    problems: list[str] = []
-    found: list[tuple[Path, type[StateSpaceModel]]] = []
-    for path in model_files(directory):
-        try:
-            module = _import(path, directory)
-            found.append((path, _model_class(path, module)))
-        except ModelDefinitionError as err:
-            problems.append(str(err))
-        except Exception as err:  # noqa: BLE001 - reported with the file it came from
-            problems.append(f"model module {path}: import failed: {type(err).__name__}: {err}")
-    by_slug: dict[str, list[tuple[Path, type[StateSpaceModel]]]] = {}
-    for path, cls in found:
-        by_slug.setdefault(getattr(cls, "slug", path.stem), []).append((path, cls))
-    for slug, owners in by_slug.items():
-        if len(owners) > 1:
-            where = " and ".join(f"{p.name} ({c.__name__})" for p, c in owners)
-            problems.append(
-                f"slug {slug!r} is used twice: by {where}; each model needs its own "
-                f"slug, equal to its file name"
-            )
-    for path, cls in found:
-        if len(by_slug[getattr(cls, "slug", path.stem)]) > 1:
-            continue
-        for msg in definition_problems(cls, path.stem):
-            problems.append(f"model module {path} ({cls.__name__}): {msg}")
+    models, problems = _discover(directory)
     if problems:
-        raise ModelDefinitionError("invalid model definition(s):\n  - " + "\n  - ".join(problems))
-    return {cls.slug: cls() for _, cls in found}
+        listed = list(dict.fromkeys(m for msgs in problems.values() for m in msgs))
+        raise ModelDefinitionError("invalid model definition(s):\n  - " + "\n  - ".join(listed))
+    return models
 
 
 class _Registry(Mapping[str, StateSpaceModel]):
     """The models of :data:`MODELS_DIR` by slug, discovered on first use (so that importing
-    this package never fails; the first lookup raises :class:`ModelDefinitionError`)."""
+    this package never fails).  A module that breaks the contract (a syntax error, a missing
+    attribute) stops only its own lookup, with one line naming its file
+    (:class:`ModelDefinitionError`); the other models are found and listed as usual, so a
+    config that does not use it runs."""
 
     def __init__(self) -> None:
         self._models: dict[str, StateSpaceModel] | None = None
+        self._problems: dict[str, list[str]] = {}
 
     def _load(self) -> dict[str, StateSpaceModel]:
         if self._models is None:
-            self._models = discover_models()
+            self._models, self._problems = _discover(MODELS_DIR)
         return self._models
 
     def __getitem__(self, slug: str) -> StateSpaceModel:
-        return self._load()[slug]
+        models = self._load()
+        if slug in self._problems and slug not in models:
+            what = "; ".join(self._problems[slug])
+            raise ModelDefinitionError(
+                f"{what} (fix the module, or move it out of {MODELS_DIR}; configs that do "
+                f"not use model {slug!r} run)"
+            )
+        return models[slug]
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._load())

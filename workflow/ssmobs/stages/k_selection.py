@@ -49,7 +49,7 @@ def run_k_selection_point(
     _, _, info, _ = joint_map_of(traj, sc.prior, settings)
     # no scenario name: a point is keyed by what it computes, the grid names the scenario
     info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed)
-    io.write_json(out, info)
+    io.write_checked_json(out, info)
     return info
 
 
@@ -82,9 +82,9 @@ def run_k_selection_grid(
         with io.file_lock(Path(points_dir) / ".locks" / f"K{K}.lock"):
             if point.exists():
                 try:
-                    info = io.read_json(point, required=["K_i", "method", "seed"])
+                    info = io.read_checked_json(point, required=["K_i", "method", "seed"])
                 except io.CorruptFileError as err:
-                    logger.warning("recomputing: %s", err)
+                    logger.warning("recomputing: %s", err.what)
             if info is None:
                 s = set_seed(seed, K, sets)
                 path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"

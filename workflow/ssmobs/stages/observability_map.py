@@ -127,9 +127,9 @@ def _read_cell(path: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        return io.read_json(path, required=list(CELL_KEYS))
+        return io.read_checked_json(path, required=list(CELL_KEYS))
     except io.CorruptFileError as err:
-        logger.warning("recomputing: %s", err)
+        logger.warning("recomputing: %s", err.what)
         return None
 
 
@@ -161,7 +161,7 @@ def map_table(
             disturbances = (
                 Path(design_dir) / f"q{sc.disturbance_dim}_K{sc.K}_{sc.method}_seed{sc.seed}.nc"
             )
-            io.write_json(
+            io.write_checked_json(
                 path, cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
             )
             row = _read_cell(path)  # a fresh row as a cached one reads (JSON types)
