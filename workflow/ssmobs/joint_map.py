@@ -64,6 +64,23 @@ class JointMapResult:
     mu_start: np.ndarray | None = None
     ridge_value_change: np.ndarray | None = None
 
+    @classmethod
+    def unfilled(cls, K: int, theta_names: list[str], status: str, reason: str) -> JointMapResult:
+        """A result for K trajectories of ``len(theta_names)`` components, every value NaN
+        (iterations 0), every status and reason the given ones, to be filled row by row."""
+        n = len(theta_names)
+        return cls(
+            theta_hat=np.full((K, n), np.nan),
+            neg2_log_post=np.full(K, np.nan),
+            local_variance=np.full((K, n), np.nan),
+            eig_ratio=np.full(K, np.nan),
+            grad_max=np.full(K, np.nan),
+            iterations=np.zeros(K, dtype=np.int64),
+            status=np.full(K, status, dtype=object),
+            reason=np.full(K, reason, dtype=object),
+            theta_names=list(theta_names),
+        )
+
     @property
     def ok(self) -> np.ndarray:
         """(K,) True for k in K^max."""
@@ -212,19 +229,9 @@ def joint_map(
             f"constraints"
         )
     n = model.n_theta(T)
-    out = JointMapResult(
-        theta_hat=np.full((K, n), np.nan),
-        neg2_log_post=np.full(K, np.nan),
-        local_variance=np.full((K, n), np.nan),
-        eig_ratio=np.full(K, np.nan),
-        grad_max=np.full(K, np.nan),
-        iterations=np.zeros(K, dtype=np.int64),
-        status=np.full(K, "failed", dtype=object),
-        reason=np.full(K, "", dtype=object),
-        theta_names=model.theta_names(T),
-        mu_start=np.full(K, np.nan),
-        ridge_value_change=np.full(K, np.nan),
-    )
+    out = JointMapResult.unfilled(K, model.theta_names(T), "failed", "")
+    out.mu_start = np.full(K, np.nan)
+    out.ridge_value_change = np.full(K, np.nan)
     for sl in _chunks(K, n, settings):
         zc = z[sl]
         if theta_start is None:

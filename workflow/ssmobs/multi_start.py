@@ -308,18 +308,7 @@ def halton_start_rule(
 
 def _expand(result: JointMapResult, rows: np.ndarray, K: int) -> JointMapResult:
     """A result of the trajectories ``rows`` spread to all K (status ``not-run`` elsewhere)."""
-    n = result.theta_hat.shape[1]
-    out = JointMapResult(
-        theta_hat=np.full((K, n), np.nan),
-        neg2_log_post=np.full(K, np.nan),
-        local_variance=np.full((K, n), np.nan),
-        eig_ratio=np.full(K, np.nan),
-        grad_max=np.full(K, np.nan),
-        iterations=np.zeros(K, dtype=np.int64),
-        status=np.full(K, "not-run", dtype=object),
-        reason=np.full(K, "image start not run", dtype=object),
-        theta_names=result.theta_names,
-    )
+    out = JointMapResult.unfilled(K, result.theta_names, "not-run", "image start not run")
     for name in (
         "theta_hat",
         "neg2_log_post",
