@@ -1,15 +1,12 @@
 """The compiled LCD kernel (ssmobs.lcd_native, lcd_kernel/lcd_kernel.cpp) against the NumPy
 reference of ssmobs.lcd_distance: the same distance and gradient to ~1e-12, its own log, exp
-and expm1 against NumPy's, and bits that neither the optimiser nor the CPU kernels of NumPy
-and OpenBLAS nor their thread counts change."""
+and expm1 against NumPy's, and bits that the compiler's optimisation does not change (that
+NumPy's and OpenBLAS's kernels and thread counts do not: tests/workflow/
+test_same_bytes_on_any_kernels.py)."""
 
 from __future__ import annotations
 
 import hashlib
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +15,6 @@ from ssmobs import lcd_native
 from ssmobs.lcd_distance import _quadrature, b_max_rule, symmetric_distance
 
 pytestmark = pytest.mark.unit
-
-WORKFLOW = Path(lcd_native.__file__).resolve().parents[1]
 
 
 def _half(q: int, K: int, seed: int, zero_rows: int = 0) -> np.ndarray:
@@ -49,8 +44,8 @@ def test_compiled_matches_the_numpy_reference(q, K, b_max, zero_rows):
     b = b_max_rule(q) if b_max is None else b_max
     s = _half(q, K, seed=q * 1000 + K, zero_rows=min(zero_rows, K // 2))
     v_ref, g_ref = symmetric_distance(s, K, b, gradient=True, kernel="numpy")
-    v, g = symmetric_distance(s, K, b, gradient=True)
-    v_only, none = symmetric_distance(s, K, b, gradient=False)
+    v, g = symmetric_distance(s, K, b, gradient=True, kernel="compiled")
+    v_only, none = symmetric_distance(s, K, b, gradient=False, kernel="compiled")
     assert none is None and v_only == v
     # the value is a difference of terms of size ~|D1'|: its round-off is relative to them
     scale = max(abs(v_ref), abs(_quadrature(q, b, 80).d1p))
@@ -130,43 +125,18 @@ def test_same_bits_without_optimisation(tmp_path):
     assert _digest(lcd_native.load(path)) == _digest()
 
 
-CHILD = """
-import sys
-sys.path.insert(0, sys.argv[1])
-sys.path.insert(0, sys.argv[2])
-from test_lcd_native import _digest
-print(_digest())
-"""
+def test_auto_runs_the_compiled_kernel_up_to_its_dimension(monkeypatch):
+    from ssmobs import lcd_distance
 
-
-@pytest.mark.parametrize(
-    "env",
-    [
-        {"OPENBLAS_NUM_THREADS": "4", "OMP_NUM_THREADS": "4"},
-        {
-            "OPENBLAS_CORETYPE": "Haswell",
-            "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
-            "OPENBLAS_NUM_THREADS": "1",
-            "OMP_NUM_THREADS": "1",
-        },
-        {"OPENBLAS_CORETYPE": "Sandybridge", "OPENBLAS_NUM_THREADS": "2"},
-    ],
-    ids=["own-4-threads", "fixed-1-thread", "sandybridge-2-threads"],
-)
-def test_same_bits_under_any_numpy_and_blas_kernels(env):
-    base = {
-        k: v
-        for k, v in os.environ.items()
-        if k not in ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
-    }
-    out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(WORKFLOW), str(Path(__file__).parent)],
-        env={**base, **env},
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    assert out.stdout.strip() == _digest()
+    calls = []
+    monkeypatch.setattr(lcd_native, "symmetric_distance", lambda *a: calls.append(a) or (0.0, None))
+    q = lcd_distance.COMPILED_MAX_Q
+    symmetric_distance(_half(q, 4, 1), 4, 2.0, gradient=False)
+    assert len(calls) == 1
+    symmetric_distance(_half(q + 1, 4, 1), 4, 2.0, gradient=False)  # NumPy above
+    assert len(calls) == 1
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        symmetric_distance(_half(2, 4, 1), 4, 2.0, gradient=False, kernel="fast")
 
 
 def test_missing_compiler_is_one_clear_error(tmp_path, monkeypatch):

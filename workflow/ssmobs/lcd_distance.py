@@ -319,7 +319,12 @@ def lcd_distance(points: np.ndarray, b_max: float, *, n_nodes: int = N_NODES) ->
 
 
 #: the kernels of :func:`symmetric_distance`
-KERNELS: tuple[str, ...] = ("compiled", "numpy")
+KERNELS: tuple[str, ...] = ("auto", "compiled", "numpy")
+#: ``kernel="auto"`` runs the compiled kernel up to this dimension and NumPy above it: the
+#: compiled kernel's x86-64 baseline (SSE2, no FMA) loops over the coordinates lose to
+#: OpenBLAS's AVX2 products once they dominate (measured with K = 1000: 1.85x faster at
+#: q = 8, 1.3x at q = 40, 0.94x at q = 64, 0.82x at q = 100; BENCHMARKS.md)
+COMPILED_MAX_Q: int = 48
 
 
 def symmetric_distance(
@@ -329,16 +334,22 @@ def symmetric_distance(
     *,
     gradient: bool,
     n_nodes: int = N_NODES,
-    kernel: str = "compiled",
+    kernel: str = "auto",
 ) -> tuple[float, np.ndarray | None]:
     """Distance of the point-symmetric set of ``half`` (and its gradient w.r.t. ``half``
     with ``gradient=True``, else None), without checking the arguments
     (:func:`symmetric_distance_and_gradient` checks them).
 
-    ``kernel="compiled"`` (default): the fused C++ kernel of :mod:`ssmobs.lcd_native`, the
-    same bits on any x86-64 CPU (it raises :class:`ssmobs.lcd_native.LcdKernelUnavailable`
-    where it cannot be built); ``"numpy"``: the NumPy reference below, which agrees with it
-    to ~1e-12 relative (not in the last bits) and is kept for tests and benchmarks."""
+    ``kernel="compiled"``: the fused C++ kernel of :mod:`ssmobs.lcd_native`, the same bits
+    on any x86-64 CPU whatever NumPy's and OpenBLAS's kernels and threads (it raises
+    :class:`ssmobs.lcd_native.LcdKernelUnavailable` where it cannot be built);
+    ``"numpy"``: the NumPy reference below (block-wise, OpenBLAS products), which agrees
+    with it to ~1e-12 relative, not in the last bits, and whose bits follow the kernels
+    NumPy and OpenBLAS run (fixed by the workflow, :mod:`ssmobs.kernels`); ``"auto"``
+    (default): ``"compiled"`` for q <= :data:`COMPILED_MAX_Q`, else ``"numpy"`` (a choice
+    by q alone, never by the machine)."""
+    if kernel == "auto":
+        kernel = "compiled" if half.shape[1] <= COMPILED_MAX_Q else "numpy"
     if kernel == "compiled":
         from . import lcd_native
 

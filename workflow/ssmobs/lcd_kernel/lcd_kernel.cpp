@@ -30,7 +30,6 @@ const double EULER_GAMMA = 0.57721566490153286061;
 const double LN2_HEAD = 0x1.62e42fp-1;
 const double LN2_TAIL = 0x1.df473de6af279p-26;
 const double INV_LN2 = 0x1.71547652b82fep+0;
-const double SQRT2 = 0x1.6a09e667f3bcdp+0;
 const double HALF_LN2 = 0x1.62e42fefa39efp-2;
 // rounds a double of magnitude < 2^51 to the nearest integer (ties to even) when added and
 // subtracted again
@@ -61,38 +60,140 @@ double pow2(int k) {
     return from_bits(static_cast<std::uint64_t>(k + 1023 + 200) << 52) * 0x1p-200;
 }
 
-// Natural logarithm of a finite x > 0.  x = 2^e m with m in [sqrt(1/2), sqrt(2)); with
-// f = m - 1 (exact) and s = f / (2 + f), log m = 2 atanh s = 2 (s + s^3/3 + s^5/5 + ...),
-// |s| <= 0.1716, s^2 <= 0.0295: ten terms after s leave a relative remainder below 1e-18.
-// Written without branches (selects only), so that a compiler may run it on vector lanes.
+// Tables of ln: for t = 0..127 (the first 7 bits of the mantissa m in [1, 2)) a centre c_t
+// (1 + t/128 for t < 64, 1 + (t+1)/128 above), 1/c_t rounded, and ln c_t (t < 64) or
+// ln(c_t / 2) (t >= 64), correctly rounded (computed with 50 decimal digits).
+const double LOG_CENTRE[128] = {
+    0x1.0000000000000p+0, 0x1.0200000000000p+0, 0x1.0400000000000p+0, 0x1.0600000000000p+0,
+    0x1.0800000000000p+0, 0x1.0a00000000000p+0, 0x1.0c00000000000p+0, 0x1.0e00000000000p+0,
+    0x1.1000000000000p+0, 0x1.1200000000000p+0, 0x1.1400000000000p+0, 0x1.1600000000000p+0,
+    0x1.1800000000000p+0, 0x1.1a00000000000p+0, 0x1.1c00000000000p+0, 0x1.1e00000000000p+0,
+    0x1.2000000000000p+0, 0x1.2200000000000p+0, 0x1.2400000000000p+0, 0x1.2600000000000p+0,
+    0x1.2800000000000p+0, 0x1.2a00000000000p+0, 0x1.2c00000000000p+0, 0x1.2e00000000000p+0,
+    0x1.3000000000000p+0, 0x1.3200000000000p+0, 0x1.3400000000000p+0, 0x1.3600000000000p+0,
+    0x1.3800000000000p+0, 0x1.3a00000000000p+0, 0x1.3c00000000000p+0, 0x1.3e00000000000p+0,
+    0x1.4000000000000p+0, 0x1.4200000000000p+0, 0x1.4400000000000p+0, 0x1.4600000000000p+0,
+    0x1.4800000000000p+0, 0x1.4a00000000000p+0, 0x1.4c00000000000p+0, 0x1.4e00000000000p+0,
+    0x1.5000000000000p+0, 0x1.5200000000000p+0, 0x1.5400000000000p+0, 0x1.5600000000000p+0,
+    0x1.5800000000000p+0, 0x1.5a00000000000p+0, 0x1.5c00000000000p+0, 0x1.5e00000000000p+0,
+    0x1.6000000000000p+0, 0x1.6200000000000p+0, 0x1.6400000000000p+0, 0x1.6600000000000p+0,
+    0x1.6800000000000p+0, 0x1.6a00000000000p+0, 0x1.6c00000000000p+0, 0x1.6e00000000000p+0,
+    0x1.7000000000000p+0, 0x1.7200000000000p+0, 0x1.7400000000000p+0, 0x1.7600000000000p+0,
+    0x1.7800000000000p+0, 0x1.7a00000000000p+0, 0x1.7c00000000000p+0, 0x1.7e00000000000p+0,
+    0x1.8200000000000p+0, 0x1.8400000000000p+0, 0x1.8600000000000p+0, 0x1.8800000000000p+0,
+    0x1.8a00000000000p+0, 0x1.8c00000000000p+0, 0x1.8e00000000000p+0, 0x1.9000000000000p+0,
+    0x1.9200000000000p+0, 0x1.9400000000000p+0, 0x1.9600000000000p+0, 0x1.9800000000000p+0,
+    0x1.9a00000000000p+0, 0x1.9c00000000000p+0, 0x1.9e00000000000p+0, 0x1.a000000000000p+0,
+    0x1.a200000000000p+0, 0x1.a400000000000p+0, 0x1.a600000000000p+0, 0x1.a800000000000p+0,
+    0x1.aa00000000000p+0, 0x1.ac00000000000p+0, 0x1.ae00000000000p+0, 0x1.b000000000000p+0,
+    0x1.b200000000000p+0, 0x1.b400000000000p+0, 0x1.b600000000000p+0, 0x1.b800000000000p+0,
+    0x1.ba00000000000p+0, 0x1.bc00000000000p+0, 0x1.be00000000000p+0, 0x1.c000000000000p+0,
+    0x1.c200000000000p+0, 0x1.c400000000000p+0, 0x1.c600000000000p+0, 0x1.c800000000000p+0,
+    0x1.ca00000000000p+0, 0x1.cc00000000000p+0, 0x1.ce00000000000p+0, 0x1.d000000000000p+0,
+    0x1.d200000000000p+0, 0x1.d400000000000p+0, 0x1.d600000000000p+0, 0x1.d800000000000p+0,
+    0x1.da00000000000p+0, 0x1.dc00000000000p+0, 0x1.de00000000000p+0, 0x1.e000000000000p+0,
+    0x1.e200000000000p+0, 0x1.e400000000000p+0, 0x1.e600000000000p+0, 0x1.e800000000000p+0,
+    0x1.ea00000000000p+0, 0x1.ec00000000000p+0, 0x1.ee00000000000p+0, 0x1.f000000000000p+0,
+    0x1.f200000000000p+0, 0x1.f400000000000p+0, 0x1.f600000000000p+0, 0x1.f800000000000p+0,
+    0x1.fa00000000000p+0, 0x1.fc00000000000p+0, 0x1.fe00000000000p+0, 0x1.0000000000000p+1,
+};
+
+const double LOG_INVERSE[128] = {
+    0x1.0000000000000p+0, 0x1.fc07f01fc07f0p-1, 0x1.f81f81f81f820p-1, 0x1.f44659e4a4271p-1,
+    0x1.f07c1f07c1f08p-1, 0x1.ecc07b301ecc0p-1, 0x1.e9131abf0b767p-1, 0x1.e573ac901e574p-1,
+    0x1.e1e1e1e1e1e1ep-1, 0x1.de5d6e3f8868ap-1, 0x1.dae6076b981dbp-1, 0x1.d77b654b82c34p-1,
+    0x1.d41d41d41d41dp-1, 0x1.d0cb58f6ec074p-1, 0x1.cd85689039b0bp-1, 0x1.ca4b3055ee191p-1,
+    0x1.c71c71c71c71cp-1, 0x1.c3f8f01c3f8f0p-1, 0x1.c0e070381c0e0p-1, 0x1.bdd2b899406f7p-1,
+    0x1.bacf914c1bad0p-1, 0x1.b7d6c3dda338bp-1, 0x1.b4e81b4e81b4fp-1, 0x1.b2036406c80d9p-1,
+    0x1.af286bca1af28p-1, 0x1.ac5701ac5701bp-1, 0x1.a98ef606a63bep-1, 0x1.a6d01a6d01a6dp-1,
+    0x1.a41a41a41a41ap-1, 0x1.a16d3f97a4b02p-1, 0x1.9ec8e951033d9p-1, 0x1.9c2d14ee4a102p-1,
+    0x1.999999999999ap-1, 0x1.970e4f80cb872p-1, 0x1.948b0fcd6e9e0p-1, 0x1.920fb49d0e229p-1,
+    0x1.8f9c18f9c18fap-1, 0x1.8d3018d3018d3p-1, 0x1.8acb90f6bf3aap-1, 0x1.886e5f0abb04ap-1,
+    0x1.8618618618618p-1, 0x1.83c977ab2beddp-1, 0x1.8181818181818p-1, 0x1.7f405fd017f40p-1,
+    0x1.7d05f417d05f4p-1, 0x1.7ad2208e0ecc3p-1, 0x1.78a4c8178a4c8p-1, 0x1.767dce434a9b1p-1,
+    0x1.745d1745d1746p-1, 0x1.724287f46debcp-1, 0x1.702e05c0b8170p-1, 0x1.6e1f76b4337c7p-1,
+    0x1.6c16c16c16c17p-1, 0x1.6a13cd1537290p-1, 0x1.6816816816817p-1, 0x1.661ec6a5122f9p-1,
+    0x1.642c8590b2164p-1, 0x1.623fa77016240p-1, 0x1.6058160581606p-1, 0x1.5e75bb8d015e7p-1,
+    0x1.5c9882b931057p-1, 0x1.5ac056b015ac0p-1, 0x1.58ed2308158edp-1, 0x1.571ed3c506b3ap-1,
+    0x1.5390948f40febp-1, 0x1.51d07eae2f815p-1, 0x1.5015015015015p-1, 0x1.4e5e0a72f0539p-1,
+    0x1.4cab88725af6ep-1, 0x1.4afd6a052bf5bp-1, 0x1.49539e3b2d067p-1, 0x1.47ae147ae147bp-1,
+    0x1.460cbc7f5cf9ap-1, 0x1.446f86562d9fbp-1, 0x1.42d6625d51f87p-1, 0x1.4141414141414p-1,
+    0x1.3fb013fb013fbp-1, 0x1.3e22cbce4a902p-1, 0x1.3c995a47babe7p-1, 0x1.3b13b13b13b14p-1,
+    0x1.3991c2c187f63p-1, 0x1.3813813813814p-1, 0x1.3698df3de0748p-1, 0x1.3521cfb2b78c1p-1,
+    0x1.33ae45b57bcb2p-1, 0x1.323e34a2b10bfp-1, 0x1.30d190130d190p-1, 0x1.2f684bda12f68p-1,
+    0x1.2e025c04b8097p-1, 0x1.2c9fb4d812ca0p-1, 0x1.2b404ad012b40p-1, 0x1.29e4129e4129ep-1,
+    0x1.288b01288b013p-1, 0x1.27350b8812735p-1, 0x1.25e22708092f1p-1, 0x1.2492492492492p-1,
+    0x1.23456789abcdfp-1, 0x1.21fb78121fb78p-1, 0x1.20b470c67c0d9p-1, 0x1.1f7047dc11f70p-1,
+    0x1.1e2ef3b3fb874p-1, 0x1.1cf06ada2811dp-1, 0x1.1bb4a4046ed29p-1, 0x1.1a7b9611a7b96p-1,
+    0x1.19453808ca29cp-1, 0x1.1811811811812p-1, 0x1.16e0689427379p-1, 0x1.15b1e5f75270dp-1,
+    0x1.1485f0e0acd3bp-1, 0x1.135c81135c811p-1, 0x1.12358e75d3033p-1, 0x1.1111111111111p-1,
+    0x1.0fef010fef011p-1, 0x1.0ecf56be69c90p-1, 0x1.0db20a88f4696p-1, 0x1.0c9714fbcda3bp-1,
+    0x1.0b7e6ec259dc8p-1, 0x1.0a6810a6810a7p-1, 0x1.0953f39010954p-1, 0x1.0842108421084p-1,
+    0x1.073260a47f7c6p-1, 0x1.0624dd2f1a9fcp-1, 0x1.05197f7d73404p-1, 0x1.0410410410410p-1,
+    0x1.03091b51f5e1ap-1, 0x1.0204081020408p-1, 0x1.0101010101010p-1, 0x1.0000000000000p-1,
+};
+
+const double LOG_TABLE[128] = {
+    0x0.0p+0, 0x1.fe02a6b106789p-8, 0x1.fc0a8b0fc03e4p-7, 0x1.7b91b07d5b11bp-6,
+    0x1.f829b0e783300p-6, 0x1.39e87b9febd60p-5, 0x1.77458f632dcfcp-5, 0x1.b42dd711971bfp-5,
+    0x1.f0a30c01162a6p-5, 0x1.16536eea37ae1p-4, 0x1.341d7961bd1d1p-4, 0x1.51b073f06183fp-4,
+    0x1.6f0d28ae56b4cp-4, 0x1.8c345d6319b21p-4, 0x1.a926d3a4ad563p-4, 0x1.c5e548f5bc743p-4,
+    0x1.e27076e2af2e6p-4, 0x1.fec9131dbeabbp-4, 0x1.0d77e7cd08e59p-3, 0x1.1b72ad52f67a0p-3,
+    0x1.29552f81ff523p-3, 0x1.371fc201e8f74p-3, 0x1.44d2b6ccb7d1ep-3, 0x1.526e5e3a1b438p-3,
+    0x1.5ff3070a793d4p-3, 0x1.6d60fe719d21dp-3, 0x1.7ab890210d909p-3, 0x1.87fa06520c911p-3,
+    0x1.9525a9cf456b4p-3, 0x1.a23bc1fe2b563p-3, 0x1.af3c94e80bff3p-3, 0x1.bc286742d8cd6p-3,
+    0x1.c8ff7c79a9a22p-3, 0x1.d5c216b4fbb91p-3, 0x1.e27076e2af2e6p-3, 0x1.ef0adcbdc5936p-3,
+    0x1.fb9186d5e3e2bp-3, 0x1.0402594b4d041p-2, 0x1.0a324e27390e3p-2, 0x1.1058bf9ae4ad5p-2,
+    0x1.1675cababa60ep-2, 0x1.1c898c16999fbp-2, 0x1.22941fbcf7966p-2, 0x1.2895a13de86a3p-2,
+    0x1.2e8e2bae11d31p-2, 0x1.347dd9a987d55p-2, 0x1.3a64c556945eap-2, 0x1.404308686a7e4p-2,
+    0x1.4618bc21c5ec2p-2, 0x1.4be5f957778a1p-2, 0x1.51aad872df82dp-2, 0x1.5767717455a6cp-2,
+    0x1.5d1bdbf5809cap-2, 0x1.62c82f2b9c795p-2, 0x1.686c81e9b14afp-2, 0x1.6e08eaa2ba1e4p-2,
+    0x1.739d7f6bbd007p-2, 0x1.792a55fdd47a2p-2, 0x1.7eaf83b82afc3p-2, 0x1.842d1da1e8b17p-2,
+    0x1.89a3386c1425bp-2, 0x1.8f11e873662c7p-2, 0x1.947941c2116fbp-2, 0x1.99d958117e08bp-2,
+    -0x1.214456d0eb8d4p-2, -0x1.1bf99635a6b95p-2, -0x1.16b5ccbacfb73p-2, -0x1.1178e8227e47cp-2,
+    -0x1.0c42d676162e3p-2, -0x1.07138604d5862p-2, -0x1.01eae5626c691p-2, -0x1.f991c6cb3b379p-3,
+    -0x1.ef5ade4dcffe6p-3, -0x1.e530effe71012p-3, -0x1.db13db0d48940p-3, -0x1.d1037f2655e7bp-3,
+    -0x1.c6ffbc6f00f71p-3, -0x1.bd087383bd8adp-3, -0x1.b31d8575bce3dp-3, -0x1.a93ed3c8ad9e3p-3,
+    -0x1.9f6c407089664p-3, -0x1.95a5adcf7017fp-3, -0x1.8beafeb38fe8cp-3, -0x1.823c16551a3c2p-3,
+    -0x1.7898d85444c73p-3, -0x1.6f0128b756abcp-3, -0x1.6574ebe8c133ap-3, -0x1.5bf406b543db2p-3,
+    -0x1.527e5e4a1b58dp-3, -0x1.4913d8333b561p-3, -0x1.3fb45a59928ccp-3, -0x1.365fcb0159016p-3,
+    -0x1.2d1610c86813ap-3, -0x1.23d712a49c202p-3, -0x1.1aa2b7e23f72ap-3, -0x1.1178e8227e47cp-3,
+    -0x1.08598b59e3a07p-3, -0x1.fe89139dbd566p-4, -0x1.ec739830a1120p-4, -0x1.da727638446a2p-4,
+    -0x1.c885801bc4b23p-4, -0x1.b6ac88dad5b1cp-4, -0x1.a4e7640b1bc38p-4, -0x1.9335e5d594989p-4,
+    -0x1.8197e2f40e3f0p-4, -0x1.700d30aeac0e1p-4, -0x1.5e95a4d9791cbp-4, -0x1.4d3115d207eacp-4,
+    -0x1.3bdf5a7d1ee64p-4, -0x1.2aa04a44717a5p-4, -0x1.1973bd1465567p-4, -0x1.08598b59e3a07p-4,
+    -0x1.eea31c006b87cp-5, -0x1.ccb73cdddb2ccp-5, -0x1.aaef2d0fb10fcp-5, -0x1.894aa149fb343p-5,
+    -0x1.67c94f2d4bb58p-5, -0x1.466aed42de3eap-5, -0x1.252f32f8d183fp-5, -0x1.0415d89e74444p-5,
+    -0x1.c63d2ec14aaf2p-6, -0x1.8492528c8cabfp-6, -0x1.432a925980cc1p-6, -0x1.0205658935847p-6,
+    -0x1.82448a388a2aap-7, -0x1.010157588de71p-7, -0x1.0080559588b35p-8, 0x0.0p+0,
+};
+
+// Natural logarithm of a finite x > 0: x = 2^e m, m in [1, 2), t = the first 7 bits of m;
+// r = (m - c_t) / c_t with m - c_t exact and |r| < 1/128, and
+// ln x = e ln 2 + ln c_t + ln(1 + r)  (t < 64),  (e + 1) ln 2 + ln(c_t / 2) + ln(1 + r)
+// (t >= 64: then x just below a power of 2 has a small result without cancellation).
+// ln(1 + r) by its Taylor polynomial to r^8 (remainder below 2e-18 r).  No division and no
+// branch (selects only), so that a compiler may run it on vector lanes.
 inline double ln(double x) {
     const bool sub = x < 0x1p-1022;  // subnormal: scale into the normal range first
     const double scaled = x * 0x1p54;
     x = sub ? scaled : x;
     const std::uint64_t b = to_bits(x);
+    const std::uint64_t t = (b >> 45) & 127;
     // the biased exponent as a double, exactly: 2^52 + field - 2^52
     const double field = from_bits((b >> 52) | 0x4330000000000000ULL) - 0x1p52;
-    double m = from_bits((b & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL);
-    const bool big = m > SQRT2;
-    const double halved = m * 0.5;
-    m = big ? halved : m;
-    const double e = (field - 1023.0) + ((sub ? -54.0 : 0.0) + (big ? 1.0 : 0.0));
-    const double f = m - 1.0;
-    const double s = f / (2.0 + f);
-    const double z = s * s;
-    double p = 1.0 / 21.0;
-    p = p * z + 1.0 / 19.0;
-    p = p * z + 1.0 / 17.0;
-    p = p * z + 1.0 / 15.0;
-    p = p * z + 1.0 / 13.0;
-    p = p * z + 1.0 / 11.0;
-    p = p * z + 1.0 / 9.0;
-    p = p * z + 1.0 / 7.0;
-    p = p * z + 1.0 / 5.0;
-    p = p * z + 1.0 / 3.0;
-    const double two_s = s + s;
-    const double log_m = two_s + two_s * (z * p);
-    return e * LN2_HEAD + (log_m + e * LN2_TAIL);
+    const double m = from_bits((b & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL);
+    const double e = (field - 1023.0) + ((sub ? -54.0 : 0.0) + (t >= 64 ? 1.0 : 0.0));
+    const double r = (m - LOG_CENTRE[t]) * LOG_INVERSE[t];
+    double p = -1.0 / 8.0;
+    p = p * r + 1.0 / 7.0;
+    p = p * r - 1.0 / 6.0;
+    p = p * r + 1.0 / 5.0;
+    p = p * r - 1.0 / 4.0;
+    p = p * r + 1.0 / 3.0;
+    p = p * r - 0.5;
+    const double log1p_r = r + (r * r) * p;
+    return e * LN2_HEAD + (LOG_TABLE[t] + (log1p_r + e * LN2_TAIL));
 }
 
 // exp(r) - 1 for |r| <= ln(2)/2 by its Taylor polynomial (degree 14: remainder < 1e-18 r)
