@@ -16,6 +16,11 @@ occurs in practice (:math:`c = T/4B^2 \\le 1`, doc Section 7 item 1) :math:`E_1`
 its convergent power series (``-gamma - ln c + sum (-1)^{k+1} c^k / (k k!)``), which is about
 5x faster than ``scipy.special.exp1`` and agrees with it to ~1e-15 relative; larger arguments fall
 back to ``scipy.special.exp1``.
+
+Kernels.  :func:`symmetric_distance` (what the optimiser calls) runs this NumPy code as the
+reference and, up to q = :data:`COMPILED_MAX_Q`, the fused compiled kernel of
+:mod:`ssmobs.lcd_native` (doc Section 6.6); the quadrature rule of both is computed in decimal
+arithmetic, the same bits everywhere.
 """
 
 from __future__ import annotations
