@@ -151,3 +151,61 @@ def test_the_kernel_source_and_flags_key_the_design_sets():
     code = code_digest("design")
     assert "lcd_kernel/lcd_kernel.cpp" in code and "lcd_native.py" in code
     assert lcd_native.build_key() != lcd_native.build_key(lcd_native.CXXFLAGS + ("-g",))
+    # each build its own cache entry; both flag sets sit in lcd_native.py, part of the key
+    keys = {lcd_native.build_key(flags) for flags in lcd_native.BUILDS.values()}
+    assert len(keys) == len(lcd_native.BUILDS) == 2
+
+
+def _bytes_of(lib, q: int, K: int, b: float, seed: int, zero_rows: int) -> bytes:
+    s = _half(q, K, seed, zero_rows=min(zero_rows, K // 2))
+    quad = _quadrature(q, b, 80)
+    rule = (quad.lam, quad.sig, quad.alpha, quad.beta, quad.d1p, quad.j0p)
+    v, g = lcd_native.symmetric_distance(s, K, b, rule, True, lib=lib)
+    v_only, _ = lcd_native.symmetric_distance(s, K, b, rule, False, lib=lib)
+    return np.float64(v).tobytes() + g.tobytes() + np.float64(v_only).tobytes()
+
+
+@pytest.mark.skipif(not lcd_native.has_avx2(), reason="this CPU has no AVX2: one build only")
+def test_the_avx2_build_gives_the_bits_of_the_baseline_build():
+    """The two builds (x86-64: SSE2, two lanes; -mavx2: four lanes, no FMA) on random sets,
+    q = 1..48, odd and even K, widths with arguments above 1 (continued fraction) and
+    points at the origin: the same bytes of value and gradient, and of log, exp, expm1,
+    E1 and psi on arguments over the whole range."""
+    base = lcd_native.kernel_of("x86-64")
+    avx2 = lcd_native.kernel_of("x86-64-avx2")
+    assert lcd_native.BUILDS["x86-64-avx2"] != lcd_native.BUILDS["x86-64"]
+    assert not any("fma" in f or "march" in f for f in lcd_native.BUILDS["x86-64-avx2"])
+    rng = np.random.default_rng(48)
+    cases = 0
+    for q in range(1, 49):
+        K = int(rng.integers(2, 90)) if q > 8 else int(rng.integers(2, 300))
+        b = b_max_rule(q) * float(rng.choice([1.0, 0.3, 0.05]))  # small widths: c > 1
+        zero_rows = int(rng.integers(0, 3))
+        got = _bytes_of(avx2, q, K, b, seed=q, zero_rows=zero_rows)
+        assert got == _bytes_of(base, q, K, b, seed=q, zero_rows=zero_rows), (q, K, b)
+        cases += 1
+    for q, K, b in [(8, 1000, b_max_rule(8)), (8, 999, 2.0), (40, 301, 0.7), (48, 257, None)]:
+        bb = b_max_rule(q) if b is None else b
+        assert _bytes_of(avx2, q, K, bb, 1, 0) == _bytes_of(base, q, K, bb, 1, 0), (q, K)
+        cases += 1
+    assert cases == 52
+    x = np.concatenate([np.exp(rng.uniform(-745, 709, 4000)), [5e-324, 1e-310, 1.0, 2.0]])
+    for name, arg in [("log", x), ("exp", rng.uniform(-760, 720, 4000)),
+                      ("expm1", rng.uniform(-40, 40, 4000))]:  # fmt: skip
+        a = lcd_native.elementwise(arg, name, lib=avx2)
+        assert a.tobytes() == lcd_native.elementwise(arg, name, lib=base).tobytes(), name
+    c = np.concatenate([rng.uniform(0, 2, 4000), rng.exponential(20, 1000), [0.0, 1.0]])
+    e_a, p_a = lcd_native.e1_psi(c, lib=avx2)
+    e_b, p_b = lcd_native.e1_psi(c, lib=base)
+    assert e_a.tobytes() == e_b.tobytes() and p_a.tobytes() == p_b.tobytes()
+
+
+def test_the_build_follows_the_cpu_unless_forced(monkeypatch):
+    monkeypatch.delenv(lcd_native.BUILD_ENV, raising=False)
+    auto = "x86-64-avx2" if lcd_native.has_avx2() else "x86-64"
+    assert lcd_native.chosen_build() == auto
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "x86-64")
+    assert lcd_native.chosen_build() == "x86-64"
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "avx512")
+    with pytest.raises(ValueError, match="SSMOBS_LCD_BUILD must be auto or one of"):
+        lcd_native.chosen_build()

@@ -139,19 +139,25 @@ def test_the_compiled_lcd_kernel_gives_the_same_bytes_under_any_kernels_and_thre
     """The design sets' distance and gradient up to q = COMPILED_MAX_Q (the compiled kernel,
     with its own log/exp and its quadrature rule in decimal arithmetic): the same bytes with
     this machine's own NumPy and OpenBLAS kernels and 4 threads, the fixed ones and 1
-    thread, and another OpenBLAS kernel with 2 threads.  Not skipped where the kernels give
-    the same bits anyway: the kernel must not depend on them in any case.  (The workflow
-    run above makes its q = 40 design set with this kernel.)"""
+    thread, and another OpenBLAS kernel with 2 threads; each with the build the kernel
+    picks for this CPU (the AVX2 build where there is AVX2) and, forced, the x86-64 baseline
+    build.  Not skipped where the kernels give the same bits anyway: the kernel must not
+    depend on them in any case.  (The workflow run above makes its q = 40 design set with
+    this kernel, in the build it picks.)"""
+    from ssmobs import lcd_native
     from ssmobs.lcd_distance import COMPILED_MAX_Q
 
     assert COMPILED_MAX_Q >= 40  # the set of the run above goes through the compiled kernel
     other = {"OPENBLAS_CORETYPE": "Sandybridge", "OPENBLAS_NUM_THREADS": "2"}
+    baseline = {lcd_native.BUILD_ENV: "x86-64"}
     digests = {
         name: probe(env, LCD_KERNEL)
         for name, env in [
-            ("own, 4 threads", environment(OWN, UNSET_FOR_OWN)),
-            ("fixed, 1 thread", environment(FIXED)),
+            ("own, 4 threads", environment(OWN, UNSET_FOR_OWN + (lcd_native.BUILD_ENV,))),
+            ("fixed, 1 thread", environment(FIXED, (lcd_native.BUILD_ENV,))),
             ("Sandybridge, 2 threads", environment(other, UNSET_FOR_OWN)),
+            ("own, 4 threads, x86-64 build", environment({**OWN, **baseline}, UNSET_FOR_OWN)),
+            ("fixed, 1 thread, x86-64 build", environment({**FIXED, **baseline})),
         ]
     }
     assert len(set(digests.values())) == 1, digests

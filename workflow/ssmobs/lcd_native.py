@@ -10,6 +10,18 @@ OpenBLAS's kernels and thread counts, and whichever compiler built it (IEEE 754 
 in the order the source writes).  Its source and :data:`CXXFLAGS` are part of the design
 sets' cache key (:mod:`ssmobs.cache_keys`).
 
+Two builds of the one source (:data:`BUILDS`): ``x86-64`` (the baseline, SSE2: two lanes)
+and ``x86-64-avx2`` (the same flags and ``-mavx2``: four lanes, still without FMA, so no
+``a*b+c`` is contracted).  :func:`kernel` loads the AVX2 build on a CPU with AVX2 (every
+CPU of the workflow's same-bytes guarantee, :mod:`ssmobs.kernels`) and the baseline
+elsewhere; ``SSMOBS_LCD_BUILD`` (``auto``, ``x86-64`` or ``x86-64-avx2``) forces one, for
+the tests and the benchmark.  Both give the same bits: the source fixes the order of every
+sum (the compiler may not reorder floating-point sums without fast-math), and every
+vectorised loop runs element-wise IEEE operations (+, -, *, /, compares and selects, bit
+operations on the doubles' bits), which are correctly rounded on two lanes as on four; a
+test (``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient of both
+builds on random sets, and the kernels test runs the build :func:`kernel` picks.
+
 Building: ``$CXX`` (default ``g++``, which the Stan driver needs anyway) compiles the
 source once into ``<cache>/lcd/kernel-<key>/liblcd.so`` (the cache of the compiled Stan
 programs, :func:`cache_root`), ``<key>`` a hash of the source
@@ -27,11 +39,12 @@ import hashlib
 import json
 import logging
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
 import time
-from functools import lru_cache
+from functools import cache, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -40,9 +53,11 @@ from . import io
 
 __all__ = [
     "CXXFLAGS",
+    "BUILDS",
     "SOURCE",
     "LcdKernelUnavailable",
     "build_key",
+    "chosen_build",
     "kernel",
     "symmetric_distance",
 ]
@@ -63,6 +78,13 @@ CXXFLAGS: tuple[str, ...] = (
     "-fPIC",
     "-shared",
 )
+#: the builds of the kernel: name -> flags (see the module docstring); AVX2 without FMA
+BUILDS: dict[str, tuple[str, ...]] = {
+    "x86-64": CXXFLAGS,
+    "x86-64-avx2": (*CXXFLAGS, "-mavx2"),
+}
+#: the environment variable that forces a build (``auto``: by the CPU)
+BUILD_ENV = "SSMOBS_LCD_BUILD"
 #: the shared library's name in a cache entry
 LIB_NAME = "liblcd.so"
 #: the record every finished entry holds (written last, before the rename)
@@ -137,17 +159,17 @@ def cache_root() -> Path:
     return Path(base) / "ssmobs"
 
 
-def _publish(entry: Path) -> None:
-    """Build into a temporary sibling of ``entry`` and rename it into place (the caller
-    holds the lock)."""
+def _publish(entry: Path, flags: tuple[str, ...]) -> None:
+    """Build with ``flags`` into a temporary sibling of ``entry`` and rename it into place
+    (the caller holds the lock)."""
     work = Path(tempfile.mkdtemp(prefix=f".{entry.name}.tmp-", dir=entry.parent))
     try:
         t0 = time.perf_counter()
-        _, cmd = build(work)
+        _, cmd = build(work, flags)
         version = subprocess.run([compiler(), "--version"], capture_output=True, text=True)
         record = {
-            "key": build_key(),
-            "flags": list(CXXFLAGS),
+            "key": build_key(flags),
+            "flags": list(flags),
             "command": cmd,
             "compiler_version": (version.stdout.splitlines() or [""])[0],
         }
@@ -170,17 +192,56 @@ def _umask() -> int:
 
 
 @lru_cache(maxsize=1)
+def has_avx2() -> bool:
+    """Whether this CPU runs AVX2: x86-64 with the ``avx2`` flag in ``/proc/cpuinfo`` (read
+    here, not with :func:`ssmobs.kernels.cpu_flags`: the design sets' key would then follow
+    every edit of that module; the build does not change a result)."""
+    if platform.machine() not in ("x86_64", "AMD64"):
+        return False
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            return "avx2" in line.split(":", 1)[-1].split()
+    return False
+
+
+def chosen_build() -> str:
+    """The build :func:`kernel` loads: ``$SSMOBS_LCD_BUILD`` unless ``auto`` (or unset), else
+    ``x86-64-avx2`` on a CPU with AVX2 and ``x86-64`` elsewhere.  ValueError (one line) for
+    an unknown name or the AVX2 build forced on a CPU without AVX2."""
+    name = os.environ.get(BUILD_ENV, "auto") or "auto"
+    if name == "auto":
+        return "x86-64-avx2" if has_avx2() else "x86-64"
+    if name not in BUILDS:
+        raise ValueError(f"{BUILD_ENV} must be auto or one of {sorted(BUILDS)}; got {name!r}")
+    if name == "x86-64-avx2" and not has_avx2():
+        raise ValueError(f"{BUILD_ENV}={name}: this CPU has no AVX2")
+    return name
+
+
 def kernel() -> ctypes.CDLL:
-    """The compiled kernel, built into the cache on first use (see the module docstring):
-    ``<cache>/lcd/kernel-<key>/``, under an exclusive lock, published by a rename."""
-    entry = cache_root() / "lcd" / f"kernel-{build_key()}"
+    """The compiled kernel of :func:`chosen_build`, built into the cache on first use (see
+    the module docstring)."""
+    return kernel_of(chosen_build())
+
+
+@cache
+def kernel_of(name: str) -> ctypes.CDLL:
+    """The build ``name`` of :data:`BUILDS`, built into the cache on first use:
+    ``<cache>/lcd/kernel-<key>/`` (``<key>``: source and that build's flags), under an
+    exclusive lock, published by a rename."""
+    flags = BUILDS[name]
+    entry = cache_root() / "lcd" / f"kernel-{build_key(flags)}"
     done = (entry / LIB_NAME).is_file() and (entry / BUILD_RECORD).is_file()
     if not done:
         try:
             entry.parent.mkdir(parents=True, exist_ok=True)
             with io.file_lock(entry.parent / f".{entry.name}.lock"):
                 if not ((entry / LIB_NAME).is_file() and (entry / BUILD_RECORD).is_file()):
-                    _publish(entry)
+                    _publish(entry, flags)
         except OSError as err:
             raise LcdKernelUnavailable(
                 f"cannot write the LCD design kernel into the cache {entry.parent} ({err}); "
