@@ -11,16 +11,17 @@ in the order the source writes).  Its source and :data:`CXXFLAGS` are part of th
 sets' cache key (:mod:`ssmobs.cache_keys`).
 
 Two builds of the one source (:data:`BUILDS`): ``x86-64`` (the baseline, SSE2: two lanes)
-and ``x86-64-avx2`` (the same flags and ``-mavx2``: four lanes, still without FMA, so no
-``a*b+c`` is contracted).  :func:`kernel` loads the AVX2 build on a CPU with AVX2 (every
-CPU of the workflow's same-bytes guarantee, :mod:`ssmobs.kernels`) and the baseline
-elsewhere; ``SSMOBS_LCD_BUILD`` (``auto``, ``x86-64`` or ``x86-64-avx2``) forces one, for
-the tests and the benchmark.  Both give the same bits: the source fixes the order of every
-sum (the compiler may not reorder floating-point sums without fast-math), and every
-vectorised loop runs element-wise IEEE operations (+, -, *, /, compares and selects, bit
-operations on the doubles' bits), which are correctly rounded on two lanes as on four; a
-test (``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient of both
-builds on random sets, and the kernels test runs the build :func:`kernel` picks.
+and ``x86-64-avx2`` (the same flags and ``-mavx2 -mtune=haswell``: four lanes, table
+lookups by gathers, still without FMA, so no ``a*b+c`` is contracted).  :func:`kernel`
+loads the AVX2 build on a CPU with AVX2 (every CPU of the workflow's same-bytes guarantee,
+:mod:`ssmobs.kernels`) and the baseline elsewhere; ``SSMOBS_LCD_BUILD`` (``auto``,
+``x86-64`` or ``x86-64-avx2``) forces one, for the tests and the benchmark.  Both give the
+same bits: the source fixes the order of every sum (the compiler may not reorder
+floating-point sums without fast-math), and every vectorised loop runs element-wise IEEE
+operations (+, -, *, /, compares and selects, bit operations on the doubles' bits, loads),
+which are correctly rounded on two lanes as on four; a test
+(``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient of both builds
+on random sets, and the kernels test runs the build :func:`kernel` picks and the baseline.
 
 Building: ``$CXX`` (default ``g++``, which the Stan driver needs anyway) compiles the
 source once into ``<cache>/lcd/kernel-<key>/liblcd.so`` (the cache of the compiled Stan
@@ -78,10 +79,12 @@ CXXFLAGS: tuple[str, ...] = (
     "-fPIC",
     "-shared",
 )
-#: the builds of the kernel: name -> flags (see the module docstring); AVX2 without FMA
+#: the builds of the kernel: name -> flags (see the module docstring); AVX2 without FMA,
+#: tuned (instruction choice only, not what is computed) for Haswell, the first CPU with
+#: AVX2, so that the compiler loads the logarithm's table entries with gathers
 BUILDS: dict[str, tuple[str, ...]] = {
     "x86-64": CXXFLAGS,
-    "x86-64-avx2": (*CXXFLAGS, "-mavx2"),
+    "x86-64-avx2": (*CXXFLAGS, "-mavx2", "-mtune=haswell"),
 }
 #: the environment variable that forces a build (``auto``: by the CPU)
 BUILD_ENV = "SSMOBS_LCD_BUILD"

@@ -14,8 +14,9 @@
 //   the C library's nor NumPy's, whose last bits differ between versions and CPU kernels;
 // - one thread.
 // A vectorising compiler may run the element-wise loops on several lanes at once: each lane
-// does the same IEEE operations in the same order, so the bits do not change (the test
-// builds the kernel also without optimisation and compares the bits).
+// does the same IEEE operations in the same order, so the bits do not change (the tests
+// build the kernel also without optimisation, and ssmobs/lcd_native.py builds it twice, for
+// the x86-64 baseline and with -mavx2, and the tests compare the bits of all three).
 
 #include <cstddef>
 #include <cstdint>
@@ -39,6 +40,8 @@ const double SERIES_MAX = 1.0;
 const int MAX_TERMS = 30;
 // rows (and columns) of one tile of the pair grid
 const std::ptrdiff_t TILE = 32;
+// partial maxima of a row's arguments (2 * TILE is a multiple of it)
+const int MAX_LANES = 4;
 
 double from_bits(std::uint64_t b) {
     double x;
@@ -60,44 +63,10 @@ double pow2(int k) {
     return from_bits(static_cast<std::uint64_t>(k + 1023 + 200) << 52) * 0x1p-200;
 }
 
-// Tables of ln: for t = 0..127 (the first 7 bits of the mantissa m in [1, 2)) a centre c_t
-// (1 + t/128 for t < 64, 1 + (t+1)/128 above), 1/c_t rounded, and ln c_t (t < 64) or
-// ln(c_t / 2) (t >= 64), correctly rounded (computed with 50 decimal digits).
-const double LOG_CENTRE[128] = {
-    0x1.0000000000000p+0, 0x1.0200000000000p+0, 0x1.0400000000000p+0, 0x1.0600000000000p+0,
-    0x1.0800000000000p+0, 0x1.0a00000000000p+0, 0x1.0c00000000000p+0, 0x1.0e00000000000p+0,
-    0x1.1000000000000p+0, 0x1.1200000000000p+0, 0x1.1400000000000p+0, 0x1.1600000000000p+0,
-    0x1.1800000000000p+0, 0x1.1a00000000000p+0, 0x1.1c00000000000p+0, 0x1.1e00000000000p+0,
-    0x1.2000000000000p+0, 0x1.2200000000000p+0, 0x1.2400000000000p+0, 0x1.2600000000000p+0,
-    0x1.2800000000000p+0, 0x1.2a00000000000p+0, 0x1.2c00000000000p+0, 0x1.2e00000000000p+0,
-    0x1.3000000000000p+0, 0x1.3200000000000p+0, 0x1.3400000000000p+0, 0x1.3600000000000p+0,
-    0x1.3800000000000p+0, 0x1.3a00000000000p+0, 0x1.3c00000000000p+0, 0x1.3e00000000000p+0,
-    0x1.4000000000000p+0, 0x1.4200000000000p+0, 0x1.4400000000000p+0, 0x1.4600000000000p+0,
-    0x1.4800000000000p+0, 0x1.4a00000000000p+0, 0x1.4c00000000000p+0, 0x1.4e00000000000p+0,
-    0x1.5000000000000p+0, 0x1.5200000000000p+0, 0x1.5400000000000p+0, 0x1.5600000000000p+0,
-    0x1.5800000000000p+0, 0x1.5a00000000000p+0, 0x1.5c00000000000p+0, 0x1.5e00000000000p+0,
-    0x1.6000000000000p+0, 0x1.6200000000000p+0, 0x1.6400000000000p+0, 0x1.6600000000000p+0,
-    0x1.6800000000000p+0, 0x1.6a00000000000p+0, 0x1.6c00000000000p+0, 0x1.6e00000000000p+0,
-    0x1.7000000000000p+0, 0x1.7200000000000p+0, 0x1.7400000000000p+0, 0x1.7600000000000p+0,
-    0x1.7800000000000p+0, 0x1.7a00000000000p+0, 0x1.7c00000000000p+0, 0x1.7e00000000000p+0,
-    0x1.8200000000000p+0, 0x1.8400000000000p+0, 0x1.8600000000000p+0, 0x1.8800000000000p+0,
-    0x1.8a00000000000p+0, 0x1.8c00000000000p+0, 0x1.8e00000000000p+0, 0x1.9000000000000p+0,
-    0x1.9200000000000p+0, 0x1.9400000000000p+0, 0x1.9600000000000p+0, 0x1.9800000000000p+0,
-    0x1.9a00000000000p+0, 0x1.9c00000000000p+0, 0x1.9e00000000000p+0, 0x1.a000000000000p+0,
-    0x1.a200000000000p+0, 0x1.a400000000000p+0, 0x1.a600000000000p+0, 0x1.a800000000000p+0,
-    0x1.aa00000000000p+0, 0x1.ac00000000000p+0, 0x1.ae00000000000p+0, 0x1.b000000000000p+0,
-    0x1.b200000000000p+0, 0x1.b400000000000p+0, 0x1.b600000000000p+0, 0x1.b800000000000p+0,
-    0x1.ba00000000000p+0, 0x1.bc00000000000p+0, 0x1.be00000000000p+0, 0x1.c000000000000p+0,
-    0x1.c200000000000p+0, 0x1.c400000000000p+0, 0x1.c600000000000p+0, 0x1.c800000000000p+0,
-    0x1.ca00000000000p+0, 0x1.cc00000000000p+0, 0x1.ce00000000000p+0, 0x1.d000000000000p+0,
-    0x1.d200000000000p+0, 0x1.d400000000000p+0, 0x1.d600000000000p+0, 0x1.d800000000000p+0,
-    0x1.da00000000000p+0, 0x1.dc00000000000p+0, 0x1.de00000000000p+0, 0x1.e000000000000p+0,
-    0x1.e200000000000p+0, 0x1.e400000000000p+0, 0x1.e600000000000p+0, 0x1.e800000000000p+0,
-    0x1.ea00000000000p+0, 0x1.ec00000000000p+0, 0x1.ee00000000000p+0, 0x1.f000000000000p+0,
-    0x1.f200000000000p+0, 0x1.f400000000000p+0, 0x1.f600000000000p+0, 0x1.f800000000000p+0,
-    0x1.fa00000000000p+0, 0x1.fc00000000000p+0, 0x1.fe00000000000p+0, 0x1.0000000000000p+1,
-};
-
+// Tables of ln: for t = 0..127 (the first 7 bits of the mantissa m in [1, 2)) and the centre
+// c_t = 1 + t/128 (t < 64), 1 + (t+1)/128 (t >= 64) (made from its bits in ln), 1/c_t
+// rounded, and ln c_t (t < 64) or ln(c_t / 2) (t >= 64), correctly rounded (computed with 50
+// decimal digits).
 const double LOG_INVERSE[128] = {
     0x1.0000000000000p+0, 0x1.fc07f01fc07f0p-1, 0x1.f81f81f81f820p-1, 0x1.f44659e4a4271p-1,
     0x1.f07c1f07c1f08p-1, 0x1.ecc07b301ecc0p-1, 0x1.e9131abf0b767p-1, 0x1.e573ac901e574p-1,
@@ -184,7 +153,10 @@ inline double ln(double x) {
     const double field = from_bits((b >> 52) | 0x4330000000000000ULL) - 0x1p52;
     const double m = from_bits((b & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL);
     const double e = (field - 1023.0) + ((sub ? -54.0 : 0.0) + (t >= 64 ? 1.0 : 0.0));
-    const double r = (m - LOG_CENTRE[t]) * LOG_INVERSE[t];
+    // c_t from its bits (the entry of LOG_CENTRE, exactly: 1 + (t + [t >= 64]) / 128), not
+    // loaded: one table lookup less per lane
+    const double centre = from_bits(0x3ff0000000000000ULL + ((t + (t >> 6)) << 45));
+    const double r = (m - centre) * LOG_INVERSE[t];
     double p = -1.0 / 8.0;
     p = p * r + 1.0 / 7.0;
     p = p * r - 1.0 / 6.0;
@@ -423,8 +395,18 @@ void ssmobs_lcd_pairs(const double* s, std::ptrdiff_t n, std::ptrdiff_t q, const
                 }
                 if (diag) c[0] = 0.0;  // T-_ii := 0
                 const std::ptrdiff_t nc = 2 * len;
-                double cbig = 0.0;
-                for (std::ptrdiff_t t = 0; t < nc; ++t) cbig = c[t] > cbig ? c[t] : cbig;
+                // the largest argument, on MAX_LANES partial maxima (a maximum is exact in
+                // any order; the arguments are >= +0, none NaN), over c padded with +0
+                const std::ptrdiff_t ncp = (nc + MAX_LANES - 1) / MAX_LANES * MAX_LANES;
+                for (std::ptrdiff_t t = nc; t < ncp; ++t) c[t] = 0.0;
+                double part[MAX_LANES] = {};
+                for (std::ptrdiff_t t = 0; t < ncp; t += MAX_LANES) {
+                    for (int l = 0; l < MAX_LANES; ++l) {
+                        part[l] = c[t + l] > part[l] ? c[t + l] : part[l];
+                    }
+                }
+                double cbig = part[0];
+                for (int l = 1; l < MAX_LANES; ++l) cbig = part[l] > cbig ? part[l] : cbig;
                 const int m = terms_for(cbig < SERIES_MAX ? cbig : SERIES_MAX);
                 // the series on every argument (1 stands in for c <= 0), fixed up below
                 const double s_top = ser.s[m];
