@@ -325,10 +325,11 @@ def lcd_distance(points: np.ndarray, b_max: float, *, n_nodes: int = N_NODES) ->
 
 #: the kernels of :func:`symmetric_distance`
 KERNELS: tuple[str, ...] = ("auto", "compiled", "numpy")
-#: ``kernel="auto"`` runs the compiled kernel up to this dimension and NumPy above it: the
-#: compiled kernel's x86-64 baseline (SSE2, no FMA) loops over the coordinates lose to
-#: OpenBLAS's AVX2 products once they dominate (measured with K = 1000: 1.85x faster at
-#: q = 8, 1.3x at q = 40, 0.94x at q = 64, 0.82x at q = 100; BENCHMARKS.md)
+#: ``kernel="auto"`` runs the compiled kernel up to this dimension and NumPy above it: its
+#: baseline build loses to OpenBLAS's AVX2 products above it (K = 1000: 0.94x at q = 64,
+#: 0.82x at q = 100); its AVX2 build wins per evaluation up to q = 100, but the default
+#: profile's q = 100 sets (K <= 500) are no faster on it (0.96x at K = 500) and would change
+#: their bits (BENCHMARKS.md)
 COMPILED_MAX_Q: int = 48
 
 
