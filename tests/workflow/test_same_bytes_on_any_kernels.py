@@ -59,15 +59,31 @@ print(h.hexdigest())
 """
 
 
+#: the compiled LCD kernel (ssmobs.lcd_native) on a few sets, as bytes: value and gradient
+LCD_KERNEL = """
+import hashlib, numpy as np
+from ssmobs import lcd_native
+from ssmobs.lcd_distance import _quadrature
+h = hashlib.sha256()
+for q, K, b in [(8, 301, 10.0), (40, 120, 50.0), (2, 33, 0.7), (200, 41, 100.0)]:
+    s = np.random.default_rng(q + K).standard_normal((K // 2, q))
+    quad = _quadrature(q, b, 80)
+    rule = (quad.lam, quad.sig, quad.alpha, quad.beta, quad.d1p, quad.j0p)
+    v, g = lcd_native.symmetric_distance(s, K, b, rule, True)
+    h.update(np.float64(v).tobytes() + g.tobytes())
+print(h.hexdigest())
+"""
+
+
 def environment(variant: dict[str, str], unset: tuple[str, ...] = ()) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in unset}
     env.update(variant)
     return env
 
 
-def probe(env: dict[str, str]) -> str:
+def probe(env: dict[str, str], code: str = PROBE) -> str:
     out = subprocess.run(
-        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
     return out.stdout.strip()
 
@@ -119,3 +135,31 @@ def test_one_commit_gives_the_same_bytes_under_any_kernels_and_thread_count(tmp_
     assert set(first) == set(second), sorted(set(first) ^ set(second))
     differ = sorted(k for k in first if first[k] != second[k])
     assert not differ, f"{len(differ)} of {len(first)} files differ: {differ[:20]}"
+
+
+def test_the_compiled_lcd_kernel_gives_the_same_bytes_under_any_kernels_and_thread_count():
+    """The design sets' distance and gradient up to q = COMPILED_MAX_Q (the compiled kernel,
+    with its own log/exp and its quadrature rule in decimal arithmetic): the same bytes with
+    this machine's own NumPy and OpenBLAS kernels and 4 threads, the fixed ones and 1
+    thread, and another OpenBLAS kernel with 2 threads; each with the build the kernel
+    picks for this CPU (the AVX2 build where there is AVX2) and, forced, the x86-64 baseline
+    build.  Not skipped where the kernels give the same bits anyway: the kernel must not
+    depend on them in any case.  (The workflow run above makes its q = 40 design set with
+    this kernel, in the build it picks.)"""
+    from ssmobs import lcd_native
+    from ssmobs.lcd_distance import COMPILED_MAX_Q
+
+    assert COMPILED_MAX_Q >= 40  # the set of the run above goes through the compiled kernel
+    other = {"OPENBLAS_CORETYPE": "Sandybridge", "OPENBLAS_NUM_THREADS": "2"}
+    baseline = {lcd_native.BUILD_ENV: "x86-64"}
+    digests = {
+        name: probe(env, LCD_KERNEL)
+        for name, env in [
+            ("own, 4 threads", environment(OWN, UNSET_FOR_OWN + (lcd_native.BUILD_ENV,))),
+            ("fixed, 1 thread", environment(FIXED, (lcd_native.BUILD_ENV,))),
+            ("Sandybridge, 2 threads", environment(other, UNSET_FOR_OWN)),
+            ("own, 4 threads, x86-64 build", environment({**OWN, **baseline}, UNSET_FOR_OWN)),
+            ("fixed, 1 thread, x86-64 build", environment({**FIXED, **baseline})),
+        ]
+    }
+    assert len(set(digests.values())) == 1, digests

@@ -74,8 +74,11 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
 }
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
 NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
+#: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
+LCD_KERNEL = "lcd_kernel/lcd_kernel.cpp"
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
+    "design": (LCD_KERNEL,),
     "program": (NATIVE_DRIVER,),
     "nuts_records": (NATIVE_DRIVER,),
 }

@@ -16,12 +16,18 @@ occurs in practice (:math:`c = T/4B^2 \\le 1`, doc Section 7 item 1) :math:`E_1`
 its convergent power series (``-gamma - ln c + sum (-1)^{k+1} c^k / (k k!)``), which is about
 5x faster than ``scipy.special.exp1`` and agrees with it to ~1e-15 relative; larger arguments fall
 back to ``scipy.special.exp1``.
+
+Kernels.  :func:`symmetric_distance` (what the optimiser calls) runs this NumPy code as the
+reference and, up to q = :data:`COMPILED_MAX_Q`, the fused compiled kernel of
+:mod:`ssmobs.lcd_native` (doc Section 6.6); the quadrature rule of both is computed in decimal
+arithmetic, the same bits everywhere.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from decimal import Decimal, localcontext
 from functools import lru_cache
 
 import numpy as np
@@ -80,11 +86,6 @@ def b_max_rule(q: int) -> float:
     return 200.0
 
 
-def _log_tanh(v: np.ndarray) -> np.ndarray:
-    e = np.exp(-2.0 * v)
-    return np.log1p(-e) - np.log1p(e)
-
-
 @dataclass(frozen=True, eq=False)
 class _Quadrature:
     """Precomputed fixed Gauss–Legendre rule of doc Section 2.4 for one (q, B)."""
@@ -111,37 +112,90 @@ class _Quadrature:
         return jp, a @ self.beta
 
 
-def _gauss_legendre(lo: float, hi: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    x, w = np.polynomial.legendre.leggauss(n)
-    half = 0.5 * (hi - lo)
-    return lo + half * (x + 1.0), half * w
+#: decimal digits of the quadrature rule's computation (then rounded to doubles)
+_DIGITS = 45
+
+
+def _dec_expm1(z: Decimal) -> Decimal:
+    """exp(z) - 1, also for tiny |z| (series)."""
+    if abs(z) < Decimal("1e-6"):
+        return z * (1 + z / 2 * (1 + z / 3 * (1 + z / 4 * (1 + z / 5))))
+    return z.exp() - 1
+
+
+def _dec_log_tanh(v: Decimal) -> Decimal:
+    e = (-2 * v).exp()
+    return ((1 - e) / (1 + e)).ln()
+
+
+@lru_cache(maxsize=8)
+def _dec_gauss_legendre(n: int) -> tuple[tuple[Decimal, Decimal], ...]:
+    """Gauss–Legendre nodes and weights on [-1, 1] by Newton's method on P_n in decimal
+    arithmetic (start: the usual cosine estimate; only its last bits depend on the C
+    library, the converged root does not)."""
+    out = []
+    eps = Decimal(10) ** (-(_DIGITS - 5))
+    for i in range(1, n + 1):
+        x = Decimal(repr(math.cos(math.pi * (i - 0.25) / (n + 0.5))))
+        for _ in range(100):
+            p0, p1 = Decimal(1), x
+            for k in range(2, n + 1):
+                p0, p1 = p1, ((2 * k - 1) * x * p1 - (k - 1) * p0) / k
+            dp = n * (x * p1 - p0) / (x * x - 1)
+            dx = p1 / dp
+            x -= dx
+            if abs(dx) < eps:
+                break
+        p0, p1 = Decimal(1), x
+        for k in range(2, n + 1):
+            p0, p1 = p1, ((2 * k - 1) * x * p1 - (k - 1) * p0) / k
+        dp = n * (x * p1 - p0) / (x * x - 1)
+        out.append((x, 2 / ((1 - x * x) * dp * dp)))
+    return tuple(sorted(out))
 
 
 @lru_cache(maxsize=64)
 def _quadrature(q: int, b_max: float, n_nodes: int = N_NODES) -> _Quadrature:
-    # J' and M: one L-node rule on [0, V], V = asinh(sqrt(2) B) (substitution sqrt(2) b = sinh v)
-    v, w = _gauss_legendre(0.0, math.asinh(math.sqrt(2.0) * b_max), n_nodes)
-    lam = q * _log_tanh(v)
-    sig = 1.0 / np.cosh(v) ** 2
-    alpha = 0.25 * w * np.sinh(2.0 * v)
-    beta = 0.5 * w * np.tanh(v)
-    # D1' = 1/2 int_0^{asinh B} (tanh^q u - 1) sinh(2u) du, composite rule (panels <= 0.25 wide)
-    u_max = math.asinh(b_max)
-    n_panels = max(4, math.ceil(u_max / 0.25))
-    edges = np.linspace(0.0, u_max, n_panels + 1)
-    xs, ws = np.polynomial.legendre.leggauss(32)
-    d1p = 0.0
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        u = lo + 0.5 * (hi - lo) * (xs + 1.0)
-        d1p += (
-            0.5
-            * (hi - lo)
-            * float(np.sum(ws * 0.5 * np.expm1(q * _log_tanh(u)) * np.sinh(2.0 * u)))
-        )
-    j0p = float(np.expm1(lam) @ alpha)
-    for arr in (lam, sig, alpha, beta):
+    """The rule of doc Section 2.4 for (q, B), computed in decimal arithmetic with
+    :data:`_DIGITS` digits and rounded to doubles: the same bits on any machine, whatever
+    NumPy's or the C library's kernels (the compiled kernel's inputs)."""
+    with localcontext() as ctx:
+        ctx.prec = _DIGITS
+        d = Decimal
+        # J' and M: one L-node rule on [0, V], V = asinh(sqrt(2) B) (sqrt(2) b = sinh v)
+        y = d(2).sqrt() * d(repr(float(b_max)))
+        big_v = (y + (y * y + 1).sqrt()).ln()
+        half = big_v / 2
+        lam, sig, alpha, beta = [], [], [], []
+        for x, w in _dec_gauss_legendre(n_nodes):
+            v = half * (x + 1)
+            wv = half * w
+            e2 = (2 * v).exp()
+            th = (e2 - 1) / (e2 + 1)
+            lam.append(q * _dec_log_tanh(v))
+            sig.append(1 - th * th)
+            alpha.append(wv * (e2 - 1 / e2) / 8)  # w sinh(2v) / 4
+            beta.append(wv * th / 2)
+        # D1' = 1/2 int_0^{asinh B} (tanh^q u - 1) sinh(2u) du, composite rule (panels <= 0.25)
+        yb = d(repr(float(b_max)))
+        u_max = (yb + (yb * yb + 1).sqrt()).ln()
+        n_panels = max(4, math.ceil(float(u_max) / 0.25))
+        rule32 = _dec_gauss_legendre(32)
+        d1p = d(0)
+        for p in range(n_panels):
+            lo, hi = u_max * p / n_panels, u_max * (p + 1) / n_panels
+            part = d(0)
+            for x, w in rule32:
+                u = lo + (hi - lo) / 2 * (x + 1)
+                e2 = (2 * u).exp()
+                part += w * _dec_expm1(q * _dec_log_tanh(u)) * (e2 - 1 / e2) / 4
+            d1p += (hi - lo) / 2 * part
+        j0p = sum((_dec_expm1(lm) * al for lm, al in zip(lam, alpha)), d(0))
+        arrays = [np.array([float(t) for t in col]) for col in (lam, sig, alpha, beta)]
+    for arr in arrays:
         arr.setflags(write=False)
-    return _Quadrature(q, b_max, lam, sig, alpha, beta, d1p, j0p)
+    lam_a, sig_a, alpha_a, beta_a = arrays
+    return _Quadrature(q, float(b_max), lam_a, sig_a, alpha_a, beta_a, float(d1p), float(j0p))
 
 
 # --------------------------------------------------------------------------------------------
@@ -269,12 +323,55 @@ def lcd_distance(points: np.ndarray, b_max: float, *, n_nodes: int = N_NODES) ->
     return quad.d1p - 2.0 * d2p + d3p
 
 
+#: the kernels of :func:`symmetric_distance`
+KERNELS: tuple[str, ...] = ("auto", "compiled", "numpy")
+#: ``kernel="auto"`` runs the compiled kernel up to this dimension and NumPy above it: its
+#: baseline build loses to OpenBLAS's AVX2 products above it (K = 1000: 0.94x at q = 64,
+#: 0.82x at q = 100); its AVX2 build wins per evaluation up to q = 100, but the default
+#: profile's q = 100 sets (K <= 500) are no faster on it (0.96x at K = 500) and would change
+#: their bits (BENCHMARKS.md)
+COMPILED_MAX_Q: int = 48
+
+
 def symmetric_distance(
-    half: np.ndarray, K: int, b_max: float, *, gradient: bool, n_nodes: int = N_NODES
+    half: np.ndarray,
+    K: int,
+    b_max: float,
+    *,
+    gradient: bool,
+    n_nodes: int = N_NODES,
+    kernel: str = "auto",
 ) -> tuple[float, np.ndarray | None]:
     """Distance of the point-symmetric set of ``half`` (and its gradient w.r.t. ``half``
     with ``gradient=True``, else None), without checking the arguments
-    (:func:`symmetric_distance_and_gradient` checks them)."""
+    (:func:`symmetric_distance_and_gradient` checks them).
+
+    ``kernel="compiled"``: the fused C++ kernel of :mod:`ssmobs.lcd_native`, the same bits
+    on any x86-64 CPU whatever NumPy's and OpenBLAS's kernels and threads (it raises
+    :class:`ssmobs.lcd_native.LcdKernelUnavailable` where it cannot be built);
+    ``"numpy"``: the NumPy reference below (block-wise, OpenBLAS products), which agrees
+    with it to ~1e-12 relative, not in the last bits, and whose bits follow the kernels
+    NumPy and OpenBLAS run (fixed by the workflow, :mod:`ssmobs.kernels`); ``"auto"``
+    (default): ``"compiled"`` for q <= :data:`COMPILED_MAX_Q`, else ``"numpy"`` (a choice
+    by q alone, never by the machine)."""
+    if kernel == "auto":
+        kernel = "compiled" if half.shape[1] <= COMPILED_MAX_Q else "numpy"
+    if kernel == "compiled":
+        from . import lcd_native
+
+        quad = _quadrature(half.shape[1], b_max, n_nodes)
+        rule = (quad.lam, quad.sig, quad.alpha, quad.beta, quad.d1p, quad.j0p)
+        return lcd_native.symmetric_distance(half, K, b_max, rule, gradient)
+    if kernel != "numpy":
+        raise ValueError(f"kernel must be one of {KERNELS}; got {kernel!r}")
+    return _symmetric_distance_numpy(half, K, b_max, gradient=gradient, n_nodes=n_nodes)
+
+
+def _symmetric_distance_numpy(
+    half: np.ndarray, K: int, b_max: float, *, gradient: bool, n_nodes: int = N_NODES
+) -> tuple[float, np.ndarray | None]:
+    """The NumPy reference of :func:`symmetric_distance` (block-wise pairs, see the module
+    docstring)."""
     s = half
     n_half, q = s.shape
     quad = _quadrature(q, b_max, n_nodes)
