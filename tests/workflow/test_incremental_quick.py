@@ -276,7 +276,7 @@ def test_a_read_only_cold_cache_stops_nuts_jobs_whose_program_results_knows(tmp_
         prefix = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search"]
     work = make_workdir(tmp_path / "w")
     (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
-    until = ["--until", "build_stan_model", "check_model_stan"]
+    until = ["--until", "check_model_stan"]
     snakemake(work, *until, "--cores", "2", "--configfile", CONFIG)
     assert list(work.glob("results/shared/stan/*/same/*.json"))  # the program's marker
     cold = tmp_path / "cold"

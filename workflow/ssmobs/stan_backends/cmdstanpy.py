@@ -199,15 +199,15 @@ class CmdStanPyBackend:
                     try:
                         copy = work / f"{slug}.stan"
                         copy.write_text(code)
-                        header_copy = None
+                        # user_header only with a header: the autodiff call is the one
+                        # of every cmdstanpy version
+                        header_arg: dict[str, str] = {}
                         if header_text is not None:
-                            header_copy = str(work / f"{slug}.hpp")
-                            Path(header_copy).write_text(header_text)
+                            header_arg["user_header"] = str(work / f"{slug}.hpp")
+                            Path(header_arg["user_header"]).write_text(header_text)
                         try:
                             with quiet_loggers(forward=("cmdstanpy",)):
-                                model = cmdstanpy.CmdStanModel(
-                                    stan_file=str(copy), user_header=header_copy
-                                )
+                                model = cmdstanpy.CmdStanModel(stan_file=str(copy), **header_arg)
                         except Exception as err:
                             raise RuntimeError(f"compiling {path} failed: {err}") from err
                         if model.exe_file is None or not Path(model.exe_file).is_file():
