@@ -12,8 +12,10 @@ CORES ?= 2
 # uv installs them (several times faster than pip; BENCHMARKS.md, "Set-up"), taking pip's wheel
 # where a version has two (envs/uv-wheels.txt); pip is the fallback where uv cannot be installed
 # or fails (e.g. an index only pip's configuration names).
+# --compile-bytecode: pip compiles the .pyc files at install, uv only when asked; without them
+# every job compiles what it imports (seconds per job where PYTHONDONTWRITEBYTECODE is set).
 UV_INSTALL = $(BIN)/pip install --quiet -c envs/constraints.txt uv \
-	&& $(BIN)/uv pip install --quiet --python $(BIN)/python \
+	&& $(BIN)/uv pip install --quiet --compile-bytecode --python $(BIN)/python \
 		-c envs/constraints.txt -c envs/uv-wheels.txt -e '.[test,cluster]'
 PIP_INSTALL = $(BIN)/pip install --quiet --upgrade pip \
 	&& $(BIN)/pip install --quiet -c envs/constraints.txt -e '.[test,cluster]'
