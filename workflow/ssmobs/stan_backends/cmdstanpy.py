@@ -201,10 +201,11 @@ class CmdStanPyBackend:
                         copy.write_text(code)
                         # user_header only with a header: the autodiff call is the one
                         # of every cmdstanpy version
-                        header_arg: dict[str, str] = {}
+                        header_arg: dict[str, Any] = {}
                         if header_text is not None:
-                            header_arg["user_header"] = str(work / f"{slug}.hpp")
-                            Path(header_arg["user_header"]).write_text(header_text)
+                            header_file = work / f"{slug}.hpp"
+                            header_file.write_text(header_text)
+                            header_arg["user_header"] = str(header_file)
                         try:
                             with quiet_loggers(forward=("cmdstanpy",)):
                                 model = cmdstanpy.CmdStanModel(stan_file=str(copy), **header_arg)
