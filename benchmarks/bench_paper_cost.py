@@ -1,7 +1,7 @@
 """Cost of the paper profile's Stan stage: CPU seconds per NUTS run for every scenario.
 
 For each scenario of config/paper.yaml with the Stan stage on, run ``--n`` trajectories
-(random disturbances, seed 1) through the real stage (``ssmobs.nuts_stage.run_trajectories``)
+(random disturbances, seed 1) through the real stage (``ssmobs.nuts.batch.run_trajectories``)
 with the paper's sampler settings, measure wall time and CPU time (this process plus its
 chain worker processes), and extrapolate to CPU-hours per 1000 runs and for the scenario's K.
 Appends a section to BENCHMARKS.md unless ``--no-write``.
@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 from machine import machine_info, report
-from ssmobs import config as cfg
-from ssmobs.convergence import ConvergenceSettings
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.scenario import Scenario
+from ssmobs.config import validation as cfg
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.trajectories import make_trajectories
+from ssmobs.nuts.batch import run_trajectories
+from ssmobs.nuts.convergence import ConvergenceSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends import get_backend, stan_file
-from ssmobs.trajectories import make_trajectories
 
 REPO = Path(__file__).resolve().parents[1]
 

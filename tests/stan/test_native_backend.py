@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.record_cache import record_path
+from ssmobs.nuts.batch import run_trajectories
+from ssmobs.nuts.record_cache import record_path
 from ssmobs.stan_backends import (
     SAMPLER_COLUMNS,
     BackendError,

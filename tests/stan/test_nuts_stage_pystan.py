@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ssmobs.convergence import ConvergenceSettings
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.record_format import records_to_frame
+from ssmobs.nuts.batch import run_trajectories
+from ssmobs.nuts.convergence import ConvergenceSettings
+from ssmobs.nuts.record_format import records_to_frame
+from ssmobs.nuts.stan_metrics import stan_summary
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.pystan import PyStanBackend
-from ssmobs.stan_metrics import stan_summary
 
 # every test builds its program with PyStan (`make test-slow`)
 pytestmark = [pytest.mark.stan, pytest.mark.pystan]

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
-from ssmobs import config as cfg
+from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs import config as cfg
 from ssmobs import io
-from ssmobs.convergence import (
+from ssmobs.config import validation as cfg
+from ssmobs.nuts.convergence import (
     ConvergenceSettings,
     check_convergence,
     converged_under,

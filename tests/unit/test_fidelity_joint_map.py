@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs import config as cfg
-from ssmobs.joint_map import initial_theta, joint_map
-from ssmobs.joint_map_barrier import LogBarrier, initial_mu_values
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.config import validation as cfg
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.trajectories import make_trajectories, write_trajectories
+from ssmobs.joint_map.barrier import LogBarrier, initial_mu_values
+from ssmobs.joint_map.driver import initial_theta, joint_map
+from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ssmobs import io
-from ssmobs.design_disturbances import design_disturbances
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.disturbances import design_disturbances
+from ssmobs.design.trajectories import make_trajectories, read_trajectories, write_trajectories
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories, read_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
 
@@ -177,7 +177,7 @@ def umask():
 def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
     import pandas as pd
     import xarray as xr
-    from ssmobs.figures import _plt, save_figure
+    from ssmobs.reports.figures import _plt, save_figure
 
     umask(mask)
     io.write_json(tmp_path / "a.json", {"x": 1})

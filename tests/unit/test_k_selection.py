@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs.joint_map import joint_map_summary
+from ssmobs.config.scenario import Scenario
+from ssmobs.joint_map.driver import joint_map_summary
 from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -137,7 +137,7 @@ def test_selection_from_summaries_end_to_end():
 
 # ------------------------------------------------------------------ set variants (issue 12)
 def test_nested_random_sets_share_points_and_independent_sets_do_not():
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
     from ssmobs.k_selection import set_seed
 
     q = 8
@@ -163,7 +163,7 @@ def test_nested_random_sets_share_points_and_independent_sets_do_not():
 
 def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs import io
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
     from ssmobs.k_selection import set_seed
     from ssmobs.stages.k_selection import run_k_selection_point
     from ssmobs.stages.outputs import run_select_k
@@ -216,7 +216,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
 
 def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     import yaml
-    from ssmobs import config as cfg
+    from ssmobs.config import validation as cfg
 
     c = cfg.validate(yaml.safe_load(open("config/paper.yaml")))
     paper = yaml.safe_load(open("config/paper_values.yaml"))

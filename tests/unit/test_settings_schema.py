@@ -10,11 +10,11 @@ import re
 from typing import Any
 
 import pytest
-from ssmobs import config as cfg
 from ssmobs.cache_keys import SAMPLER_FIELDS
-from ssmobs.convergence import ConvergenceSettings
-from ssmobs.exact_settings import ExactSettings
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.config import validation as cfg
+from ssmobs.exact.settings import ExactSettings
+from ssmobs.joint_map.settings import JointMapSettings
+from ssmobs.nuts.convergence import ConvergenceSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends.base import SamplerSettings
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ssmobs import config as cfg
-from ssmobs.smoke_config import SMOKE_K, main, smoke_overlay
+from ssmobs.config import validation as cfg
+from ssmobs.config.smoke import SMOKE_K, main, smoke_overlay
 
 pytestmark = pytest.mark.unit
 
@@ -94,9 +94,10 @@ def test_the_overlay_file_and_the_make_recipe(tmp_path, capsys):
         check=True,
     ).stdout.splitlines()
     assert plan[-3:] == [
-        ".venv/bin/python -m ssmobs.smoke_config config/stoch_vol.yaml "
+        ".venv/bin/python -m ssmobs.config.smoke config/stoch_vol.yaml "
         "--out results/smoke_configs/stoch_vol.yaml",
-        ".venv/bin/python -m ssmobs.preflight --unlock-stale results/smoke_configs/stoch_vol.yaml",
+        ".venv/bin/python -m ssmobs.config.preflight --unlock-stale "
+        "results/smoke_configs/stoch_vol.yaml",
         ".venv/bin/snakemake --cores 2 --rerun-incomplete "
         "--configfile results/smoke_configs/stoch_vol.yaml",
     ]

@@ -1,4 +1,4 @@
-"""The paper's tables (ssmobs.tables): one key convention, compact Section IV, intervals."""
+"""The paper's tables (ssmobs.reports.tables): one key convention, compact Section IV, intervals."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pandas as pd
 import pytest
 from ssmobs.binomial import clopper_pearson
-from ssmobs.tables import (
+from ssmobs.reports.tables import (
     exact_vs_stan_table,
     section_iv,
     section_iv_compact,
@@ -188,7 +188,7 @@ def test_exact_vs_stan_table_gives_median_and_largest_difference_per_statistic()
 
 
 def test_k_selection_distribution_counts_each_chosen_k_over_the_seeds():
-    from ssmobs.tables import k_selection_distribution, k_selection_table
+    from ssmobs.reports.tables import k_selection_distribution, k_selection_table
 
     base = {"name": "n", "scenario": "s", "method": "design", "c1": 0.01, "c2": 0.01,
             "K_grid": "100-1000 step 100", "K_paper": 300}  # fmt: skip

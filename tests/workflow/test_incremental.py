@@ -151,7 +151,7 @@ CASES = {
     ),
     "exact stage code": (
         None,
-        _append("workflow/ssmobs/exact_marginal.py", "\n# an edit of the exact stage\n"),
+        _append("workflow/ssmobs/exact/marginal.py", "\n# an edit of the exact stage\n"),
         {"exact_marginal", "paper_tables"},
         {"design_trajectories", "joint_map", "sample_nuts"},
     ),
@@ -451,7 +451,7 @@ def test_a_run_naming_its_targets_remakes_a_stale_table(base, tmp_path):
     """``make tables`` names its files: after an edit of the tables' code the named table is
     remade too (its stamp is stale), and a dry run first deletes nothing."""
     work = _copy(base, tmp_path / "named")
-    _append("workflow/ssmobs/tables.py", "\n# an edit of the tables' code\n")(work)
+    _append("workflow/ssmobs/reports/tables.py", "\n# an edit of the tables' code\n")(work)
     table = f"{OUT}/table2_joint_vs_marginal.csv"
     named = [table, "--cores", "2", "--configfile", CONFIG]
     snakemake(work, "-n", *named)

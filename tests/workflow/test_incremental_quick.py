@@ -105,7 +105,7 @@ def test_a_run_refused_by_a_live_lock_changes_nothing(tmp_path):
 
 def variant_table_workdir(dest: Path) -> Path:
     """A workflow copy with the committed studies the variant table reads."""
-    from ssmobs.stan_variants import read_spec, spec_inputs
+    from ssmobs.reports.stan_variants import read_spec, spec_inputs
 
     work = make_workdir(dest)
     spec = read_spec(REPO / "config" / "tables" / "stan_variants_by_row.yaml")
@@ -124,7 +124,7 @@ def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     first = snakemake(work, "--cores", "1", "stan_variant_table")
     assert rules_run(first) == {"stan_variant_table"}
     assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == set()
-    code = work / "workflow" / "ssmobs" / "stan_variants.py"
+    code = work / "workflow" / "ssmobs" / "reports" / "stan_variants.py"
     code.write_text(code.read_text() + "\n# an edit of the table's code\n")
     # another start of Snakemake (here listing the rules) keeps the committed table while stale
     table = sorted(work.glob("paper_figures/stan_variants/variants_by_row.*"))
@@ -332,7 +332,9 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     text = proc.stdout + proc.stderr
     assert proc.returncode != 0
     assert len(text.splitlines()) <= 20, text
-    assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
+    assert (
+        "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.config.preflight" in text
+    )
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
 
 

@@ -71,7 +71,12 @@ def copy_package_first(monkeypatch, request):
 
 def test_step_check_command(fresh):
     proc = _python(
-        fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile", "config/stoch_vol.yaml"
+        fresh,
+        "-m",
+        "ssmobs.model_check.check",
+        "stoch_vol",
+        "--configfile",
+        "config/stoch_vol.yaml",
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
@@ -177,7 +182,7 @@ def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_p
         ],
     }
     (work / "config" / "growth.yaml").write_text(yaml.safe_dump(conf))
-    preflight = _python(work, "-m", "ssmobs.preflight", "config/growth.yaml")
+    preflight = _python(work, "-m", "ssmobs.config.preflight", "config/growth.yaml")
     dry = snakemake(work, "-n", "--configfile", "config/growth.yaml", check=False)
     for proc in (preflight, dry):
         text = proc.stdout + proc.stderr
@@ -259,7 +264,7 @@ def test_smoke_of_ones_own_study_plans_its_jobs_on_small_sizes(tmp_path):
     figures to paper_figures/smoke_stoch_vol/, never to the study's committed folder."""
     work = make_workdir(tmp_path)
     overlay = "results/smoke_configs/stoch_vol.yaml"
-    made = _python(work, "-m", "ssmobs.smoke_config", "config/stoch_vol.yaml", "--out", overlay)
+    made = _python(work, "-m", "ssmobs.config.smoke", "config/stoch_vol.yaml", "--out", overlay)
     assert made.returncode == 0, made.stderr
     proc = snakemake(work, "-n", "--configfile", overlay)
     text = proc.stdout + "\n" + proc.stderr
@@ -301,7 +306,7 @@ def test_own_model_without_stan_program_runs_with_stan_false_and_is_named_with_s
     assert {"joint_map", "design_trajectories"} <= _planned_rules(proc)
     (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "true"))
     for cmd in (
-        [sys.executable, "-m", "ssmobs.preflight", "config/ns.yaml"],
+        [sys.executable, "-m", "ssmobs.config.preflight", "config/ns.yaml"],
         [sys.executable, "-m", "snakemake", "-n", "--configfile", "config/ns.yaml"],
     ):
         out = subprocess.run(

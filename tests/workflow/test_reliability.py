@@ -102,7 +102,7 @@ def test_interrupted_design_stage_resumes(smoke_run, tmp_path):
     )
     assert list((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock"
     proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", "--unlock-stale", "config/smoke.yaml"],
+        [sys.executable, "-m", "ssmobs.config.preflight", "--unlock-stale", "config/smoke.yaml"],
         cwd=workdir,
         capture_output=True,
         text=True,
@@ -307,8 +307,8 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
 def test_job_count_estimate_matches_the_dry_run(tmp_path):
     """The size budget counts the jobs Snakemake plans for the default profile."""
     import yaml
-    from ssmobs import budget
-    from ssmobs.config import validate
+    from ssmobs.config import budget
+    from ssmobs.config.validation import validate
 
     workdir = make_workdir(tmp_path)
     proc = snakemake(workdir, "-n", "--cores", "2", timeout=300)

@@ -1,7 +1,7 @@
 """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.outputs import run_figure_exact_vs_stan
 
 logger = log.start_job(snakemake)

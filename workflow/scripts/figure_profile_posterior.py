@@ -1,7 +1,7 @@
 """Rule figure_profile_posterior: Figure 4."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.outputs import run_figure_profile_posterior
 
 log.start_job(snakemake)

@@ -1,7 +1,7 @@
 """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.outputs import run_joint_map_mu0_sweep
 
 log.start_job(snakemake)

@@ -1,7 +1,7 @@
 """Rule k_selection_grid: V_{K_i} of the choice of K for every K_i of one grid (Sec. IV.A)."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.k_selection import run_k_selection_grid
 
 log.start_job(snakemake)

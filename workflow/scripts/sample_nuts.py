@@ -1,7 +1,7 @@
 """Rule sample_nuts: NUTS + checks + marginal MAPs for one batch of trajectories."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.stan import run_sample_batch
 
 log.start_job(snakemake)

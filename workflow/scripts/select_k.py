@@ -1,7 +1,7 @@
 """Rule select_k: the choice of K by relative differences (Sec. IV.A)."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.outputs import run_select_k
 
 log.start_job(snakemake)

@@ -52,30 +52,30 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     # the sets k_selection_grid makes (disturbance_set) lie beside the design's own
     "design": ("stages/design.py:run_design_disturbances,disturbance_set",),
     "trajectories": ("stages/design.py:run_design_trajectories",),
-    "check_model": ("check_model.py",),
+    "check_model": ("model_check/check.py",),
     "joint_map": ("stages/joint_map.py:run_joint_map",),
     "k_selection": ("stages/k_selection.py:run_k_selection_grid",),
     "program": ("stages/stan.py:run_build_stan_model",),
-    "nuts_records": ("stages/stan.py:run_sample_batch", "record_cache.py"),
+    "nuts_records": ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
     "nuts_batches": ("stages/stan.py:run_sample_batch",),
-    "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
+    "gather": ("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"),
     "exact": ("stages/exact.py",),
     # the cells of an observability map: what computes a cell, not the map's table or figure
     "map_cells": ("stages/observability_map.py:run_map_cells",),
     # the variant x row table of Section IV, read from committed reproductions
-    "variant_table": ("stan_variants.py",),
+    "variant_table": ("reports/stan_variants.py",),
     # every stamped table and figure; observability_study's and observability_map's scripts
     # call their modules themselves
     "outputs": (
         "stages/outputs.py",
-        "observability_study.py",
+        "reports/observability_study.py",
         "stages/observability_map.py:write_map,figure_map",
     ),
 }
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
 NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
 #: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
-LCD_KERNEL = "lcd_kernel/lcd_kernel.cpp"
+LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
     "design": (LCD_KERNEL,),
@@ -116,11 +116,11 @@ STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
 NEUTRAL_MODULES: frozenset[str] = frozenset(
     {
         "log.py",
-        "budget.py",
-        "preflight.py",
-        "config.py",
-        "config_schema.py",
-        "config_files.py",
+        "config/budget.py",
+        "config/preflight.py",
+        "config/validation.py",
+        "config/schema.py",
+        "config/files.py",
         "provenance.py",
     }
 )
@@ -243,7 +243,7 @@ def stan_identity(backend: str) -> str:
     records name it (:func:`ssmobs.record_cache.backend_identity`, e.g. ``native stanc3
     v2.35.0 (Unix)``): part of the compiled programs' keys, so another Stan recomputes them
     and all after them.  ValueError or BackendError where that backend cannot start here."""
-    from .record_cache import backend_identity
+    from .nuts.record_cache import backend_identity
     from .stan_backends import get_backend
 
     return backend_identity(get_backend(backend))
@@ -477,7 +477,7 @@ class CacheKeys:
         scenario entry but its name, the design sets' key, the joint-MAP settings, the exact
         settings where the map runs the exact stage, the model's code and the cells' code.
         A cell two maps share, or that an extended grid keeps, has the same key."""
-        from .config import cell_entries
+        from .config.validation import cell_entries
 
         entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
         out = []
@@ -520,8 +520,8 @@ def main(argv: list[str] | None = None) -> int:
     """Print every key of a config with what it is keyed by (JSON)."""
     import argparse
 
-    from .config import validate
-    from .preflight import load_config_file
+    from .config.preflight import load_config_file
+    from .config.validation import validate
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--configfile", default="config/config.yaml")

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from . import io
-from .config import read_config_file
+from .config.validation import read_config_file
 
 
 def _git(*args: str) -> str:

@@ -19,10 +19,10 @@ from . import PathLike
 if TYPE_CHECKING:
     import pandas
 
-    from ..joint_map import JointMapResult
+    from ..config.scenario import Scenario
+    from ..design.trajectories import Trajectories
+    from ..joint_map.driver import JointMapResult
     from ..models.base import PriorBounds
-    from ..scenario import Scenario
-    from ..trajectories import Trajectories
 
 logger = logging.getLogger("ssmobs")
 
@@ -31,8 +31,8 @@ def joint_map_of(
     traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
 ) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
     """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
-    from ..joint_map import joint_map, joint_map_summary
-    from ..joint_map_settings import JointMapSettings
+    from ..joint_map.driver import joint_map, joint_map_summary
+    from ..joint_map.settings import JointMapSettings
 
     model = traj.model
     bounds = model.prior_bounds(traj.omega, prior)
@@ -55,9 +55,9 @@ def multi_start_of(
     """:func:`joint_map_of` from ``settings["n_starts"]`` starts (:mod:`ssmobs.multi_start`):
     the paper's start's result, its table with the per-k columns of the distinct maxima
     beside, and its summary with |K^max_unique| and the other multi-start counts."""
-    from ..joint_map import joint_map_summary
-    from ..joint_map_settings import JointMapSettings
-    from ..multi_start import multi_start_joint_map, multi_start_summary
+    from ..joint_map.driver import joint_map_summary
+    from ..joint_map.multi_start import multi_start_joint_map, multi_start_summary
+    from ..joint_map.settings import JointMapSettings
 
     model = traj.model
     bounds = model.prior_bounds(traj.omega, prior)
@@ -92,7 +92,7 @@ def run_joint_map(
     theta: PathLike | None = None,
 ) -> dict:
     """Rule joint_map: joint MAP + checks for every design trajectory of a scenario."""
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model

@@ -18,7 +18,7 @@ from . import PathLike
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..scenario import Scenario
+    from ..config.scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -40,8 +40,8 @@ def run_k_selection_point(
     as :func:`ssmobs.stages.design.disturbance_set` returns them.  ``seed`` is the run's
     seed; the set itself was drawn with :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
     """
+    from ..design.trajectories import make_trajectories
     from ..k_selection import set_seed
-    from ..trajectories import make_trajectories
     from .joint_map import joint_map_of
 
     sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))

@@ -36,8 +36,8 @@ import pandas as pd
 
 from .. import io
 from ..binomial import clopper_pearson
+from ..config.scenario import Scenario
 from ..log import Progress
-from ..scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -60,9 +60,9 @@ def cell_summary(
     """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
     model linear in the states) exact marginal; the row of the map's table (module
     docstring), without the map's own columns."""
-    from ..exact_marginal import exact_marginal
-    from ..exact_settings import ExactSettings
-    from ..trajectories import make_trajectories
+    from ..design.trajectories import make_trajectories
+    from ..exact.marginal import exact_marginal
+    from ..exact.settings import ExactSettings
     from .design import disturbance_set
     from .joint_map import multi_start_of, scenario_settings
 
@@ -190,7 +190,7 @@ def figure_map(
     several starts, |K^max_unique|/K: dotted); the paper's cells ringed.  Right: how well,
     the median 90 % interval width of the varied parameter (exact) or 2 x 1.645 x
     sqrt(median local variance) (joint MAP, models without the exact stage)."""
-    from ..figures import _plt, save_figure
+    from ..reports.figures import _plt, save_figure
 
     plt = _plt()
     vary = entry["vary"]
@@ -283,9 +283,9 @@ def write_map(
     frame["paper_point"] = [
         (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
     ]
-    from ..config import map_value_label
+    from ..config.validation import map_value_label
     from ..models import get_model
-    from ..tables import write_table
+    from ..reports.tables import write_table
 
     model = get_model(entry["base"]["model"])
     caption = (

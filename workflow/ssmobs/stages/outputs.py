@@ -15,13 +15,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import io
-from ..scenario import Scenario
+from ..config.scenario import Scenario
 from . import PathLike
 
 if TYPE_CHECKING:
     import pandas
 
-    from ..trajectories import Trajectories
+    from ..design.trajectories import Trajectories
 
 logger = logging.getLogger("ssmobs")
 
@@ -66,7 +66,7 @@ def run_paper_tables(
     person reads (:func:`ssmobs.tables.section_iv_compact`) to ``section4``.
     """
     exact = exact or {}
-    from .. import tables
+    from ..reports import tables
 
     paper = tables.load_paper_values(paper_values)
     rows = []
@@ -130,8 +130,8 @@ def run_convergence_sensitivity(
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
     scenario names to their gather_nuts tables.
     """
-    from ..convergence import ConvergenceSettings, failure_pattern_table, sensitivity_table
-    from ..tables import write_table
+    from ..nuts.convergence import ConvergenceSettings, failure_pattern_table, sensitivity_table
+    from ..reports.tables import write_table
 
     frames = {
         name: io.read_parquet(
@@ -174,8 +174,8 @@ def run_figure_joint_vs_marginal(
     values as lines.  No scenarios: empty panels (and the paper's (a, x0) = (0.9, 8))."""
     import pandas as pd
 
-    from ..figures import figure_joint_vs_marginal
     from ..models import get_model
+    from ..reports.figures import figure_joint_vs_marginal
 
     name, truth = "a", (0.9, 8.0)
     if scenarios:
@@ -207,7 +207,7 @@ def run_figure_observability(summary_csv: PathLike, paths: list[str]) -> None:
     """Rule figure_observability: |K^max|/K and |K^Stan|/K of every scenario."""
     import pandas as pd
 
-    from ..figures import figure_observability_ratios
+    from ..reports.figures import figure_observability_ratios
 
     figure_observability_ratios(pd.read_csv(summary_csv), paths)
 
@@ -216,9 +216,9 @@ def run_figure_profile_posterior(
     trajectories: PathLike, scenario: Scenario, grid: dict, paths: list[str]
 ) -> None:
     """Rule figure_profile_posterior: Figure 4 for trajectory k = 0 of a ranWalk scenario."""
-    from ..figures import figure_profile_posterior
-    from ..profile_posterior import profile_posterior
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
+    from ..reports.figures import figure_profile_posterior
+    from ..reports.profile_posterior import profile_posterior
 
     traj = read_trajectories(trajectories)
     model = traj.model
@@ -246,8 +246,8 @@ def run_figure_exact_vs_stan(
 ) -> pandas.DataFrame:
     """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k: the
     figure, and the table of median and largest differences (returned)."""
-    from ..figures import figure_exact_vs_stan
-    from ..tables import exact_vs_stan_table, write_table
+    from ..reports.figures import figure_exact_vs_stan
+    from ..reports.tables import exact_vs_stan_table, write_table
 
     model = scenario.model
     names = list(model.param_names) + (
@@ -325,8 +325,8 @@ def run_joint_map_mu0_sweep(
     import pandas as pd
 
     from ..binomial import clopper_pearson
-    from ..tables import load_paper_values, write_table
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
+    from ..reports.tables import load_paper_values, write_table
 
     paper = load_paper_values(paper_values)
     table: dict[str, dict] = {}
@@ -376,9 +376,9 @@ def run_select_k(
     (:func:`ssmobs.k_selection.choose_k`); the V components as CSV and the figure."""
     import pandas as pd
 
-    from ..figures import figure_k_convergence
     from ..k_selection import choose_k
-    from ..tables import load_paper_values
+    from ..reports.figures import figure_k_convergence
+    from ..reports.tables import load_paper_values
 
     summaries = [row for p in grids for row in io.read_json(p, required=["points"])["points"]]
     paper = load_paper_values(paper_values).get(scenario.paper_ref, {}) or {}
@@ -405,7 +405,7 @@ def run_table_k_selection(
 ) -> None:
     """Rule table_k_selection: chosen K per k_selection entry, method and seed (``paths``),
     and how often each K was chosen over the seeds (``distribution``)."""
-    from ..tables import k_selection_distribution, k_selection_table, write_table
+    from ..reports.tables import k_selection_distribution, k_selection_table, write_table
 
     rows = [c for p in selections for c in io.read_json(p, required=["choices"])["choices"]]
     table = k_selection_table(rows)

@@ -15,7 +15,7 @@ from ..log import Progress
 from . import PathLike
 
 if TYPE_CHECKING:
-    from ..scenario import Scenario
+    from ..config.scenario import Scenario
     from ..stan_backends.base import SamplerSettings
 
 logger = logging.getLogger("ssmobs")
@@ -55,8 +55,8 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
         return path, None
     if gradients != "analytic":
         raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
-    from ..analytic_gradients import write_analytic_program
     from ..models import get_model
+    from ..nuts.analytic_gradients import write_analytic_program
 
     generated = write_analytic_program(get_model(model), path)
     return generated.stan_file, generated.header
@@ -100,12 +100,12 @@ def run_sample_batch(
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
     interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
     """
-    from ..convergence import ConvergenceSettings, apply_thresholds
-    from ..nuts_stage import run_trajectories
-    from ..record_cache import draws_path, record_path
-    from ..record_format import records_to_frame
+    from ..design.trajectories import read_trajectories
+    from ..nuts.batch import run_trajectories
+    from ..nuts.convergence import ConvergenceSettings, apply_thresholds
+    from ..nuts.record_cache import draws_path, record_path
+    from ..nuts.record_format import records_to_frame
     from ..stan_backends import get_backend
-    from ..trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model
@@ -176,9 +176,9 @@ def run_gather_nuts(
     (:func:`ssmobs.record_cache.check_batch_records`)."""
     import pandas as pd
 
-    from ..record_cache import check_batch_records
-    from ..stan_metrics import stan_summary
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
+    from ..nuts.record_cache import check_batch_records
+    from ..nuts.stan_metrics import stan_summary
 
     traj = read_trajectories(trajectories)
     frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
