@@ -9,22 +9,21 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ssmobs.cache_keys import (
+from ssmobs.cache_keys import CacheKeys, UnknownKeyError
+from ssmobs.code_hashing import syntax_digest
+from ssmobs.config.validation import validate
+from ssmobs.nuts.record_cache import program_hash
+from ssmobs.stage_code import (
     MODEL_REGISTRY,
     NEUTRAL_MODULES,
     PACKAGE_DIR,
     STAGE_MODULES,
     STAGE_SCRIPTS,
-    CacheKeys,
-    UnknownKeyError,
     code_digest,
     digest,
     file_digest,
     module_closure,
 )
-from ssmobs.code_hashing import syntax_digest
-from ssmobs.config.validation import validate
-from ssmobs.nuts.record_cache import program_hash
 from ssmobs.stan_backends.base import program_code
 
 pytestmark = pytest.mark.unit

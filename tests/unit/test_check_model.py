@@ -178,22 +178,25 @@ def test_every_model_simulates_what_its_terms_say(slug):
 def test_one_mistake_gives_one_message_and_its_check_is_not_checked(monkeypatch, capsys):
     """A swapped simulate is wrong in every case (3 default cases): one message, and the
     check that found it is printed as failed, not as checked (issue 36)."""
+    import ssmobs.model_check.__main__ as cli
     import ssmobs.model_check.check as cm
 
     model = SwappedSimulateStochVol()
     assert len(default_cases(model)) == 3
     monkeypatch.setattr(cm, "get_model", lambda slug: model)
+    monkeypatch.setattr(cli, "get_model", lambda slug: model)
     report = cm.check_model("stoch_vol", stan=False)
     assert len(report.problems) == 1
     assert report.checks == [] and report.failed.startswith("python:")
     assert report.to_dict()["failed"] == report.failed
-    assert cm.main(["stoch_vol", "--no-stan"]) == 1
+    assert cli.main(["stoch_vol", "--no-stan"]) == 1
     out, err = capsys.readouterr()
     assert "checked" not in out
     assert f"failed   {report.failed}" in err and err.count("  - [python") == 1
     # the model as shipped: the check passes and is printed as checked
     monkeypatch.setattr(cm, "get_model", lambda slug: StochVol())
-    assert cm.main(["stoch_vol", "--no-stan"]) == 0
+    monkeypatch.setattr(cli, "get_model", lambda slug: StochVol())
+    assert cli.main(["stoch_vol", "--no-stan"]) == 0
     out, err = capsys.readouterr()
     assert out.startswith("checked  python:") and "failed" not in err
 
@@ -243,11 +246,11 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     with pytest.raises(cfg.ConfigError) as err:
         cfg.validate({"scenarios": [dict(entry)]})
     msg = str(err.value)
-    assert "model 'test_growth' fails its own check (python -m ssmobs.model_check.check" in msg
+    assert "model 'test_growth' fails its own check (python -m ssmobs.model_check" in msg
     assert "simulate does not match the transition term" in msg
     assert "check the order of the parameters in simulate" in msg
     assert "reach |x_t|" not in msg
-    # the message of `python -m ssmobs.model_check.check test_growth`, word for word
+    # the message of `python -m ssmobs.model_check test_growth`, word for word
     from ssmobs.model_check.check import check_model
 
     assert check_model("test_growth", stan=False).problems[0] in msg
@@ -269,7 +272,7 @@ def test_the_check_command_on_a_cold_cache_without_a_compiler_says_one_line(
 ):
     """Found before (issue 46): the tutorial's step 3 on a cold cache without g++ gave a
     57-line traceback and no remedy."""
-    from ssmobs.model_check.check import main
+    from ssmobs.model_check.__main__ import main
 
     monkeypatch.setenv("CXX", "no-such-compiler")
     monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "cold"))

@@ -7,13 +7,11 @@ import pandas as pd
 import pytest
 from ssmobs import io
 from ssmobs.config import validation as cfg
-from ssmobs.nuts.convergence import (
-    ConvergenceSettings,
-    check_convergence,
+from ssmobs.nuts.convergence import ConvergenceSettings, check_convergence, threshold_failures
+from ssmobs.nuts.convergence_sensitivity import (
     converged_under,
     failure_pattern_table,
     sensitivity_table,
-    threshold_failures,
 )
 from ssmobs.stages.outputs import run_convergence_sensitivity
 from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)

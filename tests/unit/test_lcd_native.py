@@ -146,7 +146,7 @@ def test_missing_compiler_is_one_clear_error(tmp_path, monkeypatch):
 
 
 def test_the_kernel_source_and_flags_key_the_design_sets():
-    from ssmobs.cache_keys import code_digest
+    from ssmobs.stage_code import code_digest
 
     code = code_digest("design")
     assert "design/lcd_kernel/lcd_kernel.cpp" in code and "design/lcd_native.py" in code

@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 from ssmobs.cache_keys import CacheKeys
-from ssmobs.config.validation import ConfigError, cell_entries, validate
+from ssmobs.config.maps import cell_entries
+from ssmobs.config.validation import ConfigError, validate
 from ssmobs.stages import observability_map as om
 
 pytestmark = pytest.mark.unit

@@ -73,7 +73,7 @@ def test_step_check_command(fresh):
     proc = _python(
         fresh,
         "-m",
-        "ssmobs.model_check.check",
+        "ssmobs.model_check",
         "stoch_vol",
         "--configfile",
         "config/stoch_vol.yaml",

@@ -39,7 +39,7 @@ BASE_BYTES = 300 * MIB
 LCD_BLOCK_BYTES = 80 * MIB
 #: safety factor on every estimate
 MARGIN = 1.25
-#: joint-MAP chunk rule of ssmobs.joint_map._chunks (trajectories optimised together)
+#: joint-MAP chunk rule of ssmobs.joint_map.driver._chunks (trajectories optimised together)
 JOINT_MAP_CHUNK_WORK = 2e5
 #: numbers of the joint-MAP working set per Theta component and trajectory of a chunk
 #: (measured 36-73 for the six models, T = 4..300)

@@ -2,7 +2,7 @@
 YAML 1.1 forms (``010``, ``4:00``, ``1_0``, ``0x8``) are refused.
 
 :func:`read_config_file` reads one file; :func:`check_config_files` applies it to the files
-Snakemake read itself (``--configfile``).  Imports only :mod:`ssmobs.config_schema`.
+Snakemake read itself (``--configfile``).  Imports only :mod:`ssmobs.config.schema`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Checks before Snakemake and its first job: the config file, writable folders, a stale lock.
 
-``python -m ssmobs.preflight [--all] [--unlock-stale] CONFIGFILE`` (see the Makefile)
+``python -m ssmobs.config.preflight [--all] [--unlock-stale] CONFIGFILE`` (see the Makefile)
 
-* reads CONFIGFILE and validates it (:func:`ssmobs.config.validate`, with the size budget),
+* reads CONFIGFILE and validates it (:func:`ssmobs.config.validation.validate`, with the size
+budget),
   and prints one line per problem instead of Snakemake's traceback: a file that does not
   exist or is larger than 5 MiB, a YAML syntax error or a key given twice in one mapping
   (file, line, column), aliases that expand to too many values, an empty file or one
@@ -246,7 +247,7 @@ def unlock_if_stale(workdir: str | os.PathLike, configfile: str | None) -> str |
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m ssmobs.preflight",
+        prog="python -m ssmobs.config.preflight",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

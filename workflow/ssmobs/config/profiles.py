@@ -3,7 +3,7 @@
 :data:`PROFILES` is the one description; :func:`table` renders it, and ``README.md`` and
 ``config/README.md`` show that table between the markers :data:`START` and :data:`END`
 (the documentation site takes README's block by include-markdown).  ``python -m
-ssmobs.config_profiles`` rewrites both blocks, ``--check`` only compares (``make docs`` runs
+ssmobs.config.profiles`` rewrites both blocks, ``--check`` only compares (``make docs`` runs
 it).  Every YAML file of ``config/`` outside ``config/profiles/`` (Snakemake's own profiles)
 must match exactly one entry, so a new profile cannot go undescribed.
 """
@@ -23,7 +23,7 @@ REPO_DIR = Path(__file__).resolve().parents[3]
 PAGES = ("README.md", "config/README.md")
 START = "<!-- profiles:start -->"
 END = "<!-- profiles:end -->"
-COMMAND = "python -m ssmobs.config_profiles"
+COMMAND = "python -m ssmobs.config.profiles"
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """The configuration reference page of the documentation, generated from the config schema.
 
-``python -m ssmobs.config_reference`` writes ``docs/reference/configuration.md``: one
+``python -m ssmobs.config.reference`` writes ``docs/reference/configuration.md``: one
 section per top-level key of ``workflow/schemas/config.schema.yaml`` and one table row per
 key at any depth (type, default, allowed values, description), so the page cannot drift
 from the schema.  ``--check`` writes nothing and exits 1 when the page differs from what
@@ -29,7 +29,7 @@ REPO_DIR = Path(__file__).resolve().parents[3]
 #: the generated page
 PAGE_PATH = REPO_DIR / "docs" / "reference" / "configuration.md"
 #: the command that writes the page
-COMMAND = "python -m ssmobs.config_reference"
+COMMAND = "python -m ssmobs.config.reference"
 
 _KIND_WORDS = {"object": "mapping", "array": "list"}
 

@@ -1,6 +1,7 @@
 """One scenario of Section IV as a typed, frozen object, built once from its config entry.
 
-The config (``config/*.yaml``, validated by :mod:`ssmobs.config`) holds a scenario as plain
+The config (``config/*.yaml``, validated by :mod:`ssmobs.config.validation`) holds a scenario as
+plain
 data: Omega as a mapping ``{name: value}``, x0 as a number or a list, optional keys with
 the schema's defaults.  Snakemake passes that plain entry to a script; the script turns it
 into a :class:`Scenario` with :meth:`Scenario.from_config` at its first line, and
@@ -114,7 +115,7 @@ class Scenario:
         """The Scenario of one entry of the config's ``scenarios`` list.
 
         Missing optional keys take the schema's defaults.  Raises
-        :class:`~ssmobs.config_schema.ConfigError` naming the scenario, the key, the value and
+        :class:`~ssmobs.config.schema.ConfigError` naming the scenario, the key, the value and
         what is allowed for every problem :func:`entry_problems` finds.
         """
         if not isinstance(entry, Mapping):

@@ -3,7 +3,8 @@
 :func:`load_schema` reads ``workflow/schemas/config.schema.yaml``; :func:`schema_problems`
 checks a value against (part of) it, filling in its defaults, and words every problem as
 key, value and what is allowed.  This module imports nothing of the package, so every other
-module (the cross-field checks of :mod:`ssmobs.config`, :mod:`ssmobs.scenario`) can use it.
+module (the cross-field checks of :mod:`ssmobs.config.validation`, :mod:`ssmobs.config.scenario`)
+can use it.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """A smoke run of one's own study: its config on the smoke profile's small sizes.
 
-``make smoke CONFIG=config/my_study.yaml`` runs ``python -m ssmobs.smoke_config
+``make smoke CONFIG=config/my_study.yaml`` runs ``python -m ssmobs.config.smoke
 config/my_study.yaml --out results/smoke_configs/my_study.yaml`` and then Snakemake with that
 overlay.  The overlay keeps everything that says *what* is studied (models, true values,
 priors, horizons T, studies, maps, multi-start and every other setting) and takes the
@@ -84,7 +84,7 @@ def header(source: str, overlay: dict[str, Any]) -> str:
     """The comment at the top of an overlay file: where it comes from and what it changed."""
     stan = overlay["stan"]
     return (
-        f"# Made by `make smoke CONFIG={source}` (python -m ssmobs.smoke_config) from {source}:\n"
+        f"# Made by `make smoke CONFIG={source}` (python -m ssmobs.config.smoke) from {source}:\n"
         f"# that study on the smoke profile's sizes (K <= {SMOKE_K}, {stan['chains']} chains x "
         f"({stan['iter_warmup']} + {stan['iter_sampling']}) iterations,\n"
         f"# ESS minima {overlay['convergence']['ess_bulk_min']}); its tables and figures go to "
@@ -113,7 +113,7 @@ def write_overlay(source: str | Path, out: str | Path) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m ssmobs.smoke_config",
+        prog="python -m ssmobs.config.smoke",
         description="Write a study config's smoke overlay (the smoke profile's sizes).",
     )
     parser.add_argument("configfile", help="the study's config file")

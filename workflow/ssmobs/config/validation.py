@@ -4,16 +4,15 @@
 stops the run with one message naming the key, the value and what is allowed, before any
 expensive work and before anything is written to ``results/``.  Every scenario and every
 cell of an observability map (:func:`cell_entries`) is checked by the one check of a
-scenario entry, :func:`ssmobs.scenario.entry_problems`.
+scenario entry, :func:`ssmobs.config.scenario.entry_problems`.
 
 The ground floor below it, which imports nothing of the package: the schema, its messages
-and :class:`ConfigError` (:mod:`ssmobs.config_schema`), the strict reading of config files
-(:mod:`ssmobs.config_files`).  Their names that callers take from here are imported below.
+and :class:`ConfigError` (:mod:`ssmobs.config.schema`), the strict reading of config files
+(:mod:`ssmobs.config.files`).  Their names that callers take from here are imported below.
 """
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from .files import MAX_CONFIG_VALUES, count_values
 from .files import check_config_files as check_config_files
 from .files import parse_config_text as parse_config_text
 from .files import read_config_file as read_config_file
+from .maps import MAP_CELL_KEYS, cell_entries
 from .scenario import entry_problems
 from .schema import (
     MAX_REPR,
@@ -32,7 +32,6 @@ from .schema import (
     load_schema,
     nonfinite_problems,
     scalars_from_command_line,
-    scenario_schema,
     schema_problems,
     short_repr,
     summarise_problems,
@@ -134,40 +133,6 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
         + _mu0_sweep_problems(config)
         + _outputs_dir_problems(config)
     )
-
-
-#: keys of a map's base that its cells set themselves
-MAP_CELL_KEYS = ("name", "T", "K", "joint_map", "stan", "exact", "exact_K", "stan_batch_size")
-
-
-def map_value_label(value: float) -> str:
-    """A value of a map's varied parameter as cell names and captions write it."""
-    return f"{value:g}"
-
-
-def cell_entries(entry: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """The scenario entries of every cell of one observability map, value-major then T
-    (config order), with the schema's defaults filled in.
-
-    A cell is the map's ``base`` with ``omega[vary]`` = value, its ``T`` and ``K``, the
-    joint MAP on and Stan off; its name is ``<map>_<vary><value>_T<T>``."""
-    base = dict(entry["base"])
-    cells = []
-    for value in entry["values"]:
-        for T in entry["T"]:
-            omega = {**base["omega"], entry["vary"]: value}
-            cell = {
-                **copy.deepcopy(base),
-                "name": f"{entry['name']}_{entry['vary']}{map_value_label(value)}_T{T}",
-                "omega": omega,
-                "T": int(T),
-                "K": int(entry["K"]),
-                "joint_map": True,
-                "stan": False,
-            }
-            schema_problems(cell, scenario_schema())  # fills in the defaults (checked elsewhere)
-            cells.append(cell)
-    return cells
 
 
 def _map_problems(config: dict) -> list[str]:
@@ -368,7 +333,7 @@ def _paper_output_problems(config: dict) -> list[str]:
 
 
 def _own_model_problems(config: dict) -> list[str]:
-    """The model's own Python check (``python -m ssmobs.check_model <slug> --no-stan``, at
+    """The model's own Python check (``python -m ssmobs.model_check <slug> --no-stan``, at
     its default cases) for every model whose noise-free trajectory at a configured entry's
     true values exceeds the size bound: a wrong ``simulate`` (say two parameters swapped)
     can blow that trajectory up, and the size check would then blame the config's values.
@@ -395,7 +360,7 @@ def _own_model_problems(config: dict) -> list[str]:
         found = _own_python_check(MODELS[slug])
         if found:
             problems.append(
-                f"model {slug!r} fails its own check (python -m ssmobs.check_model {slug}), "
+                f"model {slug!r} fails its own check (python -m ssmobs.model_check {slug}), "
                 f"so the size of its trajectories at the config's true values says nothing "
                 f"about the config: {found}"
             )
@@ -404,7 +369,7 @@ def _own_model_problems(config: dict) -> list[str]:
 
 def _own_python_check(model: StateSpaceModel) -> str:
     """The first problem of the model check's Python stage at its default cases (the
-    message ``python -m ssmobs.check_model <slug>`` prints), or ""."""
+    message ``python -m ssmobs.model_check <slug>`` prints), or ""."""
     from ..model_check.python import python_stage_problems
 
     found = python_stage_problems(model)
@@ -465,7 +430,7 @@ def validate(
     Raises :class:`ConfigError` listing every problem (key, value, what is allowed), one
     per line; problems of one kind shared by more than a few entries of a config list (50
     scenarios over the memory limit) in one line with their number and first names
-    (:func:`~ssmobs.config_schema.summarise_problems`), unless ``every_problem``.  The
+    (:func:`~ssmobs.config.schema.summarise_problems`), unless ``every_problem``.  The
     header of such a message says how to get every one: the preflight with ``--all`` and
     ``config_file``.
     """
@@ -514,7 +479,7 @@ def _problems_message(
         if len(lines) < len(problems):
             header += (
                 f" ({len(problems)} problems of {len(lines)} kinds; every one: "
-                f".venv/bin/python -m ssmobs.preflight --all {config_file or 'CONFIGFILE'})"
+                f".venv/bin/python -m ssmobs.config.preflight --all {config_file or 'CONFIGFILE'})"
             )
         problems = lines
     return f"{header}:\n  - " + "\n  - ".join(problems)

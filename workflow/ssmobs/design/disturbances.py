@@ -4,7 +4,7 @@ The design disturbances of the paper (Sec. III.A) are K equally weighted points 
 approximate the standard normal distribution N(0, I_q).  For ``method="design"`` they are the
 point-symmetric set {s_1..s_N, -s_1..-s_N} (plus the origin for odd K) that minimises the modified
 Cramér–von Mises distance between localized cumulative distributions (LCDs)
-(:mod:`ssmobs.lcd_distance`), followed by a covariance correction.  Formulas and section
+(:mod:`ssmobs.design.lcd_distance`), followed by a covariance correction.  Formulas and section
 numbers refer to ``docs/lcd-design-disturbances.md`` ("the doc"):
 
 * covariance correction after the optimisation: Section 5;
@@ -297,7 +297,7 @@ def design_disturbances(
         If q < 1, K < 1, the method is unknown, the seed is not an integer in
         [0, 2**32 - 1] or b_max is not positive.
     """
-    kernels.warn_once_if_not_fixed("ssmobs.design_disturbances.design_disturbances")
+    kernels.warn_once_if_not_fixed("ssmobs.design.disturbances.design_disturbances")
     q = check_positive_int("q", q)
     K = check_positive_int("K", K)
     if method not in METHODS:

@@ -1,7 +1,7 @@
 """The LCD distance of a point set to N(0, I_q), and its gradient for point-symmetric sets.
 
 The distance is the modified Cramér–von Mises distance between localized cumulative
-distributions (LCDs) that :mod:`ssmobs.design_disturbances` minimises.  Formulas and
+distributions (LCDs) that :mod:`ssmobs.design.disturbances` minimises.  Formulas and
 section numbers refer to ``docs/lcd-design-disturbances.md`` ("the doc"):
 
 * distance (the doc's :math:`\\hat D`, normalised by :math:`\\pi^{-q/2}`): Sections 1-2, in the
@@ -19,7 +19,8 @@ back to ``scipy.special.exp1``.
 
 Kernels.  :func:`symmetric_distance` (what the optimiser calls) runs this NumPy code as the
 reference and, up to q = :data:`COMPILED_MAX_Q`, the fused compiled kernel of
-:mod:`ssmobs.lcd_native` (doc Section 6.6); the quadrature rule of both is computed in decimal
+:mod:`ssmobs.design.lcd_native` (doc Section 6.6); the quadrature rule of both is computed in
+decimal
 arithmetic, the same bits everywhere.
 """
 
@@ -346,9 +347,9 @@ def symmetric_distance(
     with ``gradient=True``, else None), without checking the arguments
     (:func:`symmetric_distance_and_gradient` checks them).
 
-    ``kernel="compiled"``: the fused C++ kernel of :mod:`ssmobs.lcd_native`, the same bits
+    ``kernel="compiled"``: the fused C++ kernel of :mod:`ssmobs.design.lcd_native`, the same bits
     on any x86-64 CPU whatever NumPy's and OpenBLAS's kernels and threads (it raises
-    :class:`ssmobs.lcd_native.LcdKernelUnavailable` where it cannot be built);
+    :class:`ssmobs.design.lcd_native.LcdKernelUnavailable` where it cannot be built);
     ``"numpy"``: the NumPy reference below (block-wise, OpenBLAS products), which agrees
     with it to ~1e-12 relative, not in the last bits, and whose bits follow the kernels
     NumPy and OpenBLAS run (fixed by the workflow, :mod:`ssmobs.kernels`); ``"auto"``

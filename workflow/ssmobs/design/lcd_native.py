@@ -1,7 +1,7 @@
 """The compiled pair kernel of the LCD distance (``lcd_kernel/lcd_kernel.cpp``): built on
 first use, loaded with ctypes.
 
-The kernel computes what the NumPy reference of :mod:`ssmobs.lcd_distance` computes (the
+The kernel computes what the NumPy reference of :mod:`ssmobs.design.lcd_distance` computes (the
 point-symmetric distance and its gradient, docs/lcd-design-disturbances.md Sections 2.4 and
 4) in one fused pass over the pairs, with its own ``log``, ``exp`` and ``expm1``, one fixed
 order of every sum and one thread, compiled for the x86-64 baseline without contraction or
@@ -272,7 +272,7 @@ def symmetric_distance(
 ) -> tuple[float, np.ndarray | None]:
     """Distance of the point-symmetric set of ``half`` (N x q, K = 2N or 2N + 1 points) and,
     with ``gradient``, its gradient w.r.t. ``half`` (doc 2.4, 4), as
-    :func:`ssmobs.lcd_distance.symmetric_distance` with ``kernel="numpy"`` to ~1e-12.
+    :func:`ssmobs.design.lcd_distance.symmetric_distance` with ``kernel="numpy"`` to ~1e-12.
     ``rule``: the quadrature rule of (q, B) as (lam, sig, alpha, beta, D1', J'(0))."""
     lib = kernel() if lib is None else lib
     s = np.ascontiguousarray(half, dtype=np.float64)

@@ -1,4 +1,4 @@
-"""Improper boundaries of p(Omega | z) for the exact marginal stage (:mod:`ssmobs.exact_marginal`).
+"""Improper boundaries of p(Omega | z) for the exact marginal stage (:mod:`ssmobs.exact.marginal`).
 
 :func:`boundary_slopes` measures d log p / d log(distance to the boundary) along each axis,
 :func:`improper` reads a slope as non-integrable, and :func:`valley_limits` cuts the grid's

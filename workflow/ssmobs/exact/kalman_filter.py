@@ -9,7 +9,7 @@ given z, starting from zero information on x_0.  The same recursion run backward
 (Omega, z).  Everything is vectorised over Omega values and trajectories (a scalar
 recursion for p = 1, p x p blocks otherwise).  It knows of a model only its matrices
 ``state_space_matrices(omega) -> (F, Q, H, R)``; the grid over Omega that turns it into
-marginal posteriors is :mod:`ssmobs.exact_marginal`.
+marginal posteriors is :mod:`ssmobs.exact.marginal`.
 """
 
 from __future__ import annotations

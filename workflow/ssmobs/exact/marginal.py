@@ -6,7 +6,7 @@ p_0(x_0) of Sec. IV the states integrate out in closed form:
 
     p(Omega | z) ∝ p(Omega) ∫ p(z | Omega, x_0, ..., x_T) p(x_1..x_T | x_0, Omega) dx_0..dx_T.
 
-:func:`ssmobs.kalman_filter.kalman_marginal` evaluates -2 log of that integral exactly
+:func:`ssmobs.exact.kalman_filter.kalman_marginal` evaluates -2 log of that integral exactly
 and the smoothed Gaussians of the states given (Omega, z).
 
 :func:`exact_marginal` integrates over Omega per trajectory:
@@ -37,9 +37,9 @@ the boundary, relative to the basin's (along the axis through the mode), so a us
 where the interior basin does not dominate.
 
 The steps live in their own modules: the grid over Omega (steps 1-3) in
-:mod:`ssmobs.exact_omega_grid`, the state mixtures (step 4) in
-:mod:`ssmobs.exact_state_mixtures`, the boundary slopes and the valley limits in
-:mod:`ssmobs.exact_boundaries`, the settings in :mod:`ssmobs.exact_settings`; this module
+:mod:`ssmobs.exact.omega_grid`, the state mixtures (step 4) in
+:mod:`ssmobs.exact.state_mixtures`, the boundary slopes and the valley limits in
+:mod:`ssmobs.exact.boundaries`, the settings in :mod:`ssmobs.exact.settings`; this module
 holds the driver and its result.
 """
 

@@ -1,4 +1,4 @@
-"""The grid over Omega of the exact marginal stage (:mod:`ssmobs.exact_marginal`, steps 1-3).
+"""The grid over Omega of the exact marginal stage (:mod:`ssmobs.exact.marginal`, steps 1-3).
 
 log p(Omega | z) comes from the Kalman filter (:func:`log_posterior_omega`); the grid works in
 coordinates u (:class:`OmegaAxes`: Omega itself on bounded supports, log|Omega| on half

@@ -1,4 +1,4 @@
-"""Grid sizes and tolerances of the exact marginal stage (:mod:`ssmobs.exact_marginal`)."""
+"""Grid sizes and tolerances of the exact marginal stage (:mod:`ssmobs.exact.marginal`)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,13 @@ QUANTILES = (0.05, 0.95)
 
 @dataclass(frozen=True)
 class ExactSettings:
-    """Grid sizes and tolerances of :func:`ssmobs.exact_marginal.exact_marginal`: the config
+    """Grid sizes and tolerances of :func:`ssmobs.exact.marginal.exact_marginal`: the config
     block ``exact_marginal`` (workflow/schemas/config.schema.yaml describes every field; a
     test keeps the two equal).
 
     ``coarse_nodes``, ``state_nodes`` and ``state_thin`` hold one value per number m = 1..4
     of parameters; ``state_nodes`` nodes per axis carry the state mixtures (on their own
-    box, :func:`ssmobs.exact_state_mixtures.state_box`) and the fine Omega grid has
+    box, :func:`ssmobs.exact.state_mixtures.state_box`) and the fine Omega grid has
     ``(state_nodes - 1) * state_thin + 1`` nodes per axis: refining the state grid refines
     the Omega grid too.
     """

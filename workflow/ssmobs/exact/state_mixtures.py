@@ -1,4 +1,4 @@
-"""The states' marginals of the exact marginal stage (:mod:`ssmobs.exact_marginal`, step 4).
+"""The states' marginals of the exact marginal stage (:mod:`ssmobs.exact.marginal`, step 4).
 
 The marginal of every state x_t is a mixture, over a grid of Omega, of the smoothed
 Gaussians given (Omega, z), weighted by p(Omega | z) (:func:`state_mixtures` on the box of

@@ -51,7 +51,7 @@ Hessian is positive definite (NaN otherwise).
 
 The ridge re-check records both how far the re-optimised point moved (sup norm) and how
 much -2 pi changed; ``ridge_test`` says which decides (see
-:class:`~ssmobs.joint_map_settings.JointMapSettings`).
+:class:`~ssmobs.joint_map.settings.JointMapSettings`).
 """
 
 from __future__ import annotations
@@ -92,8 +92,8 @@ def check_maxima(
     """The checks of Sec. III.B at the results ``theta`` of one batch of trajectories.
 
     ``mu`` and ``stop`` are the final barrier parameter and the stop reason of
-    :func:`~ssmobs.joint_map_barrier.minimize_barrier`.  Returns per-k arrays named as the
-    fields of :class:`~ssmobs.joint_map.JointMapResult` they fill: ``neg2_log_post``,
+    :func:`~ssmobs.joint_map.barrier.minimize_barrier`.  Returns per-k arrays named as the
+    fields of :class:`~ssmobs.joint_map.driver.JointMapResult` they fill: ``neg2_log_post``,
     ``local_variance``, ``eig_ratio``, ``grad_max``, ``status`` (the first check of the
     module docstring that applies), ``reason`` and ``ridge_value_change`` (the ridge
     re-optimisation, :func:`ridge_check`, is run where the eigenvalue ratio asks for it).

@@ -4,9 +4,9 @@ For every design observation trajectory z~(k) we minimise -2 pi(Theta | z~(k)) o
 Theta = (Omega, x_0, x_1..x_T) and check the maximum found; this module is the driver, its
 result (one row per k) and the scenario summary over K^max (Table II).  Its parts:
 
-- :mod:`ssmobs.joint_map_settings`: thresholds and tuning (:class:`JointMapSettings`);
-- :mod:`ssmobs.joint_map_barrier`: the primal log-barrier Newton solver and its start mu_0;
-- :mod:`ssmobs.joint_map_checks`: the checks of a found maximum (statuses, eigenvalue
+- :mod:`ssmobs.joint_map.settings`: thresholds and tuning (:class:`JointMapSettings`);
+- :mod:`ssmobs.joint_map.barrier`: the primal log-barrier Newton solver and its start mu_0;
+- :mod:`ssmobs.joint_map.checks`: the checks of a found maximum (statuses, eigenvalue
   ratio, ridge re-check) and the local variances.
 
 Trajectories are optimised in contiguous batches of k, each vectorised over k.
@@ -197,7 +197,8 @@ def joint_map(
     progress : optional object with ``update(n)`` (e.g. :class:`ssmobs.log.Progress`),
         called after each batch with the number of trajectories finished.
     theta_start : optional (K, |Theta|) start of every trajectory's optimisation instead of
-        :func:`initial_theta` (the multi-start's images of maxima, :mod:`ssmobs.multi_start`);
+        :func:`initial_theta` (the multi-start's images of maxima,
+        :mod:`ssmobs.joint_map.multi_start`);
         each row's Omega must lie strictly inside the support.
 
     Returns
@@ -264,7 +265,7 @@ def joint_map_summary(
 
     Keys: ``K``, ``K_max`` (= |K^max|), ``ratio`` (= |K^max| / K), ``components``, the count
     per status ``n_<status>``, and per component c of Omega and x_0 (``<component>_<stat>``,
-    as the Stan stage's :func:`ssmobs.stan_metrics.stan_summary`): ``c_mean``, ``c_var``
+    as the Stan stage's :func:`ssmobs.nuts.stan_metrics.stan_summary`): ``c_mean``, ``c_var``
     (ddof = 1, as in Table II), ``c_mse`` (mean squared error about the true value, divided
     by |K^max|), ``c_bias`` and ``c_lvar_mean`` (mean local variance).  Values that are not
     defined (|K^max| = 0, or 1 for the variance) are NaN.

@@ -4,7 +4,7 @@ The checks of Sec. III.B (gradient, Hessian, eigenvalue ratio with the ridge re-
 local: they pass at any strict local maximum, so one start per trajectory, as in the paper,
 says that *a* maximum was found, not that it is the only one.  Here every design
 trajectory is optimised from ``n_starts`` starts by the same barrier method with the same
-checks (:func:`ssmobs.joint_map.joint_map`, each start vectorised over k):
+checks (:func:`ssmobs.joint_map.driver.joint_map`, each start vectorised over k):
 
 - start 0 is the paper's: (Omega_true, x0_true, the scenario's state start rule);
 - starts 1 .. n_starts - 1 take (Omega, x_0) from a Halton sequence (bases 2, 3, 5, ...;
@@ -153,7 +153,7 @@ class MultiStartResult:
     Attributes
     ----------
     starts : (S, m + p) start (Omega, x_0) of every Halton start; row 0 is the paper's.
-    runs : the :class:`~ssmobs.joint_map.JointMapResult` of every start, the S starts first
+    runs : the :class:`~ssmobs.joint_map.driver.JointMapResult` of every start, the S starts first
         (``runs[0]`` is the paper's start, the joint MAP of K^max), then the image starts
         (status ``not-run`` for the k an image start did not run).
     start_states : (S,) the state start rule of each of the S starts.
@@ -381,7 +381,7 @@ def multi_start_joint_map(
     """Joint MAP of every trajectory from ``settings.n_starts`` starts and the images of
     the maxima they find (module docstring).
 
-    Start 0 is :func:`ssmobs.joint_map.joint_map` with the paper's start exactly (with one
+    Start 0 is :func:`ssmobs.joint_map.driver.joint_map` with the paper's start exactly (with one
     start nothing else runs); the others use the state start rule of
     :func:`halton_start_rule`.
     """

@@ -2,8 +2,8 @@
 its barrier solver.
 
 One frozen dataclass, read from the config's ``joint_map`` block, for the solver
-(:mod:`ssmobs.joint_map_barrier`), the checks of a found maximum
-(:mod:`ssmobs.joint_map_checks`) and the driver (:mod:`ssmobs.joint_map`).
+(:mod:`ssmobs.joint_map.barrier`), the checks of a found maximum
+(:mod:`ssmobs.joint_map.checks`) and the driver (:mod:`ssmobs.joint_map.driver`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ class JointMapSettings:
     paper's thresholds and the choices a study varies (the start of the barrier, the ridge
     test); every key of it is a field (a test compares the two).
 
-    Fixed fields, not in the config (code that calls :func:`ssmobs.joint_map.joint_map`
+    Fixed fields, not in the config (code that calls :func:`ssmobs.joint_map.driver.joint_map`
     itself may set them):
 
     - ``start_states``: set per scenario instead (its ``joint_map_start``);
@@ -61,7 +61,7 @@ class JointMapSettings:
     mu0: float = 1.0
     mu0_per_step: float = 2.0
     #: how mu_0 is chosen: "gradient_balance" (per trajectory: the barrier's Omega-gradient
-    #: equals that of -2 pi at the start; :mod:`ssmobs.joint_map_barrier`) or "per_step"
+    #: equals that of -2 pi at the start; :mod:`ssmobs.joint_map.barrier`) or "per_step"
     #: (the formula above)
     mu0_rule: str = "gradient_balance"
     #: start of the states: "observations" (the paper's x = z), "sign_of_x0"
@@ -104,7 +104,7 @@ class JointMapSettings:
     divergence_limit: float = 1e6
     #: a run stopped by max_newton_iter or the line search is followed for this many more
     #: iterations to tell a run-off (unbounded) or a flat direction (ridge) from a slow
-    #: convergence (:func:`ssmobs.joint_map_checks.runoff_check`)
+    #: convergence (:func:`ssmobs.joint_map.checks.runoff_check`)
     runoff_iter: int = 50
     #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
     eigen_method: str = "lanczos"
@@ -112,11 +112,12 @@ class JointMapSettings:
     lanczos_steps: int = 24
     #: trajectories per vectorised batch (0: about 2e5 / |Theta|, between 64 and 2048)
     chunk_size: int = 0
-    #: starts per trajectory (:mod:`ssmobs.multi_start`): 1 is the paper's start alone; n > 1
+    #: starts per trajectory (:mod:`ssmobs.joint_map.multi_start`): 1 is the paper's start alone; n
+    #: > 1
     #: adds n - 1 starts spread over the start box by a Halton sequence
     n_starts: int = 1
     #: two maxima that pass the checks are one if no component of Theta differs by more
-    #: than this many local standard deviations sqrt(LVar_j) (:mod:`ssmobs.multi_start`)
+    #: than this many local standard deviations sqrt(LVar_j) (:mod:`ssmobs.joint_map.multi_start`)
     distinct_tol: float = 1e-2
     #: a trajectory has one maximum (K^max_unique) only when at least this share of its
     #: n_starts starts pass the checks and all reach it; with fewer it is "undetermined"

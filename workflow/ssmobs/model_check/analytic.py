@@ -1,5 +1,5 @@
-"""The analytic gradients of the model check (:mod:`ssmobs.check_model`, step 4): the log
-density and gradient generated from the model's terms (:mod:`ssmobs.analytic_gradients`)
+"""The analytic gradients of the model check (:mod:`ssmobs.model_check.check`, step 4): the log
+density and gradient generated from the model's terms (:mod:`ssmobs.nuts.analytic_gradients`)
 against Stan's autodiff of the hand-written program, both evaluated by the native driver's
 ``--log-density`` mode at the same random points inside the support.
 

@@ -1,4 +1,4 @@
-"""The cases of the model check (:mod:`ssmobs.check_model`): true values and priors at which
+"""The cases of the model check (:mod:`ssmobs.model_check.check`): true values and priors at which
 the Python model and the Stan program are compared, and random points inside their support.
 """
 

@@ -1,4 +1,4 @@
-"""The Python side of the model check (:mod:`ssmobs.check_model`, step 1): the simulator's
+"""The Python side of the model check (:mod:`ssmobs.model_check.check`, step 1): the simulator's
 shapes and values, the symbolic derivatives against finite differences, and the simulated
 disturbances recovered by the log-density terms.
 """

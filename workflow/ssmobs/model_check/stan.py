@@ -1,4 +1,4 @@
-"""The compiled Stan program of the model check (:mod:`ssmobs.check_model`, step 3): its
+"""The compiled Stan program of the model check (:mod:`ssmobs.model_check.check`, step 3): its
 parameter names and shapes, its log density against the Python one up to one additive
 constant, and its support, evaluated by the native driver or PyStan (:func:`stan_density`).
 """

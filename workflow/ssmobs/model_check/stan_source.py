@@ -1,4 +1,4 @@
-"""The Stan source of the model check (:mod:`ssmobs.check_model`, step 2), read without
+"""The Stan source of the model check (:mod:`ssmobs.model_check.check`, step 2), read without
 compiling: the ``parameters`` block declares ``(*param_names, x0, x)`` in this order, the
 ``data`` block ``T``, ``z`` and every parameter's prior bounds.
 """

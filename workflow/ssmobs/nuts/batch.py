@@ -3,12 +3,12 @@
 :func:`run_trajectories` is the loop one batch job runs: for every k of its batch it
 
 1. skips k if ``records_dir/k{k:05d}.json`` exists and validates (same key: scenario, k,
-   seed, Stan program hash, settings hash, data hash; see :mod:`ssmobs.record_cache`), else
+   seed, Stan program hash, settings hash, data hash; see :mod:`ssmobs.nuts.record_cache`), else
 2. samples pi(Theta | z~(k)) with the backend, seed ``seeds.int_seed(seed, "nuts",
    scenario, k)``, random or true initial values,
-3. checks convergence (:func:`ssmobs.convergence.check_convergence`),
+3. checks convergence (:func:`ssmobs.nuts.convergence.check_convergence`),
 4. computes the marginal MAP and 5 %/95 % quantiles of every Theta component
-   (:func:`ssmobs.marginal_map.marginal_summary`, Eq. (11), (12)),
+   (:func:`ssmobs.nuts.marginal_map.marginal_summary`, Eq. (11), (12)),
 5. writes the record atomically, and the draws as NetCDF (ArviZ) for k in ``keep_draws_for``.
 
 A failure of the sampler on one trajectory (:class:`SamplingError`, data the model
@@ -19,7 +19,7 @@ driver) fails the job without a record, so a broken installation never yields a 
 run with |K^Stan| = 0.  Only the per-trajectory records (and draws where asked) are
 written, so an interrupted batch resumes where it stopped.
 
-The record format and the table built from records: :mod:`ssmobs.record_format`.
+The record format and the table built from records: :mod:`ssmobs.nuts.record_format`.
 """
 
 from __future__ import annotations
@@ -297,7 +297,7 @@ def run_trajectories(
     ks : trajectory indices (0-based rows of ``z``) to process, in order.
     bounds : the prior's :class:`~ssmobs.models.base.PriorBounds`.
     omega_true, x0_true : true parameters (array in ``model.param_names`` order) and
-        initial state (array of p values), e.g. a :class:`~ssmobs.scenario.Scenario`'s.
+        initial state (array of p values), e.g. a :class:`~ssmobs.config.scenario.Scenario`'s.
     scenario, seed : scenario name and seed; Stan's seed is
         ``seeds.int_seed(seed, "nuts", scenario, k)``, or ``stan_seed`` for every k when
         given (as a loop calling Stan with one fixed seed would).
@@ -314,7 +314,7 @@ def run_trajectories(
     retry_errors : recompute stored records whose status is "error" (e.g. after fixing
         the cause of an exception); by default every valid record is reused.
     user_header : the C++ header defining the program's external functions (the analytic
-        gradients of :mod:`ssmobs.analytic_gradients`); keyed with the program.
+        gradients of :mod:`ssmobs.nuts.analytic_gradients`); keyed with the program.
 
     Returns
     -------

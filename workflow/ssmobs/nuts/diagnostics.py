@@ -1,7 +1,7 @@
 """Array-level MCMC diagnostics: rank-normalised split R-hat, bulk-/tail-ESS and E-BFMI.
 
 The statistics of Vehtari et al. (2021), the paper's [35], that Sec. III.C's convergence
-checks (:mod:`ssmobs.convergence`) apply to every trajectory's NUTS run, on plain arrays
+checks (:mod:`ssmobs.nuts.convergence`) apply to every trajectory's NUTS run, on plain arrays
 ``(parameter, chain, draw)``:
 
 * :func:`rank_diagnostics` -- R-hat (max of bulk and folded rank-normalised split R-hat),
@@ -26,7 +26,7 @@ one trajectory's four statistics for all parameters take, as CPU time (median of
 
 largest relative difference 2.6e-14 (tail-ESS), same NaNs.  arviz-stats is 2.7-6.8x
 slower, not within 1.5x, and the workflow computes these for every trajectory (thousands
-per scenario), so we keep the vectorised code; :class:`~ssmobs.convergence.ConvergenceSettings`
+per scenario), so we keep the vectorised code; :class:`~ssmobs.nuts.convergence.ConvergenceSettings`
 ``implementation="arviz"`` calls arviz-stats instead (same numbers).
 """
 

@@ -1,7 +1,7 @@
 """The Stan stage's record cache: keys, hashes, paths and reading records back.
 
-Every trajectory k of the NUTS stage (:mod:`ssmobs.nuts_stage`; the record format:
-:mod:`ssmobs.record_format`) is stored as ``records_dir/k{k:05d}.json``.  A rerun reuses a
+Every trajectory k of the NUTS stage (:mod:`ssmobs.nuts.batch`; the record format:
+:mod:`ssmobs.nuts.record_format`) is stored as ``records_dir/k{k:05d}.json``.  A rerun reuses a
 record only when its key matches (:func:`record_key`): scenario, k, seed, Stan seed, the
 Stan program's hash (:func:`program_hash`), the hash of every setting that determines the record
 (:func:`settings_hash`: sampler, the diagnostics' implementation, init, prior bounds, true
@@ -106,7 +106,7 @@ def settings_hash(
     """Hash of everything besides (scenario, k, seed, program, data) that determines a record.
 
     ``omega_true`` in the model's parameter order and ``x0_true`` are arrays (as a
-    :class:`~ssmobs.scenario.Scenario` holds them); ``sampler.workers`` is left out: it
+    :class:`~ssmobs.config.scenario.Scenario` holds them); ``sampler.workers`` is left out: it
     changes how chains are scheduled, not the draws.
     """
     sampler_d = sampler_key({k: v for k, v in asdict(sampler).items() if k != "workers"})
@@ -319,7 +319,7 @@ def check_batch_records(
     convergence_cfg: dict,
 ) -> None:
     """The per-trajectory records a batch table was built from are all there, parse and
-    give exactly this table (:func:`ssmobs.record_format.records_to_frame`).
+    give exactly this table (:func:`ssmobs.nuts.record_format.records_to_frame`).
 
     Run by gather_nuts (the workflow also stops before it when a record is newer than its
     table, :func:`changed_batch_records`).  Raises

@@ -1,7 +1,7 @@
 """The NUTS stage's record of one trajectory k, and the table built from records.
 
-Record format (JSON, one file per k; :data:`ssmobs.record_cache.RECORD_VERSION`, written by
-:mod:`ssmobs.nuts_stage`, stored and read back by :mod:`ssmobs.record_cache`)::
+Record format (JSON, one file per k; :data:`ssmobs.nuts.record_cache.RECORD_VERSION`, written by
+:mod:`ssmobs.nuts.batch`, stored and read back by :mod:`ssmobs.nuts.record_cache`)::
 
     record_version   int
     key              {scenario, k, seed, stan_seed, program_hash, settings_hash, backend
@@ -65,7 +65,7 @@ def records_to_frame(
     Columns: ``k`` (int), ``scenario``, ``stan_seed``, ``status``, ``converged`` (bool),
     ``failed_checks`` (comma-separated names, "" when none), ``reason`` ("" when none),
     the worst diagnostics :data:`DIAGNOSTIC_COLUMNS` (NaN when sampling failed), the same
-    per block ``max_rhat_omega``, ``min_ess_bulk_x0``, ... (:data:`~ssmobs.convergence.BLOCKS`;
+    per block ``max_rhat_omega``, ``min_ess_bulk_x0``, ... (:data:`~ssmobs.nuts.convergence.BLOCKS`;
     the tables add ``failing_blocks``), then for
     every component of ``model.theta_names(T)`` (Omega, x0, x1..xT): ``<name>_map``,
     ``<name>_q5``, ``<name>_q95`` (NaN when not computed).  We chose wide columns (3 |Theta|

@@ -1,6 +1,6 @@
 """Per-scenario properties of the marginal MAP estimator over K^Stan (Sec. III.C, Sec. IV).
 
-Given the per-trajectory table of :func:`ssmobs.record_format.records_to_frame`,
+Given the per-trajectory table of :func:`ssmobs.nuts.record_format.records_to_frame`,
 :func:`stan_summary` returns
 
 * ``n_stan`` = |K^Stan| (trajectories that passed every check), ``K`` (rows of the table)
@@ -54,11 +54,11 @@ def stan_summary(
 
     Parameters
     ----------
-    frame : per-k table (:func:`ssmobs.record_format.records_to_frame`): columns ``k``,
+    frame : per-k table (:func:`ssmobs.nuts.record_format.records_to_frame`): columns ``k``,
         ``converged`` and ``<name>_map``/``_q5``/``_q95`` for every Theta component.
     model : the state space model (for parameter and Theta names).
     omega_true, x0_true : true Omega (array in ``model.param_names`` order) and x0 (array
-        of p values), e.g. a :class:`~ssmobs.scenario.Scenario`'s.
+        of p values), e.g. a :class:`~ssmobs.config.scenario.Scenario`'s.
     x_true : (K, T, p) design states; row ``k`` of the table is compared with ``x_true[k]``.
 
     Returns

@@ -260,7 +260,7 @@ def figure_exact_vs_stan(
     Top row: one scatter per component (exact on x, Stan + KDE on y, the diagonal); bottom
     row: histograms of the differences Stan - exact of the MAP and of the 5 %/95 % quantiles.
     ``stan`` and ``exact`` hold the same trajectories in the same order (converged in
-    both).  The numbers of the comparison: :func:`ssmobs.tables.exact_vs_stan_table`.
+    both).  The numbers of the comparison: :func:`ssmobs.reports.tables.exact_vs_stan_table`.
     """
     plt = _plt()
     fig, axes = plt.subplots(2, len(names), figsize=(3.2 * len(names), 6.0), squeeze=False)

@@ -57,7 +57,7 @@ def study_row(
     trials = {"K_max": scenario.K, "K_stan": ss.get("K", scenario.K)}
     for ratio, count in (("K_max_ratio", "K_max"), ("K_stan_ratio", "K_stan")):
         row[f"{ratio}_lo95"], row[f"{ratio}_hi95"] = clopper_pearson(row[count], trials[count])
-    if js.get("K_max_unique") is not None:  # multi-start joint MAP (ssmobs.multi_start)
+    if js.get("K_max_unique") is not None:  # multi-start joint MAP (ssmobs.joint_map.multi_start)
         unique = int(js.get("K_max_unique"))
         row["K_max_unique"], row["K_max_unique_ratio"] = unique, unique / scenario.K
         lo, hi = clopper_pearson(unique, scenario.K)

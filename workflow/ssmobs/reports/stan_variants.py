@@ -20,9 +20,10 @@ import pandas as pd
 
 from ssmobs import io
 from ssmobs.binomial import format_fraction
-from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS, code_digest, digest, file_digest
+from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS
 from ssmobs.config.validation import ConfigError, read_config_file, validate
 from ssmobs.reports.tables import write_table
+from ssmobs.stage_code import code_digest, digest, file_digest
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
 TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")

@@ -188,7 +188,7 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     same statistics over the ``K_exact_used`` trajectories with a unique maximum.  Every
     fraction ``<f>`` has its exact binomial 95 % interval in ``<f>_lo95`` / ``<f>_hi95``.
 
-    When a scenario's joint MAP ran from several starts (:mod:`ssmobs.multi_start`), the
+    When a scenario's joint MAP ran from several starts (:mod:`ssmobs.joint_map.multi_start`), the
     table also has ``joint_n_starts``, ``K_max_unique`` (trajectories with exactly one
     distinct maximum that passes the checks, from enough starts), ``K_max_undetermined``
     (one maximum, from too few passing starts), ``K_max_several`` and

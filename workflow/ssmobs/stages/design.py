@@ -24,7 +24,7 @@ def run_design_disturbances(
     q: int, K: int, method: str, seed: int, design_cfg: dict, out: PathLike
 ) -> DesignResult:
     """Rule design_disturbances: one (q x K) disturbance matrix (LCD design, or a random
-    baseline), written to ``out`` (:func:`ssmobs.design_disturbances.design_disturbances`)."""
+    baseline), written to ``out`` (:func:`ssmobs.design.disturbances.design_disturbances`)."""
     from ..design.disturbances import design_disturbances
 
     logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, method, seed)

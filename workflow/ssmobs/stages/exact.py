@@ -24,7 +24,7 @@ logger = logging.getLogger("ssmobs")
 def exact_summary(
     frame: Any, model: StateSpaceModel, omega: Any, x0: Any, x_true: np.ndarray
 ) -> dict:
-    """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
+    """The Stan stage's statistics (:func:`ssmobs.nuts.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
     trajectories whose posterior is improper at each boundary."""
     from ..exact.marginal import MAXIMA_KINDS

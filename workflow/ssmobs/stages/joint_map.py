@@ -52,7 +52,8 @@ def joint_map_of(
 def multi_start_of(
     traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
 ) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
-    """:func:`joint_map_of` from ``settings["n_starts"]`` starts (:mod:`ssmobs.multi_start`):
+    """:func:`joint_map_of` from ``settings["n_starts"]`` starts
+    (:mod:`ssmobs.joint_map.multi_start`):
     the paper's start's result, its table with the per-k columns of the distinct maxima
     beside, and its summary with |K^max_unique| and the other multi-start counts."""
     from ..joint_map.driver import joint_map_summary

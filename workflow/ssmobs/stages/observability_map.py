@@ -4,16 +4,16 @@ observable, and how well.
 A map (one entry of the config's ``observability_maps``) is a grid of *cells*: a base
 scenario (model, Omega, x0, prior, method, seed) with one parameter set to each of
 ``values`` and the horizon set to each of ``T`` (the cells' scenario entries:
-:func:`ssmobs.config.cell_entries`).  Every cell gets K design trajectories
+:func:`ssmobs.config.maps.cell_entries`).  Every cell gets K design trajectories
 (Sec. III.A) and
 - the joint MAP (Sec. III.B): |K^max|/K with its exact binomial 95 % interval and, over
   K^max, the median local variance of every Omega component; |K^max_unique|/K with its
   interval, the trajectories with exactly one distinct maximum that passes the checks over
-  the cell's ``n_starts`` starts (:mod:`ssmobs.multi_start`; the base's
+  the cell's ``n_starts`` starts (:mod:`ssmobs.joint_map.multi_start`; the base's
   ``joint_map_n_starts``, else the ``joint_map`` block's ``n_starts``): with one start, the
   default, it equals |K^max| (no other start looked for a second maximum);
 - for a model linear in the states, the exact marginal posterior p(Omega | z) (Kalman filter
-  and grid, :mod:`ssmobs.exact_marginal`): the fraction of trajectories with a unique interior
+  and grid, :mod:`ssmobs.exact.marginal`): the fraction of trajectories with a unique interior
   maximum (Definition 3) with its interval, and over those the median Laplace standard
   deviation and the median width of the 90 % interval of every Omega component ("how
   well"), plus the fraction whose cut-off improper spike is not negligible.
@@ -283,7 +283,7 @@ def write_map(
     frame["paper_point"] = [
         (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
     ]
-    from ..config.validation import map_value_label
+    from ..config.maps import map_value_label
     from ..models import get_model
     from ..reports.tables import write_table
 

@@ -63,7 +63,7 @@ def run_paper_tables(
     ``joint`` / ``marginal`` / ``exact`` map scenario names to their summary JSON paths.
     ``table2``, ``table3``, ``section4``: the paths to write (.csv, .md, .tex by suffix);
     the Section IV summary goes whole to ``section4_csv`` and as the compact table a
-    person reads (:func:`ssmobs.tables.section_iv_compact`) to ``section4``.
+    person reads (:func:`ssmobs.reports.tables.section_iv_compact`) to ``section4``.
     """
     exact = exact or {}
     from ..reports import tables
@@ -130,7 +130,8 @@ def run_convergence_sensitivity(
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
     scenario names to their gather_nuts tables.
     """
-    from ..nuts.convergence import ConvergenceSettings, failure_pattern_table, sensitivity_table
+    from ..nuts.convergence import ConvergenceSettings
+    from ..nuts.convergence_sensitivity import failure_pattern_table, sensitivity_table
     from ..reports.tables import write_table
 
     frames = {
@@ -280,7 +281,7 @@ def mu0_sweep_rows(
     traj: Trajectories, prior: Any, settings: dict, mu0_per_T: list[float]
 ) -> list[dict]:
     """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
-    gradient-balance rule (:func:`ssmobs.joint_map_barrier.initial_mu_values`)."""
+    gradient-balance rule (:func:`ssmobs.joint_map.barrier.initial_mu_values`)."""
     from .joint_map import joint_map_of
 
     rows = []

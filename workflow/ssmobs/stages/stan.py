@@ -1,7 +1,7 @@
 """Glue of the Stan stage (Sec. III.C; rules in ``workflow/rules/stan.smk``): the compiled
 program, NUTS for one batch of trajectories, and the scenario's gathered table and summary.
 
-The checks that a batch table still matches its records are in :mod:`ssmobs.record_cache`.
+The checks that a batch table still matches its records are in :mod:`ssmobs.nuts.record_cache`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ logger = logging.getLogger("ssmobs")
 
 def batches(trajectories: range, batch_size: int) -> list[range]:
     """The trajectories k of each Stan job: consecutive runs of ``batch_size`` of the
-    scenario's Stan trajectories (:attr:`ssmobs.scenario.Scenario.stan_trajectories`); a pure
+    scenario's Stan trajectories (:attr:`ssmobs.config.scenario.Scenario.stan_trajectories`); a pure
     function of both."""
     return [trajectories[i : i + batch_size] for i in range(0, len(trajectories), batch_size)]
 
@@ -47,7 +47,7 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
     """The Stan program NUTS runs for ``model`` and its C++ header (config key
     ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
     program with its model block calling the log density and gradient generated from the
-    model's terms (:mod:`ssmobs.analytic_gradients`), in the cache."""
+    model's terms (:mod:`ssmobs.nuts.analytic_gradients`), in the cache."""
     from ..stan_backends import stan_file
 
     path = stan_file(model)
@@ -98,7 +98,7 @@ def run_sample_batch(
     the scenario's chains start (``stan_init: joint_map``).
 
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
-    interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
+    interruption reuses every valid record (see :func:`ssmobs.nuts.batch.run_trajectories`).
     """
     from ..design.trajectories import read_trajectories
     from ..nuts.batch import run_trajectories
@@ -171,9 +171,9 @@ def run_gather_nuts(
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
 
     The batch tables hold the configured convergence checks applied to the records'
-    diagnostics (:func:`ssmobs.convergence.apply_thresholds`), so other thresholds rebuild
+    diagnostics (:func:`ssmobs.nuts.convergence.apply_thresholds`), so other thresholds rebuild
     the tables without new sampling; each is checked against its records first
-    (:func:`ssmobs.record_cache.check_batch_records`)."""
+    (:func:`ssmobs.nuts.record_cache.check_batch_records`)."""
     import pandas as pd
 
     from ..design.trajectories import read_trajectories
