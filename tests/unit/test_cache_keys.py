@@ -55,7 +55,7 @@ def test_module_closure_follows_imports_and_skips_neutral_modules():
 def test_code_digest_names_its_script_and_its_own_glue():
     code = code_digest("joint_map")
     assert "scripts/joint_map.py" in code and "stages/joint_map.py" in code
-    assert not {"stages/outputs.py", "stages/stan.py", "stages/exact.py"} & set(code)
+    assert not {"stages/outputs/paper_tables.py", "stages/stan.py", "stages/exact.py"} & set(code)
 
 
 def _write(root: Path, files: dict[str, str]) -> Path:
@@ -78,16 +78,26 @@ def _write(root: Path, files: dict[str, str]) -> Path:
             "joint_map",
             {"stages/joint_map.py", "joint_map/driver.py", "design/trajectories.py"},
             {
-                "stages/outputs.py",
-                "stages/k_selection.py",
+                "stages/outputs/figures.py",
+                "stages/k_selection/grid.py",
                 "reports/tables.py",
                 "reports/figures.py",
             },
         ),
         (
             "k_selection",
-            {"stages/k_selection.py", "stages/design.py", "stages/joint_map.py", "k_selection.py"},
-            {"stages/outputs.py", "reports/tables.py", "reports/figures.py"},
+            {
+                "stages/k_selection/grid.py",
+                "stages/design.py",
+                "stages/joint_map.py",
+                "k_selection.py",
+            },
+            {
+                "stages/k_selection/choice.py",
+                "stages/outputs/mu0_sweep.py",
+                "reports/tables.py",
+                "reports/figures.py",
+            },
         ),
         (
             "program",
@@ -104,7 +114,7 @@ def _write(root: Path, files: dict[str, str]) -> Path:
             {"stages/stan.py", "nuts/batch.py", "nuts/record_cache.py", "design/trajectories.py"},
             {
                 "nuts/stan_metrics.py",
-                "stages/outputs.py",
+                "stages/outputs/paper_tables.py",
                 "reports/tables.py",
                 "joint_map/driver.py",
             },
@@ -122,7 +132,10 @@ def _write(root: Path, files: dict[str, str]) -> Path:
         (
             "outputs",
             {
-                "stages/outputs.py",
+                "stages/outputs/paper_tables.py",
+                "stages/outputs/figures.py",
+                "stages/outputs/mu0_sweep.py",
+                "stages/k_selection/choice.py",
                 "reports/tables.py",
                 "reports/figures.py",
                 "reports/observability_study.py",
@@ -326,10 +339,12 @@ FROM_TRAJECTORIES = {"trajectories", "joint_map", "nuts_records", "nuts_batches"
         ("ssmobs/log.py", set()),
         ("ssmobs/stages/design.py", {"design", "k_selection"} | FROM_TRAJECTORIES),
         ("ssmobs/stages/joint_map.py", {"joint_map", "k_selection", "outputs"}),
-        ("ssmobs/stages/k_selection.py", {"k_selection"}),
+        ("ssmobs/stages/k_selection/grid.py", {"k_selection"}),
+        ("ssmobs/stages/k_selection/choice.py", {"outputs"}),
         ("ssmobs/stages/stan.py", {"program", "nuts_records", "nuts_batches", "gather"}),
         ("ssmobs/stages/exact.py", {"exact"}),
-        ("ssmobs/stages/outputs.py", {"outputs"}),
+        ("ssmobs/stages/outputs/paper_tables.py", {"outputs"}),
+        ("ssmobs/stages/outputs/mu0_sweep.py", {"outputs"}),
         ("ssmobs/nuts/record_cache.py", {"nuts_records", "nuts_batches", "gather"}),
         ("ssmobs/nuts/stan_metrics.py", {"gather", "exact"}),
         ("ssmobs/reports/tables.py", {"outputs"}),
@@ -339,7 +354,7 @@ FROM_TRAJECTORIES = {"trajectories", "joint_map", "nuts_records", "nuts_batches"
 )
 def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
     """An edit of a model's module or a stage's code moves that stage's outputs (and those
-    downstream) and no other: an edit of a table's glue (stages/outputs.py) reruns no
+    downstream) and no other: an edit of a table's glue (stages/outputs/) reruns no
     sampling, an edit of the Stan glue (stages/stan.py) no joint MAP; an edit of logging
     moves none."""
     work = tmp_path / "workflow"

@@ -13,7 +13,7 @@ from ssmobs.nuts.convergence_sensitivity import (
     failure_pattern_table,
     sensitivity_table,
 )
-from ssmobs.stages.outputs import run_convergence_sensitivity
+from ssmobs.stages.outputs.paper_tables import run_convergence_sensitivity
 from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
 
 pytestmark = pytest.mark.unit

@@ -69,7 +69,7 @@ def test_mu0_rule_changes_the_start_and_is_reported():
 
 
 def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
-    from ssmobs.stages.outputs import run_joint_map_mu0_sweep
+    from ssmobs.stages.outputs.mu0_sweep import run_joint_map_mu0_sweep
 
     sc = Scenario.from_config(
         {

@@ -165,8 +165,8 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs import io
     from ssmobs.design.disturbances import design_disturbances
     from ssmobs.k_selection import set_seed
-    from ssmobs.stages.k_selection import run_k_selection_point
-    from ssmobs.stages.outputs import run_select_k
+    from ssmobs.stages.k_selection.choice import run_select_k
+    from ssmobs.stages.k_selection.grid import run_k_selection_point
 
     sc = Scenario.from_config(
         {
@@ -240,7 +240,7 @@ def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
 
 def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
-    from ssmobs.stages.outputs import run_select_k
+    from ssmobs.stages.k_selection.choice import run_select_k
 
     sc = Scenario.from_config(
         {
@@ -281,7 +281,7 @@ def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
     write them), every point is cached as it finishes, and a rerun reuses them."""
     import json
 
-    from ssmobs.stages.k_selection import run_k_selection_grid
+    from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
     sc = Scenario.from_config(
         {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4, "K": 8}

@@ -156,7 +156,7 @@ def test_write_table_refuses_unknown_suffix(tmp_path):
 
 
 def test_table_ii_caption_names_the_configured_setting():
-    from ssmobs.stages.outputs import _table_ii_setting
+    from ssmobs.stages.outputs.paper_tables import _table_ii_setting
 
     def entry(name, a, x0):
         return {

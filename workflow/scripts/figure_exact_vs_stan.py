@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.config.scenario import Scenario
-from ssmobs.stages.outputs import run_figure_exact_vs_stan
+from ssmobs.stages.outputs.figures import run_figure_exact_vs_stan
 
 logger = log.start_job(snakemake)
 table = run_figure_exact_vs_stan(

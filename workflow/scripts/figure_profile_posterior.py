@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.config.scenario import Scenario
-from ssmobs.stages.outputs import run_figure_profile_posterior
+from ssmobs.stages.outputs.figures import run_figure_profile_posterior
 
 log.start_job(snakemake)
 run_figure_profile_posterior(

@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.config.scenario import Scenario
-from ssmobs.stages.outputs import run_joint_map_mu0_sweep
+from ssmobs.stages.outputs.mu0_sweep import run_joint_map_mu0_sweep
 
 log.start_job(snakemake)
 p = snakemake.params

@@ -2,7 +2,7 @@
 
 from ssmobs import log
 from ssmobs.config.scenario import Scenario
-from ssmobs.stages.k_selection import run_k_selection_grid
+from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
 log.start_job(snakemake)
 wc, p = snakemake.wildcards, snakemake.params

@@ -2,7 +2,7 @@
 
 from ssmobs import io, log
 from ssmobs.config.scenario import Scenario
-from ssmobs.stages.outputs import run_select_k
+from ssmobs.stages.k_selection.choice import run_select_k
 
 log.start_job(snakemake)
 p, out = snakemake.params, snakemake.output

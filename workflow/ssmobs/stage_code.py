@@ -38,7 +38,7 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     # the command line too: it was part of the check's module
     "check_model": ("model_check/check.py", "model_check/__main__.py"),
     "joint_map": ("stages/joint_map.py:run_joint_map",),
-    "k_selection": ("stages/k_selection.py:run_k_selection_grid",),
+    "k_selection": ("stages/k_selection/grid.py:run_k_selection_grid",),
     "program": ("stages/stan.py:run_build_stan_model",),
     "nuts_records": ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
     "nuts_batches": ("stages/stan.py:run_sample_batch",),
@@ -51,7 +51,10 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
     # every stamped table and figure; observability_study's and observability_map's scripts
     # call their modules themselves
     "outputs": (
-        "stages/outputs.py",
+        "stages/outputs/paper_tables.py",
+        "stages/outputs/figures.py",
+        "stages/outputs/mu0_sweep.py",
+        "stages/k_selection/choice.py",
         "reports/observability_study.py",
         "stages/observability_map.py:write_map,figure_map",
     ),

@@ -1,7 +1,7 @@
 """Glue of the joint-MAP stage (Sec. III.B; rule joint_map in ``workflow/rules/joint_map.smk``).
 
 :func:`joint_map_of` is also what the choice of K (:mod:`ssmobs.stages.k_selection`) and the
-table of barrier starts (:func:`ssmobs.stages.outputs.run_joint_map_mu0_sweep`) run.
+table of barrier starts (:func:`ssmobs.stages.outputs.mu0_sweep.run_joint_map_mu0_sweep`) run.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 ``workflow/rules/k_selection.smk``): the joint-MAP summaries V_{K_i} of every K_i of a grid.
 
 The rules that read them, select_k and table_k_selection, write stamped outputs: their glue
-is in :mod:`ssmobs.stages.outputs`.
+is in :mod:`ssmobs.stages.k_selection.choice`.
 """
 
 from __future__ import annotations
@@ -11,14 +11,14 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import io
-from ..log import Progress
-from . import PathLike
+from ... import io
+from ...log import Progress
+from .. import PathLike
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..config.scenario import Scenario
+    from ...config.scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -40,9 +40,9 @@ def run_k_selection_point(
     as :func:`ssmobs.stages.design.disturbance_set` returns them.  ``seed`` is the run's
     seed; the set itself was drawn with :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
     """
-    from ..design.trajectories import make_trajectories
-    from ..k_selection import set_seed
-    from .joint_map import joint_map_of
+    from ...design.trajectories import make_trajectories
+    from ...k_selection import set_seed
+    from ..joint_map import joint_map_of
 
     sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
     traj = make_trajectories(sc, disturbances, provenance=provenance)
@@ -71,8 +71,8 @@ def run_k_selection_grid(
     rerun after a kill computes only the missing ones; grids of other k_selection entries on
     the same scenario find it too, and a file lock keeps two jobs from computing it at once),
     each set in ``design_dir`` (:func:`ssmobs.stages.design.disturbance_set`)."""
-    from ..k_selection import set_seed
-    from .design import disturbance_set
+    from ...k_selection import set_seed
+    from ..design import disturbance_set
 
     progress = Progress(f"choice of K {scenario.name} {method} {sets} seed {seed}", len(K_grid))
     rows = []
