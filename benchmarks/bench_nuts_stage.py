@@ -123,7 +123,7 @@ def worker_stage(
 ) -> dict:
     """One 'job': imports, compile, n trajectories through run_trajectories."""
     t0 = time.perf_counter()
-    from ssmobs.nuts.batch import run_trajectories
+    from ssmobs.nuts.batch import NutsBatch, run_trajectories
     from ssmobs.nuts.convergence import ConvergenceSettings
     from ssmobs.stan_backends import get_backend, stan_file
     from ssmobs.stan_backends.base import SamplerSettings
@@ -141,26 +141,21 @@ def worker_stage(
     t_compile = time.perf_counter() - t0
     sampler = SamplerSettings(chains=4, iter_warmup=warmup, iter_sampling=sampling, workers=workers)
     t0 = time.perf_counter()
-    recs = run_trajectories(
+    batch = NutsBatch(
         model,
-        backend,
         stan_file("same"),
         z,
         x,
-        list(range(first_k, first_k + n)),
         model.prior_bounds({"a": 0.9}),
-        {"a": 0.9},
+        model.omega_array({"a": 0.9}),
         8.0,
         f"bench_T{T}",
         1,
         sampler,
         ConvergenceSettings(),
         "random",
-        records,
-        set(),
-        None,
-        None,
     )
+    recs = run_trajectories(batch, backend, list(range(first_k, first_k + n)), records)
     t_loop = time.perf_counter() - t0
     out = {
         "T": T,

@@ -25,7 +25,7 @@ from machine import machine_info, report
 from ssmobs.config import validation as cfg
 from ssmobs.config.scenario import Scenario
 from ssmobs.design.trajectories import make_trajectories
-from ssmobs.nuts.batch import run_trajectories
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
 from ssmobs.nuts.convergence import ConvergenceSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends import get_backend, stan_file
@@ -59,13 +59,11 @@ def main() -> None:
         backend.compile(stan_file(model.slug))
         with tempfile.TemporaryDirectory() as tmp:
             t0, c0 = time.perf_counter(), cpu_seconds()
-            recs = run_trajectories(
+            batch = NutsBatch(
                 model,
-                backend,
                 stan_file(model.slug),
                 traj.z,
                 traj.x,
-                list(range(args.n)),
                 bounds,
                 traj.omega,
                 traj.x0,
@@ -74,8 +72,8 @@ def main() -> None:
                 sampler=sampler,
                 convergence=ConvergenceSettings(**conf["convergence"]),
                 init=sc.stan_init,
-                records_dir=tmp,
             )
+            recs = run_trajectories(batch, backend, list(range(args.n)), records_dir=tmp)
             wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
         per_cpu = cpu / args.n
         rows.append(

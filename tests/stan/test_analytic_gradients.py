@@ -102,7 +102,7 @@ def test_generated_whole_program_equals_the_hand_written_one():
 
 
 def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
-    from ssmobs.nuts.batch import run_trajectories
+    from ssmobs.nuts.batch import NutsBatch, run_trajectories
     from ssmobs.nuts.convergence import ConvergenceSettings
     from ssmobs.nuts.record_cache import program_hash
     from ssmobs.stages.stan import stan_program
@@ -119,13 +119,11 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
     sampler = SamplerSettings(chains=2, iter_warmup=200, iter_sampling=200)
 
     def run():
-        return run_trajectories(
+        batch = NutsBatch(
             model,
-            NativeBackend(),
             program,
             z,
             x,
-            [0],
             model.prior_bounds(omega),
             omega,
             np.array([8.0]),
@@ -133,9 +131,9 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
             1,
             sampler,
             ConvergenceSettings(),
-            records_dir=tmp_path / "records",
             user_header=header,
-        )[0]
+        )
+        return run_trajectories(batch, NativeBackend(), [0], records_dir=tmp_path / "records")[0]
 
     rec = run()
     assert rec["status"] == "ok" and rec["map"] is not None

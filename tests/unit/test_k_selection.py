@@ -288,12 +288,12 @@ def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
     )
     args = (tmp_path / "design", sc, [8, 16], "random", 1, "nested", {}, {"b_max": None})
     (tmp_path / "design").mkdir()
-    rows = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid.json")
+    rows = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid.json")
     assert [r["K_i"] for r in rows] == [8, 16]
     assert len(list((tmp_path / "design").glob("q8_K*_random_seed*.nc"))) == 2
     assert json.loads((tmp_path / "grid.json").read_text())["points"] == rows
     stamp = {p: p.stat().st_mtime_ns for p in (tmp_path / "points").glob("K*.json")}
     assert len(stamp) == 2
-    again = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid2.json")
+    again = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid2.json")
     assert again == rows
     assert {p: p.stat().st_mtime_ns for p in stamp} == stamp

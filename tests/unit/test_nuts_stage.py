@@ -12,7 +12,7 @@ import pytest
 from ssmobs import seeds
 from ssmobs.log import Progress
 from ssmobs.models import get_model
-from ssmobs.nuts.batch import run_trajectories
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
 from ssmobs.nuts.convergence import ConvergenceSettings, apply_thresholds
 from ssmobs.nuts.record_cache import RECORD_KEYS, load_records, record_path
 from ssmobs.nuts.record_format import records_to_frame
@@ -107,31 +107,22 @@ def scenario(tmp_path):
     }
 
 
+#: the fields of the fixture that are NutsBatch's, and the run's own arguments
+BATCH_FIELDS = {f.name for f in dataclasses.fields(NutsBatch)}
+
+
 def run(sc, backend, ks=range(K), **kw):
-    args = {k: v for k, v in sc.items()}
-    args.update(kw)
+    args = {**sc, **kw}
+    batch = NutsBatch(**{k: v for k, v in args.items() if k in BATCH_FIELDS})
     return run_trajectories(
-        args["model"],
+        batch,
         backend,
-        args["stan_file"],
-        args["z"],
-        args["x_true"],
         list(ks),
-        args["bounds"],
-        args["omega_true"],
-        args["x0_true"],
-        args["scenario"],
-        args["seed"],
-        args["sampler"],
-        args["convergence"],
-        kw.get("init", "random"),
         args["records_dir"],
-        kw.get("keep_draws_for", set()),
+        args.get("keep_draws_for", set()),
         args["draws_dir"],
-        kw.get("progress"),
-        kw.get("retry_errors", False),
-        kw.get("stan_seed"),
-        kw.get("init_theta"),
+        args.get("progress"),
+        args.get("retry_errors", False),
     )
 
 
@@ -627,9 +618,9 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
             stan_cfg,
             {},
             1,
-            records,
-            draws,
-            tmp_path / "batch1.parquet",
+            records_dir=records,
+            draws_dir=draws,
+            out=tmp_path / "batch1.parquet",
         )
     assert not any(p.exists() for p in ours)
     assert other.exists()

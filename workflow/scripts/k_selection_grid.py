@@ -15,6 +15,6 @@ run_k_selection_grid(
     wc.sets,
     dict(p.settings),
     dict(p.design),
-    p.points,
-    snakemake.output[0],
+    points_dir=p.points,
+    out=snakemake.output[0],
 )

@@ -13,9 +13,9 @@ run_sample_batch(
     p.stan,
     p.convergence,
     int(snakemake.wildcards.batch),
-    p.records,
-    p.draws,
-    snakemake.output[0],
+    records_dir=p.records,
+    draws_dir=p.draws,
+    out=snakemake.output[0],
     threads=snakemake.threads,
     joint_map_theta=snakemake.input.get("joint_map"),
 )

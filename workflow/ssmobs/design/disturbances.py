@@ -311,7 +311,16 @@ def design_disturbances(
         blas_threads = check_positive_int("blas_threads", blas_threads)
     with openblas_threads(blas_threads):
         return _generate(
-            q, K, method, seed, bm, progress, correct_covariance, rel_tol, grad_tol, max_iter
+            q,
+            K,
+            method,
+            seed,
+            bm,
+            progress,
+            correct_covariance=correct_covariance,
+            rel_tol=rel_tol,
+            grad_tol=grad_tol,
+            max_iter=max_iter,
         )
 
 
@@ -322,6 +331,7 @@ def _generate(
     seed: int,
     bm: float,
     progress: Callable[[str], None] | None,
+    *,
     correct_covariance: bool,
     rel_tol: float,
     grad_tol: float,

@@ -73,6 +73,7 @@ def valley_limits(
     H: np.ndarray,
     slopes: tuple[np.ndarray, np.ndarray],
     cut: tuple[np.ndarray, np.ndarray],
+    *,
     settings: ExactSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Box limits that keep the interior mode's basin, and the size of what they cut off.

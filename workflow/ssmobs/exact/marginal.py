@@ -181,10 +181,18 @@ def exact_marginal(
         np.isinf(bounds.upper) & improper(slopes_upper, finite=False)
     )
     lim_lo, lim_hi, spike_ratio = valley_limits(
-        model, axes, z, bounds, u, H, (slopes_lower, slopes_upper), (cut_lower, cut_upper), settings
+        model,
+        axes,
+        z,
+        bounds,
+        u,
+        H,
+        (slopes_lower, slopes_upper),
+        (cut_lower, cut_upper),
+        settings=settings,
     )
     lpu, lo_box, hi_box, truncated = fine_grid(
-        model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings
+        model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings=settings
     )
     mass = grid_mass(lpu)
     om_map, om_q = marginal_omega(axes, mass, lo_box, hi_box, settings)

@@ -317,6 +317,7 @@ def fine_grid(
     sd: np.ndarray,
     lim_lo: np.ndarray,
     lim_hi: np.ndarray,
+    *,
     settings: ExactSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """log density (Jacobian included) on the per-trajectory boxes centre ± box_sd sd,

@@ -112,6 +112,7 @@ def _locate_difference(
     bounds: Any,
     rng: np.random.Generator,
     rtol: float,
+    *,
     backend: str,
 ) -> str:
     """Which block of Theta (Omega and its components, x0, x_1..x_T) and which term of the
@@ -227,7 +228,7 @@ def stan_problems(
                 f"{_fmt(theta[0], names)}"
                 f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ); "
                 + _locate_difference(
-                    model, stan_path, density, theta, z, bounds, rng, rtol, backend
+                    model, stan_path, density, theta, z, bounds, rng, rtol, backend=backend
                 )
             )
             return problems

@@ -28,6 +28,7 @@ import logging
 import os
 import time
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -57,6 +58,95 @@ if TYPE_CHECKING:
 LOG = logging.getLogger("ssmobs.nuts")
 
 INIT_MODES = ("random", "true", "joint_map")
+
+
+# --------------------------------------------------------------------------- the batch
+@dataclass(frozen=True)
+class NutsBatch:
+    """Everything that determines the NUTS records of one scenario's trajectories (Sec.
+    III.C), built once from the scenario (:func:`ssmobs.stages.stan.nuts_batch`) and passed
+    whole to :func:`run_trajectories`; where the records go is no part of it.
+
+    model : a :class:`~ssmobs.models.base.StateSpaceModel`.
+    stan_file : the model's Stan program (its text hash is part of every record's key).
+    z : (K, T, d) design observations; ``z[k]`` is trajectory k (a (K, T) array for d = 1).
+    x_true : (K, T, p) design states (used for the key and, with ``init="true"``, inits).
+    bounds : the prior's :class:`~ssmobs.models.base.PriorBounds`.
+    omega_true, x0_true : true parameters (array in ``model.param_names`` order) and
+        initial state (array of p values), e.g. a :class:`~ssmobs.config.scenario.Scenario`'s.
+    scenario, seed : scenario name and seed; Stan's seed is
+        ``seeds.int_seed(seed, "nuts", scenario, k)``, or ``stan_seed`` for every k when
+        given (as a loop calling Stan with one fixed seed would).
+    sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
+    init : ``"random"`` (Stan's uniform(-r, r) on the unconstrained scale with r =
+        ``sampler.init_radius``, 2 by default: the paper's), ``"true"`` (all chains at the
+        true Omega, x0 and design states) or ``"joint_map"`` (all chains at trajectory k's
+        joint MAP, row k of ``init_theta``, where :func:`joint_map_point` gives one, else
+        random; the point is in the key).
+    user_header : the C++ header defining the program's external functions (the analytic
+        gradients of :mod:`ssmobs.nuts.analytic_gradients`); keyed with the program.
+    """
+
+    model: StateSpaceModel
+    stan_file: str | Path
+    z: np.ndarray
+    x_true: np.ndarray
+    bounds: Any
+    omega_true: np.ndarray
+    x0_true: np.ndarray
+    scenario: str
+    seed: int
+    sampler: SamplerSettings = field(default_factory=SamplerSettings)
+    convergence: ConvergenceSettings = field(default_factory=ConvergenceSettings)
+    init: str = "random"
+    stan_seed: int | None = None
+    init_theta: np.ndarray | None = None
+    user_header: str | Path | None = None
+
+    def __post_init__(self) -> None:
+        """Checks the values and stores them in the shapes the loop uses: ``z`` and
+        ``x_true`` as (K, T, .) floats, Omega and x0 as float vectors, the program as text."""
+        if self.init not in INIT_MODES:
+            raise ValueError(f"init must be one of {INIT_MODES}, got {self.init!r}")
+        if (self.init == "joint_map") != (self.init_theta is not None):
+            raise ValueError(
+                'init_theta (the joint MAP of every k) goes with init="joint_map" only'
+            )
+        z = np.asarray(self.z, dtype=float)
+        x_true = np.asarray(self.x_true, dtype=float)
+        if z.ndim == 2:
+            z = z[:, :, None]
+        if x_true.ndim == 2:
+            x_true = x_true[:, :, None]
+        if z.shape[:2] != x_true.shape[:2]:
+            raise ValueError(f"z {z.shape} and x_true {x_true.shape} disagree in (K, T)")
+        omega_true = np.asarray(self.omega_true, dtype=float)
+        x0_true = np.atleast_1d(np.asarray(self.x0_true, dtype=float))
+        model = self.model
+        if omega_true.shape != (model.n_params,) or x0_true.shape != (model.state_dim,):
+            raise ValueError(
+                f"need Omega as {model.n_params} value(s) in the order "
+                f"{list(model.param_names)} and x0 as {model.state_dim} value(s), got "
+                f"{omega_true.tolist()} and {x0_true.tolist()}"
+            )
+        for name, value in (
+            ("z", z),
+            ("x_true", x_true),
+            ("omega_true", omega_true),
+            ("x0_true", x0_true),
+            ("stan_file", str(self.stan_file)),
+        ):
+            object.__setattr__(self, name, value)
+
+    @property
+    def T(self) -> int:
+        """The trajectories' length."""
+        return int(self.z.shape[1])
+
+    @property
+    def header(self) -> dict[str, Path]:
+        """The keyword arguments of the backend's compile and sample for the header."""
+        return {} if self.user_header is None else {"user_header": Path(self.user_header)}
 
 
 # --------------------------------------------------------------------------- one trajectory
@@ -102,25 +192,16 @@ def _floats(values: np.ndarray) -> list[float]:
 
 
 def _one_trajectory(
-    model: StateSpaceModel,
+    batch: NutsBatch,
     backend: StanBackend,
-    stan_file: str,
-    z_k: np.ndarray,
-    x_k: np.ndarray,
     k: int,
     key: dict[str, Any],
-    bounds: Any,
-    omega_true: Any,
-    x0_true: Any,
-    scenario: str,
-    sampler: SamplerSettings,
-    convergence: ConvergenceSettings,
-    init: str,
     keep_draws: Path | None,
     init_point: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-    header: dict[str, Path] | None = None,
 ) -> dict[str, Any]:
-    T = int(np.asarray(z_k).shape[0])
+    model, sampler, init = batch.model, batch.sampler, batch.init
+    z_k, x_k = batch.z[k], batch.x_true[k]
+    T = batch.T
     names = model.theta_names(T)
     t0, c0 = time.perf_counter(), time.process_time()
     sample_cpu = 0.0
@@ -136,7 +217,7 @@ def _one_trajectory(
         "record_version": RECORD_VERSION,
         "key": key,
         "k": int(k),
-        "scenario": scenario,
+        "scenario": batch.scenario,
         "model": model.slug,
         "T": T,
         "status": "ok",
@@ -155,17 +236,17 @@ def _one_trajectory(
     reasons: list[str] = []
     draws: Draws | None = None
     try:
-        data = model.stan_data(np.asarray(z_k, dtype=float), bounds)
+        data = model.stan_data(np.asarray(z_k, dtype=float), batch.bounds)
         inits = None
         if init == "true":
-            inits = _inits(model, omega_true, x0_true, x_k, sampler.chains)
+            inits = _inits(model, batch.omega_true, batch.x0_true, x_k, sampler.chains)
         elif init_point is not None:  # init "joint_map": this trajectory's joint MAP
             inits = _inits(model, *init_point, sampler.chains)
         t1, c1 = time.perf_counter(), time.process_time()
         timings["prepare"] = t1 - t0
         try:
             draws = backend.sample(
-                stan_file, data, key["stan_seed"], sampler, inits, **(header or {})
+                str(batch.stan_file), data, key["stan_seed"], sampler, inits, **batch.header
             )
         finally:
             timings["sample_call"] = time.perf_counter() - t1
@@ -190,7 +271,7 @@ def _one_trajectory(
         failed: list[str] = []
         t2 = time.perf_counter()
         try:
-            diag = check_convergence(draws, convergence, max_treedepth=sampler.max_treedepth)
+            diag = check_convergence(draws, batch.convergence, max_treedepth=sampler.max_treedepth)
             rec["diagnostics"] = diag
             failed.extend(diag["failed_checks"])
             reasons.extend(diag["messages"])
@@ -262,96 +343,53 @@ def _write_draws(path: Path, draws: Draws, rec: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- the loop
 def run_trajectories(
-    model: StateSpaceModel,
+    batch: NutsBatch,
     backend: StanBackend,
-    stan_file: str | Path,
-    z: np.ndarray,
-    x_true: np.ndarray,
     ks: Sequence[int],
-    bounds: Any,
-    omega_true: np.ndarray,
-    x0_true: np.ndarray,
-    scenario: str,
-    seed: int,
-    sampler: SamplerSettings | None = None,
-    convergence: ConvergenceSettings | None = None,
-    init: str = "random",
     records_dir: str | os.PathLike = ".",
     keep_draws_for: Iterable[int] = (),
     draws_dir: str | os.PathLike | None = None,
     progress: Progress | None = None,
     retry_errors: bool = False,
-    stan_seed: int | None = None,
-    init_theta: np.ndarray | None = None,
-    user_header: str | Path | None = None,
 ) -> list[dict[str, Any]]:
     """Sample, check and summarise the design trajectories ``ks`` of one scenario.
 
     Parameters
     ----------
-    model : a :class:`~ssmobs.models.base.StateSpaceModel`.
+    batch : what determines the records (:class:`NutsBatch`: the model, its program, the
+        design trajectories, the true values, the seeds and the settings).
     backend : a :class:`~ssmobs.stan_backends.base.StanBackend` (``compile``/``sample``).
-    stan_file : the model's Stan program (its text hash is part of every record's key).
-    z : (K, T, d) design observations; ``z[k]`` is trajectory k.
-    x_true : (K, T, p) design states (used for the key and, with ``init="true"``, inits).
-    ks : trajectory indices (0-based rows of ``z``) to process, in order.
-    bounds : the prior's :class:`~ssmobs.models.base.PriorBounds`.
-    omega_true, x0_true : true parameters (array in ``model.param_names`` order) and
-        initial state (array of p values), e.g. a :class:`~ssmobs.config.scenario.Scenario`'s.
-    scenario, seed : scenario name and seed; Stan's seed is
-        ``seeds.int_seed(seed, "nuts", scenario, k)``, or ``stan_seed`` for every k when
-        given (as a loop calling Stan with one fixed seed would).
-    sampler, convergence : NUTS settings and thresholds (defaults: the paper's / Stan's).
-    init : ``"random"`` (Stan's uniform(-r, r) on the unconstrained scale with r =
-        ``sampler.init_radius``, 2 by default: the paper's), ``"true"`` (all chains at the
-        true Omega, x0 and design states) or ``"joint_map"`` (all chains at trajectory k's
-        joint MAP, row k of ``init_theta``, where :func:`joint_map_point` gives one, else
-        random; the point is in the key).
+    ks : trajectory indices (0-based rows of ``batch.z``) to process, in order.
     records_dir : where ``k{k:05d}.json`` records go.
     keep_draws_for : k whose draws are written to ``draws_dir/k{k:05d}.nc`` (ArviZ).
     progress : a :class:`~ssmobs.log.Progress` updated once per k of ``ks`` (skipped ones
         included); if None, one is made for the trajectories that need sampling.
     retry_errors : recompute stored records whose status is "error" (e.g. after fixing
         the cause of an exception); by default every valid record is reused.
-    user_header : the C++ header defining the program's external functions (the analytic
-        gradients of :mod:`ssmobs.nuts.analytic_gradients`); keyed with the program.
 
     Returns
     -------
     The records (dicts, format in the module docstring), in the order of ``ks``.
     """
-    sampler = sampler or SamplerSettings()
-    convergence = convergence or ConvergenceSettings()
-    if init not in INIT_MODES:
-        raise ValueError(f"init must be one of {INIT_MODES}, got {init!r}")
-    if (init == "joint_map") != (init_theta is not None):
-        raise ValueError('init_theta (the joint MAP of every k) goes with init="joint_map" only')
-    z = np.asarray(z, dtype=float)
-    x_true = np.asarray(x_true, dtype=float)
-    if z.ndim == 2:
-        z = z[:, :, None]
-    if x_true.ndim == 2:
-        x_true = x_true[:, :, None]
-    if z.shape[:2] != x_true.shape[:2]:
-        raise ValueError(f"z {z.shape} and x_true {x_true.shape} disagree in (K, T)")
-    omega_true = np.asarray(omega_true, dtype=float)
-    x0_true = np.atleast_1d(np.asarray(x0_true, dtype=float))
-    if omega_true.shape != (model.n_params,) or x0_true.shape != (model.state_dim,):
-        raise ValueError(
-            f"need Omega as {model.n_params} value(s) in the order "
-            f"{list(model.param_names)} and x0 as {model.state_dim} value(s), got "
-            f"{omega_true.tolist()} and {x0_true.tolist()}"
-        )
-    T = z.shape[1]
+    model, z, x_true, bounds, T = batch.model, batch.z, batch.x_true, batch.bounds, batch.T
     keep = {int(k) for k in keep_draws_for}
     if keep and draws_dir is None:
         raise ValueError("keep_draws_for needs draws_dir")
-    stan_file = str(stan_file)
-    prog = program_hash(stan_file, user_header)
-    header = {} if user_header is None else {"user_header": Path(user_header)}
-    set_hash = settings_hash(model, T, sampler, convergence, init, bounds, omega_true, x0_true)
+    stan_file = str(batch.stan_file)
+    prog = program_hash(stan_file, batch.user_header)
+    set_hash = settings_hash(
+        model,
+        T,
+        batch.sampler,
+        batch.convergence,
+        batch.init,
+        bounds,
+        batch.omega_true,
+        batch.x0_true,
+    )
     n_theta = len(model.theta_names(T))
     ident = backend_identity(backend)
+    scenario, init_theta = batch.scenario, batch.init_theta
 
     records: dict[int, dict[str, Any]] = {}
     todo: list[tuple[int, dict[str, Any]]] = []
@@ -362,7 +400,16 @@ def run_trajectories(
             raise IndexError(f"trajectory k={k} outside 0..{z.shape[0] - 1}")
         points[k] = None if init_theta is None else joint_map_point(model, init_theta[k], bounds, T)
         key = record_key(
-            scenario, k, seed, prog, set_hash, z[k], x_true[k], ident, stan_seed, points[k]
+            scenario,
+            k,
+            batch.seed,
+            prog,
+            set_hash,
+            z[k],
+            x_true[k],
+            ident,
+            stan_seed=batch.stan_seed,
+            init_point=points[k],
         )
         rec = load_record(record_path(records_dir, k), key, n_theta)
         if rec is not None and retry_errors and rec["status"] == "error":
@@ -398,26 +445,15 @@ def run_trajectories(
         progress = Progress(f"{scenario} NUTS", total=max(len(todo), 1), logger=LOG)
     assert progress is not None  # given, or made just above
     if todo:
-        backend.compile(stan_file, **header)
+        backend.compile(stan_file, **batch.header)
     for k, key in todo:
         rec = _one_trajectory(
-            model,
+            batch,
             backend,
-            stan_file,
-            z[k],
-            x_true[k],
             k,
             key,
-            bounds,
-            omega_true,
-            x0_true,
-            scenario,
-            sampler,
-            convergence,
-            init,
             draws_path(draws_dir, k) if k in keep and draws_dir is not None else None,
             points[k],
-            header,
         )
         t_w = time.perf_counter()
         write_record(record_path(records_dir, k), rec)

@@ -148,6 +148,7 @@ def record_key(
     z_k: np.ndarray,
     x_k: np.ndarray,
     backend: str = "",
+    *,
     stan_seed: int | None = None,
     init_point: tuple[np.ndarray, ...] | None = None,
 ) -> dict[str, Any]:

@@ -178,6 +178,7 @@ def run_observability_study(
     csv: str | os.PathLike,
     md: str | os.PathLike,
     png: str | os.PathLike,
+    *,
     stan_settings: Mapping[str, Any] | None = None,
 ) -> pd.DataFrame:
     """Rule observability_study: read the scenario summaries, write table (CSV, Markdown)

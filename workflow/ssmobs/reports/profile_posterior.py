@@ -115,6 +115,7 @@ def profile_posterior(
     omega_grid_name: str,
     omega_values: Sequence[float] | np.ndarray,
     x0_values: Sequence[float] | np.ndarray,
+    *,
     omega_fixed: Mapping[str, float] | None = None,
     max_iter: int = 100,
     tol: float = 1e-10,

@@ -15,7 +15,11 @@ from ..log import Progress
 from . import PathLike
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..config.scenario import Scenario
+    from ..design.trajectories import Trajectories
+    from ..nuts.batch import NutsBatch
     from ..stan_backends.base import SamplerSettings
 
 logger = logging.getLogger("ssmobs")
@@ -80,6 +84,44 @@ def run_build_stan_model(
     return marker
 
 
+def nuts_batch(
+    scenario: Scenario,
+    traj: Trajectories,
+    stan_cfg: dict,
+    convergence_cfg: dict,
+    threads: int = 1,
+    init_theta: np.ndarray | None = None,
+) -> NutsBatch:
+    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`): its design
+    trajectories, true values, prior bounds, seeds and chains' start, its Stan program (the
+    analytic one where ``stan_cfg`` asks for it) and the NUTS settings and thresholds of
+    ``stan_cfg`` (the scenario's own merged over the config block: :meth:`Scenario.stan_config`)
+    and ``convergence_cfg``; ``init_theta``: the joint MAP of every k (``stan_init:
+    joint_map``)."""
+    from ..nuts.batch import NutsBatch
+    from ..nuts.convergence import ConvergenceSettings
+
+    model = traj.model
+    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
+    return NutsBatch(
+        model=model,
+        stan_file=program,
+        z=traj.z,
+        x_true=traj.x,
+        bounds=model.prior_bounds(traj.omega, scenario.prior),
+        omega_true=traj.omega,
+        x0_true=traj.x0,
+        scenario=scenario.name,
+        seed=scenario.seed,
+        sampler=sampler_settings(stan_cfg, threads),
+        convergence=ConvergenceSettings(**convergence_cfg),
+        init=scenario.stan_init,
+        stan_seed=scenario.stan_seed,
+        init_theta=init_theta,
+        user_header=header,
+    )
+
+
 def run_sample_batch(
     trajectories: PathLike,
     marker: PathLike,
@@ -87,6 +129,7 @@ def run_sample_batch(
     stan_cfg: dict,
     convergence_cfg: dict,
     batch: int,
+    *,
     records_dir: PathLike,
     draws_dir: PathLike,
     out: PathLike,
@@ -118,31 +161,16 @@ def run_sample_batch(
     io.sweep_temporaries(
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
     )
-    bounds = model.prior_bounds(traj.omega, scenario.prior)
     progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
-    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
+    theta_hat = None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K)
     records = run_trajectories(
-        model,
+        nuts_batch(scenario, traj, stan_cfg, convergence_cfg, threads, theta_hat),
         get_backend(backend_name),
-        program,
-        traj.z,
-        traj.x,
         ks,
-        bounds,
-        traj.omega,
-        traj.x0,
-        scenario.name,
-        scenario.seed,
-        sampler=sampler_settings(stan_cfg, threads),
-        convergence=ConvergenceSettings(**convergence_cfg),
-        init=scenario.stan_init,
         records_dir=records_dir,
         keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
         draws_dir=draws_dir,
         progress=progress,
-        stan_seed=scenario.stan_seed,
-        init_theta=None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K),
-        user_header=header,
     )
     settings = ConvergenceSettings(**convergence_cfg)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))

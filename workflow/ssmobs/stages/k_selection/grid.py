@@ -32,6 +32,7 @@ def run_k_selection_point(
     seed: int,
     settings: dict,
     out: PathLike,
+    *,
     sets: str = "independent",
 ) -> dict:
     """One point of rule k_selection_grid: the joint-MAP summary of one K_i (Sec. IV.A).
@@ -62,6 +63,7 @@ def run_k_selection_grid(
     sets: str,
     settings: dict,
     design_cfg: dict,
+    *,
     points_dir: PathLike,
     out: PathLike,
 ) -> list[dict]:
@@ -92,7 +94,7 @@ def run_k_selection_grid(
                     path, scenario.disturbance_dim, K, method, s, design_cfg
                 )
                 info = run_k_selection_point(
-                    matrix, attrs, scenario, K, method, seed, settings, point, sets
+                    matrix, attrs, scenario, K, method, seed, settings, point, sets=sets
                 )
         rows.append({**info, "scenario": scenario.name})
         progress.update()

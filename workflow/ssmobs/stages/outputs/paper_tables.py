@@ -42,6 +42,7 @@ def run_paper_tables(
     joint: dict[str, str],
     marginal: dict[str, str],
     paper_values: PathLike,
+    *,
     table2: list[PathLike],
     table3: list[PathLike],
     section4_csv: PathLike,
