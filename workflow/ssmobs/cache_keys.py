@@ -33,6 +33,7 @@ from typing import Any
 
 from . import kernels
 from .code_hashing import syntax_digest
+from .config.blocks import joint_map_settings, stan_settings
 from .stage_code import (
     NATIVE_DRIVER,
     PACKAGE_DIR,
@@ -53,8 +54,8 @@ def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
 
 #: the scenario fields that determine its design trajectories
 TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
-#: ... its joint MAP (beside the trajectories)
-JOINT_MAP_FIELDS = ("prior", "joint_map_start", "joint_map_n_starts")
+#: ... its joint MAP (beside the trajectories and its joint-MAP settings)
+JOINT_MAP_FIELDS = ("prior",)
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)
@@ -204,7 +205,7 @@ class CacheKeys:
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, JOINT_MAP_FIELDS),
-            "settings": self.config["joint_map"],
+            "settings": joint_map_settings(sc, self.config["joint_map"]),
             "code": self.code("joint_map"),
         }
         return self._key("joint_map", name, payload)
@@ -233,7 +234,7 @@ class CacheKeys:
         the convergence checks: they are applied to the stored diagnostics by gather)."""
         sc = self.scenarios[name]
         # the scenario's own NUTS settings over the stan block (absent: the block's)
-        stan = {**self.config["stan"], **(sc.get("stan_settings") or {})}
+        stan = stan_settings(sc, self.config["stan"])
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, NUTS_FIELDS),
@@ -287,8 +288,9 @@ class CacheKeys:
         ks = self.k_selections[ksel]
         sc = self.scenarios[ks["scenario"]]
         payload = {
-            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior", "joint_map_start")),
-            "settings": self.config["joint_map"],
+            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior")),
+            # the scenario's start of the states, the paper's one start
+            "settings": joint_map_settings(sc, self.config["joint_map"], single_start=True),
             "design": self.design,
             "model_code": self.model_code(sc["model"]),
             "code": self.code("k_selection"),
@@ -319,7 +321,7 @@ class CacheKeys:
             payload = {
                 "cell": {k: v for k, v in cell.items() if k != "name"},
                 "design": self.design,
-                "settings": self.config["joint_map"],
+                "settings": joint_map_settings(cell, self.config["joint_map"]),
                 "exact": self.config["exact_marginal"] if entry["exact"] else None,
                 "model_code": self.model_code(cell["model"]),
                 "code": self.code("map_cells"),

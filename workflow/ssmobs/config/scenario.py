@@ -24,6 +24,7 @@ import numpy as np
 
 from ..models import MODELS, StateSpaceModel, get_model
 from ..models.base import PriorChoice
+from .blocks import joint_map_settings, stan_settings
 from .schema import ConfigError, scenario_schema, schema_problems, short_repr
 
 
@@ -194,8 +195,20 @@ class Scenario:
         return range(0, self.K, self.stan_every)
 
     def stan_config(self, stan_cfg: Mapping[str, Any]) -> dict[str, Any]:
-        """The config's stan block with this scenario's ``stan_settings`` over it."""
-        return {**stan_cfg, **dict(self.stan_settings)}
+        """The config's stan block with this scenario's ``stan_settings`` over it
+        (:func:`stan_settings`)."""
+        return stan_settings({"stan_settings": dict(self.stan_settings)}, stan_cfg)
+
+    def joint_map_config(
+        self, joint_map_cfg: Mapping[str, Any], *, single_start: bool = False
+    ) -> dict[str, Any]:
+        """The config's joint_map block with this scenario's start of the states and number
+        of starts (:func:`joint_map_settings`)."""
+        own = {
+            "joint_map_start": self.joint_map_start,
+            "joint_map_n_starts": self.joint_map_n_starts,
+        }
+        return joint_map_settings(own, joint_map_cfg, single_start=single_start)
 
     def batch_size(self, stan_cfg: Mapping[str, Any]) -> int:
         """Trajectories per Stan job: ``stan_batch_size``, else the config's ``stan.batch_size``."""

@@ -7,7 +7,6 @@ table of barrier starts (:func:`ssmobs.stages.outputs.mu0_sweep.run_joint_map_mu
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -75,15 +74,6 @@ def multi_start_of(
     return result, frame, info, bounds
 
 
-def scenario_settings(scenario: Scenario, settings: Mapping[str, Any]) -> dict:
-    """The joint-MAP settings of ``scenario``: the config's ``joint_map`` block with the
-    scenario's own start of the states and, where it sets one, its number of starts."""
-    own = {**settings, "start_states": scenario.joint_map_start}
-    if scenario.joint_map_n_starts is not None:
-        own["n_starts"] = scenario.joint_map_n_starts
-    return own
-
-
 def run_joint_map(
     trajectories: PathLike,
     scenario: Scenario,
@@ -97,7 +87,7 @@ def run_joint_map(
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    settings = scenario_settings(scenario, settings)
+    settings = scenario.joint_map_config(settings)
     n_starts = int(settings.get("n_starts", 1))
     progress = Progress(f"joint MAP {scenario.name}", traj.K * n_starts, logger)
     if n_starts > 1:

@@ -64,7 +64,7 @@ def cell_summary(
     from ..exact.marginal import exact_marginal
     from ..exact.settings import ExactSettings
     from .design import disturbance_set
-    from .joint_map import multi_start_of, scenario_settings
+    from .joint_map import multi_start_of
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -76,7 +76,7 @@ def cell_summary(
         dict(design_cfg),
     )
     traj = make_trajectories(scenario, matrix, provenance=attrs)
-    settings = scenario_settings(scenario, joint_settings)
+    settings = scenario.joint_map_config(joint_settings)
     # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
     _, frame, info, bounds = multi_start_of(traj, scenario.prior, settings)
     K = scenario.K

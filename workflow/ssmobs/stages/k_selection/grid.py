@@ -47,7 +47,8 @@ def run_k_selection_point(
 
     sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
     traj = make_trajectories(sc, disturbances, provenance=provenance)
-    _, _, info, _ = joint_map_of(traj, sc.prior, settings)
+    # the scenario's start of the states, the paper's one start (as the key holds them)
+    _, _, info, _ = joint_map_of(traj, sc.prior, sc.joint_map_config(settings, single_start=True))
     # no scenario name: a point is keyed by what it computes, the grid names the scenario
     info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed)
     io.write_checked_json(out, info)
