@@ -6,6 +6,7 @@ import re
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs.model_check.cases import (
     CheckCase,
     cases_from_scenarios,
@@ -118,7 +119,7 @@ def test_cases_from_scenarios_deduplicate():
     scs = [
         {"model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0, "prior": None, "T": T}
         for T in (20, 50)
-    ] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
+    ] + [same_a09(name=None, T=None, K=None)]
     cases = cases_from_scenarios(scs, "stoch_vol")
     assert cases == [CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], None)]
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
@@ -21,7 +22,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 def scenarios(n: int, **changes) -> list[dict]:
     """``n`` large scenarios of model Same (each over the memory limit in two job kinds)."""
-    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    base = same_a09(name=None, T=400, K=200_000)
     return [{"name": f"big_scenario_{i:02d}", **base, **changes} for i in range(n)]
 
 
@@ -126,7 +127,7 @@ def test_preflight_prints_the_summary_and_every_problem_with_all(tmp_path):
 
 
 def test_analytic_gradients_with_pystan_is_one_line_naming_key_and_choices():
-    conf = config_of([{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}])
+    conf = config_of([same_a09()])
     conf["stan"] = {"backend": "pystan", "gradients": "analytic"}
     lines = [ln for ln in problem_lines(conf) if "stan.gradients" in ln]
     assert len(lines) == 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from factories import same_a09
 from ssmobs import io
 from ssmobs.config import validation as cfg
 from ssmobs.nuts.convergence import ConvergenceSettings, check_convergence, threshold_failures
@@ -22,9 +23,7 @@ pytestmark = pytest.mark.unit
 def config_with(**convergence) -> dict:
     return cfg.validate(
         {
-            "scenarios": [
-                {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 10}
-            ],
+            "scenarios": [same_a09(K=10)],
             "convergence": convergence,
         }
     )

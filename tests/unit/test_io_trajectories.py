@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs import io
 from ssmobs.config.scenario import Scenario
 from ssmobs.design.disturbances import design_disturbances
@@ -79,18 +80,7 @@ def test_disturbances_round_trip_and_checksum(tmp_path):
         io.read_disturbances(path)
 
 
-SCENARIO = Scenario.from_config(
-    {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 3,
-        "K": 4,
-        "method": "design",
-        "seed": 1,
-    }
-)
+SCENARIO = Scenario.from_config(same_a09(T=3, method="design", seed=1))
 
 
 def test_trajectories_follow_the_model_equations(tmp_path):

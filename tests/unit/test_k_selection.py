@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from factories import same_a09
 from ssmobs.config.scenario import Scenario
 from ssmobs.joint_map.driver import joint_map_summary
 from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
@@ -168,18 +169,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs.stages.k_selection.choice import run_select_k
     from ssmobs.stages.k_selection.grid import run_k_selection_point
 
-    sc = Scenario.from_config(
-        {
-            "name": "s",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8.0,
-            "T": 4,
-            "K": 40,
-            "prior": "restricted",
-            "paper_ref": "same_a09_T4",
-        }
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=40, prior="restricted", paper_ref="same_a09_T4"))
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
@@ -242,17 +232,7 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
     from ssmobs.stages.k_selection.choice import run_select_k
 
-    sc = Scenario.from_config(
-        {
-            "name": "s",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8.0,
-            "T": 4,
-            "K": 100,
-            "paper_ref": "same_a09_T4",
-        }
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=100, paper_ref="same_a09_T4"))
     model = get_model("same")
     pts = []
     for K in (100, 200, 300):
@@ -283,9 +263,7 @@ def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
 
     from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
-    sc = Scenario.from_config(
-        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4, "K": 8}
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=8))
     args = (tmp_path / "design", sc, [8, 16], "random", 1, "nested", {}, {"b_max": None})
     (tmp_path / "design").mkdir()
     rows = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid.json")

@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from factories import same_a09
 from growth_model import Growth
 from ssmobs.config.scenario import Scenario
 from ssmobs.joint_map.driver import JointMapResult, joint_map
@@ -299,19 +300,9 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
 
 
 def section_rows(with_multi: bool) -> list[dict]:
-    sc = {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 20,
-        "K": 40,
-        "method": "design",
-        "stan_init": "random",
-        "joint_map": True,
-        "stan": False,
-        "paper_ref": "",
-    }
+    sc = same_a09(
+        T=20, K=40, method="design", stan_init="random", joint_map=True, stan=False, paper_ref=""
+    )
     joint = {"K": 40, "K_max": 30, "components": ["a", "x0"]}
     multi = {**joint, "n_starts": 8, "K_max_unique": 10, "K_max_several": 22}
     rows = [{"config": sc, "joint": joint, "marginal": None, "exact": None}]

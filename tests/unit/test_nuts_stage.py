@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs import seeds
 from ssmobs.log import Progress
 from ssmobs.models import get_model
@@ -584,9 +585,7 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
     from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.stages.stan import run_sample_batch
 
-    sc = Scenario.from_config(
-        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 3, "K": 4}
-    )
+    sc = Scenario.from_config(same_a09(T=3))
     write_trajectories(tmp_path / "t.nc", make_trajectories(sc, np.zeros((6, 4))))
     (tmp_path / "marker.json").write_text(json.dumps({"backend": "native"}))
     records, draws = tmp_path / "records", tmp_path / "draws"

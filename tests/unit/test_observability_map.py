@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs.cache_keys import CacheKeys
 from ssmobs.config.maps import cell_entries
 from ssmobs.config.validation import ConfigError, validate
@@ -15,10 +16,10 @@ from ssmobs.stages import observability_map as om
 
 pytestmark = pytest.mark.unit
 
-SCENARIO = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+SCENARIO = same_a09(K=3)
 MAP = {
     "name": "m",
-    "base": {"model": "same", "omega": {"a": 0.9}, "x0": 8, "prior": "restricted"},
+    "base": same_a09(name=None, prior="restricted", T=None, K=None),
     "vary": "a",
     "values": [0.5, 0.9],
     "T": [4, 10],

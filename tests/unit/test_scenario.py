@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import yaml
+from factories import same_a09
 from ssmobs.config import validation as cfg
 from ssmobs.config.scenario import Scenario
 from ssmobs.models import get_model
@@ -184,13 +185,13 @@ def test_missing_keys_and_non_mappings_fail_clearly():
 def test_one_check_of_an_entry_for_scenarios_map_cells_and_the_scenario_object(change, message):
     """The config's scenarios, an observability map's cells and Scenario.from_config all
     refuse an entry by the same check (ssmobs.config.scenario.entry_problems)."""
-    entry = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5, **change}
+    entry = same_a09(K=5, **change)
     with pytest.raises(cfg.ConfigError, match=r"scenarios\[0\] \('s'\): " + message):
         cfg.validate({"scenarios": [dict(entry)]})
     base = {k: v for k, v in entry.items() if k not in ("name", "T", "K", "joint_map")}
     values = [entry["omega"]["a"]]
     the_map = {"name": "m", "base": base, "vary": "a", "values": values, "T": [4], "K": 5}
-    good = {"name": "ok", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5}
+    good = same_a09(name="ok", K=5)
     if "joint_map" not in change:  # a map's cells always run the joint MAP
         with pytest.raises(cfg.ConfigError, match=r"cell m_a[0-9.]+_T4: " + message):
             cfg.validate({"scenarios": [good], "observability_maps": [the_map]})

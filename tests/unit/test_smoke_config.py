@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from ssmobs.config import validation as cfg
 from ssmobs.config.smoke import SMOKE_K, main, smoke_overlay
 
@@ -46,17 +47,9 @@ def test_every_profile_has_a_valid_smoke_overlay_on_small_sizes(path):
 def test_scenario_settings_follow_the_smaller_K():
     conf = {
         "scenarios": [
-            {
-                "name": "s",
-                "model": "same",
-                "omega": {"a": 0.9},
-                "x0": 8,
-                "T": 4,
-                "K": 50,
-                "exact_K": 500,
-                "stan_every": 10,
-                "stan_settings": {"chains": 4, "adapt_delta": 0.9},
-            }
+            same_a09(
+                K=50, exact_K=500, stan_every=10, stan_settings={"chains": 4, "adapt_delta": 0.9}
+            )
         ],
         "stan": {"keep_draws": [0, 3, 10], "chains": 4},
         "convergence": {"ess_bulk_min": 150},

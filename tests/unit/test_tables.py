@@ -6,6 +6,7 @@ import math
 
 import pandas as pd
 import pytest
+from factories import same_a09
 from ssmobs.binomial import clopper_pearson
 from ssmobs.reports.tables import (
     exact_vs_stan_table,
@@ -27,19 +28,9 @@ PAPER = {
 
 
 def rows() -> list[dict]:
-    sc = {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 20,
-        "K": 40,
-        "method": "design",
-        "stan_init": "random",
-        "joint_map": True,
-        "stan": True,
-        "paper_ref": "ref",
-    }
+    sc = same_a09(
+        T=20, K=40, method="design", stan_init="random", joint_map=True, stan=True, paper_ref="ref"
+    )
     joint = {
         "K": 40,
         "K_max": 20,

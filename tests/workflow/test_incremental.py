@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import make_workdir, snakemake
 
 pytestmark = [pytest.mark.workflow, pytest.mark.slow]
@@ -34,18 +35,7 @@ ARGS = ["--cores", "2", "--rerun-incomplete", "--configfile", CONFIG]
 
 BASE = {
     "outputs_dir": OUT,
-    "scenarios": [
-        {
-            "name": "same_T4",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8,
-            "T": 4,
-            "K": 4,
-            "prior": "restricted",
-            "paper_ref": "same_a09_T4",
-        }
-    ],
+    "scenarios": [same_a09(name="same_T4", prior="restricted", paper_ref="same_a09_T4")],
     "paper_outputs": {"tables_2_3": ["same_T4"], "figure3": ["same_T4"], "figure4": None},
     "k_selection": [],
     "observability_studies": [],

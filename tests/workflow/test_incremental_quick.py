@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import REPO, make_workdir, snakemake
 from test_incremental import BASE, rules_run
 
@@ -321,7 +322,7 @@ def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path
 def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path):
     """Issue 35: 50 large scenarios gave a message of about 100-250 lines at the parse."""
     work = make_workdir(tmp_path / "w")
-    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    base = same_a09(name=None, T=400, K=200_000)
     conf = {
         "outputs_dir": "paper_figures/big",
         "scenarios": [{"name": f"big_{i:02d}", **base} for i in range(50)],

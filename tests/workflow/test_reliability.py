@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from factories import same_a09
 from helpers import REPO, SMOKE, SMOKE_OUT, kill_when, make_workdir, only, snakemake
 
 pytestmark = [pytest.mark.workflow, pytest.mark.slow]
@@ -267,16 +268,7 @@ BAD_CONFIGS = {
     "keep_draws": ({"stan": {"keep_draws": [999]}}, "stan.keep_draws = [999]"),
     "runaway size": (
         {
-            "scenarios": [
-                {
-                    "name": "big",
-                    "model": "same",
-                    "omega": {"a": 0.9},
-                    "x0": 8,
-                    "T": 1000,
-                    "K": 10_000_000,
-                }
-            ],
+            "scenarios": [same_a09(name="big", T=1000, K=10_000_000)],
             "k_selection": [],
             "observability_studies": [],
             "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import make_workdir, snakemake
 
 OUT = "paper_figures/kernels"
@@ -26,8 +27,7 @@ CONFIG = {
     "outputs_dir": OUT,
     "scenarios": [
         # q = (d + p) T = 40: the design set's optimiser runs through BLAS and NumPy's exp
-        {"name": "same_T20", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 6,
-         "prior": "restricted"},
+        same_a09(name="same_T20", T=20, K=6, prior="restricted"),
     ],
     "paper_outputs": {"tables_2_3": ["same_T20"], "figure3": []},
     "observability_studies": [],
