@@ -30,8 +30,8 @@ setup: $(STAMP)
 # `make run CONFIG=my.yaml` runs another config file.
 CONFIG ?= config/config.yaml
 # Before Snakemake: one line for a missing, empty or malformed config file, and removal of a
-# stale lock left by a killed run when no Snakemake process runs here (ssmobs/preflight.py).
-PREFLIGHT := $(BIN)/python -m ssmobs.preflight --unlock-stale
+# stale lock left by a killed run when no Snakemake process runs here (ssmobs/config/preflight.py).
+PREFLIGHT := $(BIN)/python -m ssmobs.config.preflight --unlock-stale
 # Every target resumes a killed run with the same command: --rerun-incomplete redoes the
 # jobs a kill left half done (their outputs are also written atomically).
 SNAKEMAKE := $(BIN)/snakemake --cores $(CORES) --rerun-incomplete
@@ -49,12 +49,12 @@ lint: setup docs
 	$(BIN)/mypy
 
 # The documentation site (mkdocs.yml, docs/) into site/; the configuration reference page
-# must be the one the schema gives (`python -m ssmobs.config_reference` rewrites it), the
+# must be the one the schema gives (`python -m ssmobs.config.reference` rewrites it), the
 # profiles tables of README.md and config/README.md the generated one
-# (`python -m ssmobs.config_profiles` rewrites them).
+# (`python -m ssmobs.config.profiles` rewrites them).
 docs: setup
-	$(BIN)/python -m ssmobs.config_reference --check
-	$(BIN)/python -m ssmobs.config_profiles --check
+	$(BIN)/python -m ssmobs.config.reference --check
+	$(BIN)/python -m ssmobs.config.profiles --check
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
@@ -73,13 +73,13 @@ test-slow: setup
 	$(BIN)/pytest -m "slow or pystan"
 
 # `make smoke`: the smoke profile (every rule, tiny sizes).  `make smoke CONFIG=my.yaml`: that
-# study on the smoke profile's sizes (ssmobs/smoke_config.py writes the overlay to
+# study on the smoke profile's sizes (ssmobs/config/smoke.py writes the overlay to
 # results/smoke_configs/; its tables and figures go to paper_figures/smoke_<name>/).
 SMOKE_OWN = $(filter-out config/config.yaml config/smoke.yaml,$(CONFIG))
 SMOKE_CONFIG = $(if $(SMOKE_OWN),results/smoke_configs/$(basename $(notdir $(CONFIG))).yaml,config/smoke.yaml)
 
 smoke: setup
-	$(if $(SMOKE_OWN),$(BIN)/python -m ssmobs.smoke_config $(CONFIG) --out $(SMOKE_CONFIG))
+	$(if $(SMOKE_OWN),$(BIN)/python -m ssmobs.config.smoke $(CONFIG) --out $(SMOKE_CONFIG))
 	$(PREFLIGHT) $(SMOKE_CONFIG)
 	$(SNAKEMAKE) --configfile $(SMOKE_CONFIG)
 

@@ -32,8 +32,8 @@ kernels.apply()
 # config/config.yaml is the default; a profile given with --configfile replaces it whole
 # (Snakemake would otherwise deep-merge the two and leak default settings into it).
 if not workflow.overwrite_configfiles:
-    from ssmobs.config import ConfigError
-    from ssmobs.preflight import load_config_file
+    from ssmobs.config.validation import ConfigError
+    from ssmobs.config.preflight import load_config_file
 
     try:  # our reading first: one line naming the file (and line, column) when it is bad
         load_config_file("config/config.yaml")

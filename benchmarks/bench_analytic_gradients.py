@@ -4,7 +4,7 @@ For each case (same a = 0.7 T = 100, sep_d2_p1 a = b = c = 0.9 T = 50, sep_ranwa
 T = 100; one trajectory from random disturbances, x0 = 8; the paper's settings: 4 chains x
 (4000 + 6000), one chain at a time) the native backend samples ``--reps`` times with the
 hand-written program (autodiff) and with the generated one (analytic,
-:mod:`ssmobs.analytic_gradients`), the two interleaved (autodiff first in even reps,
+:mod:`ssmobs.nuts.analytic_gradients`), the two interleaved (autodiff first in even reps,
 analytic first in odd ones), rep r with Stan seed 20261205 + r for both.  Reported: the
 driver's CPU seconds per run (its rusage), the post-warmup leapfrog steps per draw, the
 ratio autodiff / analytic of each rep (median and range), of the summed CPU seconds and of
@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 from machine import machine_info, report
-from ssmobs.analytic_gradients import write_analytic_program
 from ssmobs.models import get_model
+from ssmobs.nuts.analytic_gradients import write_analytic_program
 from ssmobs.stan_backends import SamplerSettings, stan_file
 from ssmobs.stan_backends.native import NativeBackend
 from ssmobs.stan_backends.native_build import stan_version

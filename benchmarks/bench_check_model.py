@@ -7,7 +7,7 @@ For each model (``--models``, default all) it measures, in the same process and 
   beforehand and reported apart), CPU and wall seconds;
 - ``compile pystan`` (with ``--cold-pystan``): a cold PyStan build, after removing the
   program's entry from httpstan's cache;
-- ``check native`` / ``check pystan``: :func:`ssmobs.check_model.check_model` on the default
+- ``check native`` / ``check pystan``: :func:`ssmobs.model_check.check.check_model` on the default
   cases with the program already built (the check itself), median of ``--reps``.
 
 Appends a section to BENCHMARKS.md unless ``--no-write``.
@@ -30,7 +30,7 @@ from pathlib import Path
 
 from bench_backends import cpu_seconds
 from machine import machine_info, report
-from ssmobs.check_model import check_model
+from ssmobs.model_check.check import check_model
 from ssmobs.models import MODELS
 from ssmobs.stan_backends import stan_file
 

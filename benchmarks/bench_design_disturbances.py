@@ -43,7 +43,7 @@ MEM_TARGET_MIB = 4096.0
 def run_case(q: int, K: int, seed: int) -> dict:
     """Run one case in this process and return the measurements."""
     import numpy as np
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
 
     messages: list[str] = []
     t0 = time.perf_counter()
@@ -114,7 +114,7 @@ def section_text(rows: list[dict], command: str, total_s: float, load: str) -> s
     today = _dt.date.today().isoformat()
     return (
         f"{SECTION}\n\n"
-        f"Generator: `ssmobs.design_disturbances.design_disturbances(q, K, 'design', seed=0)` "
+        f"Generator: `ssmobs.design.disturbances.design_disturbances(q, K, 'design', seed=0)` "
         f"(symmetric LCD design, toolbox b_max rule, L-BFGS-B with maxcor=10, stopping rule: "
         f"relative objective change <= 1e-6 or K * max|grad| <= 1e-7; symmetric whitening "
         f"afterwards).\n\n"

@@ -2,11 +2,11 @@
 """The LCD design sets before and after the compiled kernel (issue 48), in the same process.
 
 ``before``: the optimiser on the NumPy reference of the distance and its gradient
-(``kernel="numpy"`` of :func:`ssmobs.lcd_distance.symmetric_distance`, what every set was
+(``kernel="numpy"`` of :func:`ssmobs.design.lcd_distance.symmetric_distance`, what every set was
 made with until then), and on the compiled kernel's x86-64 baseline build of the source at
 git revision ``--before-rev`` (default: the kernel's last commit before the AVX2 build), built into a
 temporary directory; ``after``: the default (``kernel="auto"``: the compiled
-kernel of :mod:`ssmobs.lcd_native` in the build it picks for this CPU, up to
+kernel of :mod:`ssmobs.design.lcd_native` in the build it picks for this CPU, up to
 q = ``COMPILED_MAX_Q``, NumPy above).  All run with the workflow's fixed kernels (the
 script restarts itself with them) and the same quadrature rule.
 
@@ -60,10 +60,10 @@ def build_before(rev: str) -> object:
     import subprocess
     import tempfile
 
-    from ssmobs import lcd_native
+    from ssmobs.design import lcd_native
 
     source = subprocess.run(
-        ["git", "-C", str(REPO), "show", f"{rev}:workflow/ssmobs/lcd_kernel/lcd_kernel.cpp"],
+        ["git", "-C", str(REPO), "show", f"{rev}:workflow/ssmobs/design/lcd_kernel/lcd_kernel.cpp"],
         capture_output=True,
         text=True,
         check=True,
@@ -77,10 +77,10 @@ def build_before(rev: str) -> object:
 def design(q: int, K: int, seed: int, kernel: str, build: str = "") -> dict:
     """One design set with the distance on ``kernel`` (and the compiled ``build``, if
     given); CPU seconds and the result."""
-    import ssmobs.design_disturbances as dd
-    from ssmobs import lcd_native
-    from ssmobs.lcd_distance import symmetric_distance
-    from ssmobs.lcd_native import BUILD_ENV
+    import ssmobs.design.disturbances as dd
+    from ssmobs.design import lcd_native
+    from ssmobs.design.lcd_distance import symmetric_distance
+    from ssmobs.design.lcd_native import BUILD_ENV
 
     if build == "before":
         original = lcd_native.kernel
@@ -119,8 +119,8 @@ def design(q: int, K: int, seed: int, kernel: str, build: str = "") -> dict:
 def default_profile_sets() -> list[tuple[int, int]]:
     """Every (q, K) of a design set of the default profile."""
     import yaml
-    from ssmobs.config import validate
-    from ssmobs.scenario import Scenario
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.config.validation import validate
 
     cfg = validate(yaml.safe_load((REPO / "config" / "config.yaml").read_text()))
     by_name = {sc["name"]: sc for sc in cfg["scenarios"]}
@@ -143,8 +143,8 @@ def per_evaluation(q: int, K: int, repeat: int = 5) -> dict:
     """CPU seconds of one evaluation of distance and gradient (the fastest of ``repeat``) of
     a random set on NumPy and on each compiled build."""
     import numpy as np
-    from ssmobs import lcd_native
-    from ssmobs.lcd_distance import _quadrature, b_max_rule, symmetric_distance
+    from ssmobs.design import lcd_native
+    from ssmobs.design.lcd_distance import _quadrature, b_max_rule, symmetric_distance
 
     b = b_max_rule(q)
     half = np.random.default_rng(q).standard_normal((K // 2, q))
@@ -179,13 +179,13 @@ def main() -> None:
         "--before-rev", default=BEFORE_REV, help="git revision of the before build's source"
     )
     args = ap.parse_args()
-    from ssmobs.lcd_distance import COMPILED_MAX_Q
+    from ssmobs.design.lcd_distance import COMPILED_MAX_Q
 
     started = _dt.datetime.now(_dt.timezone.utc)
     print(f"# {started:%Y-%m-%d %H:%M} UTC; {machine_info()}")
     print(f"# load average at start: {os.getloadavg()[0]:.2f}; COMPILED_MAX_Q = {COMPILED_MAX_Q}")
     out: dict = {"machine": machine_info(), "started": started.isoformat(), "speed": []}
-    from ssmobs.lcd_native import chosen_build
+    from ssmobs.design.lcd_native import chosen_build
 
     BEFORE_LIB.append(build_before(args.before_rev))
     print(f"# before: the x86-64 build of {args.before_rev}; after: the {chosen_build()} build")

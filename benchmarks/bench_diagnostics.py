@@ -2,7 +2,7 @@
 """Benchmark of one trajectory's convergence diagnostics: ours vs. arviz-stats (issue 13).
 
 Issue 13 asked: use ArviZ's array layer (``arviz_stats.base.array_stats``) if it is within
-1.5x of our vectorised :mod:`ssmobs.diagnostics`, else keep ours.  The workflow computes
+1.5x of our vectorised :mod:`ssmobs.nuts.diagnostics`, else keep ours.  The workflow computes
 these diagnostics for every trajectory (thousands per scenario).
 
 Draws: one NUTS run of model ``same`` (a = 0.9, x0 = 8, T = 100: 102 parameters a, x0,
@@ -74,7 +74,7 @@ def sample_draws(T: int, draws: int, seed: int = 1):
 
 
 def ours(x: np.ndarray, energy: np.ndarray) -> dict[str, np.ndarray]:
-    from ssmobs.diagnostics import ebfmi, rank_diagnostics
+    from ssmobs.nuts.diagnostics import ebfmi, rank_diagnostics
 
     return {**rank_diagnostics(x), "ebfmi": ebfmi(energy)}
 
@@ -130,7 +130,7 @@ def measure(x: np.ndarray, energy: np.ndarray, rounds: int) -> dict:
 
 
 def cases(draws, n_short: int) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    from ssmobs.convergence import stack_params
+    from ssmobs.nuts.convergence import stack_params
 
     names, x = stack_params(draws)
     energy = np.asarray(draws.sample_stats["energy__"], dtype=float)
@@ -206,7 +206,7 @@ def main() -> None:
     verdict = (
         "within 1.5x: use arviz-stats"
         if worst <= 1.5
-        else "more than 1.5x slower in every case: keep ours (`ssmobs.diagnostics`)"
+        else "more than 1.5x slower in every case: keep ours (`ssmobs.nuts.diagnostics`)"
     )
     lines.append(f"\n\nSmallest ratio arviz-stats / ours (wall or CPU): {worst:.2f}; {verdict}.\n")
     report("".join(lines), write=not args.no_write)

@@ -55,9 +55,9 @@ SPEED_CASES = [
 
 
 def trajectories(slug, omega, x0, T, K, seed=0):
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.design.trajectories import make_trajectories
     from ssmobs.models import get_model
-    from ssmobs.scenario import Scenario
-    from ssmobs.trajectories import make_trajectories
 
     model = get_model(slug)
     sc = Scenario.from_config(
@@ -77,7 +77,7 @@ def trajectories(slug, omega, x0, T, K, seed=0):
 
 def _run(args):
     slug, omega, x0, T, K, lo, hi = args
-    from ssmobs.exact_marginal import exact_marginal
+    from ssmobs.exact.marginal import exact_marginal
 
     traj = trajectories(slug, omega, x0, T, K)
     bounds = traj.model.prior_bounds(traj.omega, None)
@@ -107,8 +107,8 @@ def time_case(slug, omega, x0, T, K, workers):
 
 def accuracy(slug, omega, x0, T, K):
     """Largest change (in units of the 90 % interval width) from default to refined grids."""
-    from ssmobs.exact_marginal import exact_marginal
-    from ssmobs.exact_settings import ExactSettings
+    from ssmobs.exact.marginal import exact_marginal
+    from ssmobs.exact.settings import ExactSettings
 
     traj = trajectories(slug, omega, x0, T, K, seed=1)
     bounds = traj.model.prior_bounds(traj.omega, None)
@@ -187,7 +187,7 @@ def main() -> None:
     lines = [
         SECTION,
         "",
-        "`ssmobs.exact_marginal.exact_marginal` (issue 11): information-form Kalman filter with a "
+        "`ssmobs.exact.marginal.exact_marginal` (issue 11): information-form Kalman filter with a "
         "diffuse x0, vectorised over Omega grid nodes and trajectories; coarse grid + Newton for "
         "the modes, a fine tensor grid on mode ± 7 Laplace sd for the marginals of Omega, "
         "mixtures of smoothed Gaussians over a thinned grid for the states.",

@@ -2,7 +2,7 @@
 """Benchmark of the joint-MAP stage (issue 3): batched barrier-Newton vs. SciPy per trajectory.
 
 Main case (the issue's target): (Same, d=p=1), (a, x0) = (0.9, 8), T = 50.  All K trajectories
-are optimised by ``ssmobs.joint_map.joint_map`` in this process (vectorised across k, with the
+are optimised by ``ssmobs.joint_map.driver.joint_map`` in this process (vectorised across k, with the
 numerical checks of Sec. III.B: Lanczos eigenvalue ratio, local variances, ridge
 re-optimisations), and in the same run the first ``--scipy-K`` of the same trajectories are
 optimised one at a time by ``scipy.optimize.minimize`` from the same start, with the same
@@ -86,7 +86,7 @@ def trajectories(slug, omega, x0, T, K, seed=0):
 
 
 def time_ours(model, z, omega, x0, repeat=1):
-    from ssmobs.joint_map import joint_map
+    from ssmobs.joint_map.driver import joint_map
 
     bounds = model.prior_bounds(omega)
     joint_map(model, z[:4], bounds, omega, x0)  # compile the symbolic derivatives once
@@ -100,7 +100,7 @@ def time_ours(model, z, omega, x0, repeat=1):
 
 def time_scipy(model, z, omega, x0, method):
     from scipy.optimize import Bounds, minimize
-    from ssmobs.joint_map import initial_theta
+    from ssmobs.joint_map.driver import initial_theta
     from ssmobs.models.log_posterior import neg2_log_posterior
 
     bounds = model.prior_bounds(omega)
@@ -169,7 +169,7 @@ def load_avg() -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--T", type=int, default=50)
-    ap.add_argument("--K", type=int, default=2000, help="trajectories for ssmobs.joint_map")
+    ap.add_argument("--K", type=int, default=2000, help="trajectories for ssmobs.joint_map.driver")
     ap.add_argument("--scipy-K", type=int, default=40, help="trajectories per SciPy method")
     ap.add_argument("--K-models", type=int, default=300, help="K per model in the model table")
     ap.add_argument("--repeat", type=int, default=3, help="best of this many runs (ours)")
@@ -201,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         rows = [
             (
-                "ssmobs.joint_map (batched barrier-Newton + all checks)",
+                "ssmobs.joint_map.driver (batched barrier-Newton + all checks)",
                 args.K,
                 t_ours,
                 per_ours,
@@ -289,7 +289,7 @@ def section_text(main_table, model_table, command, total, load, T, per_ours, row
     ratios = ", ".join(f"{r[0].split(' ')[1].rstrip(',')} {r[4]:.0f}x" for r in rows[1:])
     out = (
         f"{SECTION}\n\n"
-        f"`ssmobs.joint_map.joint_map`: primal log-barrier method (Nocedal & Wright Sec. 19.6) "
+        f"`ssmobs.joint_map.driver.joint_map`: primal log-barrier method (Nocedal & Wright Sec. 19.6) "
         f"with Newton steps on the analytic Hessian, vectorised across k; each Newton system is "
         f"solved through the arrow structure of the Hessian (block-tridiagonal states + m dense "
         f"rows/columns: block Cholesky + m x m Schur complement, O(n) per trajectory); the "

@@ -38,14 +38,14 @@ import numpy as np
 from ssmobs import kernels
 stage = sys.argv[1]
 if stage == "design":
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
     start = time.process_time()
     design_disturbances(8, 1000, "design", 1)
 else:
-    from ssmobs.exact_marginal import exact_marginal
+    from ssmobs.exact.marginal import exact_marginal
     from ssmobs.models import get_model
-    from ssmobs.scenario import Scenario
-    from ssmobs.trajectories import make_trajectories
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.design.trajectories import make_trajectories
     sc = Scenario.from_config({"name": "same", "model": "same", "T": 20, "K": 1300, "x0": 8.0,
                                "omega": {"a": 0.9}})
     traj = make_trajectories(sc, np.random.default_rng(0).standard_normal((40, 1300)))

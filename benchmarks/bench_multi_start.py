@@ -3,9 +3,9 @@
 
 For each case, K design-like trajectories (random N(0, I) disturbances; the optimiser's
 cost does not depend on whether they are design points) are optimised by
-:func:`ssmobs.multi_start.multi_start_joint_map` with ``n_starts`` starts; every start is
+:func:`ssmobs.joint_map.multi_start.multi_start_joint_map` with ``n_starts`` starts; every start is
 timed on its own (CPU seconds of ``time.process_time`` around its
-:func:`ssmobs.joint_map.joint_map` call, checks and ridge re-optimisations included), so the
+:func:`ssmobs.joint_map.driver.joint_map` call, checks and ridge re-optimisations included), so the
 paper's start (start 0) and the extra starts (Halton points of the start box, which start
 farther from the optimum) are reported apart.  The process runs with the fixed kernels of
 the workflow's jobs (:mod:`ssmobs.kernels`, set before NumPy loads).  Printed: a Markdown
@@ -43,9 +43,9 @@ CASES = [
 
 
 def run_case(slug, omega, x0, T, prior, K, n_starts):
-    import ssmobs.multi_start as ms
-    from ssmobs.joint_map import joint_map
-    from ssmobs.joint_map_settings import JointMapSettings
+    import ssmobs.joint_map.multi_start as ms
+    from ssmobs.joint_map.driver import joint_map
+    from ssmobs.joint_map.settings import JointMapSettings
     from ssmobs.models import get_model
 
     model = get_model(slug)

@@ -3,10 +3,10 @@
 
 Part 1, overhead (one process, like one batch job): model ``same`` (a = 0.9, x0 = 8),
 T = 20 and T = 100, the paper's settings (4 chains, 4 000 warmup + 6 000 kept draws), a
-few trajectories through :func:`ssmobs.nuts_stage.run_trajectories` with the PyStan
+few trajectories through :func:`ssmobs.nuts.batch.run_trajectories` with the PyStan
 backend.  Measured:
 
-* per job: imports (``ssmobs.nuts_stage`` and its numerics; ``stan``/``httpstan``, which
+* per job: imports (``ssmobs.nuts.batch`` and its numerics; ``stan``/``httpstan``, which
   the backend imports at its first use) and the compile call (a cache hit);
 * per trajectory: the wall time of the backend's ``sample`` call, and inside it the
   parent process's CPU time (httpstan's server: JSON transfer, gzip, parsing, conversion)
@@ -123,8 +123,8 @@ def worker_stage(
 ) -> dict:
     """One 'job': imports, compile, n trajectories through run_trajectories."""
     t0 = time.perf_counter()
-    from ssmobs.convergence import ConvergenceSettings
-    from ssmobs.nuts_stage import run_trajectories
+    from ssmobs.nuts.batch import NutsBatch, run_trajectories
+    from ssmobs.nuts.convergence import ConvergenceSettings
     from ssmobs.stan_backends import get_backend, stan_file
     from ssmobs.stan_backends.base import SamplerSettings
 
@@ -141,26 +141,21 @@ def worker_stage(
     t_compile = time.perf_counter() - t0
     sampler = SamplerSettings(chains=4, iter_warmup=warmup, iter_sampling=sampling, workers=workers)
     t0 = time.perf_counter()
-    recs = run_trajectories(
+    batch = NutsBatch(
         model,
-        backend,
         stan_file("same"),
         z,
         x,
-        list(range(first_k, first_k + n)),
         model.prior_bounds({"a": 0.9}),
-        {"a": 0.9},
+        model.omega_array({"a": 0.9}),
         8.0,
         f"bench_T{T}",
         1,
         sampler,
         ConvergenceSettings(),
         "random",
-        records,
-        set(),
-        None,
-        None,
     )
+    recs = run_trajectories(batch, backend, list(range(first_k, first_k + n)), records)
     t_loop = time.perf_counter() - t0
     out = {
         "T": T,
@@ -210,8 +205,8 @@ def _alternatives(draws, model, T: int) -> dict:
     import warnings
 
     import numpy as np
-    from ssmobs.convergence import ConvergenceSettings, check_convergence
-    from ssmobs.marginal_map import marginal_summary, theta_draws
+    from ssmobs.nuts.convergence import ConvergenceSettings, check_convergence
+    from ssmobs.nuts.marginal_map import marginal_summary, theta_draws
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -346,7 +341,7 @@ def render(over: list[dict], thr: dict | None, args, started: str, load: tuple) 
     out.append("")
     r0 = over[0]
     out.append(
-        f"Once per job (a process): importing `ssmobs.nuts_stage` and the backend module "
+        f"Once per job (a process): importing `ssmobs.nuts.batch` and the backend module "
         f"(numpy, scipy) {_fmt(r0['import_ssmobs'])} s, `import stan` "
         f"{_fmt(r0['import_stan'])} s, compile call (cache hit) {_fmt(r0['compile'])} s; "
         f"ArviZ is imported only to keep draws ({_fmt(r0['alternatives']['import_arviz'])} s"

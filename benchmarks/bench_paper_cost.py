@@ -1,7 +1,7 @@
 """Cost of the paper profile's Stan stage: CPU seconds per NUTS run for every scenario.
 
 For each scenario of config/paper.yaml with the Stan stage on, run ``--n`` trajectories
-(random disturbances, seed 1) through the real stage (``ssmobs.nuts_stage.run_trajectories``)
+(random disturbances, seed 1) through the real stage (``ssmobs.nuts.batch.run_trajectories``)
 with the paper's sampler settings, measure wall time and CPU time (this process plus its
 chain worker processes), and extrapolate to CPU-hours per 1000 runs and for the scenario's K.
 Appends a section to BENCHMARKS.md unless ``--no-write``.
@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 from machine import machine_info, report
-from ssmobs import config as cfg
-from ssmobs.convergence import ConvergenceSettings
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.scenario import Scenario
+from ssmobs.config import validation as cfg
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.trajectories import make_trajectories
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
+from ssmobs.nuts.convergence import ConvergenceSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends import get_backend, stan_file
-from ssmobs.trajectories import make_trajectories
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -59,13 +59,11 @@ def main() -> None:
         backend.compile(stan_file(model.slug))
         with tempfile.TemporaryDirectory() as tmp:
             t0, c0 = time.perf_counter(), cpu_seconds()
-            recs = run_trajectories(
+            batch = NutsBatch(
                 model,
-                backend,
                 stan_file(model.slug),
                 traj.z,
                 traj.x,
-                list(range(args.n)),
                 bounds,
                 traj.omega,
                 traj.x0,
@@ -74,8 +72,8 @@ def main() -> None:
                 sampler=sampler,
                 convergence=ConvergenceSettings(**conf["convergence"]),
                 init=sc.stan_init,
-                records_dir=tmp,
             )
+            recs = run_trajectories(batch, backend, list(range(args.n)), records_dir=tmp)
             wall, cpu = time.perf_counter() - t0, cpu_seconds() - c0
         per_cpu = cpu / args.n
         rows.append(

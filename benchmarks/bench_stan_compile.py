@@ -109,7 +109,7 @@ def main() -> int:
     (work / "libtbb.so.2").symlink_to(hdir / "lib" / "libtbb.so.2")
 
     import numpy as np
-    from ssmobs.check_model_cases import default_cases, sample_theta
+    from ssmobs.model_check.cases import default_cases, sample_theta
     from ssmobs.models import get_model
     from ssmobs.stan_backends.native_build import write_json_file
 

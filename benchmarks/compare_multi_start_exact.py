@@ -1,10 +1,10 @@
 #!/usr/bin/env python
 """Multi-start joint MAP against the exact stage, trajectory by trajectory (issue 36).
 
-For models linear in the states the exact stage (:mod:`ssmobs.exact_marginal`) classifies
+For models linear in the states the exact stage (:mod:`ssmobs.exact.marginal`) classifies
 the marginal posterior p(Omega | z~(k)) of every trajectory by Definition 3 (``unique`` /
 ``several`` / ``none`` interior maxima).  The multi-start joint MAP
-(:mod:`ssmobs.multi_start`) counts the distinct maxima of the *joint* posterior
+(:mod:`ssmobs.joint_map.multi_start`) counts the distinct maxima of the *joint* posterior
 pi(Theta | z~(k)) that pass the checks of Sec. III.B.  The two answer different questions
 (the joint maximum over the states vs the maximum of the integral over them), so they may
 disagree; this script counts how often, as a cross table per case: the rows the exact
@@ -47,10 +47,10 @@ CASES = [
 
 
 def compare(slug, omega, x0, T, prior, K, n_starts):
-    from ssmobs.exact_marginal import exact_marginal
-    from ssmobs.joint_map_settings import JointMapSettings
+    from ssmobs.exact.marginal import exact_marginal
+    from ssmobs.joint_map.multi_start import multi_start_joint_map
+    from ssmobs.joint_map.settings import JointMapSettings
     from ssmobs.models import get_model
-    from ssmobs.multi_start import multi_start_joint_map
 
     model = get_model(slug)
     rng = np.random.default_rng(0)

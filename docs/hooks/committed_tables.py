@@ -3,7 +3,7 @@
 Three markers:
 
 - ``<!-- paper-comparison: paper_figures/<folder> -->`` becomes the table of
-  :func:`ssmobs.paper_comparison.paper_comparison` (every value the paper states, ours
+  :func:`ssmobs.reports.paper_comparison.paper_comparison` (every value the paper states, ours
   beside it, with its Monte Carlo standard error and z) and a sentence naming the largest
   |z|.
 - ``<!-- section4-rows: paper_figures/section4_rows -->`` becomes one table of every
@@ -25,7 +25,7 @@ from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
 from ssmobs.binomial import format_fraction
-from ssmobs.paper_comparison import paper_comparison
+from ssmobs.reports.paper_comparison import paper_comparison
 
 COMPARISON = re.compile(r"<!-- paper-comparison: (?P<folder>[\w./-]+) -->")
 ROWS = re.compile(r"<!-- section4-rows: (?P<folder>[\w./-]+) -->")

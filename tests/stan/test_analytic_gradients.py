@@ -9,11 +9,11 @@ import re
 
 import numpy as np
 import pytest
-from ssmobs.analytic_gradients import AnalyticProgram, write_analytic_program
-from ssmobs.check_model import check_model
-from ssmobs.check_model_analytic import analytic_problems
-from ssmobs.check_model_cases import default_cases
+from ssmobs.model_check.analytic import analytic_problems
+from ssmobs.model_check.cases import default_cases
+from ssmobs.model_check.check import check_model
 from ssmobs.models import MODELS, get_model
+from ssmobs.nuts.analytic_gradients import AnalyticProgram, write_analytic_program
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.native import NativeBackend
@@ -102,9 +102,9 @@ def test_generated_whole_program_equals_the_hand_written_one():
 
 
 def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
-    from ssmobs.convergence import ConvergenceSettings
-    from ssmobs.nuts_stage import run_trajectories
-    from ssmobs.record_cache import program_hash
+    from ssmobs.nuts.batch import NutsBatch, run_trajectories
+    from ssmobs.nuts.convergence import ConvergenceSettings
+    from ssmobs.nuts.record_cache import program_hash
     from ssmobs.stages.stan import stan_program
 
     model = get_model("same")
@@ -119,13 +119,11 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
     sampler = SamplerSettings(chains=2, iter_warmup=200, iter_sampling=200)
 
     def run():
-        return run_trajectories(
+        batch = NutsBatch(
             model,
-            NativeBackend(),
             program,
             z,
             x,
-            [0],
             model.prior_bounds(omega),
             omega,
             np.array([8.0]),
@@ -133,9 +131,9 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
             1,
             sampler,
             ConvergenceSettings(),
-            records_dir=tmp_path / "records",
             user_header=header,
-        )[0]
+        )
+        return run_trajectories(batch, NativeBackend(), [0], records_dir=tmp_path / "records")[0]
 
     rec = run()
     assert rec["status"] == "ok" and rec["map"] is not None

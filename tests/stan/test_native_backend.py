@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.record_cache import record_path
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
+from ssmobs.nuts.record_cache import record_path
 from ssmobs.stan_backends import (
     SAMPLER_COLUMNS,
     BackendError,
@@ -195,21 +195,10 @@ def test_missing_library_fails_the_job_not_the_trajectory(tmp_path):
     z = np.random.default_rng(0).standard_normal((2, 5, 1))
     records = tmp_path / "records"
     with pytest.raises(BackendError):
-        run_trajectories(
-            model,
-            backend,
-            stan_file("same"),
-            z,
-            z,
-            [0, 1],
-            model.prior_bounds([0.9]),
-            [0.9],
-            [8.0],
-            "s",
-            1,
-            sampler=SMALL,
-            records_dir=records,
+        batch = NutsBatch(
+            model, stan_file("same"), z, z, model.prior_bounds([0.9]), [0.9], [8.0], "s", 1, SMALL
         )
+        run_trajectories(batch, backend, [0, 1], records_dir=records)
     assert not record_path(records, 0).exists()
 
 

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ssmobs.convergence import ConvergenceSettings
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.record_format import records_to_frame
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
+from ssmobs.nuts.convergence import ConvergenceSettings
+from ssmobs.nuts.record_format import records_to_frame
+from ssmobs.nuts.stan_metrics import stan_summary
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.pystan import PyStanBackend
-from ssmobs.stan_metrics import stan_summary
 
 # every test builds its program with PyStan (`make test-slow`)
 pytestmark = [pytest.mark.stan, pytest.mark.pystan]
@@ -43,13 +43,11 @@ def _run(backend, slug, T, sampler, tmp_path, seed=7, keep=()):
     model = get_model(slug)
     omega = {"a": 0.9}
     x, z = _trajectory(model, omega, 8.0, T, seed)
-    recs = run_trajectories(
+    batch = NutsBatch(
         model,
-        backend,
         stan_file(slug),
         z,
         x,
-        [0],
         model.prior_bounds(omega),
         model.omega_array(omega),
         8.0,
@@ -58,10 +56,9 @@ def _run(backend, slug, T, sampler, tmp_path, seed=7, keep=()):
         sampler,
         ConvergenceSettings(),
         "random",
-        tmp_path / "records",
-        set(keep),
-        tmp_path / "draws",
-        None,
+    )
+    recs = run_trajectories(
+        batch, backend, [0], tmp_path / "records", set(keep), tmp_path / "draws", None
     )
     return model, x, recs[0]
 

@@ -11,11 +11,11 @@ import sys
 
 import numpy as np
 import pytest
-from ssmobs.analytic_gradients import analytic_stan_code, function_name, header_code, stan_call
-from ssmobs.check_model_cases import default_cases
-from ssmobs.check_model_stan_source import stan_block
+from ssmobs.model_check.cases import default_cases
+from ssmobs.model_check.stan_source import stan_block
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import neg2_log_posterior
+from ssmobs.nuts.analytic_gradients import analytic_stan_code, function_name, header_code, stan_call
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import program_code
 
@@ -24,7 +24,7 @@ pytestmark = pytest.mark.unit
 
 def _header_in_fresh_process(slug: str, hashseed: str) -> str:
     code = (
-        "from ssmobs.analytic_gradients import header_code as h\n"
+        "from ssmobs.nuts.analytic_gradients import header_code as h\n"
         "from ssmobs.models import get_model as g\n"
         f"print(h(g({slug!r})), end='')"
     )
@@ -102,8 +102,8 @@ def test_header_arithmetic_is_the_python_model(slug):
 
 
 def test_whole_program_declares_what_the_model_check_reads():
-    from ssmobs.analytic_gradients import generated_stan_code
-    from ssmobs.check_model_stan_source import declared_names, expected_parameters
+    from ssmobs.model_check.stan_source import declared_names, expected_parameters
+    from ssmobs.nuts.analytic_gradients import generated_stan_code
 
     model = get_model("sep_d2_p1")
     code = generated_stan_code(model)
@@ -115,7 +115,7 @@ def test_whole_program_declares_what_the_model_check_reads():
 
 
 def test_whole_program_refuses_support_constraints():
-    from ssmobs.analytic_gradients import generated_stan_code
+    from ssmobs.nuts.analytic_gradients import generated_stan_code
 
     with pytest.raises(ValueError, match="a\\^2 \\+ b\\^2 < 1|support constraints"):
         generated_stan_code(get_model("sep_d1_p2"))

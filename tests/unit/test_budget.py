@@ -6,13 +6,13 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from ssmobs import budget
-from ssmobs.design_disturbances import design_disturbances
-from ssmobs.joint_map import joint_map
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.config import budget
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.disturbances import design_disturbances
+from ssmobs.design.trajectories import make_trajectories
+from ssmobs.joint_map.driver import joint_map
+from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories
 
 pytestmark = pytest.mark.unit
 

@@ -9,22 +9,21 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ssmobs.cache_keys import (
+from ssmobs.cache_keys import CacheKeys, UnknownKeyError
+from ssmobs.code_hashing import syntax_digest
+from ssmobs.config.validation import validate
+from ssmobs.nuts.record_cache import program_hash
+from ssmobs.stage_code import (
     MODEL_REGISTRY,
     NEUTRAL_MODULES,
     PACKAGE_DIR,
     STAGE_MODULES,
     STAGE_SCRIPTS,
-    CacheKeys,
-    UnknownKeyError,
     code_digest,
     digest,
     file_digest,
     module_closure,
 )
-from ssmobs.code_hashing import syntax_digest
-from ssmobs.config import validate
-from ssmobs.record_cache import program_hash
 from ssmobs.stan_backends.base import program_code
 
 pytestmark = pytest.mark.unit
@@ -47,16 +46,16 @@ def test_digest_is_canonical_and_sensitive():
 
 
 def test_module_closure_follows_imports_and_skips_neutral_modules():
-    closure = module_closure(("joint_map.py",))
-    assert {"joint_map.py", "banded_linalg.py", "models/log_posterior.py"} <= set(closure)
-    assert "log.py" not in closure and "config.py" not in closure
-    assert "nuts_stage.py" not in closure
+    closure = module_closure(("joint_map/driver.py",))
+    assert {"joint_map/driver.py", "banded_linalg.py", "models/log_posterior.py"} <= set(closure)
+    assert "log.py" not in closure and "config/validation.py" not in closure
+    assert "nuts/batch.py" not in closure
 
 
 def test_code_digest_names_its_script_and_its_own_glue():
     code = code_digest("joint_map")
     assert "scripts/joint_map.py" in code and "stages/joint_map.py" in code
-    assert not {"stages/outputs.py", "stages/stan.py", "stages/exact.py"} & set(code)
+    assert not {"stages/outputs/paper_tables.py", "stages/stan.py", "stages/exact.py"} & set(code)
 
 
 def _write(root: Path, files: dict[str, str]) -> Path:
@@ -69,38 +68,79 @@ def _write(root: Path, files: dict[str, str]) -> Path:
 @pytest.mark.parametrize(
     ("stage", "runs", "does_not_run"),
     [
-        ("design", {"stages/design.py", "design_disturbances.py"}, {"trajectories.py"}),
-        ("trajectories", {"stages/design.py", "trajectories.py"}, {"design_disturbances.py"}),
+        ("design", {"stages/design.py", "design/disturbances.py"}, {"design/trajectories.py"}),
+        (
+            "trajectories",
+            {"stages/design.py", "design/trajectories.py"},
+            {"design/disturbances.py"},
+        ),
         (
             "joint_map",
-            {"stages/joint_map.py", "joint_map.py", "trajectories.py"},
-            {"stages/outputs.py", "stages/k_selection.py", "tables.py", "figures.py"},
+            {"stages/joint_map.py", "joint_map/driver.py", "design/trajectories.py"},
+            {
+                "stages/outputs/figures.py",
+                "stages/k_selection/grid.py",
+                "reports/tables.py",
+                "reports/figures.py",
+            },
         ),
         (
             "k_selection",
-            {"stages/k_selection.py", "stages/design.py", "stages/joint_map.py", "k_selection.py"},
-            {"stages/outputs.py", "tables.py", "figures.py"},
+            {
+                "stages/k_selection/grid.py",
+                "stages/design.py",
+                "stages/joint_map.py",
+                "k_selection.py",
+            },
+            {
+                "stages/k_selection/choice.py",
+                "stages/outputs/mu0_sweep.py",
+                "reports/tables.py",
+                "reports/figures.py",
+            },
         ),
         (
             "program",
             {"stages/stan.py", "stan_backends/__init__.py"},
-            {"nuts_stage.py", "record_cache.py", "stan_metrics.py", "trajectories.py"},
+            {
+                "nuts/batch.py",
+                "nuts/record_cache.py",
+                "nuts/stan_metrics.py",
+                "design/trajectories.py",
+            },
         ),
         (
             "nuts_records",
-            {"stages/stan.py", "nuts_stage.py", "record_cache.py", "trajectories.py"},
-            {"stan_metrics.py", "stages/outputs.py", "tables.py", "joint_map.py"},
+            {"stages/stan.py", "nuts/batch.py", "nuts/record_cache.py", "design/trajectories.py"},
+            {
+                "nuts/stan_metrics.py",
+                "stages/outputs/paper_tables.py",
+                "reports/tables.py",
+                "joint_map/driver.py",
+            },
         ),
-        ("gather", {"stages/stan.py", "record_cache.py", "stan_metrics.py"}, {"tables.py"}),
+        (
+            "gather",
+            {"stages/stan.py", "nuts/record_cache.py", "nuts/stan_metrics.py"},
+            {"reports/tables.py"},
+        ),
         (
             "exact",
-            {"stages/exact.py", "exact_marginal.py", "stan_metrics.py"},
-            {"nuts_stage.py", "joint_map.py", "stages/stan.py"},
+            {"stages/exact.py", "exact/marginal.py", "nuts/stan_metrics.py"},
+            {"nuts/batch.py", "joint_map/driver.py", "stages/stan.py"},
         ),
         (
             "outputs",
-            {"stages/outputs.py", "tables.py", "figures.py", "observability_study.py"},
-            {"stages/stan.py", "stages/exact.py", "nuts_stage.py", "exact_marginal.py"},
+            {
+                "stages/outputs/paper_tables.py",
+                "stages/outputs/figures.py",
+                "stages/outputs/mu0_sweep.py",
+                "stages/k_selection/choice.py",
+                "reports/tables.py",
+                "reports/figures.py",
+                "reports/observability_study.py",
+            },
+            {"stages/stan.py", "stages/exact.py", "nuts/batch.py", "exact/marginal.py"},
         ),
     ],
 )
@@ -294,25 +334,27 @@ FROM_TRAJECTORIES = {"trajectories", "joint_map", "nuts_records", "nuts_batches"
     ("edit", "changed"),
     [
         ("ssmobs/models/same.py", FROM_TRAJECTORIES | {"k_selection"}),
-        ("ssmobs/exact_marginal.py", {"exact"}),
-        ("ssmobs/joint_map.py", {"joint_map", "k_selection", "outputs"}),
+        ("ssmobs/exact/marginal.py", {"exact"}),
+        ("ssmobs/joint_map/driver.py", {"joint_map", "k_selection", "outputs"}),
         ("ssmobs/log.py", set()),
         ("ssmobs/stages/design.py", {"design", "k_selection"} | FROM_TRAJECTORIES),
         ("ssmobs/stages/joint_map.py", {"joint_map", "k_selection", "outputs"}),
-        ("ssmobs/stages/k_selection.py", {"k_selection"}),
+        ("ssmobs/stages/k_selection/grid.py", {"k_selection"}),
+        ("ssmobs/stages/k_selection/choice.py", {"outputs"}),
         ("ssmobs/stages/stan.py", {"program", "nuts_records", "nuts_batches", "gather"}),
         ("ssmobs/stages/exact.py", {"exact"}),
-        ("ssmobs/stages/outputs.py", {"outputs"}),
-        ("ssmobs/record_cache.py", {"nuts_records", "nuts_batches", "gather"}),
-        ("ssmobs/stan_metrics.py", {"gather", "exact"}),
-        ("ssmobs/tables.py", {"outputs"}),
+        ("ssmobs/stages/outputs/paper_tables.py", {"outputs"}),
+        ("ssmobs/stages/outputs/mu0_sweep.py", {"outputs"}),
+        ("ssmobs/nuts/record_cache.py", {"nuts_records", "nuts_batches", "gather"}),
+        ("ssmobs/nuts/stan_metrics.py", {"gather", "exact"}),
+        ("ssmobs/reports/tables.py", {"outputs"}),
         ("scripts/sample_nuts.py", {"nuts_records", "nuts_batches", "gather"}),
         ("scripts/paper_tables.py", {"outputs"}),
     ],
 )
 def test_code_edits_key_the_stages_that_run_the_code(tmp_path, edit, changed):
     """An edit of a model's module or a stage's code moves that stage's outputs (and those
-    downstream) and no other: an edit of a table's glue (stages/outputs.py) reruns no
+    downstream) and no other: an edit of a table's glue (stages/outputs/) reruns no
     sampling, an edit of the Stan glue (stages/stan.py) no joint MAP; an edit of logging
     moves none."""
     work = tmp_path / "workflow"

@@ -6,14 +6,15 @@ import re
 
 import numpy as np
 import pytest
-from ssmobs.check_model_cases import (
+from factories import same_a09
+from ssmobs.model_check.cases import (
     CheckCase,
     cases_from_scenarios,
     default_cases,
     default_values,
 )
-from ssmobs.check_model_python import python_problems, simulate_problems
-from ssmobs.check_model_stan_source import declared_names, stan_block, stan_source_problems
+from ssmobs.model_check.python import python_problems, simulate_problems
+from ssmobs.model_check.stan_source import declared_names, stan_block, stan_source_problems
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.base import StateSpaceModel
 from ssmobs.models.sep_d2_p1 import SepD2P1
@@ -118,7 +119,7 @@ def test_cases_from_scenarios_deduplicate():
     scs = [
         {"model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0, "prior": None, "T": T}
         for T in (20, 50)
-    ] + [{"model": "same", "omega": {"a": 0.9}, "x0": 8}]
+    ] + [same_a09(name=None, T=None, K=None)]
     cases = cases_from_scenarios(scs, "stoch_vol")
     assert cases == [CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], None)]
 
@@ -178,22 +179,25 @@ def test_every_model_simulates_what_its_terms_say(slug):
 def test_one_mistake_gives_one_message_and_its_check_is_not_checked(monkeypatch, capsys):
     """A swapped simulate is wrong in every case (3 default cases): one message, and the
     check that found it is printed as failed, not as checked (issue 36)."""
-    import ssmobs.check_model as cm
+    import ssmobs.model_check.__main__ as cli
+    import ssmobs.model_check.check as cm
 
     model = SwappedSimulateStochVol()
     assert len(default_cases(model)) == 3
     monkeypatch.setattr(cm, "get_model", lambda slug: model)
+    monkeypatch.setattr(cli, "get_model", lambda slug: model)
     report = cm.check_model("stoch_vol", stan=False)
     assert len(report.problems) == 1
     assert report.checks == [] and report.failed.startswith("python:")
     assert report.to_dict()["failed"] == report.failed
-    assert cm.main(["stoch_vol", "--no-stan"]) == 1
+    assert cli.main(["stoch_vol", "--no-stan"]) == 1
     out, err = capsys.readouterr()
     assert "checked" not in out
     assert f"failed   {report.failed}" in err and err.count("  - [python") == 1
     # the model as shipped: the check passes and is printed as checked
     monkeypatch.setattr(cm, "get_model", lambda slug: StochVol())
-    assert cm.main(["stoch_vol", "--no-stan"]) == 0
+    monkeypatch.setattr(cli, "get_model", lambda slug: StochVol())
+    assert cli.main(["stoch_vol", "--no-stan"]) == 0
     out, err = capsys.readouterr()
     assert out.startswith("checked  python:") and "failed" not in err
 
@@ -229,7 +233,7 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     noise-free trajectory at (a, b) = (0.5, 25); the config's validation must report the
     model's own check, not that the config's true values reach |x_t| = 4.3e+52."""
     from growth_model import Growth
-    from ssmobs import config as cfg
+    from ssmobs.config import validation as cfg
     from ssmobs.models import MODELS
 
     class Swapped(Growth):
@@ -243,12 +247,12 @@ def test_a_model_mistake_is_named_before_the_size_check_blames_the_config(monkey
     with pytest.raises(cfg.ConfigError) as err:
         cfg.validate({"scenarios": [dict(entry)]})
     msg = str(err.value)
-    assert "model 'test_growth' fails its own check (python -m ssmobs.check_model" in msg
+    assert "model 'test_growth' fails its own check (python -m ssmobs.model_check" in msg
     assert "simulate does not match the transition term" in msg
     assert "check the order of the parameters in simulate" in msg
     assert "reach |x_t|" not in msg
-    # the message of `python -m ssmobs.check_model test_growth`, word for word
-    from ssmobs.check_model import check_model
+    # the message of `python -m ssmobs.model_check test_growth`, word for word
+    from ssmobs.model_check.check import check_model
 
     assert check_model("test_growth", stan=False).problems[0] in msg
     # an observability map of that model is judged by the model's check too
@@ -269,7 +273,7 @@ def test_the_check_command_on_a_cold_cache_without_a_compiler_says_one_line(
 ):
     """Found before (issue 46): the tutorial's step 3 on a cold cache without g++ gave a
     57-line traceback and no remedy."""
-    from ssmobs.check_model import main
+    from ssmobs.model_check.__main__ import main
 
     monkeypatch.setenv("CXX", "no-such-compiler")
     monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "cold"))

@@ -9,7 +9,8 @@ import pytest
 import yaml
 
 REPO = Path(__file__).resolve().parents[2]
-from ssmobs import config as cfg
+from factories import same_a09
+from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
 
@@ -42,9 +43,7 @@ def test_profiles_validate_and_get_defaults(name):
 
 
 def base() -> dict:
-    return {
-        "scenarios": [{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 10}]
-    }
+    return {"scenarios": [same_a09(K=10)]}
 
 
 def with_(path, value):
@@ -320,7 +319,7 @@ def test_top_level_not_a_mapping():
 def huge() -> dict:
     return with_(
         ["scenarios", 0],
-        {"name": "huge", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 1000, "K": 10_000_000},
+        same_a09(name="huge", T=1000, K=10_000_000),
     )
 
 
@@ -690,7 +689,7 @@ def test_every_profile_but_the_own_study_asks_for_the_papers_outputs(name):
 def test_a_paper_scenario_or_paper_outputs_asks_for_the_papers_outputs():
     own = {"name": "sv", "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}}
     own.update(x0=0, T=5, K=4)
-    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
+    same = same_a09(name="same_T4")
     assert not cfg.asks_for_paper_outputs(cfg.validate({"scenarios": [dict(own)]}))
     assert not cfg.asks_for_paper_outputs(cfg.validate({"scenarios": [dict(own), dict(same)]}))
     named = {**same, "paper_ref": "same_a09_T4"}

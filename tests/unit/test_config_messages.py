@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ssmobs import config as cfg
+from factories import same_a09
+from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
 
@@ -21,7 +22,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 def scenarios(n: int, **changes) -> list[dict]:
     """``n`` large scenarios of model Same (each over the memory limit in two job kinds)."""
-    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    base = same_a09(name=None, T=400, K=200_000)
     return [{"name": f"big_scenario_{i:02d}", **base, **changes} for i in range(n)]
 
 
@@ -50,7 +51,7 @@ def test_fifty_large_scenarios_give_a_short_message_naming_the_count():
     others = "the others: 'big_scenario_01', 'big_scenario_02', 'big_scenario_03' and 46 more"
     assert others in memory[0]
     assert len([x for x in lines if "gather_nuts job needs" in x]) == 1
-    assert "every one: .venv/bin/python -m ssmobs.preflight --all CONFIGFILE" in lines[0]
+    assert "every one: .venv/bin/python -m ssmobs.config.preflight --all CONFIGFILE" in lines[0]
     assert "(101 problems of 3 kinds" in lines[0]
 
 
@@ -103,7 +104,7 @@ def test_every_problem_on_request():
 
 def run_preflight(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", *args],
+        [sys.executable, "-m", "ssmobs.config.preflight", *args],
         capture_output=True,
         text=True,
         cwd=cwd,
@@ -118,7 +119,7 @@ def test_preflight_prints_the_summary_and_every_problem_with_all(tmp_path):
     assert short.returncode == 1
     assert len(short.stderr.splitlines()) <= 20, short.stderr
     assert "50 scenarios alike" in short.stderr
-    assert f"python -m ssmobs.preflight --all {path}" in short.stderr
+    assert f"python -m ssmobs.config.preflight --all {path}" in short.stderr
     every = run_preflight("--all", str(path), cwd=tmp_path)
     assert every.returncode == 1
     assert len(every.stderr.splitlines()) == 1 + 101
@@ -126,7 +127,7 @@ def test_preflight_prints_the_summary_and_every_problem_with_all(tmp_path):
 
 
 def test_analytic_gradients_with_pystan_is_one_line_naming_key_and_choices():
-    conf = config_of([{"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}])
+    conf = config_of([same_a09()])
     conf["stan"] = {"backend": "pystan", "gradients": "analytic"}
     lines = [ln for ln in problem_lines(conf) if "stan.gradients" in ln]
     assert len(lines) == 1

@@ -1,4 +1,4 @@
-"""The profiles table is generated once (ssmobs.config_profiles) and shown unchanged in
+"""The profiles table is generated once (ssmobs.config.profiles) and shown unchanged in
 README.md and config/README.md; every file of config/ has its row."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from ssmobs import config_profiles as cp
+from ssmobs.config import profiles as cp
 
 pytestmark = pytest.mark.unit
 

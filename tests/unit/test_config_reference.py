@@ -6,8 +6,8 @@ import re
 from typing import Any
 
 import pytest
-from ssmobs import config_reference as ref
-from ssmobs.config import load_schema
+from ssmobs.config import reference as ref
+from ssmobs.config.validation import load_schema
 
 pytestmark = pytest.mark.unit
 
@@ -41,7 +41,7 @@ def row(path: str) -> str:
 def test_committed_page_is_generated_from_the_schema():
     assert PAGE == ref.render(load_schema()), (
         "docs/reference/configuration.md is not what the schema gives: "
-        "run `python -m ssmobs.config_reference`"
+        "run `python -m ssmobs.config.reference`"
     )
 
 
@@ -77,4 +77,4 @@ def test_check_flag_reports_a_stale_page(tmp_path, capsys):
     stale = page.read_text().replace("| `stan.chains` | integer |", "| `stan.chains` | x |")
     page.write_text(stale)
     assert ref.main(["--check", "--output", str(page)]) == 1
-    assert "python -m ssmobs.config_reference" in capsys.readouterr().out
+    assert "python -m ssmobs.config.reference" in capsys.readouterr().out

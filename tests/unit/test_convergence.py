@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
-from ssmobs.convergence import (
+from ssmobs.nuts.convergence import (
     CHECKS,
     ConvergenceSettings,
     check_convergence,

@@ -5,17 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs import config as cfg
+from factories import same_a09
 from ssmobs import io
-from ssmobs.convergence import (
-    ConvergenceSettings,
-    check_convergence,
+from ssmobs.config import validation as cfg
+from ssmobs.nuts.convergence import ConvergenceSettings, check_convergence, threshold_failures
+from ssmobs.nuts.convergence_sensitivity import (
     converged_under,
     failure_pattern_table,
     sensitivity_table,
-    threshold_failures,
 )
-from ssmobs.stages.outputs import run_convergence_sensitivity
+from ssmobs.stages.outputs.paper_tables import run_convergence_sensitivity
 from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
 
 pytestmark = pytest.mark.unit
@@ -24,9 +23,7 @@ pytestmark = pytest.mark.unit
 def config_with(**convergence) -> dict:
     return cfg.validate(
         {
-            "scenarios": [
-                {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 10}
-            ],
+            "scenarios": [same_a09(K=10)],
             "convergence": convergence,
         }
     )

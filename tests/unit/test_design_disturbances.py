@@ -1,4 +1,4 @@
-"""Unit tests of ssmobs.design_disturbances (LCD design disturbances, paper Sec. III.A).
+"""Unit tests of ssmobs.design.disturbances (LCD design disturbances, paper Sec. III.A).
 
 Reference values are from docs/lcd-design-disturbances.md ("the doc"), Sections 2.2 and 8.
 """
@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, special
-from ssmobs import design_disturbances as ddm
-from ssmobs import lcd_distance as lcd
-from ssmobs.design_disturbances import METHODS, DesignResult, design_disturbances
-from ssmobs.lcd_distance import b_max_rule, lcd_distance, symmetric_distance_and_gradient
+from ssmobs.design import disturbances as ddm
+from ssmobs.design import lcd_distance as lcd
+from ssmobs.design.disturbances import METHODS, DesignResult, design_disturbances
+from ssmobs.design.lcd_distance import b_max_rule, lcd_distance, symmetric_distance_and_gradient
 
 pytestmark = pytest.mark.unit
 

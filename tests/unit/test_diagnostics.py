@@ -1,10 +1,10 @@
-"""Array-level diagnostics (ssmobs.diagnostics) on cases whose answer is known by hand."""
+"""Array-level diagnostics (ssmobs.nuts.diagnostics) on cases whose answer is known by hand."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from ssmobs.diagnostics import ebfmi, rank_diagnostics
+from ssmobs.nuts.diagnostics import ebfmi, rank_diagnostics
 
 pytestmark = pytest.mark.unit
 

@@ -5,20 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import ssmobs.exact_boundaries as boundaries
-import ssmobs.exact_marginal as em
-import ssmobs.exact_omega_grid as omega_grid
+import ssmobs.exact.boundaries as boundaries
+import ssmobs.exact.marginal as em
+import ssmobs.exact.omega_grid as omega_grid
 from scipy import integrate
 from scipy.special import ndtr
-from ssmobs.exact_boundaries import boundary_slopes, improper
-from ssmobs.exact_marginal import exact_marginal
-from ssmobs.exact_omega_grid import log_posterior_omega
-from ssmobs.exact_settings import ExactSettings
-from ssmobs.exact_state_mixtures import mixture_mode_quantiles
-from ssmobs.kalman_filter import kalman_marginal
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.trajectories import make_trajectories
+from ssmobs.exact.boundaries import boundary_slopes, improper
+from ssmobs.exact.kalman_filter import kalman_marginal
+from ssmobs.exact.marginal import exact_marginal
+from ssmobs.exact.omega_grid import log_posterior_omega
+from ssmobs.exact.settings import ExactSettings
+from ssmobs.exact.state_mixtures import mixture_mode_quantiles
 from ssmobs.models import MODELS, get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories
 
 pytestmark = pytest.mark.unit
 
@@ -379,8 +379,8 @@ def test_several_maxima_detected_on_a_bimodal_posterior(monkeypatch):
 
 def test_summary_has_the_stan_stage_keys():
     import pandas as pd
+    from ssmobs.nuts.stan_metrics import stan_summary
     from ssmobs.stages.exact import exact_summary
-    from ssmobs.stan_metrics import stan_summary
 
     model = get_model("same")
     traj = _traj("same", T=20, K=20, seed=2)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs import config as cfg
-from ssmobs.joint_map import initial_theta, joint_map
-from ssmobs.joint_map_barrier import LogBarrier, initial_mu_values
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.config import validation as cfg
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.trajectories import make_trajectories, write_trajectories
+from ssmobs.joint_map.barrier import LogBarrier, initial_mu_values
+from ssmobs.joint_map.driver import initial_theta, joint_map
+from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
 
@@ -69,7 +69,7 @@ def test_mu0_rule_changes_the_start_and_is_reported():
 
 
 def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
-    from ssmobs.stages.outputs import run_joint_map_mu0_sweep
+    from ssmobs.stages.outputs.mu0_sweep import run_joint_map_mu0_sweep
 
     sc = Scenario.from_config(
         {

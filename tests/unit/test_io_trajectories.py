@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs import io
-from ssmobs.design_disturbances import design_disturbances
+from ssmobs.config.scenario import Scenario
+from ssmobs.design.disturbances import design_disturbances
+from ssmobs.design.trajectories import make_trajectories, read_trajectories, write_trajectories
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
-from ssmobs.trajectories import make_trajectories, read_trajectories, write_trajectories
 
 pytestmark = pytest.mark.unit
 
@@ -79,18 +80,7 @@ def test_disturbances_round_trip_and_checksum(tmp_path):
         io.read_disturbances(path)
 
 
-SCENARIO = Scenario.from_config(
-    {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 3,
-        "K": 4,
-        "method": "design",
-        "seed": 1,
-    }
-)
+SCENARIO = Scenario.from_config(same_a09(T=3, method="design", seed=1))
 
 
 def test_trajectories_follow_the_model_equations(tmp_path):
@@ -177,7 +167,7 @@ def umask():
 def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
     import pandas as pd
     import xarray as xr
-    from ssmobs.figures import _plt, save_figure
+    from ssmobs.reports.figures import _plt, save_figure
 
     umask(mask)
     io.write_json(tmp_path / "a.json", {"x": 1})

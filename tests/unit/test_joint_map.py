@@ -9,14 +9,14 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy.optimize import minimize
-from ssmobs.joint_map import initial_theta, joint_map, joint_map_summary
-from ssmobs.joint_map_barrier import LogBarrier
-from ssmobs.joint_map_checks import STATUSES, ridge_check
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.joint_map.barrier import LogBarrier
+from ssmobs.joint_map.checks import STATUSES, ridge_check
+from ssmobs.joint_map.driver import initial_theta, joint_map, joint_map_summary
+from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.models.base import PriorBounds, StateSpaceModel
 from ssmobs.models.log_posterior import log_posterior, neg2_log_posterior
-from ssmobs.profile_posterior import profile_posterior
+from ssmobs.reports.profile_posterior import profile_posterior
 
 pytestmark = pytest.mark.unit
 
@@ -195,7 +195,7 @@ def test_small_ratio_at_a_unique_maximum_stays_ok(same_t20):
 
 def test_ridge_status_when_the_reoptimisation_moves(same_t20, monkeypatch):
     """Wiring of the last check: ratio < r0 and a moved re-optimisation give "ridge"."""
-    import ssmobs.joint_map_checks as checks
+    import ssmobs.joint_map.checks as checks
 
     model, z, bounds, res = same_t20
     calls = []

@@ -1,6 +1,6 @@
 """Joint MAPs that do not converge (issue 47): ``unbounded`` (the density keeps rising as
 Theta runs off, with the direction), ``ridge`` (a flat direction), or ``gradient`` (only
-slow), told apart by following the run (:func:`ssmobs.joint_map_checks.runoff_check`)."""
+slow), told apart by following the run (:func:`ssmobs.joint_map.checks.runoff_check`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from cubic_sensor_model import CubicSensor
 from ricker_model import Ricker
-from ssmobs.joint_map import joint_map
-from ssmobs.joint_map_checks import STATUSES, runoff_direction
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.joint_map.checks import STATUSES, runoff_direction
+from ssmobs.joint_map.driver import joint_map
+from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 
 pytestmark = pytest.mark.unit

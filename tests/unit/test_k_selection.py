@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs.joint_map import joint_map_summary
+from factories import same_a09
+from ssmobs.config.scenario import Scenario
+from ssmobs.joint_map.driver import joint_map_summary
 from ssmobs.k_selection import VVector, relative_difference, select_k, v_vector
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -137,7 +138,7 @@ def test_selection_from_summaries_end_to_end():
 
 # ------------------------------------------------------------------ set variants (issue 12)
 def test_nested_random_sets_share_points_and_independent_sets_do_not():
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
     from ssmobs.k_selection import set_seed
 
     q = 8
@@ -163,23 +164,12 @@ def test_nested_random_sets_share_points_and_independent_sets_do_not():
 
 def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
     from ssmobs import io
-    from ssmobs.design_disturbances import design_disturbances
+    from ssmobs.design.disturbances import design_disturbances
     from ssmobs.k_selection import set_seed
-    from ssmobs.stages.k_selection import run_k_selection_point
-    from ssmobs.stages.outputs import run_select_k
+    from ssmobs.stages.k_selection.choice import run_select_k
+    from ssmobs.stages.k_selection.grid import run_k_selection_point
 
-    sc = Scenario.from_config(
-        {
-            "name": "s",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8.0,
-            "T": 4,
-            "K": 40,
-            "prior": "restricted",
-            "paper_ref": "same_a09_T4",
-        }
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=40, prior="restricted", paper_ref="same_a09_T4"))
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
@@ -216,7 +206,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
 
 def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
     import yaml
-    from ssmobs import config as cfg
+    from ssmobs.config import validation as cfg
 
     c = cfg.validate(yaml.safe_load(open("config/paper.yaml")))
     paper = yaml.safe_load(open("config/paper_values.yaml"))
@@ -240,19 +230,9 @@ def test_paper_grid_is_i_times_100_up_to_500_above_the_papers_k():
 
 def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
     from ssmobs import io
-    from ssmobs.stages.outputs import run_select_k
+    from ssmobs.stages.k_selection.choice import run_select_k
 
-    sc = Scenario.from_config(
-        {
-            "name": "s",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8.0,
-            "T": 4,
-            "K": 100,
-            "paper_ref": "same_a09_T4",
-        }
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=100, paper_ref="same_a09_T4"))
     model = get_model("same")
     pts = []
     for K in (100, 200, 300):
@@ -281,19 +261,17 @@ def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
     write them), every point is cached as it finishes, and a rerun reuses them."""
     import json
 
-    from ssmobs.stages.k_selection import run_k_selection_grid
+    from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
-    sc = Scenario.from_config(
-        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8.0, "T": 4, "K": 8}
-    )
+    sc = Scenario.from_config(same_a09(x0=8.0, K=8))
     args = (tmp_path / "design", sc, [8, 16], "random", 1, "nested", {}, {"b_max": None})
     (tmp_path / "design").mkdir()
-    rows = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid.json")
+    rows = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid.json")
     assert [r["K_i"] for r in rows] == [8, 16]
     assert len(list((tmp_path / "design").glob("q8_K*_random_seed*.nc"))) == 2
     assert json.loads((tmp_path / "grid.json").read_text())["points"] == rows
     stamp = {p: p.stat().st_mtime_ns for p in (tmp_path / "points").glob("K*.json")}
     assert len(stamp) == 2
-    again = run_k_selection_grid(*args, tmp_path / "points", tmp_path / "grid2.json")
+    again = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid2.json")
     assert again == rows
     assert {p: p.stat().st_mtime_ns for p in stamp} == stamp

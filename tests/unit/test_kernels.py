@@ -82,7 +82,7 @@ def test_every_cache_key_holds_the_kernel_settings():
     import yaml
 
     config = yaml.safe_load((ROOT / "config" / "smoke.yaml").read_text())
-    from ssmobs import config as ssmobs_config
+    from ssmobs.config import validation as ssmobs_config
 
     ssmobs_config.validate(config)
     keys = CacheKeys(config, "native stanc3 test")
@@ -135,7 +135,7 @@ def test_a_script_restarts_itself_with_the_fixed_kernels(tmp_path):
 def _direct_call(env: dict[str, str]) -> subprocess.CompletedProcess:
     code = (
         "import warnings; warnings.simplefilter('always')\n"
-        "from ssmobs.design_disturbances import design_disturbances\n"
+        "from ssmobs.design.disturbances import design_disturbances\n"
         "design_disturbances(4, 6); design_disturbances(4, 6, method='random')\n"
     )
     return subprocess.run(

@@ -1,5 +1,5 @@
-"""The compiled LCD kernel (ssmobs.lcd_native, lcd_kernel/lcd_kernel.cpp) against the NumPy
-reference of ssmobs.lcd_distance: the same distance and gradient to ~1e-12, its own log, exp
+"""The compiled LCD kernel (ssmobs.design.lcd_native, lcd_kernel/lcd_kernel.cpp) against the NumPy
+reference of ssmobs.design.lcd_distance: the same distance and gradient to ~1e-12, its own log, exp
 and expm1 against NumPy's, and bits that the compiler's optimisation does not change (that
 NumPy's and OpenBLAS's kernels and thread counts do not: tests/workflow/
 test_same_bytes_on_any_kernels.py)."""
@@ -11,8 +11,8 @@ import hashlib
 import numpy as np
 import pytest
 from scipy import special
-from ssmobs import lcd_native
-from ssmobs.lcd_distance import _quadrature, b_max_rule, symmetric_distance
+from ssmobs.design import lcd_native
+from ssmobs.design.lcd_distance import _quadrature, b_max_rule, symmetric_distance
 
 pytestmark = pytest.mark.unit
 
@@ -126,7 +126,7 @@ def test_same_bits_without_optimisation(tmp_path):
 
 
 def test_auto_runs_the_compiled_kernel_up_to_its_dimension(monkeypatch):
-    from ssmobs import lcd_distance
+    from ssmobs.design import lcd_distance
 
     calls = []
     monkeypatch.setattr(lcd_native, "symmetric_distance", lambda *a: calls.append(a) or (0.0, None))
@@ -146,10 +146,10 @@ def test_missing_compiler_is_one_clear_error(tmp_path, monkeypatch):
 
 
 def test_the_kernel_source_and_flags_key_the_design_sets():
-    from ssmobs.cache_keys import code_digest
+    from ssmobs.stage_code import code_digest
 
     code = code_digest("design")
-    assert "lcd_kernel/lcd_kernel.cpp" in code and "lcd_native.py" in code
+    assert "design/lcd_kernel/lcd_kernel.cpp" in code and "design/lcd_native.py" in code
     assert lcd_native.build_key() != lcd_native.build_key(lcd_native.CXXFLAGS + ("-g",))
     # each build its own cache entry; both flag sets sit in lcd_native.py, part of the key
     keys = {lcd_native.build_key(flags) for flags in lcd_native.BUILDS.values()}

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import stats
-from ssmobs.marginal_map import (
+from ssmobs.models import get_model
+from ssmobs.nuts.marginal_map import (
     KDEError,
     binned_kde,
     kde_mode,
@@ -14,7 +15,6 @@ from ssmobs.marginal_map import (
     silverman_bandwidth,
     theta_draws,
 )
-from ssmobs.models import get_model
 from ssmobs.stan_backends.base import Draws
 
 pytestmark = pytest.mark.unit

@@ -6,7 +6,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from ssmobs.config import ConfigError
+from ssmobs.config.validation import ConfigError
 from ssmobs.models import MODELS, ModelDefinitionError, discover_models, model_files
 
 pytestmark = pytest.mark.unit
@@ -154,9 +154,9 @@ def test_a_broken_module_stops_only_the_lookups_of_its_model(tmp_path, monkeypat
 
 
 def test_the_preflight_names_a_broken_model_a_config_uses_in_one_line(tmp_path, monkeypatch):
-    import ssmobs.config as config_module
+    import ssmobs.config.validation as config_module
     import ssmobs.models as models
-    from ssmobs.preflight import check_config_file
+    from ssmobs.config.preflight import check_config_file
 
     write(tmp_path, "broken", "def broken(:\n")
     real = models._discover

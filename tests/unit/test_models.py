@@ -268,7 +268,7 @@ def test_extreme_true_values_are_refused_with_the_value(slug, omega, x0, T, word
 
 
 def test_extreme_values_stop_the_config_before_any_job():
-    from ssmobs.config import ConfigError, validate
+    from ssmobs.config.validation import ConfigError, validate
 
     config = {
         "scenarios": [

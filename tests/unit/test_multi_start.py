@@ -1,4 +1,5 @@
-"""Multi-start joint MAP (ssmobs.multi_start; issue 36): starts, distinct maxima, K^max_unique.
+"""Multi-start joint MAP (ssmobs.joint_map.multi_start; issue 36): starts, distinct maxima,
+K^max_unique.
 
 On the growth test model (tests/growth_model.py), whose every maximum has a mirror image of
 the same height, one start per trajectory overstates how many trajectories have a unique
@@ -12,11 +13,11 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from factories import same_a09
 from growth_model import Growth
-from ssmobs.joint_map import JointMapResult, joint_map
-from ssmobs.joint_map_settings import JointMapSettings
-from ssmobs.models import get_model
-from ssmobs.multi_start import (
+from ssmobs.config.scenario import Scenario
+from ssmobs.joint_map.driver import JointMapResult, joint_map
+from ssmobs.joint_map.multi_start import (
     distinct_maxima,
     halton,
     multi_start_joint_map,
@@ -24,8 +25,9 @@ from ssmobs.multi_start import (
     start_box,
     start_points,
 )
-from ssmobs.scenario import Scenario
-from ssmobs.tables import section_iv, section_iv_compact
+from ssmobs.joint_map.settings import JointMapSettings
+from ssmobs.models import get_model
+from ssmobs.reports.tables import section_iv, section_iv_compact
 
 pytestmark = pytest.mark.unit
 
@@ -201,7 +203,7 @@ def test_growth_model_has_no_unique_maximum_every_maximum_has_its_mirror():
 
 
 def test_one_maximum_from_too_few_passing_starts_is_undetermined():
-    from ssmobs.multi_start import maxima_verdict
+    from ssmobs.joint_map.multi_start import maxima_verdict
 
     verdict = maxima_verdict(np.array([1, 1, 1, 2, 0]), np.array([8, 4, 3, 8, 0]), 8, 0.5)
     assert verdict.tolist() == ["unique", "unique", "undetermined", "several", "none"]
@@ -259,9 +261,9 @@ def test_sep_edge_of_the_support_is_reported_not_counted():
 
 # --------------------------------------------------------------------------- stage and tables
 def test_stage_writes_the_columns_and_the_summary(tmp_path):
+    from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.io import read_json, read_parquet
     from ssmobs.stages.joint_map import run_joint_map
-    from ssmobs.trajectories import make_trajectories, write_trajectories
 
     entry = {
         "name": "mult_small",
@@ -298,19 +300,9 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
 
 
 def section_rows(with_multi: bool) -> list[dict]:
-    sc = {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 20,
-        "K": 40,
-        "method": "design",
-        "stan_init": "random",
-        "joint_map": True,
-        "stan": False,
-        "paper_ref": "",
-    }
+    sc = same_a09(
+        T=20, K=40, method="design", stan_init="random", joint_map=True, stan=False, paper_ref=""
+    )
     joint = {"K": 40, "K_max": 30, "components": ["a", "x0"]}
     multi = {**joint, "n_starts": 8, "K_max_unique": 10, "K_max_several": 22}
     rows = [{"config": sc, "joint": joint, "marginal": None, "exact": None}]

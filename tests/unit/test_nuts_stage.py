@@ -9,15 +9,16 @@ import os
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs import seeds
-from ssmobs.convergence import ConvergenceSettings, apply_thresholds
 from ssmobs.log import Progress
 from ssmobs.models import get_model
-from ssmobs.nuts_stage import run_trajectories
-from ssmobs.record_cache import RECORD_KEYS, load_records, record_path
-from ssmobs.record_format import records_to_frame
+from ssmobs.nuts.batch import NutsBatch, run_trajectories
+from ssmobs.nuts.convergence import ConvergenceSettings, apply_thresholds
+from ssmobs.nuts.record_cache import RECORD_KEYS, load_records, record_path
+from ssmobs.nuts.record_format import records_to_frame
+from ssmobs.nuts.stan_metrics import stan_summary
 from ssmobs.stan_backends.base import Draws, SamplerSettings, SamplingError
-from ssmobs.stan_metrics import stan_summary
 
 pytestmark = pytest.mark.unit
 
@@ -107,31 +108,22 @@ def scenario(tmp_path):
     }
 
 
+#: the fields of the fixture that are NutsBatch's, and the run's own arguments
+BATCH_FIELDS = {f.name for f in dataclasses.fields(NutsBatch)}
+
+
 def run(sc, backend, ks=range(K), **kw):
-    args = {k: v for k, v in sc.items()}
-    args.update(kw)
+    args = {**sc, **kw}
+    batch = NutsBatch(**{k: v for k, v in args.items() if k in BATCH_FIELDS})
     return run_trajectories(
-        args["model"],
+        batch,
         backend,
-        args["stan_file"],
-        args["z"],
-        args["x_true"],
         list(ks),
-        args["bounds"],
-        args["omega_true"],
-        args["x0_true"],
-        args["scenario"],
-        args["seed"],
-        args["sampler"],
-        args["convergence"],
-        kw.get("init", "random"),
         args["records_dir"],
-        kw.get("keep_draws_for", set()),
+        args.get("keep_draws_for", set()),
         args["draws_dir"],
-        kw.get("progress"),
-        kw.get("retry_errors", False),
-        kw.get("stan_seed"),
-        kw.get("init_theta"),
+        args.get("progress"),
+        args.get("retry_errors", False),
     )
 
 
@@ -245,7 +237,7 @@ def _keeping_time(path, edit) -> None:
 def test_a_record_edited_in_place_or_without_checksum_is_recomputed(scenario):
     """Found reused before (issue 35): a record edited into other valid JSON with its file
     time restored flowed into the tables; one without its checksum counts as damaged."""
-    from ssmobs.record_cache import RECORD_CHECKSUM
+    from ssmobs.nuts.record_cache import RECORD_CHECKSUM
 
     first = run(scenario, FakeBackend())
     records = scenario["records_dir"]
@@ -348,7 +340,7 @@ def test_true_inits_and_random_inits(scenario):
 
 
 def test_true_inits_for_two_states(tmp_path):
-    from ssmobs.nuts_stage import _inits
+    from ssmobs.nuts.batch import _inits
 
     model = get_model("sep_d1_p2")
     x = np.arange(6.0).reshape(3, 2)
@@ -473,7 +465,7 @@ def batch(scenario, tmp_path):
 
 def check(table, scenario):
     from ssmobs import io
-    from ssmobs.record_cache import check_batch_records
+    from ssmobs.nuts.record_cache import check_batch_records
 
     frame = io.read_parquet(table)
     check_batch_records(table, frame, scenario["model"], T, table.parent / "records", {})
@@ -502,7 +494,7 @@ def test_damaged_record_names_the_batch_to_rerun(batch, scenario, damage, needle
     elif damage == "delete":
         path.unlink()
     elif damage.startswith("edit"):
-        from ssmobs.record_cache import write_record
+        from ssmobs.nuts.record_cache import write_record
 
         rec = json.loads(path.read_text())
         rec["map"][0] += 1.0
@@ -523,7 +515,7 @@ def test_records_changed_after_the_batch_table_are_found_by_file_times(batch):
     import os
 
     from ssmobs import io
-    from ssmobs.record_cache import changed_batch_records
+    from ssmobs.nuts.record_cache import changed_batch_records
 
     records = batch.parent / "records"
     assert changed_batch_records(batch, records) is None
@@ -547,7 +539,7 @@ def test_kept_draws_without_their_checksum_are_damaged(scenario, tmp_path):
     """Found passed before (issue 35): kept draws whose record holds no checksum counted
     as intact."""
     from ssmobs import io
-    from ssmobs.record_cache import changed_batch_records, read_record, write_record
+    from ssmobs.nuts.record_cache import changed_batch_records, read_record, write_record
 
     folder = tmp_path / "sample_nuts"
     recs = run(scenario, FakeBackend(), records_dir=folder / "records", keep_draws_for={0})
@@ -588,14 +580,12 @@ class _Sampled(Exception):
 def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path, monkeypatch):
     """A killed sample_nuts job leaves temporaries of single records and draws in the folders
     all batches share; the next job of that batch removes its own, not other batches'."""
-    import ssmobs.nuts_stage
-    from ssmobs.scenario import Scenario
+    import ssmobs.nuts.batch
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.stages.stan import run_sample_batch
-    from ssmobs.trajectories import make_trajectories, write_trajectories
 
-    sc = Scenario.from_config(
-        {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 3, "K": 4}
-    )
+    sc = Scenario.from_config(same_a09(T=3))
     write_trajectories(tmp_path / "t.nc", make_trajectories(sc, np.zeros((6, 4))))
     (tmp_path / "marker.json").write_text(json.dumps({"backend": "native"}))
     records, draws = tmp_path / "records", tmp_path / "draws"
@@ -609,7 +599,7 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
     def stub(*args, **kwargs):
         raise _Sampled
 
-    monkeypatch.setattr(ssmobs.nuts_stage, "run_trajectories", stub)
+    monkeypatch.setattr(ssmobs.nuts.batch, "run_trajectories", stub)
     stan_cfg = {
         "batch_size": 2,
         "keep_draws": [],
@@ -627,9 +617,9 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
             stan_cfg,
             {},
             1,
-            records,
-            draws,
-            tmp_path / "batch1.parquet",
+            records_dir=records,
+            draws_dir=draws,
+            out=tmp_path / "batch1.parquet",
         )
     assert not any(p.exists() for p in ours)
     assert other.exists()
@@ -638,7 +628,7 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
 def test_a_damaged_record_that_is_recomputed_is_not_said_to_need_deleting(tmp_path, caplog):
     """Issue 46: while a damaged record was recomputed, the warning still said "delete this
     file and rerun"."""
-    from ssmobs.record_cache import load_record, write_record
+    from ssmobs.nuts.record_cache import load_record, write_record
 
     path = tmp_path / "k00000.json"
     write_record(path, {"record_version": 1, "a": 1.0})

@@ -8,16 +8,18 @@ import math
 
 import numpy as np
 import pytest
+from factories import same_a09
 from ssmobs.cache_keys import CacheKeys
-from ssmobs.config import ConfigError, cell_entries, validate
+from ssmobs.config.maps import cell_entries
+from ssmobs.config.validation import ConfigError, validate
 from ssmobs.stages import observability_map as om
 
 pytestmark = pytest.mark.unit
 
-SCENARIO = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+SCENARIO = same_a09(K=3)
 MAP = {
     "name": "m",
-    "base": {"model": "same", "omega": {"a": 0.9}, "x0": 8, "prior": "restricted"},
+    "base": same_a09(name=None, prior="restricted", T=None, K=None),
     "vary": "a",
     "values": [0.5, 0.9],
     "T": [4, 10],
@@ -160,7 +162,7 @@ def test_random_walk_at_T4_is_unobservable(tmp_path):
         }
     )
     ((cell, _),) = CacheKeys(conf, "native").map_cells("m")
-    from ssmobs.scenario import Scenario
+    from ssmobs.config.scenario import Scenario
 
     row = om.cell_summary(
         Scenario.from_config(cell),
@@ -196,14 +198,14 @@ def test_cell_keys_follow_the_number_of_starts():
 
 def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
     """|K^max_unique| of a cell is the joint-MAP stage's count (trajectories with exactly one
-    distinct maximum that passes the checks, ssmobs.multi_start) on the same trajectories:
+    distinct maximum that passes the checks, ssmobs.joint_map.multi_start) on the same trajectories:
     with one start it equals |K^max|; from 4 starts (the base's joint_map_n_starts) it is
     the count over 4 starts, and |K^max| stays the paper's start's (issue 36)."""
-    from ssmobs.joint_map import JointMapSettings
-    from ssmobs.multi_start import multi_start_joint_map, multi_start_summary
-    from ssmobs.scenario import Scenario
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.design.trajectories import make_trajectories
+    from ssmobs.joint_map.driver import JointMapSettings
+    from ssmobs.joint_map.multi_start import multi_start_joint_map, multi_start_summary
     from ssmobs.stages.design import disturbance_set
-    from ssmobs.trajectories import make_trajectories
 
     rows = {}
     for n in (1, 4):

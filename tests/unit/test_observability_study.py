@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs.observability_study import run_observability_study, study_table
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
+from ssmobs.reports.observability_study import run_observability_study, study_table
 
 pytestmark = pytest.mark.unit
 

@@ -1,4 +1,4 @@
-"""Ours against the paper's in standard errors (ssmobs.paper_comparison)."""
+"""Ours against the paper's in standard errors (ssmobs.reports.paper_comparison)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from ssmobs.paper_comparison import (
+from ssmobs.reports.paper_comparison import (
     paper_comparison,
     se_fraction,
     se_mean,

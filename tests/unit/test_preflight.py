@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-from ssmobs import preflight
-from ssmobs.config import ConfigError, check_config_files, read_config_file
+from ssmobs.config import preflight
+from ssmobs.config.validation import ConfigError, check_config_files, read_config_file
 
 pytestmark = pytest.mark.unit
 
@@ -27,9 +27,10 @@ def message(path) -> str:
 
 
 def run_preflight(config_file: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    """``python -m ssmobs.preflight <config_file>`` in ``cwd``, as the make targets run it."""
+    """``python -m ssmobs.config.preflight <config_file>`` in ``cwd``, as the make targets run
+    it."""
     return subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", config_file],
+        [sys.executable, "-m", "ssmobs.config.preflight", config_file],
         capture_output=True,
         text=True,
         cwd=cwd,
@@ -236,7 +237,7 @@ def test_duplicate_key_in_a_flow_mapping_and_in_json_refused(tmp_path):
 
 
 def test_merge_keys_and_tab_indented_json_still_read(tmp_path):
-    from ssmobs.config import parse_config_text
+    from ssmobs.config.validation import parse_config_text
 
     assert parse_config_text("b: &b {x: 1, y: 2}\nc: {<<: *b, y: 3}\n")["c"] == {"x": 1, "y": 3}
     assert parse_config_text('{\n\t"stan": {\n\t\t"chains": 2\n\t}\n}') == {"stan": {"chains": 2}}
@@ -343,7 +344,7 @@ def in_child(code: str, cwd: Path, prefix: list[str] | None = None) -> str:
 
 
 ASK = (
-    "from ssmobs.preflight import write_problem\n"
+    "from ssmobs.config.preflight import write_problem\n"
     "print(write_problem(['results/a/x.json', 'results/b/y.json', 'results/z.json'], "
     "{'results': 'make results/ writable'}, 'D'))\n"
     "try:\n"

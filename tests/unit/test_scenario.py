@@ -8,9 +8,10 @@ import json
 import numpy as np
 import pytest
 import yaml
-from ssmobs import config as cfg
+from factories import same_a09
+from ssmobs.config import validation as cfg
+from ssmobs.config.scenario import Scenario
 from ssmobs.models import get_model
-from ssmobs.scenario import Scenario
 
 pytestmark = pytest.mark.unit
 
@@ -107,7 +108,7 @@ def test_helpers_for_the_stages():
 
 
 def test_a_scenarios_stan_settings_override_the_block():
-    from ssmobs.config import ConfigError
+    from ssmobs.config.validation import ConfigError
 
     entry = {**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8}
     block = {"chains": 4, "adapt_delta": 0.8, "init_radius": 2, "batch_size": 50}
@@ -125,7 +126,7 @@ def test_a_scenarios_stan_settings_override_the_block():
 
 
 def test_stan_every_picks_every_mth_trajectory_and_its_batches():
-    from ssmobs.config import ConfigError
+    from ssmobs.config.validation import ConfigError
     from ssmobs.stages.stan import batches
 
     entry = {**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8, "K": 10}
@@ -183,14 +184,14 @@ def test_missing_keys_and_non_mappings_fail_clearly():
 )
 def test_one_check_of_an_entry_for_scenarios_map_cells_and_the_scenario_object(change, message):
     """The config's scenarios, an observability map's cells and Scenario.from_config all
-    refuse an entry by the same check (ssmobs.scenario.entry_problems)."""
-    entry = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5, **change}
+    refuse an entry by the same check (ssmobs.config.scenario.entry_problems)."""
+    entry = same_a09(K=5, **change)
     with pytest.raises(cfg.ConfigError, match=r"scenarios\[0\] \('s'\): " + message):
         cfg.validate({"scenarios": [dict(entry)]})
     base = {k: v for k, v in entry.items() if k not in ("name", "T", "K", "joint_map")}
     values = [entry["omega"]["a"]]
     the_map = {"name": "m", "base": base, "vary": "a", "values": values, "T": [4], "K": 5}
-    good = {"name": "ok", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 5}
+    good = same_a09(name="ok", K=5)
     if "joint_map" not in change:  # a map's cells always run the joint MAP
         with pytest.raises(cfg.ConfigError, match=r"cell m_a[0-9.]+_T4: " + message):
             cfg.validate({"scenarios": [good], "observability_maps": [the_map]})
@@ -202,7 +203,7 @@ def test_a_config_prior_interval_reaches_the_bounds():
     """Issue 47: the YAML form [0, .inf] is accepted by the schema and used as the support;
     a list of three numbers is a config error naming the key and the value."""
     import yaml
-    from ssmobs.config import ConfigError
+    from ssmobs.config.validation import ConfigError
 
     entry = {**ENTRY, "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0}
     prior = yaml.safe_load("{sigma: [0, .inf], phi: [-1, 1]}")

@@ -10,11 +10,12 @@ import re
 from typing import Any
 
 import pytest
-from ssmobs import config as cfg
+from factories import same_a09
 from ssmobs.cache_keys import SAMPLER_FIELDS
-from ssmobs.convergence import ConvergenceSettings
-from ssmobs.exact_settings import ExactSettings
-from ssmobs.joint_map_settings import JointMapSettings
+from ssmobs.config import validation as cfg
+from ssmobs.exact.settings import ExactSettings
+from ssmobs.joint_map.settings import JointMapSettings
+from ssmobs.nuts.convergence import ConvergenceSettings
 from ssmobs.stages.stan import sampler_settings
 from ssmobs.stan_backends.base import SamplerSettings
 
@@ -117,13 +118,7 @@ def test_the_joint_map_settings_refuse_what_the_schema_refuses():
 
 
 def test_the_default_config_gives_the_default_settings():
-    conf = cfg.validate(
-        {
-            "scenarios": [
-                {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
-            ]
-        }
-    )
+    conf = cfg.validate({"scenarios": [same_a09(K=3)]})
     assert JointMapSettings.from_mapping(conf["joint_map"]) == JointMapSettings()
     assert ConvergenceSettings(**conf["convergence"]) == ConvergenceSettings()
     assert sampler_settings(conf["stan"]) == SamplerSettings()
@@ -131,7 +126,7 @@ def test_the_default_config_gives_the_default_settings():
 
 
 def test_the_exact_settings_from_a_config_block_are_the_values_written():
-    scenario = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 3}
+    scenario = same_a09(K=3)
     conf = cfg.validate(
         {
             "scenarios": [scenario],

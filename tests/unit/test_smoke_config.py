@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ssmobs import config as cfg
-from ssmobs.smoke_config import SMOKE_K, main, smoke_overlay
+from factories import same_a09
+from ssmobs.config import validation as cfg
+from ssmobs.config.smoke import SMOKE_K, main, smoke_overlay
 
 pytestmark = pytest.mark.unit
 
@@ -46,17 +47,9 @@ def test_every_profile_has_a_valid_smoke_overlay_on_small_sizes(path):
 def test_scenario_settings_follow_the_smaller_K():
     conf = {
         "scenarios": [
-            {
-                "name": "s",
-                "model": "same",
-                "omega": {"a": 0.9},
-                "x0": 8,
-                "T": 4,
-                "K": 50,
-                "exact_K": 500,
-                "stan_every": 10,
-                "stan_settings": {"chains": 4, "adapt_delta": 0.9},
-            }
+            same_a09(
+                K=50, exact_K=500, stan_every=10, stan_settings={"chains": 4, "adapt_delta": 0.9}
+            )
         ],
         "stan": {"keep_draws": [0, 3, 10], "chains": 4},
         "convergence": {"ess_bulk_min": 150},
@@ -94,9 +87,10 @@ def test_the_overlay_file_and_the_make_recipe(tmp_path, capsys):
         check=True,
     ).stdout.splitlines()
     assert plan[-3:] == [
-        ".venv/bin/python -m ssmobs.smoke_config config/stoch_vol.yaml "
+        ".venv/bin/python -m ssmobs.config.smoke config/stoch_vol.yaml "
         "--out results/smoke_configs/stoch_vol.yaml",
-        ".venv/bin/python -m ssmobs.preflight --unlock-stale results/smoke_configs/stoch_vol.yaml",
+        ".venv/bin/python -m ssmobs.config.preflight --unlock-stale "
+        "results/smoke_configs/stoch_vol.yaml",
         ".venv/bin/snakemake --cores 2 --rerun-incomplete "
         "--configfile results/smoke_configs/stoch_vol.yaml",
     ]

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 from ssmobs.models import get_model
-from ssmobs.record_format import records_to_frame
-from ssmobs.stan_metrics import stan_summary
+from ssmobs.nuts.record_format import records_to_frame
+from ssmobs.nuts.stan_metrics import stan_summary
 
 pytestmark = pytest.mark.unit
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from ssmobs.config import ConfigError
-from ssmobs.stan_variants import (
+from ssmobs.config.validation import ConfigError
+from ssmobs.reports.stan_variants import (
     OURS,
     VariantTableError,
     read_spec,

@@ -1,4 +1,4 @@
-"""The paper's tables (ssmobs.tables): one key convention, compact Section IV, intervals."""
+"""The paper's tables (ssmobs.reports.tables): one key convention, compact Section IV, intervals."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import math
 
 import pandas as pd
 import pytest
+from factories import same_a09
 from ssmobs.binomial import clopper_pearson
-from ssmobs.tables import (
+from ssmobs.reports.tables import (
     exact_vs_stan_table,
     section_iv,
     section_iv_compact,
@@ -27,19 +28,9 @@ PAPER = {
 
 
 def rows() -> list[dict]:
-    sc = {
-        "name": "s",
-        "model": "same",
-        "omega": {"a": 0.9},
-        "x0": 8,
-        "T": 20,
-        "K": 40,
-        "method": "design",
-        "stan_init": "random",
-        "joint_map": True,
-        "stan": True,
-        "paper_ref": "ref",
-    }
+    sc = same_a09(
+        T=20, K=40, method="design", stan_init="random", joint_map=True, stan=True, paper_ref="ref"
+    )
     joint = {
         "K": 40,
         "K_max": 20,
@@ -156,7 +147,7 @@ def test_write_table_refuses_unknown_suffix(tmp_path):
 
 
 def test_table_ii_caption_names_the_configured_setting():
-    from ssmobs.stages.outputs import _table_ii_setting
+    from ssmobs.stages.outputs.paper_tables import _table_ii_setting
 
     def entry(name, a, x0):
         return {
@@ -188,7 +179,7 @@ def test_exact_vs_stan_table_gives_median_and_largest_difference_per_statistic()
 
 
 def test_k_selection_distribution_counts_each_chosen_k_over_the_seeds():
-    from ssmobs.tables import k_selection_distribution, k_selection_table
+    from ssmobs.reports.tables import k_selection_distribution, k_selection_table
 
     base = {"name": "n", "scenario": "s", "method": "design", "c1": 0.01, "c2": 0.01,
             "K_grid": "100-1000 step 100", "K_paper": 300}  # fmt: skip

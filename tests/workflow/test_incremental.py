@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import make_workdir, snakemake
 
 pytestmark = [pytest.mark.workflow, pytest.mark.slow]
@@ -34,18 +35,7 @@ ARGS = ["--cores", "2", "--rerun-incomplete", "--configfile", CONFIG]
 
 BASE = {
     "outputs_dir": OUT,
-    "scenarios": [
-        {
-            "name": "same_T4",
-            "model": "same",
-            "omega": {"a": 0.9},
-            "x0": 8,
-            "T": 4,
-            "K": 4,
-            "prior": "restricted",
-            "paper_ref": "same_a09_T4",
-        }
-    ],
+    "scenarios": [same_a09(name="same_T4", prior="restricted", paper_ref="same_a09_T4")],
     "paper_outputs": {"tables_2_3": ["same_T4"], "figure3": ["same_T4"], "figure4": None},
     "k_selection": [],
     "observability_studies": [],
@@ -151,7 +141,7 @@ CASES = {
     ),
     "exact stage code": (
         None,
-        _append("workflow/ssmobs/exact_marginal.py", "\n# an edit of the exact stage\n"),
+        _append("workflow/ssmobs/exact/marginal.py", "\n# an edit of the exact stage\n"),
         {"exact_marginal", "paper_tables"},
         {"design_trajectories", "joint_map", "sample_nuts"},
     ),
@@ -451,7 +441,7 @@ def test_a_run_naming_its_targets_remakes_a_stale_table(base, tmp_path):
     """``make tables`` names its files: after an edit of the tables' code the named table is
     remade too (its stamp is stale), and a dry run first deletes nothing."""
     work = _copy(base, tmp_path / "named")
-    _append("workflow/ssmobs/tables.py", "\n# an edit of the tables' code\n")(work)
+    _append("workflow/ssmobs/reports/tables.py", "\n# an edit of the tables' code\n")(work)
     table = f"{OUT}/table2_joint_vs_marginal.csv"
     named = [table, "--cores", "2", "--configfile", CONFIG]
     snakemake(work, "-n", *named)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import REPO, make_workdir, snakemake
 from test_incremental import BASE, rules_run
 
@@ -105,7 +106,7 @@ def test_a_run_refused_by_a_live_lock_changes_nothing(tmp_path):
 
 def variant_table_workdir(dest: Path) -> Path:
     """A workflow copy with the committed studies the variant table reads."""
-    from ssmobs.stan_variants import read_spec, spec_inputs
+    from ssmobs.reports.stan_variants import read_spec, spec_inputs
 
     work = make_workdir(dest)
     spec = read_spec(REPO / "config" / "tables" / "stan_variants_by_row.yaml")
@@ -124,7 +125,7 @@ def test_an_edit_of_the_variant_tables_code_remakes_it(tmp_path):
     first = snakemake(work, "--cores", "1", "stan_variant_table")
     assert rules_run(first) == {"stan_variant_table"}
     assert rules_run(snakemake(work, "--cores", "1", "stan_variant_table")) == set()
-    code = work / "workflow" / "ssmobs" / "stan_variants.py"
+    code = work / "workflow" / "ssmobs" / "reports" / "stan_variants.py"
     code.write_text(code.read_text() + "\n# an edit of the table's code\n")
     # another start of Snakemake (here listing the rules) keeps the committed table while stale
     table = sorted(work.glob("paper_figures/stan_variants/variants_by_row.*"))
@@ -321,7 +322,7 @@ def test_an_outputs_dir_below_a_file_stops_before_any_job_with_one_line(tmp_path
 def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path):
     """Issue 35: 50 large scenarios gave a message of about 100-250 lines at the parse."""
     work = make_workdir(tmp_path / "w")
-    base = {"model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 400, "K": 200_000}
+    base = same_a09(name=None, T=400, K=200_000)
     conf = {
         "outputs_dir": "paper_figures/big",
         "scenarios": [{"name": f"big_{i:02d}", **base} for i in range(50)],
@@ -332,7 +333,9 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     text = proc.stdout + proc.stderr
     assert proc.returncode != 0
     assert len(text.splitlines()) <= 20, text
-    assert "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.preflight" in text
+    assert (
+        "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.config.preflight" in text
+    )
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
 
 

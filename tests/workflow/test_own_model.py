@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from factories import same_a09
 from helpers import REPO, make_workdir, only, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -71,7 +72,12 @@ def copy_package_first(monkeypatch, request):
 
 def test_step_check_command(fresh):
     proc = _python(
-        fresh, "-m", "ssmobs.check_model", "stoch_vol", "--configfile", "config/stoch_vol.yaml"
+        fresh,
+        "-m",
+        "ssmobs.model_check",
+        "stoch_vol",
+        "--configfile",
+        "config/stoch_vol.yaml",
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
@@ -177,7 +183,7 @@ def test_mistake_swapped_simulate_is_the_models_error_on_the_workflow_path(tmp_p
         ],
     }
     (work / "config" / "growth.yaml").write_text(yaml.safe_dump(conf))
-    preflight = _python(work, "-m", "ssmobs.preflight", "config/growth.yaml")
+    preflight = _python(work, "-m", "ssmobs.config.preflight", "config/growth.yaml")
     dry = snakemake(work, "-n", "--configfile", "config/growth.yaml", check=False)
     for proc in (preflight, dry):
         text = proc.stdout + proc.stderr
@@ -226,7 +232,7 @@ def test_a_study_config_plans_its_study_outputs_only(tmp_path):
         f"paper_figures/mine/ours_stoch_vol_observability.{ext}" for ext in ("csv", "md", "png")
     ]
     assert "outputs_dir is not set" not in proc.stdout + proc.stderr
-    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
+    same = same_a09(name="same_T4")
     conf["scenarios"].append({**same, "stan": False, "paper_ref": "same_a09_T4"})
     (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
     planned = _planned(snakemake(work, "-n", "--configfile", "config/mine.yaml"))
@@ -259,7 +265,7 @@ def test_smoke_of_ones_own_study_plans_its_jobs_on_small_sizes(tmp_path):
     figures to paper_figures/smoke_stoch_vol/, never to the study's committed folder."""
     work = make_workdir(tmp_path)
     overlay = "results/smoke_configs/stoch_vol.yaml"
-    made = _python(work, "-m", "ssmobs.smoke_config", "config/stoch_vol.yaml", "--out", overlay)
+    made = _python(work, "-m", "ssmobs.config.smoke", "config/stoch_vol.yaml", "--out", overlay)
     assert made.returncode == 0, made.stderr
     proc = snakemake(work, "-n", "--configfile", overlay)
     text = proc.stdout + "\n" + proc.stderr
@@ -301,7 +307,7 @@ def test_own_model_without_stan_program_runs_with_stan_false_and_is_named_with_s
     assert {"joint_map", "design_trajectories"} <= _planned_rules(proc)
     (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "true"))
     for cmd in (
-        [sys.executable, "-m", "ssmobs.preflight", "config/ns.yaml"],
+        [sys.executable, "-m", "ssmobs.config.preflight", "config/ns.yaml"],
         [sys.executable, "-m", "snakemake", "-n", "--configfile", "config/ns.yaml"],
     ):
         out = subprocess.run(

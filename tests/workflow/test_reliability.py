@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from factories import same_a09
 from helpers import REPO, SMOKE, SMOKE_OUT, kill_when, make_workdir, only, snakemake
 
 pytestmark = [pytest.mark.workflow, pytest.mark.slow]
@@ -102,7 +103,7 @@ def test_interrupted_design_stage_resumes(smoke_run, tmp_path):
     )
     assert list((workdir / ".snakemake" / "locks").iterdir()), "the kill left no lock"
     proc = subprocess.run(
-        [sys.executable, "-m", "ssmobs.preflight", "--unlock-stale", "config/smoke.yaml"],
+        [sys.executable, "-m", "ssmobs.config.preflight", "--unlock-stale", "config/smoke.yaml"],
         cwd=workdir,
         capture_output=True,
         text=True,
@@ -267,16 +268,7 @@ BAD_CONFIGS = {
     "keep_draws": ({"stan": {"keep_draws": [999]}}, "stan.keep_draws = [999]"),
     "runaway size": (
         {
-            "scenarios": [
-                {
-                    "name": "big",
-                    "model": "same",
-                    "omega": {"a": 0.9},
-                    "x0": 8,
-                    "T": 1000,
-                    "K": 10_000_000,
-                }
-            ],
+            "scenarios": [same_a09(name="big", T=1000, K=10_000_000)],
             "k_selection": [],
             "observability_studies": [],
             "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
@@ -307,8 +299,8 @@ def test_silent_wrong_answers_and_runaway_sizes_refused_before_any_job(tmp_path,
 def test_job_count_estimate_matches_the_dry_run(tmp_path):
     """The size budget counts the jobs Snakemake plans for the default profile."""
     import yaml
-    from ssmobs import budget
-    from ssmobs.config import validate
+    from ssmobs.config import budget
+    from ssmobs.config.validation import validate
 
     workdir = make_workdir(tmp_path)
     proc = snakemake(workdir, "-n", "--cores", "2", timeout=300)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from factories import same_a09
 from helpers import make_workdir, snakemake
 
 OUT = "paper_figures/kernels"
@@ -26,8 +27,7 @@ CONFIG = {
     "outputs_dir": OUT,
     "scenarios": [
         # q = (d + p) T = 40: the design set's optimiser runs through BLAS and NumPy's exp
-        {"name": "same_T20", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 6,
-         "prior": "restricted"},
+        same_a09(name="same_T20", T=20, K=6, prior="restricted"),
     ],
     "paper_outputs": {"tables_2_3": ["same_T20"], "figure3": []},
     "observability_studies": [],
@@ -59,11 +59,11 @@ print(h.hexdigest())
 """
 
 
-#: the compiled LCD kernel (ssmobs.lcd_native) on a few sets, as bytes: value and gradient
+#: the compiled LCD kernel (ssmobs.design.lcd_native) on a few sets, as bytes: value and gradient
 LCD_KERNEL = """
 import hashlib, numpy as np
 from ssmobs import lcd_native
-from ssmobs.lcd_distance import _quadrature
+from ssmobs.design.lcd_distance import _quadrature
 h = hashlib.sha256()
 for q, K, b in [(8, 301, 10.0), (40, 120, 50.0), (2, 33, 0.7), (200, 41, 100.0)]:
     s = np.random.default_rng(q + K).standard_normal((K // 2, q))
@@ -146,8 +146,8 @@ def test_the_compiled_lcd_kernel_gives_the_same_bytes_under_any_kernels_and_thre
     build.  Not skipped where the kernels give the same bits anyway: the kernel must not
     depend on them in any case.  (The workflow run above makes its q = 40 design set with
     this kernel, in the build it picks.)"""
-    from ssmobs import lcd_native
-    from ssmobs.lcd_distance import COMPILED_MAX_Q
+    from ssmobs.design import lcd_native
+    from ssmobs.design.lcd_distance import COMPILED_MAX_Q
 
     assert COMPILED_MAX_Q >= 40  # the set of the run above goes through the compiled kernel
     other = {"OPENBLAS_CORETYPE": "Sandybridge", "OPENBLAS_NUM_THREADS": "2"}

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.workflow
 
 
 def test_design_trajectories_written(smoke_run):
-    from ssmobs.trajectories import read_trajectories
+    from ssmobs.design.trajectories import read_trajectories
 
     for sc in smoke_config()["scenarios"]:
         traj = read_trajectories(

@@ -8,14 +8,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(workflow.basedir) / "workflow"))
 
-from ssmobs import config as ssmobs_config  # noqa: E402
-from ssmobs.config import ConfigError  # noqa: E402
+from ssmobs.config import validation as ssmobs_config  # noqa: E402
+from ssmobs.config.validation import ConfigError  # noqa: E402
 from ssmobs.models import ModelDefinitionError  # noqa: E402
-from ssmobs.scenario import Scenario  # noqa: E402
+from ssmobs.config.scenario import Scenario  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
-from ssmobs.preflight import lock_holders, use_package_of, write_problem  # noqa: E402
+from ssmobs.config.preflight import lock_holders, use_package_of, write_problem  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
@@ -412,7 +412,7 @@ def damaged_batches():
     the DAG is built (Snakemake takes stock of the files then; :func:`remove_stale`), so
     that batch reruns: it recomputes exactly the damaged records and reuses every valid
     one.  A batch table deleted by hand reruns too."""
-    from ssmobs.record_cache import changed_batch_records
+    from ssmobs.nuts.record_cache import changed_batch_records
 
     if not may_change_files_before_the_lock():
         return []

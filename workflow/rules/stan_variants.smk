@@ -2,7 +2,7 @@
 # config/tables/stan_variants_by_row.yaml names, never from results/; made on request
 # (`make variant-table`), not by `all`.
 
-from ssmobs.stan_variants import read_spec, spec_inputs, table_key
+from ssmobs.reports.stan_variants import read_spec, spec_inputs, table_key
 
 VARIANT_TABLE_SPEC = "config/tables/stan_variants_by_row.yaml"
 VARIANT_TABLE = read_spec(VARIANT_TABLE_SPEC)

@@ -1,7 +1,7 @@
 """Rules check_model and check_model_stan: the model alone, or against its Stan program."""
 
 from ssmobs import log
-from ssmobs.check_model import run_check_model
+from ssmobs.model_check.check import run_check_model
 
 logger = log.start_job(snakemake)
 report = run_check_model(

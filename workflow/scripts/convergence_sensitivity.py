@@ -2,7 +2,7 @@
 how the runs that did not converge failed."""
 
 from ssmobs import io, log
-from ssmobs.stages.outputs import run_convergence_sensitivity
+from ssmobs.stages.outputs.paper_tables import run_convergence_sensitivity
 
 log.start_job(snakemake)
 p = snakemake.params

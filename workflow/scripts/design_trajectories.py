@@ -1,7 +1,7 @@
 """Rule design_trajectories: design states and observations of one scenario."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.design import run_design_trajectories
 
 log.start_job(snakemake)

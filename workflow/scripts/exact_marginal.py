@@ -1,7 +1,7 @@
 """Rule exact_marginal: exact marginal posteriors of one scenario's design trajectories."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.exact import run_exact_marginal
 
 log.start_job(snakemake)

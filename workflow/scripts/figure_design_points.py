@@ -1,7 +1,7 @@
 """Rule figure_design_points: Figure 2 of the paper."""
 
 from ssmobs import io, log
-from ssmobs.figures import figure_design_points
+from ssmobs.reports.figures import figure_design_points
 
 logger = log.start_job(snakemake)
 f2 = snakemake.params.figure

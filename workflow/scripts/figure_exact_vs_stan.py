@@ -1,8 +1,8 @@
 """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
-from ssmobs.stages.outputs import run_figure_exact_vs_stan
+from ssmobs.config.scenario import Scenario
+from ssmobs.stages.outputs.figures import run_figure_exact_vs_stan
 
 logger = log.start_job(snakemake)
 table = run_figure_exact_vs_stan(

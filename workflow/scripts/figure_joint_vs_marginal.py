@@ -1,7 +1,7 @@
 """Rule figure_joint_vs_marginal: Figure 3."""
 
 from ssmobs import io, log
-from ssmobs.stages.outputs import run_figure_joint_vs_marginal
+from ssmobs.stages.outputs.figures import run_figure_joint_vs_marginal
 
 log.start_job(snakemake)
 scenarios = snakemake.params.scenarios

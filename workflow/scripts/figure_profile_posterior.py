@@ -1,8 +1,8 @@
 """Rule figure_profile_posterior: Figure 4."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
-from ssmobs.stages.outputs import run_figure_profile_posterior
+from ssmobs.config.scenario import Scenario
+from ssmobs.stages.outputs.figures import run_figure_profile_posterior
 
 log.start_job(snakemake)
 run_figure_profile_posterior(

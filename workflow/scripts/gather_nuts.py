@@ -1,7 +1,7 @@
 """Rule gather_nuts: the Stan stage's summary of one scenario."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.stan import run_gather_nuts
 
 log.start_job(snakemake)

@@ -1,7 +1,7 @@
 """Rule joint_map: joint MAP and numerical checks of one scenario (Sec. III.B)."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.joint_map import run_joint_map
 
 log.start_job(snakemake)

@@ -1,8 +1,8 @@
 """Rule joint_map_mu0_sweep: |K^max|/K of the Sep models over a range of barrier starts."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
-from ssmobs.stages.outputs import run_joint_map_mu0_sweep
+from ssmobs.config.scenario import Scenario
+from ssmobs.stages.outputs.mu0_sweep import run_joint_map_mu0_sweep
 
 log.start_job(snakemake)
 p = snakemake.params

@@ -1,8 +1,8 @@
 """Rule k_selection_grid: V_{K_i} of the choice of K for every K_i of one grid (Sec. IV.A)."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
-from ssmobs.stages.k_selection import run_k_selection_grid
+from ssmobs.config.scenario import Scenario
+from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
 log.start_job(snakemake)
 wc, p = snakemake.wildcards, snakemake.params
@@ -15,6 +15,6 @@ run_k_selection_grid(
     wc.sets,
     dict(p.settings),
     dict(p.design),
-    p.points,
-    snakemake.output[0],
+    points_dir=p.points,
+    out=snakemake.output[0],
 )

@@ -1,8 +1,8 @@
 """Rule observability_study: one model's |K^max|/K and |K^Stan|/K over T."""
 
 from ssmobs import io, log
-from ssmobs.observability_study import run_observability_study
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
+from ssmobs.reports.observability_study import run_observability_study
 
 log.start_job(snakemake)
 p, inp = snakemake.params, snakemake.input

@@ -1,7 +1,7 @@
 """Rule paper_tables: Tables II, III and the Section IV summary."""
 
 from ssmobs import io, log
-from ssmobs.stages.outputs import run_paper_tables
+from ssmobs.stages.outputs.paper_tables import run_paper_tables
 
 log.start_job(snakemake)
 p, inp, out = snakemake.params, snakemake.input, snakemake.output

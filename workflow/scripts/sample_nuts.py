@@ -1,7 +1,7 @@
 """Rule sample_nuts: NUTS + checks + marginal MAPs for one batch of trajectories."""
 
 from ssmobs import log
-from ssmobs.scenario import Scenario
+from ssmobs.config.scenario import Scenario
 from ssmobs.stages.stan import run_sample_batch
 
 log.start_job(snakemake)
@@ -13,9 +13,9 @@ run_sample_batch(
     p.stan,
     p.convergence,
     int(snakemake.wildcards.batch),
-    p.records,
-    p.draws,
-    snakemake.output[0],
+    records_dir=p.records,
+    draws_dir=p.draws,
+    out=snakemake.output[0],
     threads=snakemake.threads,
     joint_map_theta=snakemake.input.get("joint_map"),
 )

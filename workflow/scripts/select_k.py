@@ -1,8 +1,8 @@
 """Rule select_k: the choice of K by relative differences (Sec. IV.A)."""
 
 from ssmobs import io, log
-from ssmobs.scenario import Scenario
-from ssmobs.stages.outputs import run_select_k
+from ssmobs.config.scenario import Scenario
+from ssmobs.stages.k_selection.choice import run_select_k
 
 log.start_job(snakemake)
 p, out = snakemake.params, snakemake.output

@@ -1,7 +1,7 @@
 """Rule stan_variant_table: the variant x row table of Section IV from committed studies."""
 
 from ssmobs import io, log
-from ssmobs.stan_variants import read_spec, write_variant_table
+from ssmobs.reports.stan_variants import read_spec, write_variant_table
 
 log.start_job(snakemake)
 write_variant_table(read_spec(snakemake.input.spec), snakemake.output.csv, snakemake.output.md)

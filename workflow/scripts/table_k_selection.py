@@ -1,7 +1,7 @@
 """Rule table_k_selection: chosen K per entry, method and seed, and its distribution."""
 
 from ssmobs import io, log
-from ssmobs.stages.outputs import run_table_k_selection
+from ssmobs.stages.k_selection.choice import run_table_k_selection
 
 log.start_job(snakemake)
 run_table_k_selection(

@@ -8,9 +8,9 @@ a SHA-256 over everything that determines them (the rule of the cache):
 - the keys of the stage's inputs (so a change upstream moves every output downstream),
 - the code: the model's module with every module it imports outside the pinned
   environment (the package's, the project tree's, a user's own), its Stan program, and
-  the source of the package modules the stage runs (:data:`STAGE_MODULES`: its glue in
-  :mod:`ssmobs.stages`, closed over its imports inside the package by
-  :func:`module_closure`), so an edit of a log-density term
+  the source of the package modules the stage runs (:data:`ssmobs.stage_code.STAGE_MODULES`:
+  its glue in :mod:`ssmobs.stages`, closed over its imports inside the package by
+  :func:`ssmobs.stage_code.module_closure`), so an edit of a log-density term
   or of a stage's numerics gives new keys and a recomputation, never an old result; an
   edit of code a stage does not run (a figure's glue) leaves its keys alone,
 - the numerical kernels every job computes with (:data:`ssmobs.kernels.SETTINGS_ID`), in
@@ -26,190 +26,25 @@ written beside nothing and hashed only; :meth:`CacheKeys.describe` returns it fo
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from . import io, kernels
-from .code_hashing import environment_dirs, import_closure, outside_modules, syntax_digest
+from . import kernels
+from .code_hashing import syntax_digest
+from .config.blocks import joint_map_settings, stan_settings
+from .stage_code import (
+    NATIVE_DRIVER,
+    PACKAGE_DIR,
+    REPO_DIR,
+    code_digest,
+    digest,
+    file_digest,
+    model_closure,
+    outside_code,
+)
 from .stan_backends.base import program_digest, sampler_key
-
-#: the package's own directory (``workflow/ssmobs``)
-PACKAGE_DIR = Path(__file__).resolve().parent
-#: the repository (or workflow copy) this package belongs to
-REPO_DIR = PACKAGE_DIR.parents[1]
-#: hex digits of a key
-KEY_LENGTH = 12
-
-#: the code each stage runs, as entries of :func:`module_closure`: a package module (its
-#: imports followed anywhere in the file), or ``"stages/<stage>.py:f,g"`` for the functions
-#: ``f``, ``g`` of a stage module (:mod:`ssmobs.stages`), whose imports are followed at the
-#: module's top level and inside those functions and the module's functions they call only,
-#: so that e.g. compiling a program does not run the gathered summary's code.
-STAGE_MODULES: dict[str, tuple[str, ...]] = {
-    # the sets k_selection_grid makes (disturbance_set) lie beside the design's own
-    "design": ("stages/design.py:run_design_disturbances,disturbance_set",),
-    "trajectories": ("stages/design.py:run_design_trajectories",),
-    "check_model": ("check_model.py",),
-    "joint_map": ("stages/joint_map.py:run_joint_map",),
-    "k_selection": ("stages/k_selection.py:run_k_selection_grid",),
-    "program": ("stages/stan.py:run_build_stan_model",),
-    "nuts_records": ("stages/stan.py:run_sample_batch", "record_cache.py"),
-    "nuts_batches": ("stages/stan.py:run_sample_batch",),
-    "gather": ("stages/stan.py:run_gather_nuts", "record_cache.py"),
-    "exact": ("stages/exact.py",),
-    # the cells of an observability map: what computes a cell, not the map's table or figure
-    "map_cells": ("stages/observability_map.py:run_map_cells",),
-    # the variant x row table of Section IV, read from committed reproductions
-    "variant_table": ("stan_variants.py",),
-    # every stamped table and figure; observability_study's and observability_map's scripts
-    # call their modules themselves
-    "outputs": (
-        "stages/outputs.py",
-        "observability_study.py",
-        "stages/observability_map.py:write_map,figure_map",
-    ),
-}
-#: the native backend's C++ driver (samples, and evaluates the log density for the check)
-NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
-#: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
-LCD_KERNEL = "lcd_kernel/lcd_kernel.cpp"
-#: files outside the package's import graph that a stage's results depend on
-STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
-    "design": (LCD_KERNEL,),
-    "program": (NATIVE_DRIVER,),
-    "nuts_records": (NATIVE_DRIVER,),
-}
-#: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
-OUTPUT_SCRIPTS = (
-    "paper_tables",
-    "convergence_sensitivity",
-    "joint_map_mu0_sweep",
-    "select_k",
-    "table_k_selection",
-    "observability_study",
-    "observability_map",
-    "figure_design_points",
-    "figure_joint_vs_marginal",
-    "figure_profile_posterior",
-    "figure_observability",
-    "figure_exact_vs_stan",
-)
-STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
-    "design": ("design_disturbances",),
-    "trajectories": ("design_trajectories",),
-    "check_model": ("check_model",),
-    "joint_map": ("joint_map",),
-    "k_selection": ("k_selection_grid",),
-    "program": ("build_stan_model",),
-    "nuts_records": ("sample_nuts",),
-    "nuts_batches": ("sample_nuts",),
-    "gather": ("gather_nuts",),
-    "exact": ("exact_marginal",),
-    "map_cells": ("observability_map_cells",),
-    "variant_table": ("stan_variant_table",),
-    "outputs": OUTPUT_SCRIPTS,
-}
-#: modules that only log, plan or describe and never change a number or a file's content
-NEUTRAL_MODULES: frozenset[str] = frozenset(
-    {
-        "log.py",
-        "budget.py",
-        "preflight.py",
-        "config.py",
-        "config_schema.py",
-        "config_files.py",
-        "provenance.py",
-    }
-)
-
-
-# --------------------------------------------------------------------------- hashing
-def digest(payload: Any) -> str:
-    """:data:`KEY_LENGTH` hex digits of SHA-256 over canonical JSON of ``payload``."""
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=io.json_default)
-    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
-
-
-def file_digest(path: str | Path) -> str:
-    """SHA-256 (16 hex digits) of a file's bytes."""
-    return io.file_sha256(path)[:16]
-
-
-@functools.cache
-def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
-    """The modules that ``entries`` (``"module.py"`` or ``"stages/x.py:f,g"``, see
-    :data:`STAGE_MODULES`) run: the entries, every package module they import, directly or
-    not, and the ``__init__.py`` of their packages (sorted relative paths), without
-    :data:`NEUTRAL_MODULES` (:func:`ssmobs.code_hashing.import_closure`)."""
-    return import_closure(entries, package_dir, NEUTRAL_MODULES)
-
-
-#: the model registry (:mod:`ssmobs.models`), which every stage that takes a model runs
-MODEL_REGISTRY = "models/__init__.py"
-
-
-def model_closure(model: str, package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
-    """The modules model ``model`` runs: ``models/<model>.py`` and its :func:`module_closure`
-    without the registry's own (:data:`MODEL_REGISTRY` and what it imports, e.g.
-    ``models/base.py``), which is keyed with the code of every stage that takes a model."""
-    registry = set(module_closure((MODEL_REGISTRY,), package_dir))
-    own = module_closure((f"models/{model}.py",), package_dir)
-    return tuple(f for f in own if f not in registry)
-
-
-def _module_name(relative: str, package_dir: Path) -> tuple[str, bool]:
-    """The dotted name of the package module ``relative`` (a path below ``package_dir``),
-    with whether it is a package's ``__init__.py``."""
-    parts = [package_dir.name, *Path(relative).with_suffix("").parts]
-    is_package = parts[-1] == "__init__"
-    return ".".join(parts[:-1] if is_package else parts), is_package
-
-
-def outside_code(files: Iterable[str], package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
-    """``"import:<name>"`` -> hash of every module outside the package and outside the
-    pinned environment (its standard library and site-packages) that the package modules
-    ``files`` import, directly or not (:func:`ssmobs.code_hashing.outside_modules`): a
-    user's helper on ``PYTHONPATH``, a module of the project tree such as
-    ``workflow/myhelper.py``; with the package modules those import (by their paths).  A
-    Python module by its :func:`syntax_digest`, a compiled one by its bytes.  Found as the
-    running interpreter imports them (the workflow's jobs inherit its ``PYTHONPATH``)."""
-    modules = [(*_module_name(f, package_dir), package_dir / f) for f in files]
-    outside, own = outside_modules(
-        [(name, path, is_pkg) for name, is_pkg, path in modules],
-        package_dir.name,
-        environment_dirs(),
-    )
-    out: dict[str, str] = {}
-    for name, path in sorted(outside.items()):
-        out[f"import:{name}"] = syntax_digest(path) if path.suffix == ".py" else file_digest(path)
-    entries = []
-    for name in own:
-        parts = name.split(".")[1:]
-        candidates = [Path(*parts).with_suffix(".py")] if parts else []
-        for candidate in [*candidates, Path(*parts, "__init__.py")]:
-            if (package_dir / candidate).is_file():
-                entries.append(str(candidate))
-    if entries:
-        for f in module_closure(tuple(sorted(entries)), package_dir):
-            out.setdefault(f, syntax_digest(package_dir / f))
-    return out
-
-
-def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
-    """File -> hash of the code a stage runs: its module closure (its stage module in
-    :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
-    extra files and its rule scripts.  The rule files (``workflow/rules/*.smk``) are not
-    hashed: what they decide (paths, params) is keyed."""
-    files = set(module_closure(STAGE_MODULES[stage], package_dir))
-    files |= set(STAGE_EXTRA_FILES.get(stage, ()))
-    out = {f: file_digest(package_dir / f) for f in sorted(files)}
-    for script in STAGE_SCRIPTS[stage]:
-        path = package_dir.parent / "scripts" / f"{script}.py"
-        out[f"scripts/{script}.py"] = file_digest(path)
-    return out
 
 
 # --------------------------------------------------------------------------- the keys
@@ -219,8 +54,8 @@ def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
 
 #: the scenario fields that determine its design trajectories
 TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
-#: ... its joint MAP (beside the trajectories)
-JOINT_MAP_FIELDS = ("prior", "joint_map_start", "joint_map_n_starts")
+#: ... its joint MAP (beside the trajectories and its joint-MAP settings)
+JOINT_MAP_FIELDS = ("prior",)
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)
@@ -240,10 +75,10 @@ class UnknownKeyError(KeyError):
 
 def stan_identity(backend: str) -> str:
     """The Stan backend a config names (``auto`` resolved) with its Stan version, as the NUTS
-    records name it (:func:`ssmobs.record_cache.backend_identity`, e.g. ``native stanc3
+    records name it (:func:`ssmobs.nuts.record_cache.backend_identity`, e.g. ``native stanc3
     v2.35.0 (Unix)``): part of the compiled programs' keys, so another Stan recomputes them
     and all after them.  ValueError or BackendError where that backend cannot start here."""
-    from .record_cache import backend_identity
+    from .nuts.record_cache import backend_identity
     from .stan_backends import get_backend
 
     return backend_identity(get_backend(backend))
@@ -370,7 +205,7 @@ class CacheKeys:
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, JOINT_MAP_FIELDS),
-            "settings": self.config["joint_map"],
+            "settings": joint_map_settings(sc, self.config["joint_map"]),
             "code": self.code("joint_map"),
         }
         return self._key("joint_map", name, payload)
@@ -399,7 +234,7 @@ class CacheKeys:
         the convergence checks: they are applied to the stored diagnostics by gather)."""
         sc = self.scenarios[name]
         # the scenario's own NUTS settings over the stan block (absent: the block's)
-        stan = {**self.config["stan"], **(sc.get("stan_settings") or {})}
+        stan = stan_settings(sc, self.config["stan"])
         payload = {
             "trajectories": self.trajectories(name),
             "scenario": _pick(sc, NUTS_FIELDS),
@@ -453,8 +288,9 @@ class CacheKeys:
         ks = self.k_selections[ksel]
         sc = self.scenarios[ks["scenario"]]
         payload = {
-            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior", "joint_map_start")),
-            "settings": self.config["joint_map"],
+            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior")),
+            # the scenario's start of the states, the paper's one start
+            "settings": joint_map_settings(sc, self.config["joint_map"], single_start=True),
             "design": self.design,
             "model_code": self.model_code(sc["model"]),
             "code": self.code("k_selection"),
@@ -477,7 +313,7 @@ class CacheKeys:
         scenario entry but its name, the design sets' key, the joint-MAP settings, the exact
         settings where the map runs the exact stage, the model's code and the cells' code.
         A cell two maps share, or that an extended grid keeps, has the same key."""
-        from .config import cell_entries
+        from .config.maps import cell_entries
 
         entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
         out = []
@@ -485,7 +321,7 @@ class CacheKeys:
             payload = {
                 "cell": {k: v for k, v in cell.items() if k != "name"},
                 "design": self.design,
-                "settings": self.config["joint_map"],
+                "settings": joint_map_settings(cell, self.config["joint_map"]),
                 "exact": self.config["exact_marginal"] if entry["exact"] else None,
                 "model_code": self.model_code(cell["model"]),
                 "code": self.code("map_cells"),
@@ -520,8 +356,8 @@ def main(argv: list[str] | None = None) -> int:
     """Print every key of a config with what it is keyed by (JSON)."""
     import argparse
 
-    from .config import validate
-    from .preflight import load_config_file
+    from .config.preflight import load_config_file
+    from .config.validation import validate
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--configfile", default="config/config.yaml")

@@ -372,7 +372,7 @@ def array_checksum(*arrays: np.ndarray) -> str:
 # ---------------------------------------------------------------- joint MAP (Sec. III.B)
 def joint_map_dataset(result: Any, model: StateSpaceModel, T: int, attrs: dict) -> xarray.Dataset:
     """Full Theta_hat and local variances of every k of a
-    :class:`~ssmobs.joint_map.JointMapResult` as a labelled dataset (dims ``k``,
+    :class:`~ssmobs.joint_map.driver.JointMapResult` as a labelled dataset (dims ``k``,
     ``component`` = ``model.theta_names(T)``), for :func:`write_netcdf`."""
     import xarray as xr
 
@@ -390,7 +390,7 @@ def joint_map_dataset(result: Any, model: StateSpaceModel, T: int, attrs: dict) 
 
 # ---------------------------------------------------------------- design disturbances
 def write_disturbances(path: str | os.PathLike, result: Any) -> None:
-    """Store a :class:`~ssmobs.design_disturbances.DesignResult` as the paper's (q x K) matrix."""
+    """Store a :class:`~ssmobs.design.disturbances.DesignResult` as the paper's (q x K) matrix."""
     import xarray as xr
 
     matrix = np.asarray(result.matrix, dtype=float)

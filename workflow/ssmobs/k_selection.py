@@ -78,7 +78,7 @@ class VVector:
 
 
 def v_vector(summary: Mapping[str, Any], model: StateSpaceModel) -> VVector:
-    """V_{K_i} from :func:`ssmobs.joint_map.joint_map_summary` (Sec. IV.A).
+    """V_{K_i} from :func:`ssmobs.joint_map.driver.joint_map_summary` (Sec. IV.A).
 
     Order (the paper's, generalised to any number of components): ``ratio``, ``c_mean`` for
     every component c of Omega and x_0, then ``c_var``, then ``c_lvar_mean``.  Kinds: c1
@@ -150,7 +150,7 @@ def choose_k(
 
     Parameters
     ----------
-    summaries : one :func:`ssmobs.joint_map.joint_map_summary` per run and K_i, with the
+    summaries : one :func:`ssmobs.joint_map.driver.joint_map_summary` per run and K_i, with the
         keys ``K_i``, ``method``, ``seed`` and ``sets`` (``nested`` when absent).
     model : the scenario's model (names of the V components).
     ksel : the config's ``k_selection`` entry (``name``, ``c1``, ``c2``).

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from . import io
-from .config import read_config_file
+from .config.validation import read_config_file
 
 
 def _git(*args: str) -> str:
@@ -95,7 +95,7 @@ def backend_info(config: dict[str, Any]) -> dict[str, str]:
     from .stan_backends import get_backend, resolve_backend
 
     name = resolve_backend(config.get("stan", {}).get("backend", "auto"))
-    # how NUTS got its gradients (config key stan.gradients; ssmobs.analytic_gradients)
+    # how NUTS got its gradients (config key stan.gradients; ssmobs.nuts.analytic_gradients)
     gradients = config.get("stan", {}).get("gradients", "autodiff")
     return {**get_backend(name).identity(), "gradients": gradients}
 

@@ -110,7 +110,7 @@ class StateSpaceModel:
     #: readable form of each expression of :meth:`support_constraints`, for messages
     constraint_text: ClassVar[tuple[str, ...]] = ()
     #: True when, for fixed Omega, the model is linear and Gaussian in the states (then
-    #: :meth:`state_space_matrices` gives it and :mod:`ssmobs.exact_marginal` applies)
+    #: :meth:`state_space_matrices` gives it and :mod:`ssmobs.exact.marginal` applies)
     linear_in_states: ClassVar[bool] = False
 
     # ----------------------------------------------------------------- symbolic terms
@@ -202,7 +202,7 @@ class StateSpaceModel:
         -2 pi unchanged for every z (symmetries of the model, e.g. x -> -x when z sees only
         x^2 and the dynamics are odd); none by default.
 
-        The multi-start (:mod:`ssmobs.multi_start`) starts again from the image of every
+        The multi-start (:mod:`ssmobs.joint_map.multi_start`) starts again from the image of every
         maximum it finds, so that a maximum and its mirror image, of the same height, are
         both found and the trajectory is not counted as having one maximum.
         """
@@ -405,7 +405,7 @@ class StateSpaceModel:
         """Omega as a float array in :attr:`param_names` order, from the config's mapping
         ``{name: value}`` (exactly the model's parameters) or from a sequence of m values.
 
-        The one conversion of the config's form: :meth:`ssmobs.scenario.Scenario.from_config`
+        The one conversion of the config's form: :meth:`ssmobs.config.scenario.Scenario.from_config`
         calls it, and everything downstream takes the array.  ValueError names what is
         missing, unknown or of the wrong length.
         """

@@ -315,7 +315,7 @@ def neg2_log_posterior_blocks(
 
     Same per-step symbolic derivatives as :func:`neg2_log_posterior`, but the Hessian is
     returned as a :class:`BlockHessian` (O(K T (m + p)^2) memory instead of O(K n^2)), which
-    is what the batched Newton solver of :mod:`ssmobs.joint_map_barrier` factorizes
+    is what the batched Newton solver of :mod:`ssmobs.joint_map.barrier` factorizes
     (:class:`ssmobs.banded_linalg.ArrowFactor`).
 
     Parameters: ``theta`` (K, n), ``z`` (K, T, d).  Returns value (K,), grad (K, n), blocks.

@@ -13,9 +13,9 @@ from . import PathLike
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..design_disturbances import DesignResult
-    from ..scenario import Scenario
-    from ..trajectories import Trajectories
+    from ..config.scenario import Scenario
+    from ..design.disturbances import DesignResult
+    from ..design.trajectories import Trajectories
 
 logger = logging.getLogger("ssmobs")
 
@@ -24,8 +24,8 @@ def run_design_disturbances(
     q: int, K: int, method: str, seed: int, design_cfg: dict, out: PathLike
 ) -> DesignResult:
     """Rule design_disturbances: one (q x K) disturbance matrix (LCD design, or a random
-    baseline), written to ``out`` (:func:`ssmobs.design_disturbances.design_disturbances`)."""
-    from ..design_disturbances import design_disturbances
+    baseline), written to ``out`` (:func:`ssmobs.design.disturbances.design_disturbances`)."""
+    from ..design.disturbances import design_disturbances
 
     logger.info("design disturbances q=%d K=%d method=%s seed=%d", q, K, method, seed)
     result = design_disturbances(
@@ -65,7 +65,7 @@ def run_design_trajectories(
 ) -> Trajectories:
     """Rule design_trajectories: design states and observations x~(k), z~(k) of one scenario
     (Eq. (1)) from its disturbance set, written to ``out`` with a checksum beside it."""
-    from ..trajectories import make_trajectories, write_trajectories
+    from ..design.trajectories import make_trajectories, write_trajectories
 
     matrix, attrs = io.read_disturbances(disturbances, q=scenario.disturbance_dim, K=scenario.K)
     traj = make_trajectories(scenario, matrix, provenance=attrs)

@@ -15,8 +15,8 @@ from .. import io
 from . import PathLike
 
 if TYPE_CHECKING:
+    from ..config.scenario import Scenario
     from ..models.base import StateSpaceModel
-    from ..scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -24,11 +24,11 @@ logger = logging.getLogger("ssmobs")
 def exact_summary(
     frame: Any, model: StateSpaceModel, omega: Any, x0: Any, x_true: np.ndarray
 ) -> dict:
-    """The Stan stage's statistics (:func:`ssmobs.stan_metrics.stan_summary`, over the
+    """The Stan stage's statistics (:func:`ssmobs.nuts.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
     trajectories whose posterior is improper at each boundary."""
-    from ..exact_marginal import MAXIMA_KINDS
-    from ..stan_metrics import stan_summary
+    from ..exact.marginal import MAXIMA_KINDS
+    from ..nuts.stan_metrics import stan_summary
 
     info = stan_summary(frame, model, omega, x0, x_true)
     info["n_exact"] = info["n_stan"]
@@ -58,9 +58,9 @@ def run_exact_marginal(
     config block ``exact_marginal`` as ``settings``)."""
     import time
 
-    from ..exact_marginal import exact_marginal
-    from ..exact_settings import ExactSettings
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
+    from ..exact.marginal import exact_marginal
+    from ..exact.settings import ExactSettings
 
     traj = read_trajectories(trajectories)
     model = traj.model

@@ -1,13 +1,12 @@
 """Glue of the joint-MAP stage (Sec. III.B; rule joint_map in ``workflow/rules/joint_map.smk``).
 
 :func:`joint_map_of` is also what the choice of K (:mod:`ssmobs.stages.k_selection`) and the
-table of barrier starts (:func:`ssmobs.stages.outputs.run_joint_map_mu0_sweep`) run.
+table of barrier starts (:func:`ssmobs.stages.outputs.mu0_sweep.run_joint_map_mu0_sweep`) run.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,10 +18,10 @@ from . import PathLike
 if TYPE_CHECKING:
     import pandas
 
-    from ..joint_map import JointMapResult
+    from ..config.scenario import Scenario
+    from ..design.trajectories import Trajectories
+    from ..joint_map.driver import JointMapResult
     from ..models.base import PriorBounds
-    from ..scenario import Scenario
-    from ..trajectories import Trajectories
 
 logger = logging.getLogger("ssmobs")
 
@@ -31,8 +30,8 @@ def joint_map_of(
     traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
 ) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
     """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
-    from ..joint_map import joint_map, joint_map_summary
-    from ..joint_map_settings import JointMapSettings
+    from ..joint_map.driver import joint_map, joint_map_summary
+    from ..joint_map.settings import JointMapSettings
 
     model = traj.model
     bounds = model.prior_bounds(traj.omega, prior)
@@ -52,12 +51,13 @@ def joint_map_of(
 def multi_start_of(
     traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
 ) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
-    """:func:`joint_map_of` from ``settings["n_starts"]`` starts (:mod:`ssmobs.multi_start`):
+    """:func:`joint_map_of` from ``settings["n_starts"]`` starts
+    (:mod:`ssmobs.joint_map.multi_start`):
     the paper's start's result, its table with the per-k columns of the distinct maxima
     beside, and its summary with |K^max_unique| and the other multi-start counts."""
-    from ..joint_map import joint_map_summary
-    from ..joint_map_settings import JointMapSettings
-    from ..multi_start import multi_start_joint_map, multi_start_summary
+    from ..joint_map.driver import joint_map_summary
+    from ..joint_map.multi_start import multi_start_joint_map, multi_start_summary
+    from ..joint_map.settings import JointMapSettings
 
     model = traj.model
     bounds = model.prior_bounds(traj.omega, prior)
@@ -74,15 +74,6 @@ def multi_start_of(
     return result, frame, info, bounds
 
 
-def scenario_settings(scenario: Scenario, settings: Mapping[str, Any]) -> dict:
-    """The joint-MAP settings of ``scenario``: the config's ``joint_map`` block with the
-    scenario's own start of the states and, where it sets one, its number of starts."""
-    own = {**settings, "start_states": scenario.joint_map_start}
-    if scenario.joint_map_n_starts is not None:
-        own["n_starts"] = scenario.joint_map_n_starts
-    return own
-
-
 def run_joint_map(
     trajectories: PathLike,
     scenario: Scenario,
@@ -92,11 +83,11 @@ def run_joint_map(
     theta: PathLike | None = None,
 ) -> dict:
     """Rule joint_map: joint MAP + checks for every design trajectory of a scenario."""
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model
-    settings = scenario_settings(scenario, settings)
+    settings = scenario.joint_map_config(settings)
     n_starts = int(settings.get("n_starts", 1))
     progress = Progress(f"joint MAP {scenario.name}", traj.K * n_starts, logger)
     if n_starts > 1:

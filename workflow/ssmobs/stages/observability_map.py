@@ -4,16 +4,16 @@ observable, and how well.
 A map (one entry of the config's ``observability_maps``) is a grid of *cells*: a base
 scenario (model, Omega, x0, prior, method, seed) with one parameter set to each of
 ``values`` and the horizon set to each of ``T`` (the cells' scenario entries:
-:func:`ssmobs.config.cell_entries`).  Every cell gets K design trajectories
+:func:`ssmobs.config.maps.cell_entries`).  Every cell gets K design trajectories
 (Sec. III.A) and
 - the joint MAP (Sec. III.B): |K^max|/K with its exact binomial 95 % interval and, over
   K^max, the median local variance of every Omega component; |K^max_unique|/K with its
   interval, the trajectories with exactly one distinct maximum that passes the checks over
-  the cell's ``n_starts`` starts (:mod:`ssmobs.multi_start`; the base's
+  the cell's ``n_starts`` starts (:mod:`ssmobs.joint_map.multi_start`; the base's
   ``joint_map_n_starts``, else the ``joint_map`` block's ``n_starts``): with one start, the
   default, it equals |K^max| (no other start looked for a second maximum);
 - for a model linear in the states, the exact marginal posterior p(Omega | z) (Kalman filter
-  and grid, :mod:`ssmobs.exact_marginal`): the fraction of trajectories with a unique interior
+  and grid, :mod:`ssmobs.exact.marginal`): the fraction of trajectories with a unique interior
   maximum (Definition 3) with its interval, and over those the median Laplace standard
   deviation and the median width of the 90 % interval of every Omega component ("how
   well"), plus the fraction whose cut-off improper spike is not negligible.
@@ -36,8 +36,8 @@ import pandas as pd
 
 from .. import io
 from ..binomial import clopper_pearson
+from ..config.scenario import Scenario
 from ..log import Progress
-from ..scenario import Scenario
 
 logger = logging.getLogger("ssmobs")
 
@@ -60,11 +60,11 @@ def cell_summary(
     """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
     model linear in the states) exact marginal; the row of the map's table (module
     docstring), without the map's own columns."""
-    from ..exact_marginal import exact_marginal
-    from ..exact_settings import ExactSettings
-    from ..trajectories import make_trajectories
+    from ..design.trajectories import make_trajectories
+    from ..exact.marginal import exact_marginal
+    from ..exact.settings import ExactSettings
     from .design import disturbance_set
-    from .joint_map import multi_start_of, scenario_settings
+    from .joint_map import multi_start_of
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -76,7 +76,7 @@ def cell_summary(
         dict(design_cfg),
     )
     traj = make_trajectories(scenario, matrix, provenance=attrs)
-    settings = scenario_settings(scenario, joint_settings)
+    settings = scenario.joint_map_config(joint_settings)
     # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
     _, frame, info, bounds = multi_start_of(traj, scenario.prior, settings)
     K = scenario.K
@@ -190,7 +190,7 @@ def figure_map(
     several starts, |K^max_unique|/K: dotted); the paper's cells ringed.  Right: how well,
     the median 90 % interval width of the varied parameter (exact) or 2 x 1.645 x
     sqrt(median local variance) (joint MAP, models without the exact stage)."""
-    from ..figures import _plt, save_figure
+    from ..reports.figures import _plt, save_figure
 
     plt = _plt()
     vary = entry["vary"]
@@ -283,9 +283,9 @@ def write_map(
     frame["paper_point"] = [
         (float(v), int(T)) in points for v, T in zip(frame["value"], frame["T"])
     ]
-    from ..config import map_value_label
+    from ..config.maps import map_value_label
     from ..models import get_model
-    from ..tables import write_table
+    from ..reports.tables import write_table
 
     model = get_model(entry["base"]["model"])
     caption = (

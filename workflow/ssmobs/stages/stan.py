@@ -1,7 +1,7 @@
 """Glue of the Stan stage (Sec. III.C; rules in ``workflow/rules/stan.smk``): the compiled
 program, NUTS for one batch of trajectories, and the scenario's gathered table and summary.
 
-The checks that a batch table still matches its records are in :mod:`ssmobs.record_cache`.
+The checks that a batch table still matches its records are in :mod:`ssmobs.nuts.record_cache`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,11 @@ from ..log import Progress
 from . import PathLike
 
 if TYPE_CHECKING:
-    from ..scenario import Scenario
+    import numpy as np
+
+    from ..config.scenario import Scenario
+    from ..design.trajectories import Trajectories
+    from ..nuts.batch import NutsBatch
     from ..stan_backends.base import SamplerSettings
 
 logger = logging.getLogger("ssmobs")
@@ -23,7 +27,7 @@ logger = logging.getLogger("ssmobs")
 
 def batches(trajectories: range, batch_size: int) -> list[range]:
     """The trajectories k of each Stan job: consecutive runs of ``batch_size`` of the
-    scenario's Stan trajectories (:attr:`ssmobs.scenario.Scenario.stan_trajectories`); a pure
+    scenario's Stan trajectories (:attr:`ssmobs.config.scenario.Scenario.stan_trajectories`); a pure
     function of both."""
     return [trajectories[i : i + batch_size] for i in range(0, len(trajectories), batch_size)]
 
@@ -47,7 +51,7 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
     """The Stan program NUTS runs for ``model`` and its C++ header (config key
     ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
     program with its model block calling the log density and gradient generated from the
-    model's terms (:mod:`ssmobs.analytic_gradients`), in the cache."""
+    model's terms (:mod:`ssmobs.nuts.analytic_gradients`), in the cache."""
     from ..stan_backends import stan_file
 
     path = stan_file(model)
@@ -55,8 +59,8 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
         return path, None
     if gradients != "analytic":
         raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
-    from ..analytic_gradients import write_analytic_program
     from ..models import get_model
+    from ..nuts.analytic_gradients import write_analytic_program
 
     generated = write_analytic_program(get_model(model), path)
     return generated.stan_file, generated.header
@@ -80,6 +84,44 @@ def run_build_stan_model(
     return marker
 
 
+def nuts_batch(
+    scenario: Scenario,
+    traj: Trajectories,
+    stan_cfg: dict,
+    convergence_cfg: dict,
+    threads: int = 1,
+    init_theta: np.ndarray | None = None,
+) -> NutsBatch:
+    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`): its design
+    trajectories, true values, prior bounds, seeds and chains' start, its Stan program (the
+    analytic one where ``stan_cfg`` asks for it) and the NUTS settings and thresholds of
+    ``stan_cfg`` (the scenario's own merged over the config block: :meth:`Scenario.stan_config`)
+    and ``convergence_cfg``; ``init_theta``: the joint MAP of every k (``stan_init:
+    joint_map``)."""
+    from ..nuts.batch import NutsBatch
+    from ..nuts.convergence import ConvergenceSettings
+
+    model = traj.model
+    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
+    return NutsBatch(
+        model=model,
+        stan_file=program,
+        z=traj.z,
+        x_true=traj.x,
+        bounds=model.prior_bounds(traj.omega, scenario.prior),
+        omega_true=traj.omega,
+        x0_true=traj.x0,
+        scenario=scenario.name,
+        seed=scenario.seed,
+        sampler=sampler_settings(stan_cfg, threads),
+        convergence=ConvergenceSettings(**convergence_cfg),
+        init=scenario.stan_init,
+        stan_seed=scenario.stan_seed,
+        init_theta=init_theta,
+        user_header=header,
+    )
+
+
 def run_sample_batch(
     trajectories: PathLike,
     marker: PathLike,
@@ -87,6 +129,7 @@ def run_sample_batch(
     stan_cfg: dict,
     convergence_cfg: dict,
     batch: int,
+    *,
     records_dir: PathLike,
     draws_dir: PathLike,
     out: PathLike,
@@ -98,14 +141,14 @@ def run_sample_batch(
     the scenario's chains start (``stan_init: joint_map``).
 
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
-    interruption reuses every valid record (see :func:`ssmobs.nuts_stage.run_trajectories`).
+    interruption reuses every valid record (see :func:`ssmobs.nuts.batch.run_trajectories`).
     """
-    from ..convergence import ConvergenceSettings, apply_thresholds
-    from ..nuts_stage import run_trajectories
-    from ..record_cache import draws_path, record_path
-    from ..record_format import records_to_frame
+    from ..design.trajectories import read_trajectories
+    from ..nuts.batch import run_trajectories
+    from ..nuts.convergence import ConvergenceSettings, apply_thresholds
+    from ..nuts.record_cache import draws_path, record_path
+    from ..nuts.record_format import records_to_frame
     from ..stan_backends import get_backend
-    from ..trajectories import read_trajectories
 
     traj = read_trajectories(trajectories)
     model = traj.model
@@ -118,31 +161,16 @@ def run_sample_batch(
     io.sweep_temporaries(
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
     )
-    bounds = model.prior_bounds(traj.omega, scenario.prior)
     progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
-    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
+    theta_hat = None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K)
     records = run_trajectories(
-        model,
+        nuts_batch(scenario, traj, stan_cfg, convergence_cfg, threads, theta_hat),
         get_backend(backend_name),
-        program,
-        traj.z,
-        traj.x,
         ks,
-        bounds,
-        traj.omega,
-        traj.x0,
-        scenario.name,
-        scenario.seed,
-        sampler=sampler_settings(stan_cfg, threads),
-        convergence=ConvergenceSettings(**convergence_cfg),
-        init=scenario.stan_init,
         records_dir=records_dir,
         keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
         draws_dir=draws_dir,
         progress=progress,
-        stan_seed=scenario.stan_seed,
-        init_theta=None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K),
-        user_header=header,
     )
     settings = ConvergenceSettings(**convergence_cfg)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
@@ -171,14 +199,14 @@ def run_gather_nuts(
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
 
     The batch tables hold the configured convergence checks applied to the records'
-    diagnostics (:func:`ssmobs.convergence.apply_thresholds`), so other thresholds rebuild
+    diagnostics (:func:`ssmobs.nuts.convergence.apply_thresholds`), so other thresholds rebuild
     the tables without new sampling; each is checked against its records first
-    (:func:`ssmobs.record_cache.check_batch_records`)."""
+    (:func:`ssmobs.nuts.record_cache.check_batch_records`)."""
     import pandas as pd
 
-    from ..record_cache import check_batch_records
-    from ..stan_metrics import stan_summary
-    from ..trajectories import read_trajectories
+    from ..design.trajectories import read_trajectories
+    from ..nuts.record_cache import check_batch_records
+    from ..nuts.stan_metrics import stan_summary
 
     traj = read_trajectories(trajectories)
     frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]

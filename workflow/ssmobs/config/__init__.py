@@ -1,0 +1,15 @@
+"""The config and the scenario: what a study asks for, checked before any work.
+
+Owns the JSON schema and its messages (:mod:`~ssmobs.config.schema`), the strict reading of
+config files (:mod:`~ssmobs.config.files`), the checks a schema cannot express
+(:mod:`~ssmobs.config.validation`), the scenario object (:mod:`~ssmobs.config.scenario`) and
+its settings blocks merged once (:mod:`~ssmobs.config.blocks`), the cells of the
+observability maps (:mod:`~ssmobs.config.maps`), the entry check before Snakemake
+(:mod:`~ssmobs.config.preflight`), the cost plan
+(:mod:`~ssmobs.config.budget`), the smoke overlay (:mod:`~ssmobs.config.smoke`) and the
+generated reference and profile tables (:mod:`~ssmobs.config.reference`,
+:mod:`~ssmobs.config.profiles`).
+
+May import: the shared top-level modules, :mod:`ssmobs.models`, :mod:`ssmobs.stan_backends`
+and :mod:`ssmobs.model_check` (a user's model is checked when its config is validated).
+"""

@@ -1,0 +1,357 @@
+"""The config's ground floor: its schema, its error and the messages that name what is wrong.
+
+:func:`load_schema` reads ``workflow/schemas/config.schema.yaml``; :func:`schema_problems`
+checks a value against (part of) it, filling in its defaults, and words every problem as
+key, value and what is allowed.  This module imports nothing of the package, so every other
+module (the cross-field checks of :mod:`ssmobs.config.validation`, :mod:`ssmobs.config.scenario`)
+can use it.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+import math
+import re
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "schemas" / "config.schema.yaml"
+#: longest rendering of a value in a message (characters)
+MAX_REPR = 200
+
+README = "config/README.md"
+
+
+class ConfigError(ValueError):
+    """The configuration is invalid; the message lists every problem found."""
+
+
+def load_schema() -> dict:
+    """The config schema (:data:`SCHEMA_PATH`), read afresh."""
+    return yaml.safe_load(SCHEMA_PATH.read_text())
+
+
+@functools.lru_cache(maxsize=1)
+def scenario_schema() -> dict:
+    """The schema of one entry of ``scenarios`` (with its defaults)."""
+    return load_schema()["properties"]["scenarios"]["items"]
+
+
+def short_repr(value: Any, limit: int = MAX_REPR) -> str:
+    """``repr(value)``, cut to about ``limit`` characters so that a message stays readable."""
+    return cut_text(repr(value), limit)
+
+
+def cut_text(text: str, limit: int = MAX_REPR) -> str:
+    """``text``, cut to ``limit`` characters with how long it was."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
+
+def short_list(names: list[str], n: int = 20) -> str:
+    """The first ``n`` of ``names`` as a list, with how many more there are."""
+    shown = short_repr(names[:n])
+    return shown if len(names) <= n else f"{shown} and {len(names) - n} more"
+
+
+# ------------------------------------------------------------------------ many alike
+#: problems of one kind given one by one up to this many; more are summarised in one line
+ALIKE_GIVEN_ONE_BY_ONE = 3
+#: names of the other entries a summary line shows
+ALIKE_NAMES_SHOWN = 3
+#: the entry a problem is about, as the messages write it: ``scenarios[3]``, with its name
+#: (``scenarios[3] ('x')``) where the check adds it, or ``scenario 'x'`` (the size budget)
+_ENTRY = re.compile(
+    r"^(?:(?P<section>scenarios|k_selection|observability_studies|observability_maps)"
+    r"\[(?P<index>\d+)\](?: \((?P<quoted>'[^']*'|\"[^\"]*\")\))?"
+    r"|(?P<owner>scenario|k_selection|observability map) '(?P<name>[^']*)')"
+)
+#: values inside a message: quoted text, numbers (not digits inside names), then lists
+_TEXT = re.compile(r"'[^']*'|\"[^\"]*\"")
+_NUMBER = re.compile(r"(?<![\w.])[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?(?![\w])")
+_LIST = re.compile(r"\[[^\[\]]*\]")
+_PLURAL = {
+    "scenarios": "scenarios",
+    "scenario": "scenarios",
+    "k_selection": "k_selection entries",
+    "observability_studies": "observability studies",
+    "observability_maps": "observability maps",
+    "observability map": "observability maps",
+}
+
+
+def _entry_and_kind(problem: str, names: dict[str, list[Any]]) -> tuple[str, str, str] | None:
+    """(section, the entry's name, the problem's kind) of a problem about one entry of a
+    config list, None for others.  The kind is the message without its entry and with
+    every value (quoted text, number, list) blanked: problems that differ only in the
+    entry and its values are of one kind."""
+    found = _ENTRY.match(problem)
+    if found is None:
+        return None
+    if found["owner"]:
+        section, name = found["owner"], found["name"]
+    else:
+        section, index = found["section"], int(found["index"])
+        entries = names.get(section, [])
+        if found["quoted"]:
+            name = found["quoted"][1:-1]
+        else:
+            name = entries[index] if index < len(entries) else f"[{index}]"
+    rest = _TEXT.sub("'…'", problem[found.end() :])
+    rest = _LIST.sub("[…]", _NUMBER.sub("…", rest))
+    return _PLURAL[section], str(name), rest
+
+
+def summarise_problems(problems: list[str], names: dict[str, list[Any]]) -> list[str]:
+    """``problems`` with every kind that more than :data:`ALIKE_GIVEN_ONE_BY_ONE` entries
+    of one config list share (see :func:`_entry_and_kind`) given as one line: how many, the
+    first problem in full, the names of the first few others.  Fewer stay as they are, in
+    their order; a summary line takes its first problem's place.
+
+    ``names``: the ``name`` of every entry of each config list (``scenarios``, ...), by
+    position, for the schema's messages that give only the position (``scenarios[3].K``).
+    """
+    kinds: dict[tuple[str, str], list[tuple[int, str]]] = {}
+    for i, problem in enumerate(problems):
+        found = _entry_and_kind(problem, names)
+        if found is not None:
+            kinds.setdefault((found[0], found[2]), []).append((i, found[1]))
+    out: dict[int, str] = dict(enumerate(problems))
+    for (section, _), alike in kinds.items():
+        if len(alike) <= ALIKE_GIVEN_ONE_BY_ONE:
+            continue
+        others = [repr(name) for _, name in alike[1:]]
+        shown = ", ".join(others[:ALIKE_NAMES_SHOWN])
+        if len(others) > ALIKE_NAMES_SHOWN:
+            shown += f" and {len(others) - ALIKE_NAMES_SHOWN} more"
+        first = alike[0][0]
+        out[first] = (
+            f"{len(alike)} {section} alike, the first: {problems[first]}; the others: {shown}"
+        )
+        for i, _ in alike[1:]:
+            del out[i]
+    return [out[i] for i in sorted(out)]
+
+
+# ------------------------------------------------------------------------ the schema
+def _is_integer(checker: Any, instance: Any) -> bool:
+    """JSON schema's "integer" without floats: 12.0 would become the path part K12.0."""
+    return isinstance(instance, int) and not isinstance(instance, bool)
+
+
+_TYPE_CHECKER = jsonschema.Draft202012Validator.TYPE_CHECKER.redefine("integer", _is_integer)
+
+
+def _with_defaults(
+    validator_class: type[jsonschema.protocols.Validator],
+) -> type[jsonschema.protocols.Validator]:
+    validate_props = validator_class.VALIDATORS["properties"]
+
+    def set_defaults(
+        validator: jsonschema.protocols.Validator,
+        properties: dict[str, Any],
+        instance: Any,
+        schema: dict[str, Any],
+    ) -> Iterator[jsonschema.ValidationError]:
+        if isinstance(instance, dict):
+            for key, sub in properties.items():
+                if "default" in sub and key not in instance:
+                    instance[key] = copy.deepcopy(sub["default"])
+        yield from validate_props(validator, properties, instance, schema)
+
+    return jsonschema.validators.extend(
+        validator_class, {"properties": set_defaults}, type_checker=_TYPE_CHECKER
+    )
+
+
+def _path(error: jsonschema.ValidationError) -> str:
+    return _key(tuple(error.absolute_path))
+
+
+def _types(schema: Any) -> list[str]:
+    kinds = schema.get("type", []) if isinstance(schema, dict) else []
+    return kinds if isinstance(kinds, list) else [kinds]
+
+
+def _is_type(value: Any, kind: str) -> bool:
+    try:
+        return bool(_TYPE_CHECKER.is_type(value, kind))
+    except jsonschema.exceptions.UnknownType:
+        return False
+
+
+def _branch_errors(error: jsonschema.ValidationError) -> list[jsonschema.ValidationError]:
+    """The errors of the one ``oneOf`` form whose type the value has (empty if none or
+    several have it): ``K_grid: [0, 8]`` fails as a list, not as a mapping."""
+    forms = [
+        i
+        for i, sub in enumerate(error.validator_value)
+        if any(_is_type(error.instance, kind) for kind in _types(sub))
+    ]
+    if len(forms) != 1:
+        return []
+    return sorted(
+        _without_shadowed_type_errors(
+            e for e in error.context or [] if e.schema_path and e.schema_path[0] == forms[0]
+        ),
+        key=lambda e: list(e.absolute_path),
+    )
+
+
+def _describe(error: jsonschema.ValidationError) -> list[str]:
+    key = _path(error)
+    value = short_repr(error.instance)
+    v = error.validator
+    if v == "required":
+        return [f"{key}: {cut_text(error.message)}"]
+    if v == "additionalProperties":
+        return [f"{key}: {cut_text(error.message)} (see {README} for the allowed keys)"]
+    if v in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"):
+        op = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}[v]
+        return [f"{key} = {value}: must be {op} {error.validator_value}"]
+    if v == "type":
+        kinds = _types(error.schema)
+        whole = isinstance(error.instance, float) and error.instance.is_integer()
+        if "integer" in kinds and whole:
+            others = [k for k in kinds if k != "integer"]
+            also = f" (or of type {' or '.join(others)})" if others else ""
+            return [
+                f"{key} = {value}: must be a whole number written without a decimal "
+                f"point ({int(error.instance)}){also}"
+            ]
+        return [f"{key} = {value}: must be of type {error.validator_value}"]
+    if v == "enum":
+        return [f"{key} = {value}: allowed values are {error.validator_value}{_quote_hint(error)}"]
+    if v == "pattern":
+        return [f"{key} = {value}: must match {error.validator_value}"]
+    if v in ("maxLength", "minLength"):
+        bound = "at most" if v == "maxLength" else "at least"
+        return [
+            f"{key} = {value}: {len(error.instance)} characters; allowed: {bound} "
+            f"{error.validator_value} (it is part of file names)"
+        ]
+    if v == "oneOf":
+        inner = _branch_errors(error)
+        if inner:
+            return [d for e in inner for d in _describe(e)]
+        kinds = [s.get("type") for s in error.validator_value]
+        return [f"{key} = {value}: must be one of the forms {kinds}"]
+    return [f"{key} = {value}: {cut_text(error.message)}"]
+
+
+def _yaml_spelling(value: Any) -> tuple[str, str] | None:
+    """How a boolean, null or number that YAML read from plain text is written, and what
+    YAML took it for; None for other values."""
+    if isinstance(value, bool):
+        return ("true" if value else "false"), "boolean"
+    if value is None:
+        return "null", "null"
+    if isinstance(value, (int, float)):
+        return repr(value), "number"
+    return None
+
+
+def _quote_hint(error: jsonschema.ValidationError) -> str:
+    """For an ``enum`` of strings that holds the text of a non-string value (``stan_init:
+    true`` read as a boolean): how to write it as a string; else ''."""
+    read = _yaml_spelling(error.instance)
+    if read is None or read[0] not in error.validator_value:
+        return ""
+    spelling, kind = read
+    return f" (write {spelling!r} in quotes: unquoted, YAML reads {spelling} as a {kind}, not text)"
+
+
+def _without_shadowed_type_errors(
+    errors: Iterable[jsonschema.ValidationError],
+) -> list[jsonschema.ValidationError]:
+    """``errors`` less each ``type`` error of a value whose ``enum`` error (same value, same
+    schema) is there too: the list of allowed values says all, in one message."""
+    errors = list(errors)
+    enums = {(tuple(e.absolute_path), id(e.schema)) for e in errors if e.validator == "enum"}
+    return [
+        e
+        for e in errors
+        if not (e.validator == "type" and (tuple(e.absolute_path), id(e.schema)) in enums)
+    ]
+
+
+def _key(path: tuple) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "(top level)"
+
+
+def nonfinite_problems(obj: Any, path: tuple = ()) -> list[str]:
+    """Every NaN or infinite number anywhere in the config (JSON schema ranges let NaN pass)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return [f"{_key(path)} = {obj!r}: must be a finite number"]
+    if isinstance(obj, dict):
+        return [p for k, v in obj.items() for p in nonfinite_problems(v, path + (k,))]
+    if isinstance(obj, list):
+        return [p for i, v in enumerate(obj) for p in nonfinite_problems(v, path + (i,))]
+    return []
+
+
+def scalars_from_command_line(instance: Any, schema: dict) -> Any:
+    """``instance`` with every string where the schema wants no string, but a number,
+    boolean or null, read as a YAML scalar of that type (in place; returns it).
+
+    Snakemake parses nested values of ``--config`` (and of a profile's ``config:``) with
+    YAML's BaseLoader, i.e. as strings: ``--config 'stan={chains: 1}'`` gives
+    ``{'chains': '1'}``.  A string that is no such scalar stays and the schema names it.
+    """
+    forms = schema.get("oneOf") or [schema]
+    kinds = {k for form in forms for k in _types(form)}
+    if isinstance(instance, str):
+        if "string" in kinds or not kinds & {"integer", "number", "boolean", "null"}:
+            return instance
+        if len(instance) > MAX_REPR:
+            return instance
+        try:
+            parsed = yaml.safe_load(instance)
+        except yaml.YAMLError:
+            return instance
+        number = isinstance(parsed, (int, float)) and not isinstance(parsed, bool)
+        if (
+            (parsed is None and "null" in kinds)
+            or (isinstance(parsed, bool) and "boolean" in kinds)
+            or (number and kinds & {"integer", "number"})  # 1.0 for an integer: refused later
+        ):
+            return parsed
+        return instance
+    kind = "object" if isinstance(instance, dict) else "array" if isinstance(instance, list) else ""
+    form = next((f for f in forms if kind and kind in _types(f)), None)
+    if form is None:
+        return instance
+    if isinstance(instance, dict):
+        props, extra = form.get("properties", {}), form.get("additionalProperties")
+        for key, value in list(instance.items()):
+            sub = props.get(key, extra)
+            if isinstance(sub, dict):
+                instance[key] = scalars_from_command_line(value, sub)
+    elif isinstance(form.get("items"), dict):
+        for i, value in enumerate(instance):
+            instance[i] = scalars_from_command_line(value, form["items"])
+    return instance
+
+
+@functools.lru_cache(maxsize=1)
+def _validator_class() -> type:
+    return _with_defaults(jsonschema.Draft202012Validator)
+
+
+def schema_problems(instance: Any, schema: dict) -> list[str]:
+    """Every way ``instance`` breaks ``schema`` (key, value, what is allowed), after filling
+    the schema's defaults into ``instance`` (in place)."""
+    errors = sorted(
+        _without_shadowed_type_errors(_validator_class()(schema).iter_errors(instance)),
+        key=lambda e: list(e.absolute_path),
+    )
+    return [d for e in errors for d in _describe(e)]

@@ -1,0 +1,100 @@
+"""Design trajectories of one scenario (Sec. III.A): x~(k), z~(k), k = 1..K, on disk.
+
+Stored as NetCDF with dims ``k`` (trajectory), ``t`` (1..T), ``state`` (p) and ``obs`` (d);
+the scenario's true values, model and provenance are attributes, with a checksum.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import io
+from ..config.scenario import Scenario
+from ..models import StateSpaceModel, get_model
+
+
+@dataclass(frozen=True)
+class Trajectories:
+    """Design states ``x`` (K, T, p) and observations ``z`` (K, T, d) of one scenario."""
+
+    model: StateSpaceModel
+    omega: np.ndarray
+    x0: np.ndarray
+    x: np.ndarray
+    z: np.ndarray
+    attrs: dict
+
+    @property
+    def K(self) -> int:
+        return self.x.shape[0]
+
+    @property
+    def T(self) -> int:
+        return self.x.shape[1]
+
+
+def make_trajectories(
+    scenario: Scenario, matrix: np.ndarray, provenance: dict | None = None
+) -> Trajectories:
+    """Turn a (q x K) disturbance matrix into the scenario's design trajectories (Sec. III.A)."""
+    model = scenario.model
+    x, z = model.design_trajectories(scenario.omega, scenario.x0, matrix, scenario.T)
+    attrs = {
+        "scenario": scenario.name,
+        "model": model.slug,
+        "T": scenario.T,
+        "K": int(matrix.shape[1]),
+        "method": scenario.method,
+        "seed": scenario.seed,
+        "omega": json.dumps(dict(zip(model.param_names, scenario.omega.tolist()))),
+        "x0": json.dumps(scenario.x0.tolist()),
+        # no prior: the trajectories do not depend on it (rule of the cache: a file holds
+        # only what its key determines, so a new prior reuses them byte for byte)
+    }
+    if provenance:
+        attrs.update(
+            {
+                f"disturbances_{k}": v
+                for k, v in provenance.items()
+                if isinstance(v, (int, float, str))
+            }
+        )
+    return Trajectories(
+        model=model, omega=np.array(scenario.omega), x0=np.array(scenario.x0), x=x, z=z, attrs=attrs
+    )
+
+
+def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:
+    import xarray as xr
+
+    K, T, p = traj.x.shape
+    d = traj.z.shape[2]
+    ds = xr.Dataset(
+        {"x": (("k", "t", "state"), traj.x), "z": (("k", "t", "obs"), traj.z)},
+        coords={
+            "k": np.arange(K),
+            "t": np.arange(1, T + 1),
+            "state": np.arange(p),
+            "obs": np.arange(d),
+        },
+        attrs={**traj.attrs, "checksum": io.array_checksum(traj.x, traj.z)},
+    )
+    io.write_netcdf(path, ds)
+
+
+def read_trajectories(path: str | os.PathLike) -> Trajectories:
+    """Load and validate a trajectories file (CorruptFileError naming the file if damaged)."""
+    ds = io.read_netcdf(path, required_vars=["x", "z"])
+    x = np.asarray(ds["x"].values, dtype=float)
+    z = np.asarray(ds["z"].values, dtype=float)
+    attrs = dict(ds.attrs)
+    if attrs.get("checksum") != io.array_checksum(x, z):
+        raise io.CorruptFileError(f"{path}: checksum mismatch (file damaged or edited)")
+    model = get_model(attrs["model"])
+    omega = np.array(list(json.loads(attrs["omega"]).values()), dtype=float)
+    x0 = np.array(json.loads(attrs["x0"]), dtype=float)
+    return Trajectories(model=model, omega=omega, x0=x0, x=x, z=z, attrs=attrs)

@@ -1,0 +1,473 @@
+"""Multi-start joint MAP: how many distinct maxima of pi(Theta | z~(k)) pass the checks.
+
+The checks of Sec. III.B (gradient, Hessian, eigenvalue ratio with the ridge re-check) are
+local: they pass at any strict local maximum, so one start per trajectory, as in the paper,
+says that *a* maximum was found, not that it is the only one.  Here every design
+trajectory is optimised from ``n_starts`` starts by the same barrier method with the same
+checks (:func:`ssmobs.joint_map.driver.joint_map`, each start vectorised over k):
+
+- start 0 is the paper's: (Omega_true, x0_true, the scenario's state start rule);
+- starts 1 .. n_starts - 1 take (Omega, x_0) from a Halton sequence (bases 2, 3, 5, ...;
+  its first point, the corner, skipped) scaled to the *start box*: Omega's prior box
+  (Eq. (3), Eq. (14)), where a side without a finite bound (``half_line``) and both sides
+  of x_0's (flat prior on R) lie ``start_box_span * max(1, |true value|)`` from the true
+  value; points outside the model's constraints c(Omega) > 0 are skipped, and so are points
+  where the start is excluded by the model (-2 pi or its gradient not finite at the start
+  for some trajectory, e.g. b = 0 where the states start at z / b);
+- the states of a Halton start come from one of two branches in turn, because a start
+  covers Theta, not only Omega: the odd starts (1, 3, ...) take the model's own construction
+  from the data, ``sign_consistent_states(Omega, x0, z)`` where the model defines one (the
+  states take x_0's sign, and x_0 ranges over both signs), else ``initial_states(Omega,
+  z)``; the even starts (2, 4, ...) take the model's noise-free path from x_0 at that Omega
+  (``simulate`` with eta = eps = 0), which follows the branch the dynamics choose rather
+  than the data's (where it is not finite, or excluded, the data's construction instead);
+- *image starts*: where the model declares symmetries (``mirror_images``, e.g. x -> -x),
+  each distinct maximum found by the starts above is mapped by each symmetry and optimised
+  again from there.  The image of a maximum is a maximum of the same height, so a symmetry
+  never lets a trajectory count as having one maximum because no start happened to fall
+  on the mirror's side (each start's states lie on one branch).
+
+The starts are the same for every trajectory (the image starts per k) and need no seed.
+
+Distinct maxima.  Among the starts of trajectory k whose result passes every check
+(status ``ok``), two results are the same maximum when no component of Theta differs by
+more than ``distinct_tol`` local standard deviations, |Theta_j - Theta'_j| <=
+distinct_tol * sqrt(max(LVar_j, LVar'_j)) (Sec. II.B), i.e. the tolerance is stated in
+parameters scaled by the posterior's local spread.  Greedy clustering from the highest
+log posterior down gives the distinct maxima of k, each with the highest value reached in
+it.  Per trajectory: their number, their log posterior values (pi up to the model's
+constant, = -(-2 pi) / 2), whether the paper's start reached the highest (its value within
+``ridge_value_tol * (1 + |-2 pi|)`` of the best, so exact ties count), and the gap in log
+posterior from the highest to the second (0 up to rounding for a maximum and its image).
+
+Verdict per trajectory (``maxima_verdict``): ``none`` (no maximum passes), ``several``,
+``unique`` (one distinct maximum, reached by every start that passes, and at least
+``unique_min_share`` of the ``n_starts`` starts pass) or ``undetermined`` (one distinct
+maximum, but fewer starts pass: one passing start does not show that the others would
+reach it).  K^max_unique: the trajectories with verdict ``unique``.  It is not a subset of
+K^max (which is the paper's start's result), since another start can pass where the
+paper's does not.  A start that ends on the boundary or fails a check adds no maximum (its
+count is reported), so K^max_unique can still hide a supremum at the edge of the support;
+``boundary_higher`` marks the trajectories where a start that ended on the boundary reached
+a higher log posterior than every maximum that passes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..binomial import clopper_pearson
+from ..models.base import PriorBounds, StateSpaceModel
+from ..models.log_posterior import compile_model, in_support, neg2_log_posterior
+from .driver import JointMapResult, ProgressLike, initial_theta, joint_map
+from .settings import JointMapSettings
+
+#: the verdicts of a trajectory's maxima (module docstring)
+VERDICTS: tuple[str, ...] = ("unique", "several", "undetermined", "none")
+
+#: the first primes: Halton bases of up to this many dimensions of (Omega, x_0)
+_PRIMES: tuple[int, ...] = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53)
+
+
+def halton(n: int, dim: int, skip: int = 1) -> np.ndarray:
+    """(n, dim) points of the Halton sequence in (0, 1)^dim from index ``skip`` on.
+
+    Index 0 is the corner 0 (skipped by default); every later point lies strictly inside.
+    """
+    if dim > len(_PRIMES):
+        raise ValueError(f"Halton starts support up to {len(_PRIMES)} dimensions, got {dim}")
+    out = np.empty((n, dim))
+    for j, base in enumerate(_PRIMES[:dim]):
+        for i in range(n):
+            index, f, value = i + skip, 1.0, 0.0
+            while index > 0:
+                f /= base
+                value += f * (index % base)
+                index //= base
+            out[i, j] = value
+    return out
+
+
+def start_box(
+    bounds: PriorBounds, omega_true: np.ndarray, x0_true: np.ndarray, span: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners of the box of (Omega, x_0) that the extra starts fill."""
+    truth = np.concatenate([omega_true, x0_true])
+    half = span * np.maximum(1.0, np.abs(truth))
+    lower = np.concatenate([np.asarray(bounds.lower, float), np.full(x0_true.size, -np.inf)])
+    upper = np.concatenate([np.asarray(bounds.upper, float), np.full(x0_true.size, np.inf)])
+    lower = np.where(np.isfinite(lower), lower, truth - half)
+    upper = np.where(np.isfinite(upper), upper, truth + half)
+    return lower, upper
+
+
+def start_points(
+    model: StateSpaceModel,
+    bounds: PriorBounds,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    n_starts: int,
+    span: float,
+    admissible: Callable[[np.ndarray, int], bool] | None = None,
+) -> np.ndarray:
+    """(n_starts, m + p) starts (Omega, x_0): row 0 the true values (the paper's start), the
+    others Halton points of the start box that satisfy the model's constraints and, if
+    given, ``admissible(point, index)`` (the start would be start ``index``)."""
+    m = model.n_params
+    points = [np.concatenate([omega_true, x0_true])]
+    if n_starts == 1:
+        return np.asarray(points)
+    lower, upper = start_box(bounds, omega_true, x0_true, span)
+    constraints = compile_model(model).constraints
+    skip = 1
+    while len(points) < n_starts:
+        batch = lower + halton(4 * n_starts, lower.size, skip) * (upper - lower)
+        skip += 4 * n_starts
+        inside = np.ones(batch.shape[0], dtype=bool)
+        if constraints.count:
+            inside = np.all(constraints.values(batch[:, :m]) > 0, axis=1)
+        for point in batch[inside]:
+            if len(points) == n_starts:
+                break
+            if admissible is None or admissible(point, len(points)):
+                points.append(point)
+        if len(points) < n_starts and skip > 1000 * n_starts:
+            raise ValueError(
+                f"model '{model.slug}': fewer than {n_starts} Halton points of the start box "
+                f"({lower.tolist()}, {upper.tolist()}) satisfy the model's constraints"
+                + ("" if admissible is None else " and give a finite -2 pi and gradient")
+            )
+    return np.asarray(points)
+
+
+@dataclass
+class MultiStartResult:
+    """Results of every start and the distinct maxima per trajectory k.
+
+    Attributes
+    ----------
+    starts : (S, m + p) start (Omega, x_0) of every Halton start; row 0 is the paper's.
+    runs : the :class:`~ssmobs.joint_map.driver.JointMapResult` of every start, the S starts first
+        (``runs[0]`` is the paper's start, the joint MAP of K^max), then the image starts
+        (status ``not-run`` for the k an image start did not run).
+    start_states : (S,) the state start rule of each of the S starts.
+    n_starts_ok : (K,) of the S starts, those whose result passes every check.
+    n_starts_boundary : (K,) of the S starts, those that ended with status ``boundary``.
+    maxima_log_post : per k, the log posterior (pi up to the model's constant) of every
+        distinct maximum that passes the checks, highest first.
+    maxima_first_start : per k, the first start (index into ``runs``) reaching each of them.
+    paper_start_highest : (K,) the paper's start passed and reached the highest maximum.
+    boundary_higher : (K,) one of the S starts ended with status ``boundary`` (or
+        ``unbounded``: ran off) at a higher
+        log posterior than every maximum that passes (or than -inf if none passes): the
+        supremum lies at the edge of the support, above the interior maxima.
+    unique_min_share : the share of the S starts that must pass for ``unique``.
+    """
+
+    starts: np.ndarray
+    runs: list[JointMapResult]
+    start_states: list[str]
+    n_starts_ok: np.ndarray
+    n_starts_boundary: np.ndarray
+    maxima_log_post: list[np.ndarray]
+    maxima_first_start: list[np.ndarray]
+    paper_start_highest: np.ndarray
+    boundary_higher: np.ndarray
+    unique_min_share: float = 0.5
+
+    @property
+    def n_maxima(self) -> np.ndarray:
+        """(K,) number of distinct maxima that pass the checks."""
+        return np.array([v.size for v in self.maxima_log_post], dtype=np.int64)
+
+    @property
+    def log_post_gap(self) -> np.ndarray:
+        """(K,) log posterior of the highest maximum minus the second's (NaN if < 2)."""
+        return np.array([v[0] - v[1] if v.size > 1 else np.nan for v in self.maxima_log_post])
+
+    @property
+    def verdict(self) -> np.ndarray:
+        """(K,) one of :data:`VERDICTS` (module docstring)."""
+        return maxima_verdict(
+            self.n_maxima, self.n_starts_ok, self.starts.shape[0], self.unique_min_share
+        )
+
+    def columns(self) -> pd.DataFrame:
+        """Per-k columns beside the joint-MAP table (one row per k, in order of k)."""
+        n_max = self.n_maxima
+        verdict = self.verdict
+        return pd.DataFrame(
+            {
+                "n_starts_ok": self.n_starts_ok.astype(np.int64),
+                "n_starts_boundary": self.n_starts_boundary.astype(np.int64),
+                "n_maxima": n_max,
+                "maxima_verdict": pd.Series(verdict, dtype=object).astype(str),
+                "unique_max": verdict == "unique",
+                "paper_start_highest": self.paper_start_highest.astype(bool),
+                "boundary_higher": self.boundary_higher.astype(bool),
+                "log_post_best": [v[0] if v.size else np.nan for v in self.maxima_log_post],
+                "log_post_gap": self.log_post_gap,
+                "maxima_log_post": [v.astype(float) for v in self.maxima_log_post],
+                "maxima_first_start": [v.astype(np.int64) for v in self.maxima_first_start],
+            }
+        )
+
+
+def maxima_verdict(
+    n_maxima: np.ndarray, n_starts_ok: np.ndarray, n_starts: int, unique_min_share: float
+) -> np.ndarray:
+    """(K,) ``none``, ``several``, ``unique`` or ``undetermined`` (module docstring): one
+    maximum is ``unique`` only when at least ceil(share * n_starts) of the starts pass."""
+    needed = max(1, math.ceil(unique_min_share * n_starts - 1e-12))
+    n_maxima, n_ok = np.asarray(n_maxima), np.asarray(n_starts_ok)
+    out = np.where(n_maxima == 0, "none", "several").astype(object)
+    out[(n_maxima == 1) & (n_ok >= needed)] = "unique"
+    out[(n_maxima == 1) & (n_ok < needed)] = "undetermined"
+    return out
+
+
+def distinct_maxima(
+    runs: list[JointMapResult], k: int, settings: JointMapSettings
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Distinct maxima of trajectory k over the starts whose result passes the checks.
+
+    Returns the values -2 pi of the maxima (lowest, i.e. highest posterior, first), the
+    first start reaching each, and whether start 0 reached the highest.
+    """
+    passed = [s for s, r in enumerate(runs) if r.status[k] == "ok"]
+    order = sorted(passed, key=lambda s: (runs[s].neg2_log_post[k], s))
+    values: list[float] = []
+    first: list[int] = []
+    members: list[list[int]] = []
+    for s in order:
+        theta, lvar = runs[s].theta_hat[k], runs[s].local_variance[k]
+        for j, group in enumerate(members):
+            rep = group[0]
+            sd = np.sqrt(np.maximum(lvar, runs[rep].local_variance[k]))
+            if np.all(np.abs(theta - runs[rep].theta_hat[k]) <= settings.distinct_tol * sd):
+                group.append(s)
+                first[j] = min(first[j], s)
+                break
+        else:
+            members.append([s])
+            values.append(float(runs[s].neg2_log_post[k]))
+            first.append(s)
+    paper_highest = False
+    if values and runs[0].status[k] == "ok":
+        f0, best = float(runs[0].neg2_log_post[k]), values[0]
+        paper_highest = f0 <= best + settings.ridge_value_tol * (1.0 + abs(best))
+    return np.asarray(values), np.asarray(first, dtype=np.int64), paper_highest
+
+
+def data_states_rule(model: StateSpaceModel) -> str:
+    """The data's construction of the states: ``sign_of_x0`` where defined, else
+    ``observations``."""
+    return "sign_of_x0" if model.has_sign_consistent_start else "observations"
+
+
+def start_is_admissible(
+    model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds, theta: np.ndarray
+) -> bool:
+    """The start Theta (K, n) is finite and inside the support, and -2 pi and its gradient
+    are finite there for every trajectory (the model does not exclude it)."""
+    if not np.all(np.isfinite(theta)):
+        return False
+    with np.errstate(all="ignore"):
+        value, grad = neg2_log_posterior(model, theta, z, bounds, order=1)
+    return bool(np.all(np.isfinite(value)) and np.all(np.isfinite(grad)))
+
+
+def halton_start_rule(
+    model: StateSpaceModel, z: np.ndarray, bounds: PriorBounds, point: np.ndarray, index: int
+) -> str | None:
+    """State start rule of Halton start ``index`` at ``point`` = (Omega, x_0): ``simulate``
+    for even indices, the data's construction for odd ones and where the simulated start is
+    not admissible; None if no rule gives an admissible start."""
+    m = model.n_params
+    rules = [data_states_rule(model)]
+    if index % 2 == 0:
+        rules.insert(0, "simulate")
+    for rule in rules:
+        try:
+            with np.errstate(all="ignore"):
+                theta = initial_theta(model, z, point[:m], point[m:], rule)
+        except (ArithmeticError, ValueError, NotImplementedError):
+            if rule == "simulate":  # a simulator that fails here: the data's construction
+                continue
+            raise
+        if start_is_admissible(model, z, bounds, theta):
+            return rule
+    return None
+
+
+def _expand(result: JointMapResult, rows: np.ndarray, K: int) -> JointMapResult:
+    """A result of the trajectories ``rows`` spread to all K (status ``not-run`` elsewhere)."""
+    out = JointMapResult.unfilled(K, result.theta_names, "not-run", "image start not run")
+    for name in (
+        "theta_hat",
+        "neg2_log_post",
+        "local_variance",
+        "eig_ratio",
+        "grad_max",
+        "iterations",
+        "status",
+        "reason",
+    ):
+        getattr(out, name)[rows] = getattr(result, name)
+    return out
+
+
+def image_runs(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    settings: JointMapSettings,
+    runs: list[JointMapResult],
+    first_start: list[np.ndarray],
+) -> list[JointMapResult]:
+    """Runs from the images (``model.mirror_images``) of every distinct maximum found: round
+    r starts, for every k with more than r maxima, from the images of its r-th maximum."""
+    K = z.shape[0]
+    m = model.n_params
+    out: list[JointMapResult] = []
+    rounds = max((f.size for f in first_start), default=0)
+    for r in range(rounds):
+        rows = np.array([k for k in range(K) if first_start[k].size > r], dtype=np.int64)
+        found = np.stack([runs[int(first_start[k][r])].theta_hat[k] for k in rows])
+        for image in model.mirror_images(found):
+            image = np.asarray(image, dtype=float)
+            with np.errstate(all="ignore"):
+                (value,) = neg2_log_posterior(model, image, z[rows], bounds)
+            usable = np.isfinite(value) & in_support(model, image[:, :m], bounds)
+            if not usable.any():
+                continue
+            sub = rows[usable]
+            res = joint_map(
+                model, z[sub], bounds, omega_true, x0_true, settings, theta_start=image[usable]
+            )
+            out.append(_expand(res, sub, K))
+    return out
+
+
+def _distinct_all(
+    runs: list[JointMapResult], K: int, settings: JointMapSettings
+) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
+    values, first, highest = [], [], np.zeros(K, dtype=bool)
+    for k in range(K):
+        f, s, h = distinct_maxima(runs, k, settings)
+        values.append(-0.5 * f)
+        first.append(s)
+        highest[k] = h
+    return values, first, highest
+
+
+def multi_start_joint_map(
+    model: StateSpaceModel,
+    z: np.ndarray,
+    bounds: PriorBounds,
+    omega_true: np.ndarray,
+    x0_true: np.ndarray,
+    settings: JointMapSettings,
+    progress: ProgressLike | None = None,
+) -> MultiStartResult:
+    """Joint MAP of every trajectory from ``settings.n_starts`` starts and the images of
+    the maxima they find (module docstring).
+
+    Start 0 is :func:`ssmobs.joint_map.driver.joint_map` with the paper's start exactly (with one
+    start nothing else runs); the others use the state start rule of
+    :func:`halton_start_rule`.
+    """
+    omega = np.asarray(omega_true, dtype=float)
+    x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
+    z = np.asarray(z, dtype=float)
+    m = model.n_params
+
+    def admissible(point: np.ndarray, index: int) -> bool:
+        return halton_start_rule(model, z, bounds, point, index) is not None
+
+    starts = start_points(
+        model, bounds, omega, x0, settings.n_starts, settings.start_box_span, admissible
+    )
+    runs = [joint_map(model, z, bounds, omega, x0, settings, progress=progress)]
+    rules = [settings.start_states]
+    for index, point in enumerate(starts[1:], start=1):
+        rule = halton_start_rule(model, z, bounds, point, index)
+        assert rule is not None  # start_points kept admissible points only
+        rules.append(rule)
+        spread = dataclasses.replace(settings, start_states=rule)
+        runs.append(joint_map(model, z, bounds, point[:m], point[m:], spread, progress=progress))
+    S = len(runs)
+    K = runs[0].status.shape[0]
+    values, first, highest = _distinct_all(runs, K, settings)
+    if S > 1:
+        extra = image_runs(model, z, bounds, omega, x0, settings, runs, first)
+        if extra:
+            runs.extend(extra)
+            values, first, highest = _distinct_all(runs, K, settings)
+    status = np.stack([r.status for r in runs[:S]])
+    edge = np.stack(
+        [
+            np.where(np.isin(r.status, ("boundary", "unbounded")), r.neg2_log_post, np.inf)
+            for r in runs[:S]
+        ]
+    ).min(axis=0)
+    best = np.array([-2.0 * v[0] if v.size else np.inf for v in values])
+    with np.errstate(invalid="ignore"):
+        boundary_higher = np.isfinite(edge) & (edge < best)
+    return MultiStartResult(
+        starts=starts,
+        runs=runs,
+        start_states=rules,
+        n_starts_ok=(status == "ok").sum(axis=0),
+        n_starts_boundary=(status == "boundary").sum(axis=0),
+        maxima_log_post=values,
+        maxima_first_start=first,
+        paper_start_highest=highest,
+        boundary_higher=boundary_higher,
+        unique_min_share=settings.unique_min_share,
+    )
+
+
+def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> dict[str, object]:
+    """Scenario summary of the multi-start columns (:meth:`MultiStartResult.columns`).
+
+    ``K_max_unique`` (= |K^max_unique|, verdict ``unique``), ``K_max_undetermined`` (one
+    maximum, too few starts passed), ``K_max_any`` (one or more maxima pass),
+    ``K_max_several``, ``K_paper_start_highest``, ``K_max_unique_lo95`` / ``_hi95`` (exact
+    binomial 95 % interval of |K^max_unique| / K), ``K_max_unique_boundary_higher`` (of
+    K^max_unique, those where a start on the boundary went higher), ``log_post_gap_median``
+    (over the trajectories with several maxima) and the settings ``n_starts``,
+    ``distinct_tol``, ``unique_min_share``.
+    """
+    K = int(len(columns))
+    n_max = columns["n_maxima"].to_numpy()
+    verdict = columns["maxima_verdict"].to_numpy(dtype=object)
+    unique_k = verdict == "unique"
+    unique = int(unique_k.sum())
+    lo, hi = clopper_pearson(unique, K)
+    gaps = columns["log_post_gap"].to_numpy(dtype=float)
+    several = n_max > 1
+    return {
+        "n_starts": settings.n_starts,
+        "distinct_tol": settings.distinct_tol,
+        "unique_min_share": settings.unique_min_share,
+        "K_max_unique": unique,
+        "K_max_unique_lo95": lo,
+        "K_max_unique_hi95": hi,
+        "K_max_undetermined": int((verdict == "undetermined").sum()),
+        "K_max_any": int((n_max >= 1).sum()),
+        "K_max_several": int(several.sum()),
+        "K_paper_start_highest": int(columns["paper_start_highest"].sum()),
+        "K_max_unique_boundary_higher": int(
+            (unique_k & columns["boundary_higher"].to_numpy(dtype=bool)).sum()
+        ),
+        "log_post_gap_median": float(np.median(gaps[several])) if several.any() else np.nan,
+    }

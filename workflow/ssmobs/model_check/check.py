@@ -1,0 +1,170 @@
+"""Check a model's Python module and Stan program against each other, for any model.
+
+The Python model (``workflow/ssmobs/models/<slug>.py``) drives the joint MAP (Sec. III.B)
+and the Stan program (``stan/<slug>.stan``) the marginal MAP (Sec. III.C); the paper's
+comparison of the two is only meaningful when both encode the same log posterior (2).
+:func:`check_model` tells exactly what disagrees, cheapest checks first:
+
+1. Python alone: the simulator (Eq. (1)) and ``initial_states`` return the declared
+   shapes and finite values; the symbolic gradient and Hessian of -2 pi match central finite
+   differences at random points inside the prior support.
+2. Stan source, without compiling: the ``parameters`` block declares exactly
+   ``(*param_names, x0, x)`` in this order, and the ``data`` block declares ``T``, ``z`` and
+   the prior bounds ``<name>_lower`` / ``<name>_upper`` of every parameter.
+3. Compiled Stan (the native driver's ``--log-density`` mode, or PyStan's ``log_prob``;
+   the model block without Jacobian): parameter names
+   and shapes; log density equal to the Python one up to one additive constant at random
+   points inside the support; the support itself equal to Python's (points just inside
+   every finite prior bound are accepted, points just outside and points violating a model
+   constraint are rejected).
+4. With analytic gradients (config key ``stan.gradients``): the log density and gradient
+   generated from the model's terms against Stan's autodiff of the program, at random
+   points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.model_check.analytic`).
+
+Each step lives in its own module: the cases in :mod:`ssmobs.model_check.cases`, step 1 in
+:mod:`ssmobs.model_check.python`, step 2 in :mod:`ssmobs.model_check.stan_source`, step 3 in
+:mod:`ssmobs.model_check.stan`; this module runs them in turn and reports.
+
+Its command line is :mod:`ssmobs.model_check.__main__` (``python -m ssmobs.model_check``); the
+Snakemake
+rule ``check_model`` runs it for every model a config uses, before any design trajectory.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..models import get_model
+from .cases import (
+    CheckCase,
+    ModelCheckError,
+    cases_from_scenarios,
+    default_cases,
+    prior_variant_cases,
+)
+from .python import CHECK_T, model_check_seed, python_stage_problems
+from .stan import stan_problems
+from .stan_source import stan_source_problems
+
+
+@dataclass
+class CheckReport:
+    """What was checked and passed, the check that failed (``failed``, "" if none) and the
+    problems it found (empty ``problems``: the model passes)."""
+
+    slug: str
+    checks: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    failed: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "slug": self.slug,
+            "ok": not self.problems,
+            "checks": self.checks,
+            "failed": self.failed,
+            "problems": self.problems,
+        }
+
+    def record(self, check: str, problems: Sequence[str]) -> None:
+        """A check's outcome: passed (``checks``) or the failed one with its problems."""
+        if problems:
+            self.failed, self.problems = check, [*self.problems, *problems]
+        else:
+            self.checks.append(check)
+
+
+# ----------------------------------------------------------------------------- driver
+def check_model(
+    slug: str,
+    cases: Sequence[CheckCase] | None = None,
+    stan: bool = True,
+    stan_path: str | Path | None = None,
+    T: int = CHECK_T,
+    seed: int | None = None,
+    backend: str = "native",
+    gradients: str = "autodiff",
+) -> CheckReport:
+    """Every check of this module for one model; the report lists each problem found.
+
+    ``cases`` default to :func:`default_cases`; ``stan=False`` skips the Stan checks (for a
+    config that never runs Stan for this model).  Checks stop at the first stage, and within
+    it at the first case, with problems, so that one mistake gives one message.
+    """
+    from ..stan_backends import stan_file
+
+    model = get_model(slug)
+    report = CheckReport(slug)
+    cases = list(cases) if cases else default_cases(model)
+    seed = model_check_seed(model) if seed is None else seed
+    found = python_stage_problems(model, cases, T=T, seed=seed)
+    report.record(
+        f"python: simulator shapes, initial_states, gradient and Hessian vs finite "
+        f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))",
+        found,
+    )
+    if report.problems or not stan:
+        return report
+    path = Path(stan_path) if stan_path is not None else stan_file(slug)
+    report.record(
+        f"stan source {path.name}: parameter names/order, data declarations",
+        stan_source_problems(model, path),
+    )
+    if report.problems:
+        return report
+    for i, case in enumerate(cases):
+        found = stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
+        if found:
+            break
+    report.record(
+        f"stan compiled: names, shapes, log density up to a constant, support "
+        f"bounds ({len(cases)} case(s))",
+        found,
+    )
+    if report.problems or gradients == "autodiff":
+        return report
+    from .analytic import ANALYTIC_RTOL, analytic_problems
+
+    for i, case in enumerate(cases):
+        found = analytic_problems(model, path, case, T=T, seed=seed + i)
+        if found:
+            break
+    report.record(
+        f"analytic gradients: log density up to a constant and gradient equal to Stan's "
+        f"autodiff to {ANALYTIC_RTOL:g} relative ({len(cases)} case(s))",
+        found,
+    )
+    return report
+
+
+def run_check_model(
+    slug: str,
+    scenarios: Sequence[Mapping[str, Any]],
+    out: str | Path,
+    stan: bool = True,
+    stan_path: str | Path | None = None,
+    gradients: str = "autodiff",
+) -> CheckReport:
+    """Rule check_model: check the model for the default cases and the true values of every
+    configured case under every prior variant (:func:`prior_variant_cases`), and its
+    analytic gradients when NUTS uses them; write the report; raise
+    :class:`ModelCheckError` listing every problem."""
+    model = get_model(slug)
+    cases = default_cases(model)
+    for scenario_case in cases_from_scenarios(scenarios, slug):
+        for case in prior_variant_cases(model, scenario_case):
+            if case not in cases:
+                cases.append(case)
+    report = check_model(slug, cases, stan=stan, stan_path=stan_path, gradients=gradients)
+    if report.problems:
+        raise ModelCheckError(
+            f"model '{slug}': the Python model and the Stan program "
+            f"disagree:\n  - " + "\n  - ".join(report.problems)
+        )
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    Path(out).write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    return report

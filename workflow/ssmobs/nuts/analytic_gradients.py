@@ -1,0 +1,399 @@
+"""Analytic gradients for NUTS: C++ generated from the model's own terms, called from Stan.
+
+The log posterior (2) of a model is -1/2 times the sum of its per-step terms,
+
+    log pi(Theta | z) = -1/2 [ sum_t obs_term(Omega, x_t; z_t)
+                               + sum_t trans_term(Omega, x_{t-1}, x_t) ] + const,
+
+the same SymPy terms the Python side differentiates (:mod:`ssmobs.models.log_posterior`).
+:func:`header_code` turns them into one C++ function that computes this value and its
+gradient in Theta = (Omega, x_0, ..., x_T) in plain double loops (fixed summation order:
+t = 1..T, observation term before transition term) and hands both to Stan as one node of
+its autodiff tape (``stan::math::make_callback_var``).  :func:`analytic_stan_code` keeps the
+model's Stan program (data, bounds, constraint transforms and their Jacobians stay Stan's)
+and replaces its ``model`` block by one call of that function, declared without a body
+(``stanc --allow-undefined``; the header is included before the generated model).
+
+For every shipped model -1/2 times the terms equals what Stan's ``~ normal`` keeps with
+constants dropped, so ``lp__`` keeps its meaning.  The generated text depends on the terms
+and the SymPy version only (byte-stable: the same model gives the same header).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import sympy as sp
+from sympy.printing.cxx import CXX17CodePrinter
+
+from ..models.base import StateSpaceModel
+
+#: values of the config key ``stan.gradients``: Stan's own autodiff of the hand-written
+#: program, or the generated C++ of this module
+GRADIENT_MODES: tuple[str, ...] = ("autodiff", "analytic")
+#: format of the generated files; change it whenever the generated text changes meaning
+GENERATOR_VERSION = 1
+
+
+def function_name(model: StateSpaceModel) -> str:
+    """The external Stan function of a model's analytic log density."""
+    return f"ssmobs_{model.slug}_log_density"
+
+
+# --------------------------------------------------------------------------- C++ printing
+class _Printer(CXX17CodePrinter):
+    """C++ with small integer powers as products (exact, and no ``std::pow`` call)."""
+
+    def _print_Pow(self, expr: sp.Pow) -> str:  # noqa: N802 - SymPy's naming
+        base, exp = expr.base, expr.exp
+        if exp.is_Integer and 1 <= abs(int(exp)) <= 4:
+            b = self.parenthesize(base, sp.printing.precedence.PRECEDENCE["Mul"] + 1)
+            prod = "*".join([b] * abs(int(exp)))
+            if abs(int(exp)) > 1:  # one operand wherever it stands (e.g. after a division)
+                prod = f"({prod})"
+            return prod if int(exp) > 0 else f"(1.0/{prod})"
+        if exp == sp.Rational(1, 2):
+            return f"std::sqrt({self._print(base)})"
+        if exp == -sp.Rational(1, 2):
+            return f"(1.0/std::sqrt({self._print(base)}))"
+        return f"std::pow({self._print(base)}, {self._print(exp)})"
+
+    def _print_Rational(self, expr: sp.Rational) -> str:  # noqa: N802
+        return f"({int(expr.p)}.0/{int(expr.q)}.0)"
+
+    def _print_Integer(self, expr: sp.Integer) -> str:  # noqa: N802
+        return f"{int(expr)}.0"
+
+
+def _cxx(expr: sp.Expr) -> str:
+    return _Printer().doprint(expr)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One per-step term as straight-line code: Omega-only values hoisted out of the loop,
+    the step's own temporaries, the value and the gradient in its local variables."""
+
+    hoisted: list[tuple[sp.Symbol, sp.Expr]]
+    body: list[tuple[sp.Symbol, sp.Expr]]
+    value: sp.Expr
+    grads: list[sp.Expr]
+
+
+def _step(expr: sp.Expr, local: Sequence[sp.Symbol], omega: Sequence[sp.Symbol], tag: str) -> _Step:
+    """Common subexpressions of the term and its gradient in ``local``; every subexpression
+    that depends on Omega only is moved before the loop over t."""
+    grads = [sp.diff(expr, v) for v in local]
+    temps = sp.numbered_symbols(f"{tag}_c")
+    replacements, reduced = sp.cse([expr, *grads], symbols=temps, order="canonical")
+    invariant = set(omega)
+    hoist_names = sp.numbered_symbols(f"{tag}_h")
+    hoisted: list[tuple[sp.Symbol, sp.Expr]] = []
+    seen: dict[sp.Expr, sp.Symbol] = {}
+
+    def lift(e: sp.Expr) -> sp.Expr:
+        """``e`` with its maximal Omega-only, non-trivial subtrees named and hoisted."""
+        if e.is_Atom:
+            return e
+        if e.free_symbols <= invariant:
+            if e not in seen:
+                seen[e] = next(hoist_names)
+                hoisted.append((seen[e], e))
+                invariant.add(seen[e])
+            return seen[e]
+        return e.func(*[lift(a) for a in e.args])
+
+    body: list[tuple[sp.Symbol, sp.Expr]] = []
+    for sym, rhs in replacements:
+        if rhs.free_symbols <= invariant:
+            hoisted.append((sym, rhs))
+            invariant.add(sym)
+        else:
+            body.append((sym, lift(rhs)))
+    out = [lift(e) for e in reduced]
+    return _Step(hoisted=hoisted, body=body, value=out[0], grads=out[1:])
+
+
+def _symbols(model: StateSpaceModel) -> tuple[list[sp.Symbol], ...]:
+    """The symbols of :func:`ssmobs.models.log_posterior.compile_model`."""
+    m, p, d = model.n_params, model.state_dim, model.obs_dim
+    w = list(sp.symbols(f"w0:{m}", real=True))
+    xp = list(sp.symbols(f"xp0:{p}", real=True))
+    x = list(sp.symbols(f"x0:{p}", real=True))
+    z = list(sp.symbols(f"z0:{d}", real=True))
+    return w, xp, x, z
+
+
+def _emit_step(step: _Step, targets: list[str], indent: str) -> list[str]:
+    lines = [f"{indent}const double {s} = {_cxx(e)};" for s, e in step.body]
+    lines.append(f"{indent}acc += {_cxx(step.value)};")
+    for target, g in zip(targets, step.grads):
+        if g != 0:
+            lines.append(f"{indent}{target} += {_cxx(g)};")
+    return lines
+
+
+def header_code(model: StateSpaceModel) -> str:
+    """The C++ header of the model's analytic log density and gradient (see the module
+    docstring): deterministic text for the same model terms."""
+    m, p, d = model.n_params, model.state_dim, model.obs_dim
+    w, xp, x, z = _symbols(model)
+    obs = _step(model.obs_term(w, x, z), w + x, w, "o")
+    trans = _step(model.trans_term(w, xp, x), w + xp + x, w, "r")
+    name = function_name(model)
+    guard = f"SSMOBS_ANALYTIC_{model.slug.upper()}_HPP"
+    g_w = [f"g_w[{i}]" for i in range(m)]
+    now = [f"g_x[(t + 1) * {p} + {i}]" for i in range(p)]
+    before = [f"g_x[t * {p} + {i}]" for i in range(p)]
+    out = [
+        f"// Generated by ssmobs.nuts.analytic_gradients "
+        f"(format {GENERATOR_VERSION}) from the terms",
+        f"// of model '{model.slug}' (workflow/ssmobs/models/{model.slug}.py); do not edit.",
+        "// log pi(Theta | z) = -1/2 [sum_t obs_term(Omega, x_t; z_t)",
+        "//                          + sum_t trans_term(Omega, x_{t-1}, x_t)]  (Eq. (2))",
+        f"#ifndef {guard}",
+        f"#define {guard}",
+        "#include <stan/model/model_header.hpp>",
+        "",
+        f"namespace ssmobs_analytic_{model.slug} {{",
+        "",
+        f"//! log density and its gradient: z (T*{d}), w ({m}), x ((T+1)*{p}), time-major",
+        "inline double value_gradient(const double* z, const double* w, const double* x_all,",
+        "                             const int T, double* g_w, double* g_x) {",
+    ]
+    out += [f"  const double {s} = w[{i}];" for i, s in enumerate(w)]
+    out += [f"  const double {s} = {_cxx(e)};" for s, e in obs.hoisted + trans.hoisted]
+    out += [
+        "  double acc = 0.0;",
+        f"  for (int i = 0; i < {m}; ++i) g_w[i] = 0.0;",
+        f"  for (int i = 0; i < (T + 1) * {p}; ++i) g_x[i] = 0.0;",
+        "  for (int t = 0; t < T; ++t) {",
+        "    {  // observation term at step t + 1",
+    ]
+    out += [f"      const double {s} = x_all[(t + 1) * {p} + {i}];" for i, s in enumerate(x)]
+    out += [f"      const double {s} = z[t * {d} + {i}];" for i, s in enumerate(z)]
+    out += _emit_step(obs, g_w + now, "      ")
+    out += ["    }", "    {  // transition term from step t to t + 1"]
+    out += [f"      const double {s} = x_all[t * {p} + {i}];" for i, s in enumerate(xp)]
+    out += [f"      const double {s} = x_all[(t + 1) * {p} + {i}];" for i, s in enumerate(x)]
+    out += _emit_step(trans, g_w + before + now, "      ")
+    out += [
+        "    }",
+        "  }",
+        f"  for (int i = 0; i < {m}; ++i) g_w[i] *= -0.5;",
+        f"  for (int i = 0; i < (T + 1) * {p}; ++i) g_x[i] *= -0.5;",
+        "  return -0.5 * acc;",
+        "}",
+        "",
+        f"}}  // namespace ssmobs_analytic_{model.slug}",
+        "",
+        "//! The Stan function: z (data), Omega and the states (x_0, x_1..x_T time-major) as",
+        "//! vectors; one callback node on the tape adds adj * gradient to every operand.",
+        "template <typename T_z, typename T_w, typename T_x>",
+        "stan::return_type_t<T_w, T_x>",
+        f"{name}(const T_z& z, const T_w& omega, const T_x& states, std::ostream* pstream__) {{",
+        "  const Eigen::VectorXd z_v = stan::math::value_of(z);",
+        "  const Eigen::VectorXd w_v = stan::math::value_of(omega);",
+        "  const Eigen::VectorXd x_v = stan::math::value_of(states);",
+        f'  static constexpr const char* fn = "{name}";',
+        f'  stan::math::check_size_match(fn, "size of omega", w_v.size(), "m", {m});',
+        f"  const int T = static_cast<int>(z_v.size() / {d});",
+        f'  stan::math::check_size_match(fn, "size of z", z_v.size(), "d T", {d} * T);',
+        '  stan::math::check_size_match(fn, "size of the states", x_v.size(), "p (T + 1)",',
+        f"                               {p} * (T + 1));",
+        "  if constexpr (stan::is_constant_all<T_w, T_x>::value) {",
+        f"    Eigen::VectorXd g_w({m}), g_x(x_v.size());",
+        f"    return ssmobs_analytic_{model.slug}::value_gradient(z_v.data(), w_v.data(),",
+        "        x_v.data(), T, g_w.data(), g_x.data());",
+        "  } else {",
+        f"    stan::arena_t<Eigen::VectorXd> g_w({m}), g_x(x_v.size());",
+        f"    const double lp = ssmobs_analytic_{model.slug}::value_gradient(z_v.data(),",
+        "        w_v.data(), x_v.data(), T, g_w.data(), g_x.data());",
+        "    using vars = Eigen::Matrix<stan::math::var, Eigen::Dynamic, 1>;",
+        "    stan::arena_t<vars> w_arena = omega;",
+        "    stan::arena_t<vars> x_arena = states;",
+        "    return stan::math::make_callback_var(",
+        "        lp, [w_arena, x_arena, g_w, g_x](auto& vi) mutable {",
+        "          for (Eigen::Index i = 0; i < g_w.size(); ++i)",
+        "            w_arena.coeffRef(i).adj() += vi.adj() * g_w.coeff(i);",
+        "          for (Eigen::Index i = 0; i < g_x.size(); ++i)",
+        "            x_arena.coeffRef(i).adj() += vi.adj() * g_x.coeff(i);",
+        "        });",
+        "  }",
+        "}",
+        "",
+        f"#endif  // {guard}",
+        "",
+    ]
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------- Stan program
+def _blank_comments(code: str) -> str:
+    """``code`` with comments replaced by spaces (newlines kept): positions stay valid."""
+
+    def blank(match: re.Match[str]) -> str:
+        return re.sub(r"[^\n]", " ", match.group(0))
+
+    return re.sub(r"/\*.*?\*/|//[^\n]*|#[^\n]*", blank, code, flags=re.S)
+
+
+def _block_span(bare: str, name: str) -> tuple[int, int, int] | None:
+    """(start of the keyword, position after ``{``, position of the closing ``}``) of the
+    top-level block ``name`` (not ``transformed``/``generated`` ``name``)."""
+    for match in re.finditer(rf"\b{name}\s*\{{", bare):
+        if bare[: match.start()].rstrip().endswith(("transformed", "generated")):
+            continue
+        depth = 1
+        for i in range(match.end(), len(bare)):
+            depth += {"{": 1, "}": -1}.get(bare[i], 0)
+            if depth == 0:
+                return match.start(), match.end(), i
+    return None
+
+
+def stan_call(model: StateSpaceModel) -> str:
+    """The model block's statement: the program's z, Omega and states as the function's
+    vectors (Theta's time-major order; ``x`` a ``matrix[T, p]`` when p > 1)."""
+    z = "z" if model.obs_dim == 1 else "to_vector(z')"
+    omega = "[" + ", ".join(model.param_names) + "]'"
+    states = "append_row(x0, x)" if model.state_dim == 1 else "append_row(x0, to_vector(x'))"
+    return f"target += {function_name(model)}({z}, {omega}, {states});"
+
+
+def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
+    """The Stan program ``code`` (with its includes expanded) with its ``model`` block
+    replaced by the call of the generated function, declared in ``functions``."""
+    bare = _blank_comments(code)
+    span = _block_span(bare, "model")
+    if span is None:
+        raise ValueError(f"the Stan program of model '{model.slug}' has no model block")
+    start, _, close = span
+    block = (
+        "model {\n"
+        f"  // the log posterior and its gradient from the terms of models/{model.slug}.py\n"
+        f"  {stan_call(model)}\n"
+        "}"
+    )
+    code = code[:start] + block + code[close + 1 :]
+    decl = (
+        f"  real {function_name(model)}(data vector z, vector omega, vector states);"
+        "  // generated C++\n"
+    )
+    bare = _blank_comments(code)
+    functions = _block_span(bare, "functions")
+    if functions is not None:
+        at = functions[1]
+        return code[:at] + "\n" + decl + code[at:]
+    first = re.search(r"\b(data|transformed\s+data|parameters)\s*\{", bare)
+    at = first.start() if first else 0
+    return code[:at] + "functions {\n" + decl + "}\n" + code[at:]
+
+
+def generated_stan_code(model: StateSpaceModel) -> str:
+    """A whole Stan program for a model without a hand-written one: data ``T``, ``z`` and
+    the prior bounds ``<name>_lower``/``<name>_upper``; each parameter bounded by its prior
+    interval cut to (-1, 1) (:attr:`~ssmobs.models.base.StateSpaceModel.unit_interval_params`)
+    or to (0, inf) (``positive_params``); ``x0``, ``x``; the model block of
+    :func:`analytic_stan_code`.  ValueError for a model with ``support_constraints``, which
+    bounds alone do not express (its program is written by hand, as ``stan/sep_d1_p2.stan``)."""
+    w = sp.symbols(f"w0:{model.n_params}", real=True)
+    if model.support_constraints(list(w)):
+        raise ValueError(
+            f"model '{model.slug}' has support constraints "
+            f"({', '.join(model.constraint_text) or 'support_constraints'}), which a generated "
+            f"program cannot bound: write stan/{model.slug}.stan by hand"
+        )
+    T_vec = "vector[T]" if model.obs_dim == 1 else f"matrix[T, {model.obs_dim}]"
+    lines = [
+        f"// Generated by ssmobs.nuts.analytic_gradients (format {GENERATOR_VERSION}) from",
+        f"// workflow/ssmobs/models/{model.slug}.py: its log posterior (2) with flat priors",
+        "// on Omega over their intervals and a flat prior on x0.",
+        "functions {",
+        f"  real {function_name(model)}(data vector z, vector omega, vector states);",
+        "}",
+        "data {",
+        "  int<lower=1> T;  // number of time steps",
+        f"  {T_vec} z;  // observations z_1..z_T",
+    ]
+    for name in model.param_names:
+        lines += [
+            f"  real {name}_lower;  // bounds of the flat prior on {name} (may be infinite)",
+            f"  real<lower={name}_lower> {name}_upper;",
+        ]
+    lines += ["}", "transformed data {"]
+    for name in model.param_names:
+        lo, hi = f"{name}_lower", f"{name}_upper"
+        if name in model.unit_interval_params:
+            lo, hi = f"fmax({lo}, -1)", f"fmin({hi}, 1)"
+        elif name in model.positive_params:
+            lo = f"fmax({lo}, 0)"
+        lines += [
+            f"  real {name}_lo = {lo};",
+            f"  real {name}_hi = {hi};",
+            f"  if (!({name}_lo < {name}_hi)) {{",
+            f'    reject("empty support for {name}: (", {name}_lo, ", ", {name}_hi, ")");',
+            "  }",
+        ]
+    x0 = "real" if model.state_dim == 1 else f"vector[{model.state_dim}]"
+    x = "vector[T]" if model.state_dim == 1 else f"matrix[T, {model.state_dim}]"
+    lines += ["}", "parameters {"]
+    lines += [f"  real<lower={n}_lo, upper={n}_hi> {n};" for n in model.param_names]
+    lines += [f"  {x0} x0;  // initial state x_0", f"  {x} x;  // states x_1..x_T", "}"]
+    lines += ["model {", f"  {stan_call(model)}", "}", ""]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- files
+@dataclass(frozen=True)
+class AnalyticProgram:
+    """A generated Stan program and its header, in a content-keyed directory."""
+
+    stan_file: Path
+    header: Path
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 (16 hex digits) of both texts: what the program's records are keyed by."""
+        text = self.stan_file.read_text() + "\n//--\n" + self.header.read_text()
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def write_analytic_program(
+    model: StateSpaceModel,
+    stan_file: str | os.PathLike | None,
+    root: str | os.PathLike | None = None,
+) -> AnalyticProgram:
+    """Generate the analytic program of ``model`` from its Stan program ``stan_file`` (None:
+    a whole program, :func:`generated_stan_code`) into ``<root>/<slug>-<digest>/`` (default
+    root: the cache's ``analytic/``), written once and atomically; the same inputs give the
+    same directory and bytes."""
+    from ..stan_backends.base import program_code
+    from ..stan_backends.cache import cache_root
+
+    code = (
+        generated_stan_code(model)
+        if stan_file is None
+        else analytic_stan_code(model, program_code(stan_file))
+    )
+    header = header_code(model)
+    key = hashlib.sha256((code + "\n//--\n" + header).encode()).hexdigest()[:16]
+    base = Path(root) if root is not None else cache_root() / "analytic"
+    folder = base / f"{model.slug}-{key}"
+    program = AnalyticProgram(
+        stan_file=folder / f"{model.slug}_analytic.stan",
+        header=folder / f"{model.slug}_analytic.hpp",
+    )
+    for path, text in ((program.stan_file, code), (program.header, header)):
+        if path.is_file() and path.read_text() == text:
+            continue
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    return program

@@ -1,0 +1,183 @@
+"""The variant x row table of Section IV (issue 20): |K^Stan|/K under Stan set-ups the paper
+leaves open, beside each row's own set-up and the paper's value.
+
+Read from committed reproductions (a folder with ``provenance.json`` and
+``section4_summary.csv``): each row names its baseline, a (folder, scenario) pair; every
+scenario of the study folders with the same ``paper_ref`` is a variant of it. A variant must
+run on the same design trajectories as its baseline (same model, truth, T, K, prior, design
+seed and method, the same every-m-th subset) and under the same convergence checks; what
+differs is its Stan set-up, and that difference is its label (derived, never typed).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from ssmobs import io
+from ssmobs.binomial import format_fraction
+from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS
+from ssmobs.config.validation import ConfigError, read_config_file, validate
+from ssmobs.reports.tables import write_table
+from ssmobs.stage_code import code_digest, digest, file_digest
+
+# what decides a scenario's design trajectories and its Stan subset (Sec. III)
+TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")
+# the Stan set-up: the config's stan block (scenario's stan_settings override), inits, seed
+SETUP_KEYS = (*SAMPLER_FIELDS, "stan_init", "stan_seed")
+OURS = "ours (the row's own set-up)"
+CAPTION = (
+    "Section IV under Stan set-ups the paper leaves open: |K^Stan|/K with its exact binomial "
+    "95 % interval and the number of runs, per set-up (what it changes against the row's own "
+    "set-up) and row, each row on the same design trajectories; the paper's |K^Stan|/K last"
+)
+
+
+class VariantTableError(ValueError):
+    """A variant that cannot be set beside its baseline (other trajectories or checks)."""
+
+
+def _study(folder: str | os.PathLike) -> tuple[dict[str, Any], pd.DataFrame]:
+    """A committed reproduction's config (schema defaults filled in) and Section IV summary."""
+    path = Path(folder)
+    config = validate(io.read_json(path / "provenance.json", required=["config"])["config"])
+    summary = pd.read_csv(path / "section4_summary.csv")
+    return config, summary.set_index("scenario")
+
+
+def stan_setup(config: Mapping[str, Any], scenario: Mapping[str, Any]) -> dict[str, Any]:
+    """The Stan set-up one scenario's runs used (SETUP_KEYS)."""
+    stan = {**config["stan"], **scenario.get("stan_settings", {})}
+    setup = {key: stan[key] for key in SETUP_KEYS if key in stan}
+    setup["stan_init"] = scenario.get("stan_init", "random")
+    setup["stan_seed"] = scenario.get("stan_seed")
+    return setup
+
+
+def _describe(key: str, value: Any) -> str:
+    if key == "init_radius":
+        return "every chain at 0" if value == 0 else f"inits uniform(-{value}, {value})"
+    if key == "stan_init":
+        return {
+            "true": "inits at the true values",
+            "joint_map": "inits at the joint MAP",
+            "random": "random inits",
+        }.get(value, f"inits {value}")
+    if key == "stan_seed":
+        return "a seed per run" if value is None else f"one Stan seed ({value}) for all"
+    if key == "iter_warmup":
+        return f"warmup {value}"
+    return f"{key} {value}"
+
+
+def setup_label(variant: Mapping[str, Any], baseline: Mapping[str, Any]) -> str:
+    """What a variant's Stan set-up changes against its baseline's, in words."""
+    changed = [_describe(k, variant[k]) for k in SETUP_KEYS if variant.get(k) != baseline.get(k)]
+    return ", ".join(changed) if changed else OURS
+
+
+def _checked_same_runs(
+    where: str, config: Mapping, scenario: Mapping, base_config: Mapping, base: Mapping
+) -> None:
+    """Raise unless the variant runs on the baseline's trajectories under its checks."""
+    differs = [k for k in TRAJECTORY_KEYS if scenario.get(k) != base.get(k)]
+    differs += [k for k in ("design", "convergence") if config[k] != base_config[k]]
+    if differs:
+        raise VariantTableError(
+            f"{where}: differs from its baseline {base['name']!r} in {differs}; a variant "
+            "must run on the same design trajectories under the same convergence checks"
+        )
+
+
+def variant_rows(
+    baselines: Sequence[Mapping[str, str]], studies: Sequence[str | os.PathLike]
+) -> pd.DataFrame:
+    """One line per (row, set-up): |K^Stan| of the runs, its fraction with a 95 % interval,
+    the paper's fraction; the baselines first, then the studies' variants in file order."""
+    loaded = {os.fspath(f): _study(f) for f in [b["folder"] for b in baselines] + list(studies)}
+    lines = []
+    for base_ref in baselines:
+        base_config, _ = loaded[os.fspath(base_ref["folder"])]
+        base = next(s for s in base_config["scenarios"] if s["name"] == base_ref["scenario"])
+        base_setup = stan_setup(base_config, base)
+        members = [(os.fspath(base_ref["folder"]), base)]
+        for folder in [os.fspath(s) for s in studies]:
+            config, _ = loaded[folder]
+            for sc in config["scenarios"]:
+                if sc.get("paper_ref") != base.get("paper_ref") or (folder, sc) in members:
+                    continue
+                _checked_same_runs(f"{folder}: {sc['name']}", config, sc, base_config, base)
+                members.append((folder, sc))
+        for folder, sc in members:
+            config, summary = loaded[folder]
+            got = summary.loc[sc["name"]]
+            lines.append(
+                {
+                    "row": base["paper_ref"],
+                    "setup": setup_label(stan_setup(config, sc), base_setup),
+                    "folder": folder,
+                    "scenario": sc["name"],
+                    "K_stan": int(got["K_stan"]),
+                    "runs": int(got["K_stan_runs"]),
+                    "K_stan_frac": got["K_stan_frac"],
+                    "K_stan_frac_lo95": got["K_stan_frac_lo95"],
+                    "K_stan_frac_hi95": got["K_stan_frac_hi95"],
+                    "K_stan_frac_paper": got["K_stan_frac_paper"],
+                }
+            )
+    return pd.DataFrame(lines)
+
+
+def variant_by_row(lines: pd.DataFrame) -> pd.DataFrame:
+    """The table to read: a line per set-up, a column per row, cells "0.76 [0.69, 0.82]" (and
+    the number of runs), the paper's fractions in the last line."""
+    rows = list(dict.fromkeys(lines["row"]))
+    setups = list(dict.fromkeys([OURS, *lines["setup"]]))
+    cells = {
+        (line.setup, line.row): f"{format_fraction(line.K_stan, line.runs)} of {line.runs}"
+        for line in lines.itertuples()
+    }
+    table = [{"Stan set-up": s, **{r: cells.get((s, r), "") for r in rows}} for s in setups]
+    paper = lines.groupby("row", sort=False)["K_stan_frac_paper"].first()
+    table.append({"Stan set-up": "paper", **{r: f"{paper[r]:.3f}" for r in rows}})
+    return pd.DataFrame(table)
+
+
+def read_spec(path: str | os.PathLike) -> dict[str, Any]:
+    """The table's spec (config/tables/stan_variants_by_row.yaml): output, baselines, studies."""
+    spec = read_config_file(path)
+    if not isinstance(spec, dict) or set(spec) != {"output", "baselines", "studies"}:
+        raise ConfigError(f"{path}: needs exactly the keys 'output', 'baselines' and 'studies'")
+    for base in spec["baselines"]:
+        if not isinstance(base, dict) or set(base) != {"folder", "scenario"}:
+            raise ConfigError(
+                f"{path}: baselines: each needs 'folder' and 'scenario', got {base!r}"
+            )
+    return spec
+
+
+def write_variant_table(
+    spec: Mapping[str, Any], csv: str | os.PathLike, md: str | os.PathLike
+) -> None:
+    """The spec's table: the lines to ``csv``, the table to read (with its caption) to ``md``."""
+    lines = variant_rows(spec["baselines"], spec["studies"])
+    write_table(lines, [csv])
+    write_table(variant_by_row(lines), [md], caption=CAPTION)
+
+
+def table_key(inputs: Sequence[str | os.PathLike]) -> str:
+    """The rule's content key: the bytes of every file it reads and the code that reads them
+    (its stamp's content: a stamp of another key is removed before the DAG is built, so the
+    rule reruns when either changes, whatever the file times)."""
+    files = {os.fspath(p): file_digest(os.fspath(p)) for p in inputs}
+    return digest({"inputs": files, "code": code_digest("variant_table")})
+
+
+def spec_inputs(spec: Mapping[str, Any]) -> list[str]:
+    """The committed files the table reads (Snakemake's inputs)."""
+    folders = dict.fromkeys([b["folder"] for b in spec["baselines"]] + list(spec["studies"]))
+    return [f"{f}/{name}" for f in folders for name in ("provenance.json", "section4_summary.csv")]

@@ -1,0 +1,200 @@
+"""The code each stage of the workflow runs, as hashed into its cache keys
+(:mod:`ssmobs.cache_keys`): the stage's entry points (:data:`STAGE_MODULES`), closed over
+their imports inside the package (:func:`module_closure`, without the modules that never
+change a number: :data:`NEUTRAL_MODULES`), its files outside the import graph
+(:data:`STAGE_EXTRA_FILES`) and its rule scripts (:data:`STAGE_SCRIPTS`); a model's own
+modules (:func:`model_closure`) and what they import outside the package
+(:func:`outside_code`); and the digests of payloads and files.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from . import io
+from .code_hashing import environment_dirs, import_closure, outside_modules, syntax_digest
+
+#: the package's own directory (``workflow/ssmobs``)
+PACKAGE_DIR = Path(__file__).resolve().parent
+#: the repository (or workflow copy) this package belongs to
+REPO_DIR = PACKAGE_DIR.parents[1]
+#: hex digits of a key
+KEY_LENGTH = 12
+
+#: the code each stage runs, as entries of :func:`module_closure`: a package module (its
+#: imports followed anywhere in the file), or ``"stages/<stage>.py:f,g"`` for the functions
+#: ``f``, ``g`` of a stage module (:mod:`ssmobs.stages`), whose imports are followed at the
+#: module's top level and inside those functions and the module's functions they call only,
+#: so that e.g. compiling a program does not run the gathered summary's code.
+STAGE_MODULES: dict[str, tuple[str, ...]] = {
+    # the sets k_selection_grid makes (disturbance_set) lie beside the design's own
+    "design": ("stages/design.py:run_design_disturbances,disturbance_set",),
+    "trajectories": ("stages/design.py:run_design_trajectories",),
+    # the command line too: it was part of the check's module
+    "check_model": ("model_check/check.py", "model_check/__main__.py"),
+    "joint_map": ("stages/joint_map.py:run_joint_map",),
+    "k_selection": ("stages/k_selection/grid.py:run_k_selection_grid",),
+    "program": ("stages/stan.py:run_build_stan_model",),
+    "nuts_records": ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
+    "nuts_batches": ("stages/stan.py:run_sample_batch",),
+    "gather": ("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"),
+    "exact": ("stages/exact.py",),
+    # the cells of an observability map: what computes a cell, not the map's table or figure
+    "map_cells": ("stages/observability_map.py:run_map_cells",),
+    # the variant x row table of Section IV, read from committed reproductions
+    "variant_table": ("reports/stan_variants.py",),
+    # every stamped table and figure; observability_study's and observability_map's scripts
+    # call their modules themselves
+    "outputs": (
+        "stages/outputs/paper_tables.py",
+        "stages/outputs/figures.py",
+        "stages/outputs/mu0_sweep.py",
+        "stages/k_selection/choice.py",
+        "reports/observability_study.py",
+        "stages/observability_map.py:write_map,figure_map",
+    ),
+}
+#: the native backend's C++ driver (samples, and evaluates the log density for the check)
+NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
+#: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
+LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
+#: files outside the package's import graph that a stage's results depend on
+STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
+    "design": (LCD_KERNEL,),
+    "program": (NATIVE_DRIVER,),
+    "nuts_records": (NATIVE_DRIVER,),
+}
+#: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
+OUTPUT_SCRIPTS = (
+    "paper_tables",
+    "convergence_sensitivity",
+    "joint_map_mu0_sweep",
+    "select_k",
+    "table_k_selection",
+    "observability_study",
+    "observability_map",
+    "figure_design_points",
+    "figure_joint_vs_marginal",
+    "figure_profile_posterior",
+    "figure_observability",
+    "figure_exact_vs_stan",
+)
+STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
+    "design": ("design_disturbances",),
+    "trajectories": ("design_trajectories",),
+    "check_model": ("check_model",),
+    "joint_map": ("joint_map",),
+    "k_selection": ("k_selection_grid",),
+    "program": ("build_stan_model",),
+    "nuts_records": ("sample_nuts",),
+    "nuts_batches": ("sample_nuts",),
+    "gather": ("gather_nuts",),
+    "exact": ("exact_marginal",),
+    "map_cells": ("observability_map_cells",),
+    "variant_table": ("stan_variant_table",),
+    "outputs": OUTPUT_SCRIPTS,
+}
+#: modules that only log, plan or describe and never change a number or a file's content
+NEUTRAL_MODULES: frozenset[str] = frozenset(
+    {
+        "log.py",
+        "config/budget.py",
+        "config/preflight.py",
+        "config/validation.py",
+        "config/maps.py",
+        "config/schema.py",
+        "config/files.py",
+        "provenance.py",
+    }
+)
+
+
+# --------------------------------------------------------------------------- hashing
+def digest(payload: Any) -> str:
+    """:data:`KEY_LENGTH` hex digits of SHA-256 over canonical JSON of ``payload``."""
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=io.json_default)
+    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 (16 hex digits) of a file's bytes."""
+    return io.file_sha256(path)[:16]
+
+
+@functools.cache
+def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
+    """The modules that ``entries`` (``"module.py"`` or ``"stages/x.py:f,g"``, see
+    :data:`STAGE_MODULES`) run: the entries, every package module they import, directly or
+    not, and the ``__init__.py`` of their packages (sorted relative paths), without
+    :data:`NEUTRAL_MODULES` (:func:`ssmobs.code_hashing.import_closure`)."""
+    return import_closure(entries, package_dir, NEUTRAL_MODULES)
+
+
+#: the model registry (:mod:`ssmobs.models`), which every stage that takes a model runs
+MODEL_REGISTRY = "models/__init__.py"
+
+
+def model_closure(model: str, package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
+    """The modules model ``model`` runs: ``models/<model>.py`` and its :func:`module_closure`
+    without the registry's own (:data:`MODEL_REGISTRY` and what it imports, e.g.
+    ``models/base.py``), which is keyed with the code of every stage that takes a model."""
+    registry = set(module_closure((MODEL_REGISTRY,), package_dir))
+    own = module_closure((f"models/{model}.py",), package_dir)
+    return tuple(f for f in own if f not in registry)
+
+
+def _module_name(relative: str, package_dir: Path) -> tuple[str, bool]:
+    """The dotted name of the package module ``relative`` (a path below ``package_dir``),
+    with whether it is a package's ``__init__.py``."""
+    parts = [package_dir.name, *Path(relative).with_suffix("").parts]
+    is_package = parts[-1] == "__init__"
+    return ".".join(parts[:-1] if is_package else parts), is_package
+
+
+def outside_code(files: Iterable[str], package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
+    """``"import:<name>"`` -> hash of every module outside the package and outside the
+    pinned environment (its standard library and site-packages) that the package modules
+    ``files`` import, directly or not (:func:`ssmobs.code_hashing.outside_modules`): a
+    user's helper on ``PYTHONPATH``, a module of the project tree such as
+    ``workflow/myhelper.py``; with the package modules those import (by their paths).  A
+    Python module by its :func:`syntax_digest`, a compiled one by its bytes.  Found as the
+    running interpreter imports them (the workflow's jobs inherit its ``PYTHONPATH``)."""
+    modules = [(*_module_name(f, package_dir), package_dir / f) for f in files]
+    outside, own = outside_modules(
+        [(name, path, is_pkg) for name, is_pkg, path in modules],
+        package_dir.name,
+        environment_dirs(),
+    )
+    out: dict[str, str] = {}
+    for name, path in sorted(outside.items()):
+        out[f"import:{name}"] = syntax_digest(path) if path.suffix == ".py" else file_digest(path)
+    entries = []
+    for name in own:
+        parts = name.split(".")[1:]
+        candidates = [Path(*parts).with_suffix(".py")] if parts else []
+        for candidate in [*candidates, Path(*parts, "__init__.py")]:
+            if (package_dir / candidate).is_file():
+                entries.append(str(candidate))
+    if entries:
+        for f in module_closure(tuple(sorted(entries)), package_dir):
+            out.setdefault(f, syntax_digest(package_dir / f))
+    return out
+
+
+def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
+    """File -> hash of the code a stage runs: its module closure (its stage module in
+    :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
+    extra files and its rule scripts.  The rule files (``workflow/rules/*.smk``) are not
+    hashed: what they decide (paths, params) is keyed."""
+    files = set(module_closure(STAGE_MODULES[stage], package_dir))
+    files |= set(STAGE_EXTRA_FILES.get(stage, ()))
+    out = {f: file_digest(package_dir / f) for f in sorted(files)}
+    for script in STAGE_SCRIPTS[stage]:
+        path = package_dir.parent / "scripts" / f"{script}.py"
+        out[f"scripts/{script}.py"] = file_digest(path)
+    return out
