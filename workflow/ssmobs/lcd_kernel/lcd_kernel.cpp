@@ -718,4 +718,14 @@ void ssmobs_lcd_e1_psi(const double* c, std::ptrdiff_t n, double* e1, double* ps
     }
 }
 
+// The number of series terms of each argument in [0, 1] by terms_for (``reference``) and by
+// the thresholds the pair loop uses (``fast``), for the test that they agree
+void ssmobs_lcd_terms(const double* c, std::ptrdiff_t n, int* reference, int* fast) {
+    static const Terms terms;
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+        reference[i] = terms_for(c[i]);
+        fast[i] = terms.of(c[i]);
+    }
+}
+
 }  // extern "C"
