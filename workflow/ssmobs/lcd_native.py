@@ -142,8 +142,9 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.ssmobs_lcd_elementwise.argtypes = [_DP, _SIZE, ctypes.c_int, _DP]
     lib.ssmobs_lcd_e1_psi.restype = None
     lib.ssmobs_lcd_e1_psi.argtypes = [_DP, _SIZE, _DP, _DP]
-    lib.ssmobs_lcd_terms.restype = None
-    lib.ssmobs_lcd_terms.argtypes = [_DP, _SIZE, _IP, _IP]
+    if hasattr(lib, "ssmobs_lcd_terms"):  # not in the sources before it (the benchmark's)
+        lib.ssmobs_lcd_terms.restype = None
+        lib.ssmobs_lcd_terms.argtypes = [_DP, _SIZE, _IP, _IP]
     return lib
 
 

@@ -215,14 +215,18 @@ double exp_of(double a) {
 
 // exp_of without a branch (selects only, so that a compiler may run it on vector lanes):
 // the same operations on every a in [-745.2, 709.79], hence the same bits as exp_of; 0 below
-// and +inf above, as exp_of
-inline double exp_lanes(double a) {
+// and +inf above, as exp_of.  Also expm1 as in ssmobs_lcd_quadrature: expm1_reduced(a) for
+// |a| < HALF_LN2, where k = 0 and r = a exactly (fl(a / ln 2) rounds to at most 1/2 in
+// magnitude there, checked at the largest such a), so it is the polynomial already made
+// for exp; exp(a) - 1 elsewhere
+inline double exp_lanes(double a, double* expm1_out) {
     const bool low = a < -745.2;
     const bool high = a > 709.79;
     const double ac = (low || high) ? 0.0 : a;
     const double kd = (ac * INV_LN2 + ROUND_MAGIC) - ROUND_MAGIC;
     const double r = (ac - kd * LN2_HEAD) - kd * LN2_TAIL;
-    const double y = 1.0 + expm1_reduced(r);
+    const double em = expm1_reduced(r);
+    const double y = 1.0 + em;
     // 2^k (k >= -1022) or 2^(k + 600) then 2^-600 (a subnormal result), as exp_of
     const bool sub = kd < -1022.0;
     const double ke = (sub ? kd + 600.0 : kd) + 1023.0;  // the biased exponent, 1..2047
@@ -230,7 +234,9 @@ inline double exp_lanes(double a) {
     const std::uint64_t field = to_bits(ke + 0x1p52) & 0x000fffffffffffffULL;
     const double scale = from_bits(field << 52);
     const double out = (y * scale) * (sub ? 0x1p-600 : 1.0);
-    return low ? 0.0 : (high ? from_bits(0x7ff0000000000000ULL) : out);
+    const double ea = low ? 0.0 : (high ? from_bits(0x7ff0000000000000ULL) : out);
+    *expm1_out = (a > -HALF_LN2 && a < HALF_LN2) ? em : ea - 1.0;
+    return ea;
 }
 
 // exp(a) - 1, accurate also near a = 0
@@ -480,11 +486,9 @@ void ssmobs_lcd_quadrature(const double* s, std::ptrdiff_t n, std::ptrdiff_t q,
         // exp and expm1 of every node's argument on vector lanes, then the sums in order
         for (std::ptrdiff_t l = 0; l < n_nodes; ++l) {
             const double a = lam[l] - half_n * sig[l];
-            const double ea = exp_lanes(a);
-            const bool near0 = a > -HALF_LN2 && a < HALF_LN2;
-            const double em1 = expm1_reduced(near0 ? a : 0.0);
-            ex[l] = ea;
-            exm1[l] = near0 ? em1 : ea - 1.0;
+            double em1;
+            ex[l] = exp_lanes(a, &em1);
+            exm1[l] = em1;
         }
         double sj = 0.0;
         double sm = 0.0;
