@@ -13,10 +13,11 @@
 // - log, exp and expm1 are our own (range reduction and Taylor polynomials, below): neither
 //   the C library's nor NumPy's, whose last bits differ between versions and CPU kernels;
 // - one thread.
-// A vectorising compiler may run the element-wise loops on several lanes at once: each lane
-// does the same IEEE operations in the same order, so the bits do not change (the tests
-// build the kernel also without optimisation, and ssmobs/lcd_native.py builds it twice, for
-// the x86-64 baseline and with -mavx2, and the tests compare the bits of all three).
+// A vectorising compiler may run the element-wise loops on several lanes at once, and some
+// loops are written on vectors (Lanes, below): each lane does the same IEEE operations in
+// the same order, so the bits do not change (the tests build the kernel also without
+// optimisation, and ssmobs/lcd_native.py builds it three times, for the x86-64 baseline,
+// with -mavx2 and with -mavx512f, and the tests compare the bits of all).
 
 #include <cstddef>
 #include <cstdint>
