@@ -44,8 +44,9 @@ const std::ptrdiff_t TILE = 32;
 // a row's arguments are padded to a multiple of LANES (2 * TILE is one)
 const int LANES = 8;
 // VECTOR_LANES doubles, the target's vector width (wider vectors the compiler splits,
-// slowly; LANES is a multiple of it), with element-wise IEEE arithmetic (GCC's and Clang's
-// vector extension: each operation on each element, the same bits on any width)
+// slowly; LANES is a multiple of it), with element-wise IEEE arithmetic (the vector
+// extension of GCC, which Clang also has: each operation, compare and select on each
+// element, the same bits on any width; checked with GCC)
 #if defined(__AVX512F__)
 const int VECTOR_LANES = 8;
 #elif defined(__AVX__)
