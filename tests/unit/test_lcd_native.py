@@ -153,7 +153,7 @@ def test_the_kernel_source_and_flags_key_the_design_sets():
     assert lcd_native.build_key() != lcd_native.build_key(lcd_native.CXXFLAGS + ("-g",))
     # each build its own cache entry; both flag sets sit in lcd_native.py, part of the key
     keys = {lcd_native.build_key(flags) for flags in lcd_native.BUILDS.values()}
-    assert len(keys) == len(lcd_native.BUILDS) == 2
+    assert len(keys) == len(lcd_native.BUILDS) == 3
 
 
 def _bytes_of(lib, q: int, K: int, b: float, seed: int, zero_rows: int) -> bytes:
@@ -165,47 +165,105 @@ def _bytes_of(lib, q: int, K: int, b: float, seed: int, zero_rows: int) -> bytes
     return np.float64(v).tobytes() + g.tobytes() + np.float64(v_only).tobytes()
 
 
-@pytest.mark.skipif(not lcd_native.has_avx2(), reason="this CPU has no AVX2: one build only")
-def test_the_avx2_build_gives_the_bits_of_the_baseline_build():
-    """The two builds (x86-64: SSE2, two lanes; -mavx2: four lanes, no FMA) on random sets,
-    q = 1..48, odd and even K, widths with arguments above 1 (continued fraction) and
-    points at the origin: the same bytes of value and gradient, and of log, exp, expm1,
-    E1 and psi on arguments over the whole range."""
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            name,
+            marks=pytest.mark.skipif(
+                not lcd_native.runs(name),
+                reason=f"this CPU has no {lcd_native.BUILD_CPU_FLAG[name]}",
+            ),
+        )
+        for name in lcd_native.BUILDS
+        if name != "x86-64"
+    ],
+)
+def test_each_vector_build_gives_the_bits_of_the_baseline_build(name):
+    """Each vector build (-mavx2: four lanes; -mavx512f: eight; no FMA) against the
+    baseline (SSE2, two lanes) on random sets, q = 1..48 (q = 8 takes its own gradient
+    loop, q <= 32 and q > 32 two loop orders), odd and even K, widths with arguments above 1
+    (continued fraction) and points at the origin: the same bytes of value and gradient,
+    and of log, exp, expm1, E1 and psi on arguments over the whole range."""
     base = lcd_native.kernel_of("x86-64")
-    avx2 = lcd_native.kernel_of("x86-64-avx2")
-    assert lcd_native.BUILDS["x86-64-avx2"] != lcd_native.BUILDS["x86-64"]
-    assert not any("fma" in f or "march" in f for f in lcd_native.BUILDS["x86-64-avx2"])
+    vec = lcd_native.kernel_of(name)
+    assert lcd_native.BUILDS[name] != lcd_native.BUILDS["x86-64"]
+    assert not any("fma" in f or "march" in f for f in lcd_native.BUILDS[name])
     rng = np.random.default_rng(48)
     cases = 0
     for q in range(1, 49):
         K = int(rng.integers(2, 90)) if q > 8 else int(rng.integers(2, 300))
         b = b_max_rule(q) * float(rng.choice([1.0, 0.3, 0.05]))  # small widths: c > 1
         zero_rows = int(rng.integers(0, 3))
-        got = _bytes_of(avx2, q, K, b, seed=q, zero_rows=zero_rows)
+        got = _bytes_of(vec, q, K, b, seed=q, zero_rows=zero_rows)
         assert got == _bytes_of(base, q, K, b, seed=q, zero_rows=zero_rows), (q, K, b)
         cases += 1
-    for q, K, b in [(8, 1000, b_max_rule(8)), (8, 999, 2.0), (40, 301, 0.7), (48, 257, None)]:
+    for q, K, b in [(8, 1000, b_max_rule(8)), (8, 999, 2.0), (40, 301, 0.7), (48, 257, None),
+                    (200, 101, None)]:  # fmt: skip
         bb = b_max_rule(q) if b is None else b
-        assert _bytes_of(avx2, q, K, bb, 1, 0) == _bytes_of(base, q, K, bb, 1, 0), (q, K)
+        assert _bytes_of(vec, q, K, bb, 1, 0) == _bytes_of(base, q, K, bb, 1, 0), (q, K)
         cases += 1
-    assert cases == 52
+    assert cases == 53
     x = np.concatenate([np.exp(rng.uniform(-745, 709, 4000)), [5e-324, 1e-310, 1.0, 2.0]])
-    for name, arg in [("log", x), ("exp", rng.uniform(-760, 720, 4000)),
-                      ("expm1", rng.uniform(-40, 40, 4000))]:  # fmt: skip
-        a = lcd_native.elementwise(arg, name, lib=avx2)
-        assert a.tobytes() == lcd_native.elementwise(arg, name, lib=base).tobytes(), name
+    for function, arg in [("log", x), ("exp", rng.uniform(-760, 720, 4000)),
+                          ("expm1", rng.uniform(-40, 40, 4000))]:  # fmt: skip
+        a = lcd_native.elementwise(arg, function, lib=vec)
+        assert a.tobytes() == lcd_native.elementwise(arg, function, lib=base).tobytes(), function
     c = np.concatenate([rng.uniform(0, 2, 4000), rng.exponential(20, 1000), [0.0, 1.0]])
-    e_a, p_a = lcd_native.e1_psi(c, lib=avx2)
+    e_a, p_a = lcd_native.e1_psi(c, lib=vec)
     e_b, p_b = lcd_native.e1_psi(c, lib=base)
     assert e_a.tobytes() == e_b.tobytes() and p_a.tobytes() == p_b.tobytes()
 
 
+def test_the_series_terms_by_thresholds_are_those_of_the_rule():
+    """The pair loop picks a row's number of E1 series terms by thresholds found once; they
+    give the number of the rule (first omitted term <= 1e-17, by products) on every
+    argument, also at each change of the number and one double either side of it."""
+    rng = np.random.default_rng(17)
+    c = np.concatenate([rng.uniform(0, 1, 20000), np.exp(rng.uniform(-40, 0, 20000)),
+                        [0.0, 5e-324, 1e-300, 0.5, 1.0]])  # fmt: skip
+    reference, fast = lcd_native.series_terms(c)
+    assert set(reference) >= {1, 5, 10, 15}  # the arguments span many numbers of terms
+    # where the number changes: bisect each change on the sorted grid down to adjacent doubles
+    order = np.sort(c)
+    ref_sorted, _ = lcd_native.series_terms(order)
+    edges = []
+    for k in np.flatnonzero(np.diff(ref_sorted)):
+        lo, hi = order[k], order[k + 1]
+        for _ in range(80):
+            mid = lo + (hi - lo) / 2
+            if mid in (lo, hi):
+                break
+            r_mid, _ = lcd_native.series_terms(np.array([mid]))
+            lo, hi = (mid, hi) if r_mid[0] == ref_sorted[k] else (lo, mid)
+        edges += [np.nextafter(lo, 0.0), lo, hi, np.nextafter(hi, 2.0)]
+    assert len(edges) >= 4 * 10
+    ref_e, fast_e = lcd_native.series_terms(np.array(edges))
+    assert np.array_equal(reference, fast) and np.array_equal(ref_e, fast_e)
+    assert len(set(ref_e)) > 10
+
+
 def test_the_build_follows_the_cpu_unless_forced(monkeypatch):
     monkeypatch.delenv(lcd_native.BUILD_ENV, raising=False)
-    auto = "x86-64-avx2" if lcd_native.has_avx2() else "x86-64"
+    flags = lcd_native.cpu_flags()
+    auto = (
+        "x86-64-avx512" if "avx512f" in flags else ("x86-64-avx2" if "avx2" in flags else "x86-64")
+    )
+    assert lcd_native.chosen_build() == auto
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "auto")
     assert lcd_native.chosen_build() == auto
     monkeypatch.setenv(lcd_native.BUILD_ENV, "x86-64")
     assert lcd_native.chosen_build() == "x86-64"
     monkeypatch.setenv(lcd_native.BUILD_ENV, "avx512")
     with pytest.raises(ValueError, match="SSMOBS_LCD_BUILD must be auto or one of"):
         lcd_native.chosen_build()
+    # a CPU without AVX-512 (or AVX2): auto falls back, forcing the build is a clear error
+    monkeypatch.setattr(lcd_native, "cpu_flags", lambda: frozenset({"sse2", "avx2"}))
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "auto")
+    assert lcd_native.chosen_build() == "x86-64-avx2"
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "x86-64-avx512")
+    with pytest.raises(ValueError, match="this CPU has no avx512f"):
+        lcd_native.chosen_build()
+    monkeypatch.setattr(lcd_native, "cpu_flags", lambda: frozenset())
+    monkeypatch.setenv(lcd_native.BUILD_ENV, "auto")
+    assert lcd_native.chosen_build() == "x86-64"

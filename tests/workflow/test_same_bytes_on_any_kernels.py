@@ -19,7 +19,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-from factories import same_a09
 from helpers import make_workdir, snakemake
 
 OUT = "paper_figures/kernels"
@@ -27,7 +26,8 @@ CONFIG = {
     "outputs_dir": OUT,
     "scenarios": [
         # q = (d + p) T = 40: the design set's optimiser runs through BLAS and NumPy's exp
-        same_a09(name="same_T20", T=20, K=6, prior="restricted"),
+        {"name": "same_T20", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 6,
+         "prior": "restricted"},
     ],
     "paper_outputs": {"tables_2_3": ["same_T20"], "figure3": []},
     "observability_studies": [],
@@ -62,10 +62,11 @@ print(h.hexdigest())
 #: the compiled LCD kernel (ssmobs.design.lcd_native) on a few sets, as bytes: value and gradient
 LCD_KERNEL = """
 import hashlib, numpy as np
-from ssmobs import lcd_native
+from ssmobs.design import lcd_native
 from ssmobs.design.lcd_distance import _quadrature
 h = hashlib.sha256()
-for q, K, b in [(8, 301, 10.0), (40, 120, 50.0), (2, 33, 0.7), (200, 41, 100.0)]:
+for q, K, b in [(8, 301, 10.0), (40, 120, 50.0), (2, 33, 0.7), (200, 41, 100.0),
+                (8, 1000, 10.0), (13, 77, 0.5)]:
     s = np.random.default_rng(q + K).standard_normal((K // 2, q))
     quad = _quadrature(q, b, 80)
     rule = (quad.lam, quad.sig, quad.alpha, quad.beta, quad.d1p, quad.j0p)
@@ -142,24 +143,28 @@ def test_the_compiled_lcd_kernel_gives_the_same_bytes_under_any_kernels_and_thre
     with its own log/exp and its quadrature rule in decimal arithmetic): the same bytes with
     this machine's own NumPy and OpenBLAS kernels and 4 threads, the fixed ones and 1
     thread, and another OpenBLAS kernel with 2 threads; each with the build the kernel
-    picks for this CPU (the AVX2 build where there is AVX2) and, forced, the x86-64 baseline
-    build.  Not skipped where the kernels give the same bits anyway: the kernel must not
-    depend on them in any case.  (The workflow run above makes its q = 40 design set with
-    this kernel, in the build it picks.)"""
+    picks for this CPU (the widest: AVX-512 or AVX2) and, forced, the x86-64 baseline build;
+    and every vector build this CPU runs, forced.  Not skipped where the kernels give the
+    same bits anyway: the kernel must not depend on them in any case.  (The workflow run
+    above makes its q = 40 design set with this kernel, in the build it picks.)"""
     from ssmobs.design import lcd_native
     from ssmobs.design.lcd_distance import COMPILED_MAX_Q
 
     assert COMPILED_MAX_Q >= 40  # the set of the run above goes through the compiled kernel
     other = {"OPENBLAS_CORETYPE": "Sandybridge", "OPENBLAS_NUM_THREADS": "2"}
     baseline = {lcd_native.BUILD_ENV: "x86-64"}
-    digests = {
-        name: probe(env, LCD_KERNEL)
-        for name, env in [
-            ("own, 4 threads", environment(OWN, UNSET_FOR_OWN + (lcd_native.BUILD_ENV,))),
-            ("fixed, 1 thread", environment(FIXED, (lcd_native.BUILD_ENV,))),
-            ("Sandybridge, 2 threads", environment(other, UNSET_FOR_OWN)),
-            ("own, 4 threads, x86-64 build", environment({**OWN, **baseline}, UNSET_FOR_OWN)),
-            ("fixed, 1 thread, x86-64 build", environment({**FIXED, **baseline})),
-        ]
-    }
+    runs = [
+        ("own, 4 threads", environment(OWN, UNSET_FOR_OWN + (lcd_native.BUILD_ENV,))),
+        ("fixed, 1 thread", environment(FIXED, (lcd_native.BUILD_ENV,))),
+        ("Sandybridge, 2 threads", environment(other, UNSET_FOR_OWN)),
+        ("own, 4 threads, x86-64 build", environment({**OWN, **baseline}, UNSET_FOR_OWN)),
+        ("fixed, 1 thread, x86-64 build", environment({**FIXED, **baseline})),
+    ]
+    # every other build this CPU runs, forced (the picked one also ran above, unforced)
+    for name in lcd_native.BUILDS:
+        if name != "x86-64" and lcd_native.runs(name):
+            forced = {lcd_native.BUILD_ENV: name}
+            runs.append((f"fixed, 1 thread, {name} build", environment({**FIXED, **forced})))
+    digests = {name: probe(env, LCD_KERNEL) for name, env in runs}
+    assert len(digests) >= (6 if lcd_native.has_avx2() else 5)
     assert len(set(digests.values())) == 1, digests

@@ -10,18 +10,20 @@ OpenBLAS's kernels and thread counts, and whichever compiler built it (IEEE 754 
 in the order the source writes).  Its source and :data:`CXXFLAGS` are part of the design
 sets' cache key (:mod:`ssmobs.cache_keys`).
 
-Two builds of the one source (:data:`BUILDS`): ``x86-64`` (the baseline, SSE2: two lanes)
-and ``x86-64-avx2`` (the same flags and ``-mavx2 -mtune=haswell``: four lanes, table
-lookups by gathers, still without FMA, so no ``a*b+c`` is contracted).  :func:`kernel`
-loads the AVX2 build on a CPU with AVX2 (every CPU of the workflow's same-bytes guarantee,
-:mod:`ssmobs.kernels`) and the baseline elsewhere; ``SSMOBS_LCD_BUILD`` (``auto``,
-``x86-64`` or ``x86-64-avx2``) forces one, for the tests and the benchmark.  Both give the
-same bits: the source fixes the order of every sum (the compiler may not reorder
-floating-point sums without fast-math), and every vectorised loop runs element-wise IEEE
-operations (+, -, *, /, compares and selects, bit operations on the doubles' bits, loads),
-which are correctly rounded on two lanes as on four; a test
-(``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient of both builds
-on random sets, and the kernels test runs the build :func:`kernel` picks and the baseline.
+Three builds of the one source (:data:`BUILDS`): ``x86-64`` (the baseline, SSE2: two
+lanes), ``x86-64-avx2`` (the same flags and ``-mavx2 -mtune=haswell``: four lanes, table
+lookups by gathers) and ``x86-64-avx512`` (``-mavx512f -mprefer-vector-width=512
+-mtune=skylake-avx512``: eight lanes), the last two still without contraction, so no
+``a*b+c`` becomes a fused multiply-add.  :func:`kernel` loads the widest build the CPU runs
+(AVX2 on every CPU of the workflow's same-bytes guarantee, :mod:`ssmobs.kernels`; AVX-512
+where the CPU has AVX-512F); ``SSMOBS_LCD_BUILD`` (``auto`` or a build's name) forces one,
+for the tests and the benchmark.  All give the same bits: the source fixes the order of
+every sum (the compiler may not reorder floating-point sums without fast-math), and every
+vectorised loop runs element-wise IEEE operations (+, -, *, /, compares and selects, bit
+operations on the doubles' bits, loads), which are correctly rounded on two lanes as on
+eight; a test (``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient
+of every build this CPU runs on random sets, and the kernels test runs the build
+:func:`kernel` picks and the baseline.
 
 Building: ``$CXX`` (default ``g++``, which the Stan driver needs anyway) compiles the
 source once into ``<cache>/lcd/kernel-<key>/liblcd.so`` (the cache of the compiled Stan
@@ -79,12 +81,26 @@ CXXFLAGS: tuple[str, ...] = (
     "-fPIC",
     "-shared",
 )
-#: the builds of the kernel: name -> flags (see the module docstring); AVX2 without FMA,
-#: tuned (instruction choice only, not what is computed) for Haswell, the first CPU with
-#: AVX2, so that the compiler loads the logarithm's table entries with gathers
+#: the builds of the kernel: name -> flags (see the module docstring), in the order of
+#: preference (the last one the CPU runs is picked); AVX2 and AVX-512 without contraction,
+#: tuned (instruction choice only, not what is computed) for the first CPU with each, so
+#: that the compiler loads the logarithm's table entries with gathers (untuned, the AVX-512
+#: build took twice the time); AVX-512 on full-width vectors
 BUILDS: dict[str, tuple[str, ...]] = {
     "x86-64": CXXFLAGS,
     "x86-64-avx2": (*CXXFLAGS, "-mavx2", "-mtune=haswell"),
+    "x86-64-avx512": (
+        *CXXFLAGS,
+        "-mavx512f",
+        "-mprefer-vector-width=512",
+        "-mtune=skylake-avx512",
+    ),
+}
+#: the CPU flag each build needs (``/proc/cpuinfo``)
+BUILD_CPU_FLAG: dict[str, str] = {
+    "x86-64": "",
+    "x86-64-avx2": "avx2",
+    "x86-64-avx512": "avx512f",
 }
 #: the environment variable that forces a build (``auto``: by the CPU)
 BUILD_ENV = "SSMOBS_LCD_BUILD"
@@ -94,6 +110,7 @@ LIB_NAME = "liblcd.so"
 BUILD_RECORD = "build.json"
 
 _DP = ctypes.POINTER(ctypes.c_double)
+_IP = ctypes.POINTER(ctypes.c_int)
 _SIZE = ctypes.c_ssize_t
 
 
@@ -125,6 +142,9 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
     lib.ssmobs_lcd_elementwise.argtypes = [_DP, _SIZE, ctypes.c_int, _DP]
     lib.ssmobs_lcd_e1_psi.restype = None
     lib.ssmobs_lcd_e1_psi.argtypes = [_DP, _SIZE, _DP, _DP]
+    if hasattr(lib, "ssmobs_lcd_terms"):  # not in the sources before it (the benchmark's)
+        lib.ssmobs_lcd_terms.restype = None
+        lib.ssmobs_lcd_terms.argtypes = [_DP, _SIZE, _IP, _IP]
     return lib
 
 
@@ -195,33 +215,44 @@ def _umask() -> int:
 
 
 @lru_cache(maxsize=1)
-def has_avx2() -> bool:
-    """Whether this CPU runs AVX2: x86-64 with the ``avx2`` flag in ``/proc/cpuinfo`` (read
-    here, not with :func:`ssmobs.kernels.cpu_flags`: the design sets' key would then follow
-    every edit of that module; the build does not change a result)."""
+def cpu_flags() -> frozenset[str]:
+    """The flags of this CPU in ``/proc/cpuinfo`` (empty off x86-64); read here, not with
+    :func:`ssmobs.kernels.cpu_flags`: the design sets' key would then follow every edit of
+    that module (the build does not change a result)."""
     if platform.machine() not in ("x86_64", "AMD64"):
-        return False
+        return frozenset()
     try:
         text = Path("/proc/cpuinfo").read_text()
     except OSError:
-        return False
+        return frozenset()
     for line in text.splitlines():
         if line.startswith("flags"):
-            return "avx2" in line.split(":", 1)[-1].split()
-    return False
+            return frozenset(line.split(":", 1)[-1].split())
+    return frozenset()
+
+
+def runs(name: str) -> bool:
+    """Whether this CPU runs the build ``name`` of :data:`BUILDS`."""
+    flag = BUILD_CPU_FLAG[name]
+    return not flag or flag in cpu_flags()
+
+
+def has_avx2() -> bool:
+    """Whether this CPU runs AVX2 (x86-64 with the ``avx2`` flag)."""
+    return runs("x86-64-avx2")
 
 
 def chosen_build() -> str:
     """The build :func:`kernel` loads: ``$SSMOBS_LCD_BUILD`` unless ``auto`` (or unset), else
-    ``x86-64-avx2`` on a CPU with AVX2 and ``x86-64`` elsewhere.  ValueError (one line) for
-    an unknown name or the AVX2 build forced on a CPU without AVX2."""
+    the last build of :data:`BUILDS` this CPU runs (AVX-512, AVX2, the baseline).
+    ValueError (one line) for an unknown name or a build the CPU cannot run."""
     name = os.environ.get(BUILD_ENV, "auto") or "auto"
     if name == "auto":
-        return "x86-64-avx2" if has_avx2() else "x86-64"
+        return [b for b in BUILDS if runs(b)][-1]
     if name not in BUILDS:
         raise ValueError(f"{BUILD_ENV} must be auto or one of {sorted(BUILDS)}; got {name!r}")
-    if name == "x86-64-avx2" and not has_avx2():
-        raise ValueError(f"{BUILD_ENV}={name}: this CPU has no AVX2")
+    if not runs(name):
+        raise ValueError(f"{BUILD_ENV}={name}: this CPU has no {BUILD_CPU_FLAG[name]}")
     return name
 
 
@@ -305,3 +336,15 @@ def e1_psi(c: np.ndarray, lib: ctypes.CDLL | None = None) -> tuple[np.ndarray, n
     psi = np.empty_like(c)
     lib.ssmobs_lcd_e1_psi(_ptr(c), c.size, _ptr(e1), _ptr(psi))
     return e1, psi
+
+
+def series_terms(c: np.ndarray, lib: ctypes.CDLL | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's number of E1 series terms of each ``c`` in [0, 1]: by its rule (first
+    omitted term <= 1e-17, from products) and by the thresholds its pair loop uses (for the
+    test that they agree)."""
+    lib = kernel() if lib is None else lib
+    c = np.ascontiguousarray(c, dtype=np.float64).ravel()
+    reference = np.empty(c.size, dtype=np.intc)
+    fast = np.empty(c.size, dtype=np.intc)
+    lib.ssmobs_lcd_terms(_ptr(c), c.size, reference.ctypes.data_as(_IP), fast.ctypes.data_as(_IP))
+    return reference, fast

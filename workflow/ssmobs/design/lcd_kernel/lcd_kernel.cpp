@@ -1,22 +1,23 @@
-// The LCD distance of a point-symmetric set and its gradient, compiled (ssmobs.lcd_native).
+// The LCD distance of a point-symmetric set and its gradient, compiled (ssmobs.design.lcd_native).
 //
-// The same formulas as the NumPy reference ssmobs.lcd_distance._symmetric_distance_numpy
+// The same formulas as the NumPy reference ssmobs.design.lcd_distance._symmetric_distance_numpy
 // (docs/lcd-design-disturbances.md, Sections 2.4 and 4), fused into one pass over the pairs
 // of the half-set: Gram entry, E1 and psi of T- and T+, the psi sum, and the gradient terms
 // ((E- - E+) S)_i and ((E- + E+) 1)_i, so that no N x N array is ever written.
 //
 // Same bits on any x86-64 CPU and with any compiler that follows IEEE 754 (no fast-math, no
 // contraction of a*b+c into a fused multiply-add: -ffp-contract=off; the flags are fixed in
-// ssmobs/lcd_native.py and are part of the cache key of the design sets):
+// ssmobs/design/lcd_native.py and are part of the cache key of the design sets):
 // - every sum runs in one fixed order, written out below (no reduction is left to the
 //   compiler, which may not reorder floating-point sums without -ffast-math);
 // - log, exp and expm1 are our own (range reduction and Taylor polynomials, below): neither
 //   the C library's nor NumPy's, whose last bits differ between versions and CPU kernels;
 // - one thread.
-// A vectorising compiler may run the element-wise loops on several lanes at once: each lane
-// does the same IEEE operations in the same order, so the bits do not change (the tests
-// build the kernel also without optimisation, and ssmobs/lcd_native.py builds it twice, for
-// the x86-64 baseline and with -mavx2, and the tests compare the bits of all three).
+// A vectorising compiler may run the element-wise loops on several lanes at once, and some
+// loops are written on vectors (Lanes, below): each lane does the same IEEE operations in
+// the same order, so the bits do not change (the tests build the kernel also without
+// optimisation, and ssmobs/design/lcd_native.py builds it three times, for the x86-64 baseline,
+// with -mavx2 and with -mavx512f, and the tests compare the bits of all).
 
 #include <cstddef>
 #include <cstdint>
@@ -40,8 +41,22 @@ const double SERIES_MAX = 1.0;
 const int MAX_TERMS = 30;
 // rows (and columns) of one tile of the pair grid
 const std::ptrdiff_t TILE = 32;
-// partial maxima of a row's arguments (2 * TILE is a multiple of it)
-const int MAX_LANES = 4;
+// a row's arguments are padded to a multiple of LANES (2 * TILE is one)
+const int LANES = 8;
+// VECTOR_LANES doubles, the target's vector width (wider vectors the compiler splits,
+// slowly; LANES is a multiple of it), with element-wise IEEE arithmetic (the vector
+// extension of GCC, which Clang also has: each operation, compare and select on each
+// element, the same bits on any width; checked with GCC)
+#if defined(__AVX512F__)
+const int VECTOR_LANES = 8;
+#elif defined(__AVX__)
+const int VECTOR_LANES = 4;
+#else
+const int VECTOR_LANES = 2;
+#endif
+typedef double Lanes __attribute__((vector_size(VECTOR_LANES * sizeof(double))));
+// rows of at most this many coordinates take the gradient's other loop order
+const std::ptrdiff_t SHORT_ROWS = 32;
 
 double from_bits(std::uint64_t b) {
     double x;
@@ -200,6 +215,32 @@ double exp_of(double a) {
     return y * pow2(k);
 }
 
+// exp_of without a branch (selects only, so that a compiler may run it on vector lanes):
+// the same operations on every a in [-745.2, 709.79], hence the same bits as exp_of; 0 below
+// and +inf above, as exp_of.  Also expm1 as in ssmobs_lcd_quadrature: expm1_reduced(a) for
+// |a| < HALF_LN2, where k = 0 and r = a exactly (fl(a / ln 2) rounds to at most 1/2 in
+// magnitude there, checked at the largest such a), so it is the polynomial already made
+// for exp; exp(a) - 1 elsewhere
+inline double exp_lanes(double a, double* expm1_out) {
+    const bool low = a < -745.2;
+    const bool high = a > 709.79;
+    const double ac = (low || high) ? 0.0 : a;
+    const double kd = (ac * INV_LN2 + ROUND_MAGIC) - ROUND_MAGIC;
+    const double r = (ac - kd * LN2_HEAD) - kd * LN2_TAIL;
+    const double em = expm1_reduced(r);
+    const double y = 1.0 + em;
+    // 2^k (k >= -1022) or 2^(k + 600) then 2^-600 (a subnormal result), as exp_of
+    const bool sub = kd < -1022.0;
+    const double ke = (sub ? kd + 600.0 : kd) + 1023.0;  // the biased exponent, 1..2047
+    // its bits: ke (an integer in [0, 2^52)) added to 2^52 has it in its low bits
+    const std::uint64_t field = to_bits(ke + 0x1p52) & 0x000fffffffffffffULL;
+    const double scale = from_bits(field << 52);
+    const double out = (y * scale) * (sub ? 0x1p-600 : 1.0);
+    const double ea = low ? 0.0 : (high ? from_bits(0x7ff0000000000000ULL) : out);
+    *expm1_out = (a > -HALF_LN2 && a < HALF_LN2) ? em : ea - 1.0;
+    return ea;
+}
+
 // exp(a) - 1, accurate also near a = 0
 double expm1_of(double a) {
     if (a > -HALF_LN2 && a < HALF_LN2) return expm1_reduced(a);
@@ -264,6 +305,46 @@ int terms_for(double c) {
     return MAX_TERMS;
 }
 
+// terms_for by thresholds: the predicate of terms_for for m, "fl(c^(m+1)) <= fl(1e-17 (m+1)
+// (m+1)!)", holds for c up to a largest double thr[m] and not above it (fl(c^(m+1)), a
+// product of roundings, does not decrease as c grows), so terms_for(c) is the first m with
+// c <= thr[m]: the same numbers without the products (thr[m] found once, by bisection on
+// the bits of the non-negative doubles, whose order is that of their values)
+struct Terms {
+    double thr[MAX_TERMS];  // thr[m] for m = 1..MAX_TERMS-1
+    static bool holds(double c, int m) {  // the predicate of terms_for, as terms_for
+        double power = c;
+        double fact = 1.0;
+        for (int k = 1; k <= m; ++k) {
+            power *= c;
+            fact *= static_cast<double>(k + 1);
+        }
+        return power <= 1e-17 * (static_cast<double>(m + 1) * fact);
+    }
+    Terms() {
+        thr[0] = 0.0;
+        for (int m = 1; m < MAX_TERMS; ++m) {
+            std::uint64_t lo = 0, hi = to_bits(1.0);  // holds(lo); holds(hi) or hi = 1
+            if (holds(1.0, m)) {
+                thr[m] = 1.0;
+                continue;
+            }
+            while (hi - lo > 1) {
+                const std::uint64_t mid = lo + (hi - lo) / 2;
+                if (holds(from_bits(mid), m)) lo = mid;
+                else hi = mid;
+            }
+            thr[m] = from_bits(lo);
+        }
+    }
+    int of(double c) const {  // terms_for(c) for 0 <= c <= 1
+        for (int m = 1; m < MAX_TERMS; ++m) {
+            if (c <= thr[m]) return m;
+        }
+        return MAX_TERMS;
+    }
+};
+
 struct Pair {
     double e1;   // E1(c) (0 at c <= 0)
     double psi;  // psi(T) / (4 B^2) (0 at c <= 0)
@@ -298,6 +379,93 @@ Pair e1_psi(double c, int m, const Series& ser) {
     return out;
 }
 
+// The gradient terms of one tile of pairs (ssmobs_lcd_pairs): for the rows i of the tile
+// gpair_i += sum_j dif_ij s_j and rsum_i += sum_j sum_ij (columns j ascending), then for the
+// columns j (pairs j > i only) gpair_j += sum_i dif_ij s_i and rsum_j += sum_i sum_ij (rows
+// i ascending).  Two loop orders with the same sums in the same order, hence the same bits:
+// for long rows (large q) a row at a time, the q coordinates on vector lanes; for short
+// rows (q <= SHORT_ROWS) the other index outermost, so that consecutive updates go to other
+// rows and do not wait for each other.
+void gradient_tile_long(const double* s, std::ptrdiff_t q, std::ptrdiff_t i0,
+                        std::ptrdiff_t ni, std::ptrdiff_t j0, std::ptrdiff_t nj, bool diag,
+                        const double* dif, const double* sum, double* gpair, double* rsum) {
+    for (std::ptrdiff_t ii = 0; ii < ni; ++ii) {
+        double* __restrict gi = &gpair[(i0 + ii) * q];
+        double r = rsum[i0 + ii];
+        for (std::ptrdiff_t jj = diag ? ii : 0; jj < nj; ++jj) {
+            const double d = dif[ii * TILE + jj];
+            const double* __restrict sj = &s[(j0 + jj) * q];
+            for (std::ptrdiff_t k = 0; k < q; ++k) gi[k] = gi[k] + d * sj[k];
+            r = r + sum[ii * TILE + jj];
+        }
+        rsum[i0 + ii] = r;
+    }
+    for (std::ptrdiff_t jj = 0; jj < nj; ++jj) {
+        double* __restrict gj = &gpair[(j0 + jj) * q];
+        double r = rsum[j0 + jj];
+        const std::ptrdiff_t iend = diag ? jj : ni;
+        for (std::ptrdiff_t ii = 0; ii < iend; ++ii) {
+            const double d = dif[ii * TILE + jj];
+            const double* __restrict si = &s[(i0 + ii) * q];
+            for (std::ptrdiff_t k = 0; k < q; ++k) gj[k] = gj[k] + d * si[k];
+            r = r + sum[ii * TILE + jj];
+        }
+        rsum[j0 + jj] = r;
+    }
+}
+
+// g_k = g_k + d x_k for k < q: Q > 0 (a multiple of VECTOR_LANES): q = Q, on vectors of
+// the target's width; Q = 0: a loop (which the compiler may vectorise)
+template <int Q>
+inline void add_scaled(double* __restrict g, double d, const double* __restrict x,
+                       std::ptrdiff_t q) {
+    if (Q > 0) {
+        for (int k = 0; k < Q; k += VECTOR_LANES) {
+            Lanes gv, xv;
+            std::memcpy(&gv, &g[k], sizeof gv);
+            std::memcpy(&xv, &x[k], sizeof xv);
+            gv = gv + d * xv;
+            std::memcpy(&g[k], &gv, sizeof gv);
+        }
+    } else {
+        for (std::ptrdiff_t k = 0; k < q; ++k) g[k] = g[k] + d * x[k];
+    }
+}
+
+// (Q > 0: q = Q known to the compiler)
+template <int Q>
+void gradient_tile_short(const double* s, std::ptrdiff_t q_run, std::ptrdiff_t i0,
+                         std::ptrdiff_t ni, std::ptrdiff_t j0, std::ptrdiff_t nj, bool diag,
+                         const double* dif, const double* sum, double* gpair, double* rsum) {
+    const std::ptrdiff_t q = Q > 0 ? Q : q_run;
+    double r[TILE];
+    // rows: column jj outermost, the rows ii <= jj (diagonal tile) or all rows inside
+    for (std::ptrdiff_t ii = 0; ii < ni; ++ii) r[ii] = rsum[i0 + ii];
+    for (std::ptrdiff_t jj = 0; jj < nj; ++jj) {
+        const double* __restrict sj = &s[(j0 + jj) * q];
+        const std::ptrdiff_t iend = diag ? jj + 1 : ni;
+        for (std::ptrdiff_t ii = 0; ii < iend; ++ii) {
+            const double d = dif[ii * TILE + jj];
+            double* __restrict gi = &gpair[(i0 + ii) * q];
+            add_scaled<Q>(gi, d, sj, q);
+            r[ii] = r[ii] + sum[ii * TILE + jj];
+        }
+    }
+    for (std::ptrdiff_t ii = 0; ii < ni; ++ii) rsum[i0 + ii] = r[ii];
+    // columns: row ii outermost, the columns jj > ii (diagonal tile) or all columns inside
+    for (std::ptrdiff_t jj = 0; jj < nj; ++jj) r[jj] = rsum[j0 + jj];
+    for (std::ptrdiff_t ii = 0; ii < ni; ++ii) {
+        const double* __restrict si = &s[(i0 + ii) * q];
+        for (std::ptrdiff_t jj = diag ? ii + 1 : 0; jj < nj; ++jj) {
+            const double d = dif[ii * TILE + jj];
+            double* __restrict gj = &gpair[(j0 + jj) * q];
+            add_scaled<Q>(gj, d, si, q);
+            r[jj] = r[jj] + sum[ii * TILE + jj];
+        }
+    }
+    for (std::ptrdiff_t jj = 0; jj < nj; ++jj) rsum[j0 + jj] = r[jj];
+}
+
 }  // namespace
 
 extern "C" {
@@ -309,20 +477,26 @@ void ssmobs_lcd_quadrature(const double* s, std::ptrdiff_t n, std::ptrdiff_t q,
                            const double* lam, const double* sig, const double* alpha,
                            const double* beta, std::ptrdiff_t n_nodes, double* norms,
                            double* jp, double* mm) {
+    std::vector<double> ex(static_cast<std::size_t>(n_nodes));
+    std::vector<double> exm1(static_cast<std::size_t>(n_nodes));
     for (std::ptrdiff_t i = 0; i < n; ++i) {
         const double* si = &s[i * q];
         double nrm = si[0] * si[0];
         for (std::ptrdiff_t k = 1; k < q; ++k) nrm = nrm + si[k] * si[k];
         norms[i] = nrm;
         const double half_n = 0.5 * nrm;
+        // exp and expm1 of every node's argument on vector lanes, then the sums in order
+        for (std::ptrdiff_t l = 0; l < n_nodes; ++l) {
+            const double a = lam[l] - half_n * sig[l];
+            double em1;
+            ex[l] = exp_lanes(a, &em1);
+            exm1[l] = em1;
+        }
         double sj = 0.0;
         double sm = 0.0;
         for (std::ptrdiff_t l = 0; l < n_nodes; ++l) {
-            const double a = lam[l] - half_n * sig[l];
-            const double ea = exp_of(a);
-            const double em1 = (a > -HALF_LN2 && a < HALF_LN2) ? expm1_reduced(a) : ea - 1.0;
-            sj = sj + em1 * alpha[l];
-            sm = sm + ea * beta[l];
+            sj = sj + exm1[l] * alpha[l];
+            sm = sm + ex[l] * beta[l];
         }
         jp[i] = sj;
         mm[i] = sm;
@@ -346,13 +520,13 @@ void ssmobs_lcd_pairs(const double* s, std::ptrdiff_t n, std::ptrdiff_t q, const
                       double inv4b2, int want_grad, double* psi_out, double* gpair,
                       double* rsum) {
     static const Series ser;
+    static const Terms terms;
     const double two_inv4b2 = 2.0 * inv4b2;
     const std::size_t tt = static_cast<std::size_t>(TILE * TILE);
     std::vector<double> gram(tt), dif(tt), sum(tt);
     std::vector<double> st(static_cast<std::size_t>(TILE * q));  // column tile, transposed
     // one row of a tile: arguments c- (first nj) and c+ (next nj), and their terms
-    std::vector<double> c(2 * TILE), base(2 * TILE), ps(2 * TILE), pq(2 * TILE);
-    std::vector<double> e1(2 * TILE), psi(2 * TILE);
+    std::vector<double> c(2 * TILE), base(2 * TILE), e1(2 * TILE), psi(2 * TILE);
     if (want_grad) {
         for (std::ptrdiff_t i = 0; i < n * q; ++i) gpair[i] = 0.0;
         for (std::ptrdiff_t i = 0; i < n; ++i) rsum[i] = 0.0;
@@ -395,48 +569,53 @@ void ssmobs_lcd_pairs(const double* s, std::ptrdiff_t n, std::ptrdiff_t q, const
                 }
                 if (diag) c[0] = 0.0;  // T-_ii := 0
                 const std::ptrdiff_t nc = 2 * len;
-                // the largest argument, on MAX_LANES partial maxima (a maximum is exact in
-                // any order; the arguments are >= +0, none NaN), over c padded with +0
-                const std::ptrdiff_t ncp = (nc + MAX_LANES - 1) / MAX_LANES * MAX_LANES;
+                // the largest argument, on VECTOR_LANES partial maxima (a maximum is exact
+                // in any order; the arguments are >= +0, none NaN), over c padded with +0
+                const std::ptrdiff_t ncp = (nc + LANES - 1) / LANES * LANES;
                 for (std::ptrdiff_t t = nc; t < ncp; ++t) c[t] = 0.0;
-                double part[MAX_LANES] = {};
-                for (std::ptrdiff_t t = 0; t < ncp; t += MAX_LANES) {
-                    for (int l = 0; l < MAX_LANES; ++l) {
-                        part[l] = c[t + l] > part[l] ? c[t + l] : part[l];
-                    }
+                Lanes part = {};
+                for (std::ptrdiff_t t = 0; t < ncp; t += VECTOR_LANES) {
+                    Lanes cl;
+                    std::memcpy(&cl, &c[t], sizeof cl);
+                    part = cl > part ? cl : part;
                 }
                 double cbig = part[0];
-                for (int l = 1; l < MAX_LANES; ++l) cbig = part[l] > cbig ? part[l] : cbig;
-                const int m = terms_for(cbig < SERIES_MAX ? cbig : SERIES_MAX);
-                // the series on every argument (1 stands in for c <= 0), fixed up below
-                const double s_top = ser.s[m];
-                const double q_top = ser.q[m];
-                for (std::ptrdiff_t t = 0; t < nc; ++t) {
+                for (int l = 1; l < VECTOR_LANES; ++l) cbig = part[l] > cbig ? part[l] : cbig;
+                const int m = terms.of(cbig < SERIES_MAX ? cbig : SERIES_MAX);
+                // the series on every argument (1 stands in for c <= 0), LANES arguments at
+                // a time in a vector of LANES doubles (the partial sums stay in registers);
+                // 0 at c <= 0; the continued fraction replaces c > SERIES_MAX below
+                for (std::ptrdiff_t t = 0; t < ncp; ++t) {
                     const double ct = c[t];
                     base[t] = -EULER_GAMMA - ln(ct > 0.0 ? ct : 1.0);
-                    ps[t] = s_top;
-                    pq[t] = q_top;
                 }
-                for (int k = m - 1; k >= 1; --k) {
-                    const double sk = ser.s[k];
-                    const double qk = ser.q[k];
-                    for (std::ptrdiff_t t = 0; t < nc; ++t) {
-                        ps[t] = ps[t] * c[t] + sk;
-                        pq[t] = pq[t] * c[t] + qk;
+                const double s_top = ser.s[m];
+                const double q_top = ser.q[m];
+                for (std::ptrdiff_t t = 0; t < ncp; t += VECTOR_LANES) {
+                    Lanes cl, bl;
+                    std::memcpy(&cl, &c[t], sizeof cl);
+                    std::memcpy(&bl, &base[t], sizeof bl);
+                    Lanes ps = Lanes{} + s_top;  // +0 + s_top: s_top exactly
+                    Lanes pq = Lanes{} + q_top;
+                    for (int k = m - 1; k >= 1; --k) {
+                        ps = ps * cl + ser.s[k];
+                        pq = pq * cl + ser.q[k];
                     }
+                    const Lanes e = bl + ps * cl;
+                    const Lanes p = cl * (bl + (pq * cl + 1.0));
+                    const Lanes zero = {};
+                    const Lanes e_out = cl > zero ? e : zero;
+                    const Lanes p_out = cl > zero ? p : zero;
+                    std::memcpy(&e1[t], &e_out, sizeof e_out);
+                    std::memcpy(&psi[t], &p_out, sizeof p_out);
                 }
-                for (std::ptrdiff_t t = 0; t < nc; ++t) {
-                    e1[t] = base[t] + ps[t] * c[t];
-                    psi[t] = c[t] * (base[t] + (pq[t] * c[t] + 1.0));
-                }
-                for (std::ptrdiff_t t = 0; t < nc; ++t) {
-                    if (!(c[t] > 0.0)) {
-                        e1[t] = 0.0;
-                        psi[t] = 0.0;
-                    } else if (c[t] > SERIES_MAX) {
-                        const Pair p = e1_psi(c[t], m, ser);
-                        e1[t] = p.e1;
-                        psi[t] = p.psi;
+                if (cbig > SERIES_MAX) {
+                    for (std::ptrdiff_t t = 0; t < nc; ++t) {
+                        if (c[t] > SERIES_MAX) {
+                            const Pair p = e1_psi(c[t], m, ser);
+                            e1[t] = p.e1;
+                            psi[t] = p.psi;
+                        }
                     }
                 }
                 double psi_row = 0.0;
@@ -450,30 +629,15 @@ void ssmobs_lcd_pairs(const double* s, std::ptrdiff_t n, std::ptrdiff_t q, const
             }
             psi_total = psi_total + psi_tile;
             if (!want_grad) continue;
-            // rows of the tile: gpair_i += sum_j dif_ij s_j, rsum_i += sum_j sum_ij (j ascending)
-            for (std::ptrdiff_t ii = 0; ii < ni; ++ii) {
-                double* gi = &gpair[(i0 + ii) * q];
-                double r = rsum[i0 + ii];
-                for (std::ptrdiff_t jj = diag ? ii : 0; jj < nj; ++jj) {
-                    const double d = dif[ii * TILE + jj];
-                    const double* sj = &s[(j0 + jj) * q];
-                    for (std::ptrdiff_t k = 0; k < q; ++k) gi[k] = gi[k] + d * sj[k];
-                    r = r + sum[ii * TILE + jj];
-                }
-                rsum[i0 + ii] = r;
-            }
-            // columns (pairs j > i only): gpair_j += sum_i dif_ij s_i (i ascending)
-            for (std::ptrdiff_t jj = 0; jj < nj; ++jj) {
-                double* gj = &gpair[(j0 + jj) * q];
-                double r = rsum[j0 + jj];
-                const std::ptrdiff_t iend = diag ? jj : ni;
-                for (std::ptrdiff_t ii = 0; ii < iend; ++ii) {
-                    const double d = dif[ii * TILE + jj];
-                    const double* si = &s[(i0 + ii) * q];
-                    for (std::ptrdiff_t k = 0; k < q; ++k) gj[k] = gj[k] + d * si[k];
-                    r = r + sum[ii * TILE + jj];
-                }
-                rsum[j0 + jj] = r;
+            if (q == 8) {  // the dimension of the choice of K in the default profile
+                gradient_tile_short<8>(s, q, i0, ni, j0, nj, diag, dif.data(), sum.data(),
+                                       gpair, rsum);
+            } else if (q <= SHORT_ROWS) {
+                gradient_tile_short<0>(s, q, i0, ni, j0, nj, diag, dif.data(), sum.data(), gpair,
+                                    rsum);
+            } else {
+                gradient_tile_long(s, q, i0, ni, j0, nj, diag, dif.data(), sum.data(), gpair,
+                                   rsum);
             }
         }
     }
@@ -482,7 +646,7 @@ void ssmobs_lcd_pairs(const double* s, std::ptrdiff_t n, std::ptrdiff_t q, const
 
 // The distance of the point-symmetric set {s_i} U {-s_i} (U {0} for odd K) and, with
 // ``want_grad``, its gradient w.r.t. the half-set (n x q), as the reference
-// ssmobs.lcd_distance._symmetric_distance_numpy: D = D1' - 2 D2' + D3' (doc 2.4), gradient
+// ssmobs.design.lcd_distance._symmetric_distance_numpy: D = D1' - 2 D2' + D3' (doc 2.4), gradient
 // doc Section 4.  ``lam`` .. ``beta``, ``d1p``, ``j0p``: the quadrature rule of (q, B).
 void ssmobs_lcd_symmetric(const double* s, std::ptrdiff_t n, std::ptrdiff_t q,
                           std::ptrdiff_t K, double b_max, const double* lam, const double* sig,
@@ -557,6 +721,16 @@ void ssmobs_lcd_e1_psi(const double* c, std::ptrdiff_t n, double* e1, double* ps
         const Pair p = e1_psi(c[i], m, ser);
         e1[i] = p.e1;
         psi[i] = p.psi;
+    }
+}
+
+// The number of series terms of each argument in [0, 1] by terms_for (``reference``) and by
+// the thresholds the pair loop uses (``fast``), for the test that they agree
+void ssmobs_lcd_terms(const double* c, std::ptrdiff_t n, int* reference, int* fast) {
+    static const Terms terms;
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+        reference[i] = terms_for(c[i]);
+        fast[i] = terms.of(c[i]);
     }
 }
 
