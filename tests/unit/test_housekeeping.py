@@ -275,3 +275,9 @@ def test_the_lines_name_what_to_do():
     assert "must build 2 program(s) (same, sep)" in line and "'g++'" in line
     remedies = hk.write_remedies("out", "/cache")
     assert set(remedies) == {"results", "out", "/cache"}
+
+
+def test_an_empty_program_cache_has_built_no_program(tmp_path, monkeypatch):
+    monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "empty_cache"))
+    assert hk.unbuilt_programs(["same", "sep"]) == ["same", "sep"]
+    assert hk.unbuilt_programs([]) == []

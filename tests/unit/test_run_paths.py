@@ -280,3 +280,10 @@ def test_every_key_is_computed_up_front_and_map_cells_are_returned(smoke):
         for n, sc in fresh.scenario_objects.items()
         for K in {sc.K, sc.exact_trajectories}
     ]
+
+
+def test_the_stan_models_are_those_of_the_stan_scenarios_once_each():
+    paths = run_paths("config")  # several scenarios of each model
+    models = {paths.scenarios[n]["model"] for n in paths.stan_scenarios}
+    assert paths.stan_models == sorted(models)
+    assert len(paths.stan_models) < len(paths.stan_scenarios)

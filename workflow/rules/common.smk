@@ -144,17 +144,6 @@ def unwritable_problem(files):
     return write_problem(files, remedies, default="make it writable")
 
 
-def unbuilt_programs():
-    """The models of this run whose Stan program the native backend has not built yet
-    (the model check always evaluates with it)."""
-    from ssmobs.stan_backends import stan_file
-    from ssmobs.stan_backends.native import NativeBackend
-
-    models = sorted({sc["model"] for sc in SCENARIOS.values() if sc["stan"]})
-    native = NativeBackend()
-    return [m for m in models if not native.is_built(stan_file(m))]
-
-
 def stop_without_compiler():
     """Stop the run (a dry run: warn) when Stan programs must be built with the native
     driver here (the model check always uses it) and no C++ compiler is found: a cold cache
@@ -164,7 +153,7 @@ def stop_without_compiler():
 
     if not STAN_SCENARIOS or shutil.which(compiler()):
         return
-    unbuilt = unbuilt_programs()
+    unbuilt = housekeeping.unbuilt_programs(PATHS.stan_models)
     if not unbuilt:
         return
     problem = housekeeping.missing_compiler_problem(unbuilt, compiler())
@@ -186,8 +175,8 @@ def stop_where_jobs_cannot_write():
     files = housekeeping.job_files(jobs)
     # a NUTS job builds its program too when the cache lacks it (its marker in results/
     # says only that it was built once, maybe in another cache)
-    builds = housekeeping.PROGRAM_BUILDING_RULES
-    if any(job.rule.name in builds for job in jobs) and unbuilt_programs():
+    builds = any(job.rule.name in housekeeping.PROGRAM_BUILDING_RULES for job in jobs)
+    if builds and housekeeping.unbuilt_programs(PATHS.stan_models):
         files.append(str(cache_root() / "native" / "-"))
     problem = unwritable_problem(files)
     if problem is not None:

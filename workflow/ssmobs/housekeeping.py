@@ -333,6 +333,16 @@ def outputs_dir_unset_warning(config_files: list[str], out: str) -> str:
     )
 
 
+def unbuilt_programs(models: Iterable[str]) -> list[str]:
+    """The ``models`` whose Stan program the native backend has not built yet in the
+    program cache (asks the cache, decides nothing; the model check always uses it)."""
+    from .stan_backends import stan_file
+    from .stan_backends.native import NativeBackend
+
+    native = NativeBackend()
+    return [m for m in models if not native.is_built(stan_file(m))]
+
+
 def missing_compiler_problem(unbuilt: list[str], compiler: str) -> str:
     """The line when the native backend must build the programs of ``unbuilt`` and finds
     no C++ compiler ``compiler``."""

@@ -117,6 +117,11 @@ class RunPaths:
         return [n for n, sc in self.scenarios.items() if sc["stan"]]
 
     @property
+    def stan_models(self) -> list[str]:
+        """The models of the scenarios with a NUTS stage, sorted, each once."""
+        return sorted({sc["model"] for sc in self.scenarios.values() if sc["stan"]})
+
+    @property
     def mu0_scenarios(self) -> list[str]:
         """The joint-MAP scenarios of the models the barrier-start sweep covers."""
         models = self.config["mu0_sweep"]["models"]
