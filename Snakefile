@@ -58,8 +58,7 @@ include: "workflow/rules/stan_variants.smk"
 
 stop_without_compiler()
 # stale stamps and damaged files are removed before the DAG is built, all or none
-STALE = stale_stamps() + damaged_trajectories() + damaged_batches()
-remove_stale(STALE + damaged_outputs(STALE))
+remove_stale(repairs_before_the_dag())
 
 
 onstart:
@@ -74,4 +73,4 @@ rule all:
     """Every output of the configured scenarios and the paper figures."""
     default_target: True
     input:
-        all_targets(),
+        PATHS.targets(STAMPS, DAMAGED_TARGETS),

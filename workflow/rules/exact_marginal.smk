@@ -5,7 +5,7 @@
 rule exact_marginal:
     """Exact marginal MAP, 5 %/95 % quantiles and Definition 3 per trajectory, and the summary."""
     input:
-        trajectories=lambda wc: trajectories_path(
+        trajectories=lambda wc: PATHS.trajectories(
             wc.scenario, expect_key("exact", wc.scenario, wc.key)["K"]
         ),
     output:

@@ -6,7 +6,7 @@
 if PAPER_OUTPUTS:
     register_stamp(
         "figure_design_points",
-        [figure2_disturbances()],
+        [PATHS.figure2_disturbances()],
         {"figure": config["figure2"], "model_code": KEYS.model_code("same")},
     )
 
@@ -14,13 +14,13 @@ if PAPER_OUTPUTS:
 rule figure_design_points:
     """Figure 2: five design disturbances of N(0, I_2) and the resulting (x~_1, z~_1) of model Same."""
     input:
-        figure2_disturbances,
+        PATHS.figure2_disturbances(),
     output:
         pdf=report(
             f"{OUT}/fig2_design_points.pdf", caption="../report/fig2.rst", category="Figures"
         ),
         png=f"{OUT}/fig2_design_points.png",
-        stamp=stamp("figure_design_points"),
+        stamp=PATHS.stamp("figure_design_points"),
     log:
         f"results/outputs/{OUT}/logs/figure_design_points.log",
     conda:
@@ -33,8 +33,8 @@ rule figure_design_points:
 
 
 FIGURE3_INPUTS = {
-    "joint": [f"{joint_dir(n)}/joint_map.parquet" for n in FIGURE3_SCENARIOS],
-    "marginal": [stan_table(n) for n in FIGURE3_SCENARIOS],
+    "joint": [PATHS.joint_table(n) for n in FIGURE3_SCENARIOS],
+    "marginal": [PATHS.stan_table(n) for n in FIGURE3_SCENARIOS],
 }
 if PAPER_OUTPUTS:
     register_stamp(
@@ -54,7 +54,7 @@ rule figure_joint_vs_marginal:
             caption="../report/fig3.rst",
             category="Figures",
         ),
-        stamp=stamp("figure_joint_vs_marginal"),
+        stamp=PATHS.stamp("figure_joint_vs_marginal"),
     log:
         f"results/outputs/{OUT}/logs/figure_joint_vs_marginal.log",
     localrule: True
@@ -70,7 +70,7 @@ rule figure_joint_vs_marginal:
 if FIGURE4_SCENARIO:
     register_stamp(
         f"figure_profile_posterior_{FIGURE4_SCENARIO}",
-        [trajectories_path(FIGURE4_SCENARIO)],
+        [PATHS.trajectories(FIGURE4_SCENARIO)],
         {"scenario": SCENARIOS[FIGURE4_SCENARIO], "grid": config["figure4"]},
     )
 
@@ -78,14 +78,14 @@ if FIGURE4_SCENARIO:
 rule figure_profile_posterior:
     """Figure 4: profile posterior of (a, x0) for trajectory k = 1 of paper_outputs.figure4."""
     input:
-        lambda wc: trajectories_path(wc.scenario),
+        lambda wc: PATHS.trajectories(wc.scenario),
     output:
         figure=report(
             multiext(f"{OUT}/fig4_profile_posterior_{{scenario}}", ".pdf", ".png"),
             caption="../report/fig4.rst",
             category="Figures",
         ),
-        stamp=stamp("figure_profile_posterior_{scenario}"),
+        stamp=PATHS.stamp("figure_profile_posterior_{scenario}"),
     log:
         f"results/outputs/{OUT}/logs/figure_profile_posterior_{{scenario}}.log",
     conda:
@@ -101,7 +101,7 @@ rule figure_profile_posterior:
 # its input is a stamped table: the table's key keys the figure
 if PAPER_OUTPUTS:
     register_stamp(
-        "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[stamp("paper_tables")]
+        "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[PATHS.stamp("paper_tables")]
     )
 
 
@@ -115,7 +115,7 @@ rule figure_observability:
             caption="../report/observability.rst",
             category="Figures",
         ),
-        stamp=stamp("figure_observability"),
+        stamp=PATHS.stamp("figure_observability"),
     log:
         f"results/outputs/{OUT}/logs/figure_observability.log",
     localrule: True
@@ -130,7 +130,7 @@ rule figure_observability:
 for _name in EXACT_VS_STAN_SCENARIOS:
     register_stamp(
         f"figure_exact_vs_stan_{_name}",
-        list(exact_vs_stan_inputs(_name).values()),
+        list(PATHS.exact_vs_stan_inputs(_name).values()),
         SCENARIOS[_name],
     )
 
@@ -138,7 +138,7 @@ for _name in EXACT_VS_STAN_SCENARIOS:
 rule figure_exact_vs_stan:
     """Stan + KDE marginal MAP against the exact one, trajectory by trajectory."""
     input:
-        unpack(lambda wc: exact_vs_stan_inputs(wc.scenario)),
+        unpack(lambda wc: PATHS.exact_vs_stan_inputs(wc.scenario)),
     output:
         figure=report(
             multiext(f"{OUT}/fig_exact_vs_stan_{{scenario}}", ".pdf", ".png"),
@@ -146,7 +146,7 @@ rule figure_exact_vs_stan:
             category="Figures",
         ),
         table=multiext(f"{OUT}/exact_vs_stan_{{scenario}}", ".csv", ".md"),
-        stamp=stamp("figure_exact_vs_stan_{scenario}"),
+        stamp=PATHS.stamp("figure_exact_vs_stan_{scenario}"),
     log:
         f"results/outputs/{OUT}/logs/figure_exact_vs_stan_{{scenario}}.log",
     localrule: True

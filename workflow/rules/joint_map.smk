@@ -5,7 +5,7 @@
 rule joint_map:
     """Joint MAP by a primal barrier method and the checks of Sec. III.B for every trajectory."""
     input:
-        lambda wc: keyed_input("joint_map", wc.scenario, wc.key, trajectories_path(wc.scenario)),
+        lambda wc: keyed_input("joint_map", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)),
     output:
         table="results/{scenario}/joint_map/{key}/joint_map.parquet",
         theta="results/{scenario}/joint_map/{key}/theta_hat.nc",
@@ -27,7 +27,7 @@ rule joint_map:
         "../scripts/joint_map.py"
 
 
-MU0_INPUTS = [trajectories_path(n) for n in MU0_SCENARIOS]
+MU0_INPUTS = [PATHS.trajectories(n) for n in MU0_SCENARIOS]
 MU0_PARAMS = {
     "scenarios": [SCENARIOS[n] for n in MU0_SCENARIOS],
     "settings": config["joint_map"],
@@ -48,7 +48,7 @@ rule joint_map_mu0_sweep:
             caption="../report/mu0_sweep.rst",
             category="Tables",
         ),
-        stamp=stamp("table_mu0_sweep"),
+        stamp=PATHS.stamp("table_mu0_sweep"),
     log:
         f"results/outputs/{OUT}/logs/joint_map_mu0_sweep.log",
     conda:

@@ -23,15 +23,19 @@ rule k_selection_grid:
         K_grid=lambda wc: KSEL[wc.ksel]["K_grid"],
         design=config["design"],
         design_dir=DESIGN_DIR,
-        points=lambda wc: ksel_points_dir(wc.ksel, wc.method, wc.sets, wc.seed),
+        points=lambda wc: PATHS.ksel_points_dir(wc.ksel, wc.method, wc.sets, wc.seed),
     script:
         "../scripts/k_selection_grid.py"
+
+
+def select_k_params(name):
+    return {"ksel": KSEL[name], "scenario": SCENARIOS[KSEL[name]["scenario"]]}
 
 
 for _name in KSEL:
     register_stamp(
         f"select_k_{_name}",
-        [*k_selection_grids(_name), "config/paper_values.yaml"],
+        [*PATHS.k_selection_grids(_name), "config/paper_values.yaml"],
         select_k_params(_name),
     )
 
@@ -39,7 +43,7 @@ for _name in KSEL:
 rule select_k:
     """The smallest K_i whose V_{K_i} agrees with all larger K_j within (c1, c2), per method."""
     input:
-        grids=lambda wc: k_selection_grids(wc.ksel),
+        grids=lambda wc: PATHS.k_selection_grids(wc.ksel),
         paper_values="config/paper_values.yaml",
     output:
         json="results/k_selection/{ksel}/selection.json",
@@ -49,7 +53,7 @@ rule select_k:
             caption="../report/k_convergence.rst",
             category="Figures",
         ),
-        stamp=stamp("select_k_{ksel}"),
+        stamp=PATHS.stamp("select_k_{ksel}"),
     log:
         "results/k_selection/{ksel}/select_k.log",
     localrule: True
@@ -63,12 +67,12 @@ rule select_k:
         "../scripts/select_k.py"
 
 
-SELECTIONS = [f"results/k_selection/{name}/selection.json" for name in KSEL]
+SELECTIONS = [PATHS.selection(name) for name in KSEL]
 # the selections are stamped files: their stamps' keys key the table; made for this
 # config's k_selection entries, or (empty) with the paper's outputs
 if KSEL or PAPER_OUTPUTS:
     register_stamp(
-        "table_k_selection", SELECTIONS, [STAMPS[stamp(f"select_k_{name}")] for name in KSEL]
+        "table_k_selection", SELECTIONS, [STAMPS[PATHS.stamp(f"select_k_{name}")] for name in KSEL]
     )
 
 
@@ -84,7 +88,7 @@ rule table_k_selection:
             category="Tables",
         ),
         distribution=multiext(f"{OUT}/table_k_selection_distribution", ".csv", ".md", ".tex"),
-        stamp=stamp("table_k_selection"),
+        stamp=PATHS.stamp("table_k_selection"),
     log:
         f"results/outputs/{OUT}/logs/table_k_selection.log",
     localrule: True

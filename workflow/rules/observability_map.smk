@@ -29,13 +29,13 @@ rule observability_map_cells:
 
 
 for _name in MAPS:
-    register_stamp(f"map_{_name}", [map_cells_table(_name)], {"entry": MAPS[_name]})
+    register_stamp(f"map_{_name}", [PATHS.map_cells_table(_name)], {"entry": MAPS[_name]})
 
 
 rule observability_map:
     """Where in (true parameter, T) one model is observable, and how well: table and figure."""
     input:
-        cells=lambda wc: map_cells_table(wc.map),
+        cells=lambda wc: PATHS.map_cells_table(wc.map),
     output:
         csv=f"{OUT}/map_{{map}}.csv",
         md=f"{OUT}/map_{{map}}.md",
@@ -45,7 +45,7 @@ rule observability_map:
             category="Observability maps",
         ),
         pdf=f"{OUT}/map_{{map}}.pdf",
-        stamp=stamp("map_{map}"),
+        stamp=PATHS.stamp("map_{map}"),
     log:
         f"results/outputs/{OUT}/logs/observability_map/{{map}}.log",
     localrule: True

@@ -1,9 +1,9 @@
 # Stage 4: the paper's tables in paper_figures/ (ours beside the paper's values); figures: figures.smk.
 
 PAPER_TABLES_INPUTS = {
-    "joint": [joint_summary(n) for n in JOINT_SCENARIOS],
-    "marginal": [stan_summary(n) for n in STAN_SCENARIOS],
-    "exact": [exact_summary_path(n) for n in EXACT_SCENARIOS],
+    "joint": [PATHS.joint_summary(n) for n in JOINT_SCENARIOS],
+    "marginal": [PATHS.stan_summary(n) for n in STAN_SCENARIOS],
+    "exact": [PATHS.exact_summary(n) for n in EXACT_SCENARIOS],
     "paper_values": "config/paper_values.yaml",
 }
 PAPER_TABLES_PARAMS = {
@@ -49,7 +49,7 @@ rule paper_tables:
             caption="../report/section4.rst",
             category="Tables",
         ),
-        stamp=stamp("paper_tables"),
+        stamp=PATHS.stamp("paper_tables"),
     log:
         f"results/outputs/{OUT}/logs/paper_tables.log",
     localrule: True
@@ -62,7 +62,7 @@ rule paper_tables:
         "../scripts/paper_tables.py"
 
 
-SENSITIVITY_INPUTS = [stan_table(n) for n in STAN_SCENARIOS]
+SENSITIVITY_INPUTS = [PATHS.stan_table(n) for n in STAN_SCENARIOS]
 if PAPER_OUTPUTS:
     register_stamp(
         "convergence_sensitivity",
@@ -83,7 +83,7 @@ rule convergence_sensitivity:
             category="Tables",
         ),
         failures=multiext(f"{OUT}/table_convergence_failures", ".csv", ".md", ".tex"),
-        stamp=stamp("convergence_sensitivity"),
+        stamp=PATHS.stamp("convergence_sensitivity"),
     log:
         f"results/outputs/{OUT}/logs/convergence_sensitivity.log",
     localrule: True

@@ -25,6 +25,14 @@ rule check_model:
         "../scripts/check_model.py"
 
 
+def checked_program(model):
+    """What the model check evaluates, when sampling builds it too: with the native backend,
+    build_stan_model's program, so the check runs the cached executable after the one
+    compile (no check job compiles, none waits on another's build lock).  A plain input:
+    a rebuilt program reruns its check, as it reruns the sampling."""
+    return [PATHS.program_marker(model)] if STAN_BACKEND == "native" else []
+
+
 rule check_model_stan:
     """The Python model against its Stan program at one scenario's true values under every
     prior variant: parameter order, log density, prior bounds (before its NUTS runs)."""
@@ -53,10 +61,21 @@ rule check_model_stan:
         "../scripts/check_model.py"
 
 
+def study_params(name):
+    scs = [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
+    return {
+        "study": STUDIES[name],
+        "scenarios": scs,
+        "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
+        "stan_names": [sc["name"] for sc in scs if sc["stan"]],
+        "stan_settings": config["stan"],
+    }
+
+
 for _name in STUDIES:
     register_stamp(
         f"observability_study_{_name}",
-        [p for paths in study_inputs(_name).values() for p in paths],
+        [p for paths in PATHS.study_inputs(_name).values() for p in paths],
         study_params(_name),
     )
 
@@ -64,12 +83,12 @@ for _name in STUDIES:
 rule observability_study:
     """|K^max|/K and |K^Stan|/K of one model over T: table and figure in paper_figures/."""
     input:
-        unpack(lambda wc: study_inputs(wc.study)),
+        unpack(lambda wc: PATHS.study_inputs(wc.study)),
     output:
         csv=f"{OUT}/ours_{{study}}_observability.csv",
         md=f"{OUT}/ours_{{study}}_observability.md",
         png=f"{OUT}/ours_{{study}}_observability.png",
-        stamp=stamp("observability_study_{study}"),
+        stamp=PATHS.stamp("observability_study_{study}"),
     log:
         f"results/outputs/{OUT}/logs/observability_study/{{study}}.log",
     localrule: True

@@ -23,12 +23,12 @@ rule build_stan_model:
 rule sample_nuts:
     """NUTS for one batch of trajectories; one record per trajectory, resumable."""
     input:
-        unpack(lambda wc: stan_init_inputs(wc.scenario)),
+        unpack(lambda wc: PATHS.stan_init_inputs(wc.scenario)),
         trajectories=lambda wc: keyed_input(
-            "nuts_batches", wc.scenario, wc.key, trajectories_path(wc.scenario)
+            "nuts_batches", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)
         ),
-        marker=lambda wc: program_marker(SCENARIOS[wc.scenario]["model"]),
-        checked=lambda wc: check_path(wc.scenario, stan=True),
+        marker=lambda wc: PATHS.program_marker(SCENARIOS[wc.scenario]["model"]),
+        checked=lambda wc: PATHS.check(wc.scenario, stan=True),
     output:
         "results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
     log:
@@ -42,13 +42,13 @@ rule sample_nuts:
     threads: 1
     resources:
         mem_mb=3000,
-        runtime=lambda wc: 10 + 2 * batch_size(wc.scenario),
+        runtime=lambda wc: 10 + 2 * PATHS.batch_size(wc.scenario),
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         stan=config["stan"],
         convergence=config["convergence"],
-        records=lambda wc: records_dir(wc.scenario),
-        draws=lambda wc: draws_dir(wc.scenario),
+        records=lambda wc: PATHS.records_dir(wc.scenario),
+        draws=lambda wc: PATHS.draws_dir(wc.scenario),
     script:
         "../scripts/sample_nuts.py"
 
@@ -58,9 +58,9 @@ rule gather_nuts:
     marginal-MAP mean/var/MSE, coverage, bias."""
     input:
         trajectories=lambda wc: keyed_input(
-            "gather", wc.scenario, wc.key, trajectories_path(wc.scenario)
+            "gather", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)
         ),
-        batches=lambda wc: nuts_batches(wc.scenario),
+        batches=lambda wc: PATHS.nuts_batches(wc.scenario),
     output:
         table="results/{scenario}/gather_nuts/{key}/marginal_map.parquet",
         summary="results/{scenario}/gather_nuts/{key}/summary.json",
@@ -71,6 +71,6 @@ rule gather_nuts:
     params:
         scenario=lambda wc: SCENARIOS[wc.scenario],
         convergence=config["convergence"],
-        records=lambda wc: records_dir(wc.scenario),
+        records=lambda wc: PATHS.records_dir(wc.scenario),
     script:
         "../scripts/gather_nuts.py"

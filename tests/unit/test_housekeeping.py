@@ -1,0 +1,283 @@
+"""What the workflow tidies before and after a run (ssmobs.housekeeping): the lock policy,
+stale stamps, damaged files, leftovers of an earlier config and the guards' lines."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from ssmobs import housekeeping as hk
+from ssmobs.io import checksum_problem, damaged_files, record_checksums, write_checksum
+
+pytestmark = pytest.mark.unit
+
+
+# -- the lock --------------------------------------------------------------------------------
+
+
+def test_only_the_planning_process_may_change_files():
+    decision = hk.lock_decision(main_process=False, locks=True, holders=[], dry_run=False)
+    assert decision == hk.LockDecision(False)
+
+
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_without_a_live_lock_files_may_change(dry_run):
+    assert hk.lock_decision(True, True, [], dry_run) == hk.LockDecision(True)
+
+
+def test_nolock_ignores_the_lock_holders():
+    assert hk.lock_decision(True, False, [123], False).may_change
+
+
+def test_a_live_lock_stops_a_run_and_names_the_processes():
+    decision = hk.lock_decision(True, True, [4242, 4343], dry_run=False)
+    assert not decision.may_change and decision.warning is None
+    assert decision.error is not None
+    assert "Snakemake process(es) [4242, 4343] run here" in decision.error
+    assert "stops before it removes or writes anything" in decision.error
+
+
+def test_a_live_lock_lets_a_dry_run_go_on_changing_nothing():
+    decision = hk.lock_decision(True, True, [4242], dry_run=True)
+    assert not decision.may_change and decision.error is None
+    assert decision.warning is not None and "this dry run moves no stale stamp aside" in (
+        decision.warning
+    )
+
+
+def test_a_lock_whose_holders_are_unknown_advises_unlock():
+    decision = hk.lock_decision(True, True, None, dry_run=False)
+    assert decision.error is not None and "snakemake --unlock" in decision.error
+
+
+# -- stale stamps ----------------------------------------------------------------------------
+
+
+@pytest.fixture
+def stamps(tmp_path: Path) -> dict[str, str]:
+    """Four stamps: current, stale, missing, and missing but moved aside by a dry run."""
+    files = {name: str(tmp_path / f"{name}.key") for name in ("current", "stale", "new", "aside")}
+    Path(files["current"]).write_text("aaaaaaaaaaaa\n")
+    Path(files["stale"]).write_text("bbbbbbbbbbbb\n")
+    Path(f"{files['aside']}.stale").write_text("cccccccccccc\n")
+    return files
+
+
+def test_a_stamp_of_another_key_is_stale_and_a_missing_one_only_when_set_aside(stamps):
+    states = hk.read_stamps(stamps.values())
+    key = "aaaaaaaaaaaa"
+    assert [hk.stamp_is_stale(states[p], key) for p in stamps.values()] == [
+        False,
+        True,
+        False,
+        True,
+    ]
+
+
+def test_a_run_removes_stale_stamps_with_the_files_of_their_old_key(stamps):
+    current = {path: "aaaaaaaaaaaa" for path in stamps.values()}
+    outputs = {stamps["stale"]: ["out/table.csv", "out/table.md"], stamps["aside"]: ["out/f.png"]}
+    changes = hk.stale_stamp_changes(
+        current, {}, hk.read_stamps(stamps.values()), False, lambda p: outputs.get(p, [])
+    )
+    stale, aside = Path(stamps["stale"]), Path(stamps["aside"])
+    assert changes == [
+        (Path("out/table.csv"), None),
+        (Path("out/table.md"), None),
+        (stale, None),
+        (Path(f"{stale}.stale"), None),
+        (Path("out/f.png"), None),
+        (aside, None),
+        (Path(f"{aside}.stale"), None),
+    ]
+
+
+def test_a_dry_run_only_moves_a_stale_stamp_aside(stamps):
+    current = {path: "aaaaaaaaaaaa" for path in stamps.values()}
+    changes = hk.stale_stamp_changes(
+        current, {}, hk.read_stamps(stamps.values()), True, lambda p: ["out/table.csv"]
+    )
+    stale, aside = Path(stamps["stale"]), Path(stamps["aside"])
+    assert changes == [(stale, Path(f"{stale}.stale")), (aside, Path(f"{aside}.stale"))]
+
+
+def test_a_rule_made_on_request_keeps_its_files_until_asked_for(stamps):
+    on_request = {stamps["stale"]: "aaaaaaaaaaaa"}
+    changes = hk.stale_stamp_changes(
+        {}, on_request, hk.read_stamps([stamps["stale"]]), False, lambda p: ["committed.csv"]
+    )
+    stale = Path(stamps["stale"])
+    assert changes == [(stale, None), (Path(f"{stale}.stale"), None)]
+
+
+# -- damaged files ---------------------------------------------------------------------------
+
+
+def test_a_damaged_trajectory_file_is_named_and_a_sound_one_is_kept(tmp_path):
+    sound, damaged, unchecked = (tmp_path / n for n in ("sound.nc", "damaged.nc", "bare.nc"))
+    for path in (sound, damaged, unchecked):
+        path.write_bytes(b"trajectories")
+    write_checksum(sound)
+    write_checksum(damaged)
+    damaged.write_bytes(b"trajectorieZ")  # same size, other bytes
+    paths = [str(sound), str(damaged), str(unchecked), str(tmp_path / "missing.nc")]
+    repairs = hk.damaged_trajectory_repairs({p: checksum_problem(p) for p in paths})
+    assert repairs.changes == [(damaged, None), (unchecked, None)]
+    assert repairs.warnings[0] == f"made again: {damaged} does not match its checksum " + (
+        "(damaged or changed after it was written)"
+    )
+    assert "has no checksum" in repairs.warnings[1]
+    assert repairs.targets == []
+
+
+def test_a_batch_with_changed_records_reruns_with_its_gathered_files():
+    gathered = ("g/summary.json", "g/marginal_map.parquet")
+    batches = [
+        hk.BatchState("b/batch0.parquet", None, True, True, gathered),  # sound
+        hk.BatchState(
+            "b/batch1.parquet", "record 7 changed; this batch reruns it", True, True, gathered
+        ),
+        hk.BatchState("b/batch2.parquet", None, False, True, gathered),  # deleted by hand
+        hk.BatchState("b/batch3.parquet", None, False, False, gathered),  # still to run
+    ]
+    repairs = hk.damaged_batch_repairs(batches)
+    assert repairs.warnings == [
+        "this batch reruns: record 7 changed",
+        "this batch reruns: b/batch2.parquet was deleted",
+    ]
+    removed = [str(p) for p, aside in repairs.changes if aside is None]
+    assert removed == ["b/batch1.parquet", *gathered, "b/batch2.parquet", *gathered]
+
+
+def test_damaged_outputs_are_removed_and_those_of_current_keys_made_again(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    files = {
+        "current": Path("results/sc/joint_map/0123456789ab/summary.json"),
+        "old_key": Path("results/sc/joint_map/ba9876543210/summary.json"),
+        "found": Path("results/sc/design_trajectories/0123456789ab/trajectories.nc"),
+        "sound": Path("results/sc/check_model/0123456789ab.json"),
+        "output": Path("paper_figures/mine/table.csv"),
+    }
+    for path in files.values():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("written by its job\n")
+    record_checksums(files.values())
+    for name in ("current", "old_key", "found", "output"):
+        files[name].write_text("changed afterwards\n")
+    repairs = hk.damaged_output_repairs(damaged_files(), [files["found"]], {"0123456789ab"})
+    assert sorted(p for p, _ in repairs.changes) == sorted(
+        [files["current"], files["old_key"], files["output"]]
+    )
+    assert repairs.targets == [str(files["current"])]
+    assert all(line.startswith("made again, not reused: ") for line in repairs.warnings)
+
+
+def test_the_checksum_file_of_a_file_found_elsewhere_is_said_there_only():
+    found = Path("results/sc/design_trajectories/0123456789ab/trajectories.nc")
+    damaged = [(Path(f"{found}.sha256"), "damaged"), (Path("results/x/0123456789ab.json"), "d")]
+    repairs = hk.damaged_output_repairs(damaged, [found], {"0123456789ab"})
+    assert repairs.changes == [(Path("results/x/0123456789ab.json"), None)]
+
+
+def test_keys_are_read_from_folders_and_stems_and_describe_names():
+    path = Path("results/sc/sample_nuts/0123456789ab/batch0.parquet")
+    assert hk.path_keys(path) == ["0123456789ab"]
+    assert hk.path_keys(Path("results/sc/check_model/fedcba987654.json")) == ["fedcba987654"]
+    assert hk.current_keys(["joint_map:sc:0123456789ab", "design::fedcba987654"]) == {
+        "0123456789ab",
+        "fedcba987654",
+    }
+
+
+# -- making the changes ----------------------------------------------------------------------
+
+
+def test_changes_are_made_once_each_and_only_for_existing_files(tmp_path):
+    gone, moved, kept = tmp_path / "gone.key", tmp_path / "moved.key", tmp_path / "kept.csv"
+    for path in (gone, moved, kept):
+        path.write_text("x")
+    aside = tmp_path / "moved.key.stale"
+    changes = [(gone, None), (moved, aside), (gone, None), (tmp_path / "never", None)]
+    pending = hk.pending_changes(changes, Path.exists)
+    assert pending == [(gone, None), (moved, aside)]
+    assert hk.changed_files(pending) == [gone, moved, aside]
+    hk.apply_changes(pending)
+    assert not gone.exists() and not moved.exists() and aside.read_text() == "x"
+    assert kept.exists()
+
+
+def test_a_dry_run_that_cannot_change_stale_files_names_three_and_counts_the_rest():
+    changes = [(Path(f"s{i}.key"), None) for i in range(5)]
+    assert hk.left_stale_message(changes, "results is read-only") == (
+        "this dry run leaves the stale s0.key, s1.key, s2.key and 2 more: results is read-only"
+    )
+
+
+# -- leftovers -------------------------------------------------------------------------------
+
+
+def test_a_leftover_is_found_and_a_made_or_kept_file_is_not(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    names = ["old_table.csv", "table.csv", "README.md", "notes.txt", "fig.png", "provenance.json"]
+    for name in names:
+        (out / name).write_text("x")
+    made = {str(out / "table.csv"), str(out / "fig.png")}
+    assert hk.leftover_outputs(sorted(out.iterdir()), made) == [out / "old_table.csv"]
+
+
+def test_stamps_of_rules_this_config_lacks_are_unknown(tmp_path):
+    known, other = tmp_path / "paper_tables.key", tmp_path / "map_old.key"
+    assert hk.unknown_stamps([known, other], {str(known)}) == [other]
+
+
+def test_leftovers_go_to_a_folder_named_by_the_time_and_are_listed():
+    now = time.strptime("2026-12-05 06:30:01", "%Y-%m-%d %H:%M:%S")
+    aside = hk.set_aside_folder(Path("results/outputs/out"), now)
+    assert aside == Path("results/outputs/out/set_aside/20261205T063001")
+    left = [Path(f"out/t{i}.csv") for i in range(7)]
+    message = hk.set_aside_message(left, "out", aside)
+    assert message.startswith("moved 7 file(s) that this config does not make out of out ")
+    assert message.endswith(": t0.csv, t1.csv, t2.csv, t3.csv, t4.csv, t5.csv, ...")
+
+
+# -- guards ----------------------------------------------------------------------------------
+
+
+def test_committed_outputs_of_another_profile_are_not_overwritten(tmp_path):
+    out = str(tmp_path / "paper")
+    assert hk.committed_owner(out) is None
+    Path(out).mkdir()
+    (Path(out) / "provenance.json").write_text('{"config_file": "config/paper.yaml"}')
+    owner = hk.committed_owner(out)
+    assert owner == "config/paper.yaml"
+    assert hk.committed_outputs_problem(out, owner, ["config/paper.yaml"]) is None
+    problem = hk.committed_outputs_problem(out, owner, ["config/smoke.yaml"])
+    assert problem is not None
+    assert "holds the committed outputs of config/paper.yaml" in problem
+    assert "this run's config (config/smoke.yaml) must write its own outputs_dir" in problem
+
+
+def test_the_files_of_jobs_include_logs_and_benchmarks():
+    jobs = [
+        SimpleNamespace(output=["a.nc"], log=["a.log"], benchmark="a.tsv"),
+        SimpleNamespace(output=["b.json", "b.csv"], log=[], benchmark=None),
+    ]
+    assert hk.job_files(jobs) == ["a.nc", "a.log", "a.tsv", "b.json", "b.csv"]
+
+
+def test_the_lines_name_what_to_do():
+    assert "set outputs_dir (e.g. out/my_study)" in hk.outputs_dir_unset_warning([], "out")
+    assert "outputs_dir is not set in the config" in hk.outputs_dir_unset_warning([], "out")
+    line = hk.missing_compiler_problem(["same", "sep"], "g++")
+    assert "must build 2 program(s) (same, sep)" in line and "'g++'" in line
+    remedies = hk.write_remedies("out", "/cache")
+    assert set(remedies) == {"results", "out", "/cache"}
+
+
+def test_an_empty_program_cache_has_built_no_program(tmp_path, monkeypatch):
+    monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "empty_cache"))
+    assert hk.unbuilt_programs(["same", "sep"]) == ["same", "sep"]
+    assert hk.unbuilt_programs([]) == []

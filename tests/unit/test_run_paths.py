@@ -1,0 +1,289 @@
+"""Every path of a run (ssmobs.run_paths.RunPaths): each one is a file that a rule of
+``workflow/rules/`` makes, under the key of what determines it, and the targets of ``all``
+are this config's outputs."""
+
+from __future__ import annotations
+
+import ast
+import functools
+import io
+import re
+import tokenize
+from pathlib import Path
+
+import pytest
+import yaml
+from ssmobs.cache_keys import PACKAGE_DIR, CacheKeys
+from ssmobs.config.validation import validate
+from ssmobs.run_paths import MAP_CELLS_DIR, RunPaths
+
+pytestmark = pytest.mark.unit
+
+REPO = PACKAGE_DIR.parents[1]
+RULES = REPO / "workflow" / "rules"
+
+
+@functools.cache
+def run_paths(profile: str) -> RunPaths:
+    config = validate(yaml.safe_load((REPO / "config" / f"{profile}.yaml").read_text()))
+    return RunPaths.from_config(config, CacheKeys(config, "native", repo=REPO), "native")
+
+
+def _fstring(body: str, names: dict[str, str]) -> str | None:
+    """The text of an f-string's ``body`` with ``names`` filled in (None: another expression)."""
+    out = []
+    for piece in re.split(r"(\{\{|\}\}|\{[^{}]*\})", body):
+        if piece in ("{{", "}}"):
+            out.append(piece[0])
+        elif piece.startswith("{"):
+            if piece[1:-1] not in names:
+                return None
+            out.append(names[piece[1:-1]])
+        else:
+            out.append(piece)
+    return "".join(out)
+
+
+def rule_patterns(paths: RunPaths) -> set[str]:
+    """Every path pattern written out in the rule files (string literals, f-strings with
+    outputs_dir and the design folder filled in), with Snakemake's {wildcards}."""
+    names = {
+        "OUT": paths.outputs_dir,
+        "DESIGN_DIR": f"results/shared/design_disturbances/{paths.keys.design}",
+    }
+    found = set()
+    for smk in sorted(RULES.glob("*.smk")):
+        for tok in tokenize.generate_tokens(io.StringIO(smk.read_text()).readline):
+            if tok.type != tokenize.STRING:
+                continue
+            prefix = tok.string[: tok.string.index(tok.string[-1])].lower()
+            if "f" in prefix:
+                text = _fstring(ast.literal_eval(tok.string[1:]), names)
+            else:
+                text = ast.literal_eval(tok.string)
+            if isinstance(text, str) and "/" in text:
+                found.add(text)
+    return found
+
+
+def matches_a_rule(path: str, patterns: set[str]) -> bool:
+    """Whether ``path`` is an instance of a pattern (or of a multiext stem: ``.ext`` more)."""
+    for pattern in patterns:
+        parts = re.split(r"(\{\w+\})", pattern)
+        body = "".join("[^/]+" if re.fullmatch(r"\{\w+\}", p) else re.escape(p) for p in parts)
+        if re.fullmatch(rf"{body}(\.\w+)?", path):
+            return True
+    return False
+
+
+@pytest.fixture(scope="module")
+def smoke() -> RunPaths:
+    return run_paths("smoke")
+
+
+def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
+    patterns = rule_patterns(smoke)
+    keys = smoke.keys
+
+    def rule_path(pattern: str, **wildcards: object) -> str:
+        assert pattern in patterns, f"no rule writes {pattern}"
+        return pattern.format(**wildcards)
+
+    stan = smoke.stan_scenarios
+    assert stan and smoke.joint_scenarios and smoke.exact_scenarios
+    for name, sc in smoke.scenario_objects.items():
+        for K in {sc.K, sc.exact_trajectories}:
+            assert smoke.trajectories(name, K) == rule_path(
+                "results/{scenario}/design_trajectories/{key}/trajectories.nc",
+                scenario=name,
+                key=keys.trajectories(name, K),
+            )
+        assert smoke.trajectories(name) == smoke.trajectories(name, sc.K)
+        assert smoke.check(name) == rule_path(
+            "results/{scenario}/check_model/{key}.json",
+            scenario=name,
+            key=keys.check_model(name),
+        )
+        assert smoke.disturbances(sc.disturbance_dim, sc.K, sc.method, sc.seed) == rule_path(
+            f"results/shared/design_disturbances/{keys.design}/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.nc",
+            q=sc.disturbance_dim,
+            K=sc.K,
+            method=sc.method,
+            seed=sc.seed,
+        )
+    for name in smoke.joint_scenarios:
+        joint = {"scenario": name, "key": keys.joint_map(name)}
+        assert smoke.joint_summary(name) == rule_path(
+            "results/{scenario}/joint_map/{key}/summary.json", **joint
+        )
+        assert smoke.joint_table(name) == rule_path(
+            "results/{scenario}/joint_map/{key}/joint_map.parquet", **joint
+        )
+    for name in stan:
+        model = smoke.scenario_objects[name].model.slug
+        size = smoke.batch_size(name)
+        assert smoke.check(name, stan=True) == rule_path(
+            "results/{scenario}/check_model_stan/{key}.json",
+            scenario=name,
+            key=keys.check_model(name, True),
+        )
+        assert smoke.program_marker(model) == rule_path(
+            "results/shared/stan/{backend}/{model}/{key}.json",
+            backend="native",
+            model=model,
+            key=keys.program(model),
+        )
+        batches = smoke.nuts_batches(name)
+        assert len(batches) == -(-len(smoke.scenario_objects[name].stan_trajectories) // size)
+        assert batches == [
+            rule_path(
+                "results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
+                scenario=name,
+                key=keys.nuts_batches(name, size),
+                batch=b,
+            )
+            for b in range(len(batches))
+        ]
+        gather = {"scenario": name, "key": keys.gather(name, size)}
+        assert smoke.stan_summary(name) == rule_path(
+            "results/{scenario}/gather_nuts/{key}/summary.json", **gather
+        )
+        assert smoke.stan_table(name) == rule_path(
+            "results/{scenario}/gather_nuts/{key}/marginal_map.parquet", **gather
+        )
+        assert keys.nuts_records(name) in smoke.records_dir(name)
+        assert smoke.records_dir(name) != smoke.draws_dir(name)
+    for name in smoke.exact_scenarios:
+        K = smoke.scenario_objects[name].exact_trajectories
+        assert smoke.exact_summary(name) == rule_path(
+            "results/{scenario}/exact_marginal/{key}/summary.json",
+            scenario=name,
+            key=keys.exact(name, K),
+        )
+        assert smoke.exact_table(name, K) == rule_path(
+            "results/{scenario}/exact_marginal/{key}/marginal_map.parquet",
+            scenario=name,
+            key=keys.exact(name, K),
+        )
+
+
+def test_the_choice_of_k_and_the_maps_paths_are_their_rules_outputs(smoke):
+    patterns = rule_patterns(smoke)
+    assert smoke.k_selections and smoke.maps
+    for name, ks in smoke.k_selections.items():
+        grids = smoke.k_selection_grids(name)
+        assert len(grids) == len(ks["methods"]) * len(ks["sets"]) * len(ks["seeds"])
+        assert len(set(grids)) == len(grids)
+        pattern = "results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.json"
+        assert pattern in patterns
+        key = smoke.keys.k_selection_grid(name)
+        assert all(g.startswith(f"results/k_selection/{name}/{key}/") for g in grids)
+        assert all(matches_a_rule(g, {pattern}) for g in grids)
+        selection = "results/k_selection/{ksel}/selection.json"
+        assert selection in patterns
+        assert smoke.selection(name) == selection.format(ksel=name)
+        # the points are shared by every entry of the same scenario: keyed without the entry
+        points = smoke.ksel_points_dir(name, "design", "nested", 3)
+        assert name not in points and smoke.keys.k_selection_points(name) in points
+    for name in smoke.maps:
+        cells = "results/observability_map/{map}/{key}/cells.parquet"
+        assert cells in patterns
+        assert smoke.map_cells_table(name) == cells.format(map=name, key=smoke.keys.map_table(name))
+    assert MAP_CELLS_DIR.startswith("results/observability_map/")
+
+
+@pytest.mark.parametrize("profile", ["smoke", "stoch_vol", "map"])
+def test_every_target_is_made_by_a_rule(profile):
+    paths = run_paths(profile)
+    stamps = [paths.stamp("paper_tables"), paths.stamp("map_x")]
+    targets = paths.targets(stamps)
+    assert len(set(targets)) == len(targets)
+    patterns = rule_patterns(paths)
+    strays = [t for t in targets if t not in stamps and not matches_a_rule(t, patterns)]
+    assert strays == []
+
+
+def test_the_targets_are_every_stage_and_output_of_the_config(smoke):
+    damaged = ["results/sc/joint_map/0123456789ab/theta_hat.nc"]
+    stamps = [smoke.stamp("paper_tables")]
+    targets = smoke.targets(stamps, damaged)
+    assert set(stamps + damaged) <= set(targets)
+    assert {smoke.trajectories(n) for n in smoke.scenarios} <= set(targets)
+    assert {smoke.joint_summary(n) for n in smoke.joint_scenarios} <= set(targets)
+    assert {smoke.stan_summary(n) for n in smoke.stan_scenarios} <= set(targets)
+    assert {smoke.exact_summary(n) for n in smoke.exact_scenarios} <= set(targets)
+    out = smoke.outputs_dir
+    for name in smoke.maps:
+        assert f"{out}/map_{name}.png" in targets
+    for name in smoke.studies:
+        assert f"{out}/ours_{name}_observability.csv" in targets
+    assert smoke.paper_outputs and f"{out}/table2_joint_vs_marginal.tex" in targets
+
+
+def test_a_study_of_ones_own_model_gets_no_paper_outputs():
+    paths = run_paths("stoch_vol")
+    assert not paths.paper_outputs
+    targets = paths.targets([])
+    assert not [t for t in targets if "table2" in t or "fig2_" in t or "table3" in t]
+    assert all(t.startswith(("results/", f"{paths.outputs_dir}/")) for t in targets)
+
+
+def test_stamps_and_outputs_follow_outputs_dir():
+    paths = run_paths("smoke")
+    assert (
+        paths.stamp("select_k_{ksel}")
+        == f"results/outputs/{paths.outputs_dir}/select_k_{{ksel}}.key"
+    )
+    assert Path(paths.stamp("x")).parent == Path(paths.stamps_dir)
+
+
+def test_study_inputs_and_exact_comparison_name_their_scenarios_files(smoke):
+    for name, study in smoke.studies.items():
+        inputs = smoke.study_inputs(name)
+        members = study["scenarios"]
+        assert inputs["stan"] == [
+            smoke.stan_summary(n) for n in members if n in smoke.stan_scenarios
+        ]
+        assert inputs["joint"] == [
+            smoke.joint_summary(n) for n in members if n in smoke.joint_scenarios
+        ]
+    for name in smoke.exact_vs_stan_scenarios:
+        inputs = smoke.exact_vs_stan_inputs(name)
+        assert inputs["stan"] == smoke.stan_table(name)
+        assert inputs["exact"] == smoke.exact_table(name, smoke.scenarios[name]["K"])
+
+
+def test_every_key_is_computed_up_front_and_map_cells_are_returned(smoke):
+    config = smoke.config
+    fresh = RunPaths.from_config(config, CacheKeys(config, "native", repo=REPO), "native")
+    before = set(fresh.keys.describe())
+    cells = fresh.compute_every_key()
+    assert set(cells) == set(fresh.maps) and all(cells.values())
+    described = set(fresh.keys.describe()) - before
+
+    def computed(kind: str, name: str, path: str) -> bool:
+        return any(
+            d.startswith(f"{kind}:{name}:") and d.rsplit(":", 1)[1] in path for d in described
+        )
+
+    # the paths of another object: this one computed its keys in compute_every_key only
+    for name in smoke.stan_scenarios:
+        assert computed("gather", name, smoke.stan_summary(name))
+        assert computed("check_model_stan", name, smoke.check(name, stan=True))
+    for name, sc in smoke.scenario_objects.items():
+        assert computed("joint_map", name, smoke.joint_dir(name))
+        assert computed("exact", name, smoke.exact_dir(name, sc.exact_trajectories))
+    for name in smoke.k_selections:
+        assert computed("k_selection_grid", name, smoke.ksel_grids_dir(name))
+    assert fresh.every_trajectories() == [
+        fresh.trajectories(n, K)
+        for n, sc in fresh.scenario_objects.items()
+        for K in {sc.K, sc.exact_trajectories}
+    ]
+
+
+def test_the_stan_models_are_those_of_the_stan_scenarios_once_each():
+    paths = run_paths("config")  # several scenarios of each model
+    models = {paths.scenarios[n]["model"] for n in paths.stan_scenarios}
+    assert paths.stan_models == sorted(models)
+    assert len(paths.stan_models) < len(paths.stan_scenarios)

@@ -1,0 +1,355 @@
+"""Every path of one run of the workflow: one frozen object built from the checked config.
+
+The workflow's outputs live under content keys (:mod:`ssmobs.cache_keys`)::
+
+    results/shared/design_disturbances/<key>/q{q}_K{K}_{method}_seed{seed}.nc
+    results/{scenario}/<stage>/<key>/...       one folder per stage and key of a scenario
+    results/k_selection/{name}/<key>/...       the grids of the choice of K (Sec. IV.A)
+    results/shared/k_selection_points/<key>/   its points V_{K_i}, shared by its entries
+    results/observability_map/...              the observability maps' cells and tables
+    results/outputs/<outputs_dir>/*.key        what made each table and figure (stamps)
+    <outputs_dir>/                             the tables and figures
+
+:class:`RunPaths` answers every "where is ..." of the rules (``workflow/rules/*.smk``) and
+the list of targets of the rule ``all``; it reads no file and writes none, so the rules'
+paths can be checked without Snakemake.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from .cache_keys import CacheKeys
+from .config.scenario import Scenario
+from .config.validation import asks_for_paper_outputs
+
+#: the folder of the cached cells of every observability map (by their own keys, shared by
+#: maps and profiles)
+MAP_CELLS_DIR = "results/observability_map/cells"
+
+
+def _each(stem: str, exts: Iterable[str]) -> list[str]:
+    """``stem.ext`` for every ext, in order."""
+    return [f"{stem}.{ext}" for ext in exts]
+
+
+@dataclass(frozen=True, eq=False)
+class RunPaths:
+    """Where every file of one run goes: the config's entries by name, the content keys of
+    this config (``keys``), the Stan backend (``backend``, resolved) and ``outputs_dir``.
+
+    Build it with :meth:`from_config`; every path is relative to the working directory.
+    """
+
+    #: the checked config (:func:`ssmobs.config.validation.validate`)
+    config: Mapping[str, Any]
+    #: this config's content keys
+    keys: CacheKeys
+    #: the concrete Stan backend (``native``, ``cmdstanpy``, ``pystan``)
+    backend: str
+    #: config key outputs_dir: where the tables and figures go
+    outputs_dir: str
+    #: the scenario entries by name (as the config holds them), in config order
+    scenarios: Mapping[str, Mapping[str, Any]]
+    #: the same entries as typed objects
+    scenario_objects: Mapping[str, Scenario]
+    #: the k_selection entries by name
+    k_selections: Mapping[str, Mapping[str, Any]]
+    #: the observability_studies entries by name
+    studies: Mapping[str, Mapping[str, Any]]
+    #: the observability_maps entries by name
+    maps: Mapping[str, Mapping[str, Any]]
+    #: the config asks for the paper's tables and figures (it names a scenario of the paper
+    #: or sets paper_outputs); a study of one's own model gets its own outputs only
+    paper_outputs: bool
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any], keys: CacheKeys, backend: str) -> RunPaths:
+        """The paths of a run of the checked ``config`` with its ``keys`` and ``backend``."""
+        scenarios = {sc["name"]: sc for sc in config["scenarios"]}
+        return cls(
+            config=config,
+            keys=keys,
+            backend=backend,
+            outputs_dir=config["outputs_dir"],
+            scenarios=scenarios,
+            scenario_objects={n: Scenario.from_config(sc) for n, sc in scenarios.items()},
+            k_selections={ks["name"]: ks for ks in config["k_selection"]},
+            studies={st["name"]: st for st in config["observability_studies"]},
+            maps={m["name"]: m for m in config["observability_maps"]},
+            paper_outputs=asks_for_paper_outputs(config),
+        )
+
+    def compute_every_key(self) -> dict[str, list[tuple[dict[str, Any], str]]]:
+        """Compute every key of this run up front (:attr:`keys` keeps them): a cluster job
+        plans only its own job and looks its key up directly.  Returns every cell of every
+        observability map with its key (issue 21), by map."""
+        keys = self.keys
+        for name, sc in self.scenario_objects.items():
+            keys.check_model(name)
+            keys.joint_map(name)
+            keys.trajectories(name)
+            if self.scenarios[name]["stan"]:  # a model may have no Stan program where none runs
+                keys.check_model(name, stan=True)
+                keys.program(sc.model.slug)
+                keys.gather(name, self.batch_size(name))  # its batches, records
+            for K in {sc.K, sc.exact_trajectories}:
+                keys.exact(name, K)  # and the trajectories at K
+        for name in self.k_selections:
+            keys.k_selection_grid(name)  # and its points
+        cells = {name: keys.map_cells(name) for name in self.maps}
+        for name in self.maps:
+            keys.map_table(name)
+        return cells
+
+    # -- the scenarios of each stage -------------------------------------------------------
+
+    @property
+    def joint_scenarios(self) -> list[str]:
+        """The scenarios with a joint MAP stage (Sec. III.B)."""
+        return [n for n, sc in self.scenarios.items() if sc["joint_map"]]
+
+    @property
+    def stan_scenarios(self) -> list[str]:
+        """The scenarios with a NUTS stage (Sec. III.C)."""
+        return [n for n, sc in self.scenarios.items() if sc["stan"]]
+
+    @property
+    def stan_models(self) -> list[str]:
+        """The models of the scenarios with a NUTS stage, sorted, each once."""
+        return sorted({sc["model"] for sc in self.scenarios.values() if sc["stan"]})
+
+    @property
+    def mu0_scenarios(self) -> list[str]:
+        """The joint-MAP scenarios of the models the barrier-start sweep covers."""
+        models = self.config["mu0_sweep"]["models"]
+        return [n for n, sc in self.scenarios.items() if sc["joint_map"] and sc["model"] in models]
+
+    @property
+    def exact_scenarios(self) -> list[str]:
+        """The scenarios whose model the exact marginal applies to (linear in the states)."""
+        return [n for n, sc in self.scenario_objects.items() if sc.exact_applies]
+
+    @property
+    def exact_vs_stan_scenarios(self) -> list[str]:
+        """The exact scenarios with a NUTS stage too (their comparison figure)."""
+        return [n for n in self.exact_scenarios if self.scenarios[n]["stan"]]
+
+    @property
+    def figure4_scenario(self) -> str | None:
+        """The scenario of Figure 4 (config key paper_outputs.figure4), if any."""
+        name: str | None = self.config["paper_outputs"]["figure4"]
+        return name
+
+    def batch_size(self, name: str) -> int:
+        """The trajectories of one NUTS job of scenario ``name``."""
+        return self.scenario_objects[name].batch_size(self.config["stan"])
+
+    # -- design (Sec. III.A) ---------------------------------------------------------------
+
+    @property
+    def design_dir(self) -> str:
+        """The design sets of this config's design settings and code."""
+        return f"results/shared/design_disturbances/{self.keys.design}"
+
+    def disturbances(self, q: int, K: int, method: str, seed: int) -> str:
+        """K design disturbances of N(0, I_q) made by ``method`` from ``seed``."""
+        return f"{self.design_dir}/q{q}_K{K}_{method}_seed{seed}.nc"
+
+    def figure2_disturbances(self) -> str:
+        """The design set that Figure 2 draws (config block figure2)."""
+        f2 = self.config["figure2"]
+        return self.disturbances(2, f2["K"], "design", f2["seed"])
+
+    def trajectories(self, name: str, K: int | None = None) -> str:
+        """The design trajectories of a scenario at K (its own K by default)."""
+        key = self.keys.trajectories(name, K)
+        return f"results/{name}/design_trajectories/{key}/trajectories.nc"
+
+    def every_trajectories(self) -> list[str]:
+        """The design trajectories of every scenario, at its K and at its exact stage's K."""
+        return [
+            self.trajectories(name, K)
+            for name, sc in self.scenario_objects.items()
+            for K in {sc.K, sc.exact_trajectories}
+        ]
+
+    def check(self, name: str, stan: bool = False) -> str:
+        """The report of the model check of a scenario (Python alone, or against Stan)."""
+        stage = "check_model_stan" if stan else "check_model"
+        return f"results/{name}/{stage}/{self.keys.check_model(name, stan)}.json"
+
+    # -- joint MAP (Sec. III.B) ------------------------------------------------------------
+
+    def joint_dir(self, name: str) -> str:
+        """The folder of a scenario's joint MAP stage."""
+        return f"results/{name}/joint_map/{self.keys.joint_map(name)}"
+
+    def joint_summary(self, name: str) -> str:
+        """The summary of a scenario's joint MAP stage (|K^max| and the checks)."""
+        return f"{self.joint_dir(name)}/summary.json"
+
+    def joint_table(self, name: str) -> str:
+        """The joint MAP of every trajectory of a scenario, one row each."""
+        return f"{self.joint_dir(name)}/joint_map.parquet"
+
+    def stan_init_inputs(self, name: str) -> dict[str, str]:
+        """The joint MAP of every trajectory when the scenario's chains start there."""
+        if self.scenarios[name]["stan_init"] == "joint_map":
+            return {"joint_map": f"{self.joint_dir(name)}/theta_hat.nc"}
+        return {}
+
+    # -- NUTS (Sec. III.C) -----------------------------------------------------------------
+
+    def program_marker(self, model: str) -> str:
+        """The marker of a model's Stan program built with this run's backend."""
+        return f"results/shared/stan/{self.backend}/{model}/{self.keys.program(model)}.json"
+
+    def records_dir(self, name: str) -> str:
+        """The per-trajectory NUTS records of a scenario (resumable, shared by batchings)."""
+        return f"results/{name}/sample_nuts/records/{self.keys.nuts_records(name)}"
+
+    def draws_dir(self, name: str) -> str:
+        """The kept draws of a scenario's NUTS runs (stan.keep_draws)."""
+        return f"results/{name}/draws/{self.keys.nuts_records(name)}"
+
+    def batch_dir(self, name: str) -> str:
+        """The batch tables of a scenario's NUTS stage."""
+        key = self.keys.nuts_batches(name, self.batch_size(name))
+        return f"results/{name}/sample_nuts/{key}"
+
+    def nuts_batches(self, name: str) -> list[str]:
+        """Every batch table of a scenario's NUTS stage, in batch order."""
+        from .stages.stan import batches
+
+        ranges = batches(self.scenario_objects[name].stan_trajectories, self.batch_size(name))
+        return [f"{self.batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
+
+    def gather_dir(self, name: str) -> str:
+        """The folder of a scenario's gathered NUTS results."""
+        return f"results/{name}/gather_nuts/{self.keys.gather(name, self.batch_size(name))}"
+
+    def stan_summary(self, name: str) -> str:
+        """The summary of a scenario's NUTS stage (|K^Stan| and the convergence checks)."""
+        return f"{self.gather_dir(name)}/summary.json"
+
+    def stan_table(self, name: str) -> str:
+        """The marginal MAP of every trajectory of a scenario's NUTS stage."""
+        return f"{self.gather_dir(name)}/marginal_map.parquet"
+
+    # -- exact marginal --------------------------------------------------------------------
+
+    def exact_dir(self, name: str, K: int) -> str:
+        """The folder of a scenario's exact marginal at K trajectories."""
+        return f"results/{name}/exact_marginal/{self.keys.exact(name, K)}"
+
+    def exact_table(self, name: str, K: int) -> str:
+        """The exact marginal MAP of every trajectory of a scenario at K."""
+        return f"{self.exact_dir(name, K)}/marginal_map.parquet"
+
+    def exact_summary(self, name: str) -> str:
+        """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
+        K = self.scenario_objects[name].exact_trajectories
+        return f"{self.exact_dir(name, K)}/summary.json"
+
+    def exact_vs_stan_inputs(self, name: str) -> dict[str, str]:
+        """The NUTS and exact marginal MAP tables of a scenario at its K (its figure)."""
+        K = self.scenarios[name]["K"]
+        return {"stan": self.stan_table(name), "exact": self.exact_table(name, K)}
+
+    # -- the choice of K (Sec. IV.A) and observability maps ---------------------------------
+
+    def ksel_grids_dir(self, ksel: str) -> str:
+        """The grid files of one k_selection entry (keyed by its points' key and the grid)."""
+        return f"results/k_selection/{ksel}/{self.keys.k_selection_grid(ksel)}"
+
+    def ksel_points_dir(self, ksel: str, method: str, sets: str, seed: int | str) -> str:
+        """The cached points V_{K_i} of one grid, one file per K_i, keyed without the grid
+        and the entry: every k_selection entry on the same scenario finds them."""
+        key = self.keys.k_selection_points(ksel)
+        return f"results/shared/k_selection_points/{key}/{method}_{sets}_seed{seed}"
+
+    def k_selection_grids(self, name: str) -> list[str]:
+        """Every (method, sets, seed) grid of one k_selection entry: every seed of every
+        method (a design set's seed starts its optimiser, so its K is a distribution too)."""
+        ks = self.k_selections[name]
+        return [
+            f"{self.ksel_grids_dir(name)}/{method}_{sets}_seed{seed}.json"
+            for method in ks["methods"]
+            for sets in ks["sets"]
+            for seed in ks["seeds"]
+        ]
+
+    @staticmethod
+    def selection(name: str) -> str:
+        """The chosen K of one k_selection entry."""
+        return f"results/k_selection/{name}/selection.json"
+
+    def study_inputs(self, name: str) -> dict[str, list[str]]:
+        """The summaries (and NUTS tables) of the scenarios of one observability study."""
+        names = self.studies[name]["scenarios"]
+        joint = [n for n in names if self.scenarios[n]["joint_map"]]
+        stan = [n for n in names if self.scenarios[n]["stan"]]
+        return {
+            "joint": [self.joint_summary(n) for n in joint],
+            "stan": [self.stan_summary(n) for n in stan],
+            "stan_tables": [self.stan_table(n) for n in stan],
+        }
+
+    def map_cells_table(self, name: str) -> str:
+        """The table of every cell of one observability map."""
+        return f"results/observability_map/{name}/{self.keys.map_table(name)}/cells.parquet"
+
+    # -- tables and figures ----------------------------------------------------------------
+
+    @property
+    def stamps_dir(self) -> str:
+        """The folder of the stamps of this run's tables and figures."""
+        return f"results/outputs/{self.outputs_dir}"
+
+    def stamp(self, name: str) -> str:
+        """The stamp file of a table or figure rule, ``name`` possibly a pattern with
+        wildcards: it holds the key of what made the rule's files in outputs_dir."""
+        return f"{self.stamps_dir}/{name}.key"
+
+    def targets(self, stamps: Iterable[str], damaged: Iterable[str] = ()) -> list[str]:
+        """Every target of the rule ``all``: each scenario's stages, the tables and figures
+        of this config, ``stamps`` (the stamps of its tables and figures) and ``damaged``
+        (intermediate outputs of this config found damaged, made again in this run)."""
+        out = self.outputs_dir
+        targets = [self.trajectories(name) for name in self.scenarios] + list(damaged)
+        targets += [self.joint_summary(name) for name in self.joint_scenarios]
+        targets += [self.stan_summary(name) for name in self.stan_scenarios]
+        for name in self.k_selections:
+            targets += _each(f"{out}/fig_k_convergence_{name}", ["pdf", "png"])
+        if self.k_selections or self.paper_outputs:
+            for part in ["", "_distribution"]:
+                targets += _each(f"{out}/table_k_selection{part}", ["csv", "md", "tex"])
+        targets += [self.exact_summary(name) for name in self.exact_scenarios]
+        for name in self.exact_vs_stan_scenarios:
+            targets += _each(f"{out}/fig_exact_vs_stan_{name}", ["pdf", "png"])
+        for name in self.exact_vs_stan_scenarios:
+            targets += _each(f"{out}/exact_vs_stan_{name}", ["csv", "md"])
+        figure4 = self.figure4_scenario
+        if figure4:
+            targets += _each(f"{out}/fig4_profile_posterior_{figure4}", ["pdf", "png"])
+        for name in self.studies:
+            targets += _each(f"{out}/ours_{name}_observability", ["csv", "md", "png"])
+        for name in self.maps:
+            targets += _each(f"{out}/map_{name}", ["csv", "md", "png", "pdf"])
+        targets += list(stamps)
+        if not self.paper_outputs:
+            return targets
+        targets += _each(f"{out}/fig2_design_points", ["pdf", "png"])
+        tables = ["table2_joint_vs_marginal", "table3_coverage", "section4_summary"]
+        targets += [f"{out}/{stem}.{ext}" for ext in ["csv", "md", "tex"] for stem in tables]
+        figures = ["fig3_joint_vs_marginal", "fig_observability_ratios"]
+        targets += [f"{out}/{stem}.{ext}" for ext in ["pdf", "png"] for stem in figures]
+        if self.mu0_scenarios:
+            targets += _each(f"{out}/table_mu0_sweep", ["csv", "md", "tex"])
+        if self.stan_scenarios:
+            for stem in ["table_convergence_sensitivity", "table_convergence_failures"]:
+                targets += _each(f"{out}/{stem}", ["csv", "md", "tex"])
+        return targets
