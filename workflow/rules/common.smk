@@ -140,14 +140,22 @@ def unwritable_problem(files):
 
 
 def unbuilt_programs():
-    """The models of this run whose Stan program the native backend has not built yet
-    (the model check always evaluates with it)."""
-    from ssmobs.stan_backends import stan_file
+    """The models of this run whose Stan program (hand-written, else generated) the native
+    backend has not built yet (the model check always evaluates with it)."""
+    from ssmobs.stages.stan import stan_program
     from ssmobs.stan_backends.native import NativeBackend
 
     models = sorted({sc["model"] for sc in SCENARIOS.values() if sc["stan"]})
     native = NativeBackend()
-    return [m for m in models if not native.is_built(stan_file(m))]
+    gradients = config["stan"]["gradients"]
+    return [m for m in models if not native.is_built(*stan_program(m, gradients))]
+
+
+def stan_source(model):
+    """stan/<model>.stan, or no file for a model whose program is generated (its key holds
+    the model's code: ssmobs.cache_keys.CacheKeys.stan_program)."""
+    path = f"stan/{model}.stan"
+    return path if (REPO / path).is_file() else []
 
 
 def stop_where_jobs_cannot_write():

@@ -96,7 +96,7 @@ def check_model(
     config that never runs Stan for this model).  Checks stop at the first stage, and within
     it at the first case, with problems, so that one mistake gives one message.
     """
-    from .stan_backends import stan_file
+    from .stan_backends import has_stan_file, stan_file
 
     model = get_model(slug)
     report = CheckReport(slug)
@@ -110,7 +110,19 @@ def check_model(
     )
     if report.problems or not stan:
         return report
-    path = Path(stan_path) if stan_path is not None else stan_file(slug)
+    generated = None
+    if stan_path is not None or has_stan_file(slug):
+        path = Path(stan_path) if stan_path is not None else stan_file(slug)
+    else:  # no hand-written program: the one the workflow generates and runs
+        from .analytic_gradients import generation_problem, write_analytic_program
+
+        problem = generation_problem(model)
+        report.record("stan program generated from the model", [problem] if problem else [])
+        if report.problems:
+            return report
+        generated = write_analytic_program(model, None)
+        path = generated.stan_file
+    header = None if generated is None else generated.header
     report.record(
         f"stan source {path.name}: parameter names/order, data declarations",
         stan_source_problems(model, path),
@@ -118,7 +130,9 @@ def check_model(
     if report.problems:
         return report
     for i, case in enumerate(cases):
-        found = stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
+        found = stan_problems(
+            model, path, case, T=T, seed=seed + i, backend=backend, user_header=header
+        )
         if found:
             break
     report.record(
@@ -126,7 +140,22 @@ def check_model(
         f"bounds ({len(cases)} case(s))",
         found,
     )
-    if report.problems or gradients == "autodiff":
+    if report.problems:
+        return report
+    if generated is not None:
+        from .check_model_analytic import GENERATED_RTOL, generated_problems
+
+        for i, case in enumerate(cases):
+            found = generated_problems(model, generated, case, T=T, seed=seed + i)
+            if found:
+                break
+        report.record(
+            f"generated gradients: equal to the Python model's through Stan's bound "
+            f"transforms to {GENERATED_RTOL:g} relative ({len(cases)} case(s))",
+            found,
+        )
+        return report
+    if gradients == "autodiff":
         return report
     from .check_model_analytic import ANALYTIC_RTOL, analytic_problems
 
@@ -172,24 +201,34 @@ def run_check_model(
 
 
 def _stan_problem(slug: str, backend: str) -> str | None:
-    """One line when the Stan check of ``slug`` cannot start here: no Stan program, or the
-    native driver must build it and finds no C++ compiler (the workflow's own line)."""
+    """One line when the Stan check of ``slug`` cannot start here: no Stan program and
+    none can be generated, or the native driver must build it and finds no C++ compiler
+    (the workflow's own line)."""
     import shutil
 
-    from .stan_backends import stan_file
+    from .stan_backends import has_stan_file, stan_file
 
-    try:
-        program = stan_file(slug)
-    except FileNotFoundError as err:
-        return (
-            f"{err}; write it (docs/your-own-model.md) or check the Python model alone: --no-stan"
-        )
+    if not has_stan_file(slug):  # the program generated from the model, if it can be
+        from .analytic_gradients import generation_problem, write_analytic_program
+
+        problem = generation_problem(get_model(slug))
+        if problem is not None:
+            return f"{problem}, or check the Python model alone: --no-stan"
+        if backend != "native":
+            return (
+                f"model '{slug}' has no stan/{slug}.stan; its generated program calls C++ "
+                f"that only the native backend evaluates: --backend native"
+            )
+        generated = write_analytic_program(get_model(slug), None)
+        program, header = generated.stan_file, generated.header
+    else:
+        program, header = stan_file(slug), None
     if backend != "native":
         return None
     from .stan_backends.native import NativeBackend
     from .stan_backends.native_build import compiler
 
-    if shutil.which(compiler()) or NativeBackend().is_built(program):
+    if shutil.which(compiler()) or NativeBackend().is_built(program, header):
         return None
     return (
         f"the native Stan backend must build {program} but finds no C++ compiler "
@@ -224,6 +263,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="analytic: also check the generated gradients against Stan's autodiff",
     )
     args = parser.parse_args(argv)
+    from .stan_backends import has_stan_file
+
     try:
         model = get_model(args.slug)
     except ValueError as err:
@@ -254,7 +295,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for p in report.problems:
             print(f"  - {p}", file=sys.stderr)
         return 1
-    print(f"model '{args.slug}': Python model and Stan program agree")
+    which = "Stan program" if has_stan_file(args.slug) else "generated Stan program"
+    print(f"model '{args.slug}': Python model and {which} agree")
     return 0
 
 
