@@ -21,6 +21,12 @@ comparison of the two is only meaningful when both encode the same log posterior
    generated from the model's terms against Stan's autodiff of the program, at random
    points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.check_model_analytic`).
 
+A model without ``stan/<slug>.stan`` is checked with the program generated from it
+(:func:`ssmobs.analytic_gradients.generated_stan_code`, the one NUTS runs): steps 2 and 3
+on that program, and in step 4 its gradient against the Python model's (it has no
+autodiff twin); a model whose support constraints no generated program can express stops
+with one line.
+
 Each step lives in its own module: the cases in :mod:`ssmobs.check_model_cases`, step 1 in
 :mod:`ssmobs.check_model_python`, step 2 in :mod:`ssmobs.check_model_stan_source`, step 3 in
 :mod:`ssmobs.check_model_stan`; this module runs them in turn and reports.
