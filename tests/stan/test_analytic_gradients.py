@@ -141,3 +141,64 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
     assert rec["key"]["program_hash"] != program_hash(stan_file("same"))
     again = run()  # the stored record, found again under the same key, not a new run
     assert again["key"] == rec["key"] and again["timings"] == rec["timings"]
+
+
+@pytest.fixture
+def cubic_sensor(monkeypatch):
+    """The cubic sensor test model (tests/cubic_sensor_model.py) as a model without a Stan
+    program of its own."""
+    from cubic_sensor_model import CubicSensor
+
+    model = CubicSensor()
+    monkeypatch.setitem(MODELS._load(), model.slug, model)
+    assert not (REPO_STAN / f"{model.slug}.stan").exists()
+    return model
+
+
+REPO_STAN = stan_file("same").parent
+
+
+def test_model_check_checks_a_one_file_model_by_its_generated_program(cubic_sensor):
+    """No stan/<slug>.stan: the check compiles the generated program and compares its log
+    density (up to a constant) and support with the Python model, and its gradient with
+    the Python model's through Stan's bound transforms (issue 49, item 5)."""
+    report = check_model(cubic_sensor.slug)
+    assert report.problems == [], report.problems
+    assert any(c.startswith("stan program generated from the model") for c in report.checks)
+    assert any(c.startswith("generated gradients: equal to") for c in report.checks)
+
+
+def test_planted_error_in_a_generated_program_is_one_line(cubic_sensor, tmp_path):
+    from ssmobs.model_check.analytic import generated_problems
+
+    good = write_analytic_program(cubic_sensor, None)
+    text = good.header.read_text()
+    # the gradient of the observation term in b, off by one part in ten million
+    target = re.search(r"\n(\s+g_w\[0\] \+= .*);\n", text)
+    assert target is not None
+    header = tmp_path / "planted.hpp"
+    header.write_text(text.replace(target.group(1), target.group(1) + "*1.0000001"))
+    case = default_cases(cubic_sensor)[0]
+    assert generated_problems(cubic_sensor, good, case) == []
+    problems = generated_problems(cubic_sensor, AnalyticProgram(good.stan_file, header), case)
+    assert len(problems) == 1 and "\n" not in problems[0]
+    assert "gradient in b differs from the Python model's" in problems[0]
+
+
+def test_support_constraints_stop_a_one_file_model_in_one_line(monkeypatch):
+    """sep_d1_p2's a^2 + b^2 < 1 is no parameter bound: without its hand-written program
+    the check names the constraint and the remedy in one line, before any compile."""
+    from ssmobs.models.sep_d1_p2 import SepD1P2
+    from ssmobs.nuts.analytic_gradients import generation_problem
+
+    class Unwritten(SepD1P2):
+        slug = "test_unwritten"
+
+    monkeypatch.setitem(MODELS._load(), "test_unwritten", Unwritten())
+    assert generation_problem(get_model("sep_d1_p2")) is not None
+    assert generation_problem(get_model("stoch_vol")) is None
+    report = check_model("test_unwritten")
+    assert report.failed == "stan program generated from the model"
+    assert len(report.problems) == 1 and "\n" not in report.problems[0]
+    assert "support constraints (a^2 + b^2 < 1)" in report.problems[0]
+    assert "write stan/test_unwritten.stan by hand" in report.problems[0]

@@ -82,7 +82,8 @@ def test_undeclared_prior_bound_is_named(tmp_path):
 
 def test_missing_stan_file(tmp_path):
     (msg,) = stan_source_problems(get_model("stoch_vol"), tmp_path / "nope.stan")
-    assert "every model needs stan/stoch_vol.stan" in msg
+    assert f"no Stan program {tmp_path / 'nope.stan'}: name an existing file" in msg
+    assert "the check takes the program generated from the model" in msg
 
 
 class WrongShape(StateSpaceModel):

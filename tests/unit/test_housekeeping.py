@@ -279,5 +279,8 @@ def test_the_lines_name_what_to_do():
 
 def test_an_empty_program_cache_has_built_no_program(tmp_path, monkeypatch):
     monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "empty_cache"))
-    assert hk.unbuilt_programs(["same", "sep"]) == ["same", "sep"]
-    assert hk.unbuilt_programs([]) == []
+    from ssmobs.stan_backends import stan_file
+
+    programs = {m: (stan_file(m), None) for m in ("same", "sep")}
+    assert hk.unbuilt_programs(programs) == ["same", "sep"]
+    assert hk.unbuilt_programs({}) == []

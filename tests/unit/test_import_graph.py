@@ -138,7 +138,9 @@ ALLOWED = {
     "joint_map": {"models"},
     "exact": {"models"},
     "model_check": {"models", "stan_backends", "nuts"},
-    "config": {"models", "stan_backends", "model_check"},
+    # config: a model without a Stan program is refused when no program can be generated
+    # for it (nuts.analytic_gradients.generation_problem)
+    "config": {"models", "stan_backends", "model_check", "nuts"},
     "design": {"models", "config"},
     "reports": {"models", "config", "joint_map", "nuts", "cache_keys", "stage_code"},
     "stages": {

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from factories import same_a09
 from helpers import REPO, make_workdir, only, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -72,12 +71,7 @@ def copy_package_first(monkeypatch, request):
 
 def test_step_check_command(fresh):
     proc = _python(
-        fresh,
-        "-m",
-        "ssmobs.model_check",
-        "stoch_vol",
-        "--configfile",
-        "config/stoch_vol.yaml",
+        fresh, "-m", "ssmobs.model_check", "stoch_vol", "--configfile", "config/stoch_vol.yaml"
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
@@ -232,7 +226,7 @@ def test_a_study_config_plans_its_study_outputs_only(tmp_path):
         f"paper_figures/mine/ours_stoch_vol_observability.{ext}" for ext in ("csv", "md", "png")
     ]
     assert "outputs_dir is not set" not in proc.stdout + proc.stderr
-    same = same_a09(name="same_T4")
+    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
     conf["scenarios"].append({**same, "stan": False, "paper_ref": "same_a09_T4"})
     (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
     planned = _planned(snakemake(work, "-n", "--configfile", "config/mine.yaml"))
@@ -294,21 +288,52 @@ observability_studies: []
 """
 
 
-def test_own_model_without_stan_program_runs_with_stan_false_and_is_named_with_stan(tmp_path):
-    """Found before (issue 46): an own model without a Stan program and ``stan: false``
-    passed the preflight, then gave a traceback at the parse (its Stan keys were made)."""
+def test_own_model_without_stan_program_gets_a_generated_one(tmp_path):
+    """A model module without stan/<slug>.stan: with ``stan: false`` no Stan job is planned
+    (issue 46: once a traceback at the parse); with ``stan: true`` its program is generated
+    (issue 49), so the check against Stan and the NUTS runs are planned, no file in stan/."""
     work = make_workdir(tmp_path)
     models = work / "workflow" / "ssmobs" / "models"
     (models / "nostan.py").write_text(
         'from .same import Same\n\n\nclass NoStan(Same):\n    slug = "nostan"\n'
     )
     (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "false"))
-    proc = snakemake(work, "-n", "--configfile", "config/ns.yaml")
-    assert {"joint_map", "design_trajectories"} <= _planned_rules(proc)
+    rules = _planned_rules(snakemake(work, "-n", "--configfile", "config/ns.yaml"))
+    assert {"joint_map", "design_trajectories"} <= rules
+    assert not rules & {"check_model_stan", "build_stan_model", "sample_nuts"}
     (work / "config" / "ns.yaml").write_text(NO_STAN_CONFIG % ("nostan", "true"))
+    planned = _planned(snakemake(work, "-n", "--configfile", "config/ns.yaml"))
+    for stage in ("check_model_stan", "sample_nuts", "gather_nuts"):
+        assert any(f.startswith(f"results/ns_T4/{stage}/") for f in planned), stage
+    assert any(f.startswith("results/shared/stan/native/nostan/") for f in planned)
+    assert not (work / "stan" / "nostan.stan").exists()
+
+
+CONSTRAINED_CONFIG = """outputs_dir: paper_figures/nc
+scenarios:
+  - {name: nc_T4, model: %s, omega: {a: 0.6, b: 0.5, c: 0.9, d: 0.9}, x0: [8, 8], T: 4, K: 4,
+     prior: restricted, stan: %s}
+paper_outputs: {tables_2_3: [], figure3: [], figure4: null}
+k_selection: []
+observability_studies: []
+"""
+
+
+def test_own_model_with_support_constraints_needs_its_stan_program(tmp_path):
+    """Support constraints (here a^2 + b^2 < 1) are no parameter bounds, so no program is
+    generated for them: one line naming the constraint, before any job; ``stan: false``
+    runs."""
+    work = make_workdir(tmp_path)
+    models = work / "workflow" / "ssmobs" / "models"
+    (models / "nocon.py").write_text(
+        'from .sep_d1_p2 import SepD1P2\n\n\nclass NoCon(SepD1P2):\n    slug = "nocon"\n'
+    )
+    (work / "config" / "nc.yaml").write_text(CONSTRAINED_CONFIG % ("nocon", "false"))
+    snakemake(work, "-n", "--configfile", "config/nc.yaml")
+    (work / "config" / "nc.yaml").write_text(CONSTRAINED_CONFIG % ("nocon", "true"))
     for cmd in (
-        [sys.executable, "-m", "ssmobs.config.preflight", "config/ns.yaml"],
-        [sys.executable, "-m", "snakemake", "-n", "--configfile", "config/ns.yaml"],
+        [sys.executable, "-m", "ssmobs.config.preflight", "config/nc.yaml"],
+        [sys.executable, "-m", "snakemake", "-n", "--configfile", "config/nc.yaml"],
     ):
         out = subprocess.run(
             cmd,
@@ -319,8 +344,60 @@ def test_own_model_without_stan_program_runs_with_stan_false_and_is_named_with_s
         )
         text = out.stdout + out.stderr
         assert out.returncode != 0 and "Traceback" not in text
-        assert f"model 'nostan' has no Stan program {work / 'stan' / 'nostan.stan'}" in text
-        assert "or set stan: false for this scenario" in text
+        lines = [line for line in text.splitlines() if "support constraints" in line]
+        assert len(lines) == 1, text[-3000:]
+        assert "model 'nocon' has support constraints (a^2 + b^2 < 1)" in lines[0]
+        assert "write stan/nocon.stan by hand" in lines[0]
+        assert "or set stan: false for this scenario" in lines[0]
+
+
+def one_file_model(work: Path) -> str:
+    """The tutorial's model as a one-file model of its own (slug "sv_one_file"): its module
+    copied under another name, no Stan program."""
+    text = (work / "workflow" / "ssmobs" / "models" / "stoch_vol.py").read_text()
+    assert text.count('slug = "stoch_vol"') == 1
+    text = text.replace('slug = "stoch_vol"', 'slug = "sv_one_file"')
+    text = text.replace("class StochVol(", "class SvOneFile(")
+    (work / "workflow" / "ssmobs" / "models" / "sv_one_file.py").write_text(text)
+    assert not (work / "stan" / "sv_one_file.stan").exists()
+    return "sv_one_file"
+
+
+def test_one_file_model_runs_through_nuts(tmp_path):
+    """issue 49: a model in one Python file, no Stan program: the model check checks the
+    generated program (against the Python model's log density and gradient), NUTS runs it,
+    the gathered summary counts every trajectory; the old stan/ path is not touched."""
+    import json
+
+    import yaml
+
+    work = make_workdir(tmp_path)
+    slug = one_file_model(work)
+    conf = yaml.safe_load((work / "config" / "stoch_vol.yaml").read_text())
+    entry = {**conf["scenarios"][0], "name": "one_T10", "model": slug, "T": 10, "K": 3}
+    conf = {
+        "outputs_dir": "paper_figures/one",
+        "scenarios": [entry],
+        "observability_studies": [{"name": "one", "scenarios": ["one_T10"]}],
+        "stan": {"chains": 2, "iter_warmup": 150, "iter_sampling": 150},
+    }
+    (work / "config" / "one.yaml").write_text(yaml.safe_dump(conf))
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/one.yaml")
+    assert proc.returncode == 0
+    report = json.loads(only(work, "results/one_T10/check_model_stan/*.json").read_text())
+    assert report["ok"]
+    assert any(
+        c.startswith("generated gradients: equal to the Python model's") for c in report["checks"]
+    )
+    summary = json.loads(only(work, "results/one_T10/gather_nuts/*/summary.json").read_text())
+    assert summary["model"] == slug
+    frame = pd.read_parquet(only(work, "results/one_T10/gather_nuts/*/marginal_map.parquet"))
+    assert frame["k"].tolist() == [0, 1, 2]
+    records = sorted(work.glob("results/one_T10/sample_nuts/records/*/k*.json"))
+    assert len(records) == 3
+    # every record ran the generated program with its C++ header
+    assert all(json.loads(r.read_text())["status"] == "ok" for r in records)
+    assert (work / "paper_figures" / "one" / "ours_one_observability.csv").stat().st_size > 0
 
 
 def test_a_broken_model_module_stops_only_the_configs_that_use_it(tmp_path):

@@ -9,7 +9,8 @@ report = run_check_model(
     snakemake.params.scenarios,
     snakemake.output[0],
     stan=snakemake.params.stan,
-    stan_path=snakemake.input.stan if snakemake.params.stan else None,
+    # no file for a model without stan/<model>.stan: the check generates its program
+    stan_path=(snakemake.input.get("stan") or None) if snakemake.params.stan else None,
     gradients=snakemake.config["stan"]["gradients"] if snakemake.params.stan else "autodiff",
 )
 for line in report.checks:

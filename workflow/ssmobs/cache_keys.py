@@ -133,8 +133,23 @@ class CacheKeys:
         return {**out, **outside_code(files, self.package_dir)}
 
     def stan_program(self, model: str) -> str:
-        """The model's Stan program with its ``#include`` files."""
-        return program_digest(self.repo / "stan" / f"{model}.stan")
+        """The model's Stan program with its ``#include`` files; for a model without one,
+        what its generated program is made of (:func:`ssmobs.stages.stan.stan_program`):
+        the model's code, the generator's format and SymPy's version (the generator's own
+        code is in the stages' code keys)."""
+        path = self.repo / "stan" / f"{model}.stan"
+        if path.is_file():
+            return program_digest(path)
+        import sympy
+
+        from .analytic_gradients import GENERATOR_VERSION
+
+        payload = {
+            "generated": GENERATOR_VERSION,
+            "sympy": sympy.__version__,
+            "model_code": self.model_code(model),
+        }
+        return "generated-" + digest(payload)
 
     def _key(self, kind: str, name: str, payload: dict[str, Any], **about: Any) -> str:
         # every output depends on the fixed numerical kernels (ssmobs/kernels.py)

@@ -333,14 +333,15 @@ def outputs_dir_unset_warning(config_files: list[str], out: str) -> str:
     )
 
 
-def unbuilt_programs(models: Iterable[str]) -> list[str]:
-    """The ``models`` whose Stan program the native backend has not built yet in the
-    program cache (asks the cache, decides nothing; the model check always uses it)."""
-    from .stan_backends import stan_file
+def unbuilt_programs(programs: Mapping[str, tuple[Path, Path | None]]) -> list[str]:
+    """The models of ``programs`` (model -> its Stan program and C++ header, hand-written or
+    generated: :func:`ssmobs.stages.stan.stan_program`) that the native backend has not
+    built yet in the program cache (asks the cache, decides nothing; the model check always
+    uses it)."""
     from .stan_backends.native import NativeBackend
 
     native = NativeBackend()
-    return [m for m in models if not native.is_built(stan_file(m))]
+    return [m for m, (program, header) in programs.items() if not native.is_built(program, header)]
 
 
 def missing_compiler_problem(unbuilt: list[str], compiler: str) -> str:

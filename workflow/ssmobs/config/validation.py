@@ -74,14 +74,26 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
         problems += [f"{where}: {cut_text(p, 2 * MAX_REPR)}" for p in entry_problems(sc)]
         model = MODELS.get(sc["model"])
         if sc.get("stan") and model is not None:
-            from ..stan_backends import STAN_DIR
+            from ..stan_backends import has_stan_file
 
-            if not (STAN_DIR / f"{sc['model']}.stan").is_file():
-                problems.append(
-                    f"{where}.stan = True: model {sc['model']!r} has no Stan program "
-                    f"{STAN_DIR / (sc['model'] + '.stan')}; write it (docs/your-own-model.md) "
-                    f"or set stan: false for this scenario"
-                )
+            # without stan/<model>.stan the workflow generates the program (analytic
+            # gradients; ssmobs.stages.stan.stan_program): not for support constraints
+            # nor for PyStan, which takes no external C++
+            if not has_stan_file(sc["model"]):
+                from ..nuts.analytic_gradients import generation_problem
+
+                problem = generation_problem(model)
+                if problem is None and config["stan"]["backend"] == "pystan":
+                    problem = (
+                        f"model {sc['model']!r} has no Stan program stan/{sc['model']}.stan, "
+                        f"and the generated one needs external C++, which the pystan backend "
+                        f"does not take: choose stan.backend 'native', 'cmdstanpy' or 'auto', "
+                        f"or write stan/{sc['model']}.stan (docs/your-own-model.md)"
+                    )
+                if problem is not None:
+                    problems.append(
+                        f"{where}.stan = True: {problem}; or set stan: false for this scenario"
+                    )
         if i in explicit_exact and model is not None and not model.linear_in_states:
             problems.append(
                 f"{where}.exact = True: model {sc['model']!r} is not linear in the states, "

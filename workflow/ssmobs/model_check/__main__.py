@@ -20,24 +20,34 @@ from .stan import CHECK_BACKENDS
 
 
 def _stan_problem(slug: str, backend: str) -> str | None:
-    """One line when the Stan check of ``slug`` cannot start here: no Stan program, or the
-    native driver must build it and finds no C++ compiler (the workflow's own line)."""
+    """One line when the Stan check of ``slug`` cannot start here: no Stan program and
+    none can be generated, or the native driver must build it and finds no C++ compiler
+    (the workflow's own line)."""
     import shutil
 
-    from ..stan_backends import stan_file
+    from ..stan_backends import has_stan_file, stan_file
 
-    try:
-        program = stan_file(slug)
-    except FileNotFoundError as err:
-        return (
-            f"{err}; write it (docs/your-own-model.md) or check the Python model alone: --no-stan"
-        )
+    if not has_stan_file(slug):  # the program generated from the model, if it can be
+        from ..nuts.analytic_gradients import generation_problem, write_analytic_program
+
+        problem = generation_problem(get_model(slug))
+        if problem is not None:
+            return f"{problem}, or check the Python model alone: --no-stan"
+        if backend != "native":
+            return (
+                f"model '{slug}' has no stan/{slug}.stan; its generated program calls C++ "
+                f"that only the native backend evaluates: --backend native"
+            )
+        generated = write_analytic_program(get_model(slug), None)
+        program, header = generated.stan_file, generated.header
+    else:
+        program, header = stan_file(slug), None
     if backend != "native":
         return None
     from ..stan_backends.native import NativeBackend
     from ..stan_backends.native_build import compiler
 
-    if shutil.which(compiler()) or NativeBackend().is_built(program):
+    if shutil.which(compiler()) or NativeBackend().is_built(program, header):
         return None
     return (
         f"the native Stan backend must build {program} but finds no C++ compiler "
@@ -72,6 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="analytic: also check the generated gradients against Stan's autodiff",
     )
     args = parser.parse_args(argv)
+    from ..stan_backends import has_stan_file
+
     try:
         model = get_model(args.slug)
     except ValueError as err:
@@ -102,7 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for p in report.problems:
             print(f"  - {p}", file=sys.stderr)
         return 1
-    print(f"model '{args.slug}': Python model and Stan program agree")
+    which = "Stan program" if has_stan_file(args.slug) else "generated Stan program"
+    print(f"model '{args.slug}': Python model and {which} agree")
     return 0
 
 

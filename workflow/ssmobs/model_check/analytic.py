@@ -7,6 +7,10 @@ The values may differ by one additive constant (the hand-written program keeps S
 normalising constants there); the gradients on the unconstrained scale must be equal.  Both
 to ``rtol`` relative (1e-12: what is left is rounding in another summation order).  The
 first disagreement is one line naming the point and the component.
+
+A model without a hand-written program runs a generated one
+(:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`), which has no autodiff twin:
+:func:`generated_problems` compares its gradient with the Python model's instead.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ from .stan import stan_point
 
 #: relative tolerance of value (up to a constant) and gradient
 ANALYTIC_RTOL = 1e-12
+#: relative tolerance of a generated program's gradient against the Python model's (NumPy
+#: evaluates the same terms in another form; Stan's bound transforms round in between)
+GENERATED_RTOL = 1e-10
 
 
 def unconstrained_names(names: list[str], dims: list[list[int]]) -> list[str]:
@@ -92,4 +99,85 @@ def analytic_problems(
             ]
     if ref is None:
         return [f"{label}: Stan rejects every random point; nothing was compared"]
+    return []
+
+
+def _python_gradient(
+    model: StateSpaceModel, theta: np.ndarray, z: np.ndarray, T: int
+) -> dict[str, float]:
+    """d log pi / d Theta (Eq. (2)) of the Python model by Stan's unconstrained names."""
+    from .models.log_posterior import neg2_log_posterior
+
+    _, grad = neg2_log_posterior(model, theta, z, None, order=1)
+    grad = -0.5 * np.asarray(grad)
+    m, p = model.n_params, model.state_dim
+    out = {name: float(grad[i]) for i, name in enumerate(model.param_names)}
+    states = grad[m:].reshape(T + 1, p)
+    for j in range(p):
+        out["x0" if p == 1 else f"x0[{j + 1}]"] = float(states[0, j])
+        for t in range(1, T + 1):
+            out[f"x[{t}]" if p == 1 else f"x[{t},{j + 1}]"] = float(states[t, j])
+    return out
+
+
+def _bound_slope(value: float, lo: float, hi: float) -> float:
+    """d theta / d u of Stan's transform of a parameter bounded by (lo, hi) (infinite: none)."""
+    if np.isfinite(lo) and np.isfinite(hi):
+        return (value - lo) * (hi - value) / (hi - lo)
+    if np.isfinite(lo):
+        return value - lo
+    if np.isfinite(hi):
+        return hi - value
+    return 1.0
+
+
+def generated_problems(
+    model: StateSpaceModel,
+    program: AnalyticProgram,
+    case: CheckCase,
+    T: int = 6,
+    n_points: int = 6,
+    seed: int = 0,
+    rtol: float = GENERATED_RTOL,
+) -> list[str]:
+    """The generated whole program of a model without a hand-written one
+    (:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`), which has no autodiff twin: its
+    gradient on Stan's unconstrained scale against the Python model's gradient of the same
+    terms (NumPy's evaluation, not the C++), times the slopes of Stan's bound transforms,
+    at random points inside the support (empty list: they agree)."""
+    from ..nuts.analytic_gradients import generated_bounds
+    from .stan_backends.native import NativeBackend
+
+    rng = np.random.default_rng(seed)
+    theta, z, bounds = sample_theta(model, case, T, n_points, rng)
+    data = model.stan_data(z, bounds)
+    label = f"generated program of '{model.slug}' ({case.label()})"
+    try:
+        dens = NativeBackend().log_density(
+            program.stan_file,
+            data,
+            [stan_point(model, th, T) for th in theta],
+            program.header,
+        )
+    except (ValueError, RuntimeError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        return [f"{label}: {first}"]
+    names = unconstrained_names(dens.param_names, dens.dims)
+    box = generated_bounds(model, bounds.lower, bounds.upper)
+    for i, (th, g) in enumerate(zip(theta, dens.gradients)):
+        if g is None:
+            return [f"{label}: Stan rejects point {i}, inside the Python model's support"]
+        want = _python_gradient(model, th, z, T)
+        for j, (lo, hi) in enumerate(box):
+            want[model.param_names[j]] *= _bound_slope(float(th[j]), lo, hi)
+        g_py = np.array([want[n] for n in names])
+        g_st = np.asarray(g, dtype=float)
+        scale = max(1.0, float(np.max(np.abs(g_py))))
+        j = int(np.argmax(np.abs(g_st - g_py)))
+        if abs(g_st[j] - g_py[j]) > rtol * scale:
+            return [
+                f"{label}: gradient in {names[j]} differs from the Python model's at point "
+                f"{i}: {g_st[j]:.17g} vs {g_py[j]:.17g} (relative "
+                f"{abs(g_st[j] - g_py[j]) / scale:.2g} > {rtol:g})"
+            ]
     return []

@@ -21,6 +21,12 @@ comparison of the two is only meaningful when both encode the same log posterior
    generated from the model's terms against Stan's autodiff of the program, at random
    points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.model_check.analytic`).
 
+A model without ``stan/<slug>.stan`` is checked with the program generated from it
+(:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`, the one NUTS runs): steps 2 and 3
+on that program, and in step 4 its gradient against the Python model's (it has no
+autodiff twin); a model whose support constraints no generated program can express stops
+with one line.
+
 Each step lives in its own module: the cases in :mod:`ssmobs.model_check.cases`, step 1 in
 :mod:`ssmobs.model_check.python`, step 2 in :mod:`ssmobs.model_check.stan_source`, step 3 in
 :mod:`ssmobs.model_check.stan`; this module runs them in turn and reports.
@@ -95,7 +101,7 @@ def check_model(
     config that never runs Stan for this model).  Checks stop at the first stage, and within
     it at the first case, with problems, so that one mistake gives one message.
     """
-    from ..stan_backends import stan_file
+    from ..stan_backends import has_stan_file, stan_file
 
     model = get_model(slug)
     report = CheckReport(slug)
@@ -109,7 +115,19 @@ def check_model(
     )
     if report.problems or not stan:
         return report
-    path = Path(stan_path) if stan_path is not None else stan_file(slug)
+    generated = None
+    if stan_path is not None or has_stan_file(slug):
+        path = Path(stan_path) if stan_path is not None else stan_file(slug)
+    else:  # no hand-written program: the one the workflow generates and runs
+        from ..nuts.analytic_gradients import generation_problem, write_analytic_program
+
+        problem = generation_problem(model)
+        report.record("stan program generated from the model", [problem] if problem else [])
+        if report.problems:
+            return report
+        generated = write_analytic_program(model, None)
+        path = generated.stan_file
+    header = None if generated is None else generated.header
     report.record(
         f"stan source {path.name}: parameter names/order, data declarations",
         stan_source_problems(model, path),
@@ -117,7 +135,9 @@ def check_model(
     if report.problems:
         return report
     for i, case in enumerate(cases):
-        found = stan_problems(model, path, case, T=T, seed=seed + i, backend=backend)
+        found = stan_problems(
+            model, path, case, T=T, seed=seed + i, backend=backend, user_header=header
+        )
         if found:
             break
     report.record(
@@ -125,7 +145,22 @@ def check_model(
         f"bounds ({len(cases)} case(s))",
         found,
     )
-    if report.problems or gradients == "autodiff":
+    if report.problems:
+        return report
+    if generated is not None:
+        from .analytic import GENERATED_RTOL, generated_problems
+
+        for i, case in enumerate(cases):
+            found = generated_problems(model, generated, case, T=T, seed=seed + i)
+            if found:
+                break
+        report.record(
+            f"generated gradients: equal to the Python model's through Stan's bound "
+            f"transforms to {GENERATED_RTOL:g} relative ({len(cases)} case(s))",
+            found,
+        )
+        return report
+    if gradients == "autodiff":
         return report
     from .analytic import ANALYTIC_RTOL, analytic_problems
 

@@ -51,24 +51,32 @@ class StanDensity:
 
 
 @contextmanager
-def stan_density(stan_path: Path, data: dict, backend: str = "native") -> Iterator[StanDensity]:
-    """Build the program for ``data`` with ``backend`` (one of :data:`CHECK_BACKENDS`).
+def stan_density(
+    stan_path: Path, data: dict, backend: str = "native", user_header: Path | None = None
+) -> Iterator[StanDensity]:
+    """Build the program for ``data`` with ``backend`` (one of :data:`CHECK_BACKENDS`);
+    ``user_header``: the C++ of its external functions (a generated program; native only).
 
     ValueError when the program rejects the data (or cannot be built for them)."""
+    if user_header is not None and backend != "native":
+        raise ValueError(
+            f"{stan_path.name} calls generated C++ (analytic gradients), which only the "
+            f"native backend evaluates here; check backend {backend!r}"
+        )
     if backend == "native":
         from ..stan_backends.base import BackendError
         from ..stan_backends.native import NativeBackend
 
         native = NativeBackend()
         try:
-            head = native.log_density(stan_path, data, [])
+            head = native.log_density(stan_path, data, [], user_header)
         except BackendError:
             raise
         except RuntimeError as err:  # stanc or the compiler rejects the program
             raise ValueError(str(err)) from err
 
         def native_values(points: list[dict]) -> list[float | None]:
-            return native.log_density(stan_path, data, points).values
+            return native.log_density(stan_path, data, points, user_header).values
 
         yield StanDensity(head.param_names, head.dims, native_values)
     elif backend == "pystan":
@@ -114,6 +122,7 @@ def _locate_difference(
     rtol: float,
     *,
     backend: str,
+    user_header: Path | None = None,
 ) -> str:
     """Which block of Theta (Omega and its components, x0, x_1..x_T) and which term of the
     log posterior (2) a difference Stan - Python depends on: change one block (or the data
@@ -147,7 +156,7 @@ def _locate_difference(
     point[m + p :] += rng.normal(0.0, 0.3, size=point.size - m - p)
     x_moves = moves(point)
     z2 = z + rng.normal(0.0, 0.3, size=z.shape)
-    with stan_density(stan_path, model.stan_data(z2, bounds), backend) as density2:
+    with stan_density(stan_path, model.stan_data(z2, bounds), backend, user_header) as density2:
         z_moves = moves(base, density2, z2)
     blocks = [f"Omega ({', '.join(changed)})"] if changed else []
     blocks += ["x0"] * x0_moves + ["x_1..x_T"] * x_moves + ["the data z"] * z_moves
@@ -168,13 +177,16 @@ def stan_problems(
     model: StateSpaceModel,
     stan_path: Path,
     case: CheckCase,
+    *,
     T: int = 6,
     n_points: int = 6,
     seed: int = 0,
     rtol: float = 1e-8,
     backend: str = "native",
+    user_header: Path | None = None,
 ) -> list[str]:
-    """Compiled Stan against Python for one case: names, shapes, log density, support."""
+    """Compiled Stan against Python for one case: names, shapes, log density, support
+    (``user_header``: the C++ a generated program calls, :func:`stan_density`)."""
     problems: list[str] = []
     rng = np.random.default_rng(seed)
     theta, z, bounds = sample_theta(model, case, T, n_points, rng)
@@ -183,7 +195,7 @@ def stan_problems(
     where = f"({case.label()})"
     with ExitStack() as stack:
         try:
-            density = stack.enter_context(stan_density(stan_path, data, backend))
+            density = stack.enter_context(stan_density(stan_path, data, backend, user_header))
         except ValueError as err:
             return [
                 f"{stan_path.name}: building the program with the Python model's data "
@@ -228,7 +240,16 @@ def stan_problems(
                 f"{_fmt(theta[0], names)}"
                 f" but {diff[i]:.10g} at {_fmt(theta[i], names)} (states as well differ); "
                 + _locate_difference(
-                    model, stan_path, density, theta, z, bounds, rng, rtol, backend=backend
+                    model,
+                    stan_path,
+                    density,
+                    theta,
+                    z,
+                    bounds,
+                    rng,
+                    rtol,
+                    backend=backend,
+                    user_header=user_header,
                 )
             )
             return problems

@@ -58,7 +58,10 @@ def expected_parameters(model: StateSpaceModel) -> list[str]:
 def stan_source_problems(model: StateSpaceModel, stan_path: Path) -> list[str]:
     """Parameter names and order, and the data the Python side passes, read from the source."""
     if not stan_path.is_file():
-        return [f"no Stan program {stan_path}: every model needs stan/{model.slug}.stan"]
+        return [
+            f"no Stan program {stan_path}: name an existing file, or none (without "
+            f"stan/{model.slug}.stan the check takes the program generated from the model)"
+        ]
     code = program_code(stan_path)  # with its #include files
     problems = []
     params = stan_block(code, "parameters")

@@ -99,6 +99,12 @@ def get_backend(name: str = "auto") -> StanBackend:
     return PyStanBackend()
 
 
+def has_stan_file(slug: str) -> bool:
+    """The repository holds a hand-written program ``stan/<slug>.stan`` for the model (else
+    the workflow generates one: :func:`ssmobs.stages.stan.stan_program`)."""
+    return "/" not in slug and "\\" not in slug and (STAN_DIR / f"{slug}.stan").is_file()
+
+
 def stan_file(slug: str) -> Path:
     """The Stan program ``stan/<slug>.stan`` of the repository (FileNotFoundError if absent)."""
     path = STAN_DIR / f"{slug}.stan"
@@ -120,6 +126,7 @@ __all__ = [
     "SamplingError",
     "StanBackend",
     "get_backend",
+    "has_stan_file",
     "have_cmdstan",
     "resolve_backend",
     "stan_file",
