@@ -142,7 +142,7 @@ class CacheKeys:
             return program_digest(path)
         import sympy
 
-        from .analytic_gradients import GENERATOR_VERSION
+        from .nuts.analytic_gradients import GENERATOR_VERSION
 
         payload = {
             "generated": GENERATOR_VERSION,

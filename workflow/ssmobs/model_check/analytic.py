@@ -106,7 +106,7 @@ def _python_gradient(
     model: StateSpaceModel, theta: np.ndarray, z: np.ndarray, T: int
 ) -> dict[str, float]:
     """d log pi / d Theta (Eq. (2)) of the Python model by Stan's unconstrained names."""
-    from .models.log_posterior import neg2_log_posterior
+    from ..models.log_posterior import neg2_log_posterior
 
     _, grad = neg2_log_posterior(model, theta, z, None, order=1)
     grad = -0.5 * np.asarray(grad)
@@ -146,7 +146,7 @@ def generated_problems(
     terms (NumPy's evaluation, not the C++), times the slopes of Stan's bound transforms,
     at random points inside the support (empty list: they agree)."""
     from ..nuts.analytic_gradients import generated_bounds
-    from .stan_backends.native import NativeBackend
+    from ..stan_backends.native import NativeBackend
 
     rng = np.random.default_rng(seed)
     theta, z, bounds = sample_theta(model, case, T, n_points, rng)
