@@ -60,17 +60,18 @@ docs: setup
 # `make test`: every test but the slow ones (marker `slow`: the mutation suite, the kill and
 # damage tests, the cluster runs, the PyStan smoke run, and the rare paths that cost a compile
 # or workflow runs: broken Stan programs, fresh-cache builds, read-only caches, live locks, the
-# SLURM profile; BENCHMARKS.md, "make test in five minutes") and those that build with PyStan (marker
-# `pystan`: the second backend and the native backend's oracle); `make test-slow` runs those
-# (CI runs both).
-# `make test` runs on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test
-# module, and every module of the shared smoke run, on one worker. The slow tests stay in one
-# process: most run whole workflows on both cores, and they are not yet checked under xdist.
+# SLURM profile, the paper and tables profiles' dry runs, a broken own model, the analytic
+# gradients of models other than Same; BENCHMARKS.md, "make test in five minutes") and those
+# that build with PyStan (marker `pystan`: the second backend and the native backend's
+# oracle); `make test-slow` runs those (CI runs both).
+# Both run on $(CORES) worker processes (pytest-xdist); tests/conftest.py keeps each test
+# module, and every module of the shared smoke run, on one worker, and starts the longest
+# first (the mutation suite, the smoke run, the kernels test, ...) so that none ends alone.
 test: setup lint
 	$(BIN)/pytest -n $(CORES) --dist loadscope -m "not slow and not pystan"
 
 test-slow: setup
-	$(BIN)/pytest -m "slow or pystan"
+	$(BIN)/pytest -n $(CORES) --dist loadscope -m "slow or pystan"
 
 # `make smoke`: the smoke profile (every rule, tiny sizes).  `make smoke CONFIG=my.yaml`: that
 # study on the smoke profile's sizes (ssmobs/config/smoke.py writes the overlay to

@@ -20,8 +20,14 @@ from ssmobs.stan_backends.native import NativeBackend
 
 pytestmark = pytest.mark.stan
 
-#: the models of the benchmark and one with p = 2 run by default; the others with `slow`
-FAST = ("same", "sep_d2_p1", "sep_ranwalk", "sep_d1_p2")
+#: `make test` compiles one generated program, model Same's (the other tests of this module
+#: use it too); each other model's is one more compile of about a minute on a cold cache, and
+#: analytic gradients are a setting a user opts into (stan.gradients), so they run with
+#: `slow` (`make test-slow`, issue 48)
+FAST = ("same",)
+#: a compile of a program that only this test uses (a planted error, a generated whole
+#: program): `make test-slow` (issue 48)
+OWN_COMPILE = pytest.mark.slow
 
 
 @pytest.mark.parametrize(
@@ -39,6 +45,7 @@ def test_check_model_runs_the_analytic_check():
     assert any(c.startswith("analytic gradients:") for c in report.checks)
 
 
+@OWN_COMPILE
 def test_planted_error_in_a_generated_term_is_one_line(tmp_path):
     model = get_model("same")
     good = write_analytic_program(model, stan_file("same"))
@@ -92,6 +99,7 @@ def test_draws_equal_in_distribution_over_seeds():
     assert np.all(gap < 4.5 * se), (gap / se).round(2).tolist()
 
 
+@OWN_COMPILE
 def test_generated_whole_program_equals_the_hand_written_one():
     """A model without a Stan program gets one (bounds from its prior intervals and
     parameter kinds, the analytic log density): checked against the hand-written program."""

@@ -22,8 +22,8 @@ from test_incremental import BASE, rules_run
 
 pytestmark = pytest.mark.workflow
 #: cases on a rare path (a live lock, the on-request variant table, a config that drops its
-#: Stan stage, a read-only results/), one to three workflow runs each: `make test-slow`
-#: (issue 48)
+#: Stan stage, a read-only results/ or cache, outputs damaged after their job), one to three
+#: workflow runs each: `make test-slow` (issue 48)
 RARE_PATH = pytest.mark.slow
 
 CONFIG = "config/ksel.yaml"
@@ -264,6 +264,7 @@ def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_rea
     assert (work / FIGURE2).is_file()
 
 
+@RARE_PATH
 def test_a_read_only_cold_cache_stops_nuts_jobs_whose_program_results_knows(tmp_path):
     """Found before (issue 46): with the program's marker and Stan check already in
     results/, a read-only SSMOBS_CACHE without the program let two sample_nuts jobs start
@@ -366,6 +367,7 @@ def _damage_keeping_time(path: Path, content: bytes) -> None:
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
 
 
+@RARE_PATH
 def test_outputs_damaged_after_their_job_are_made_again_not_read(tmp_path):
     """Found reused before (issue 46): an output edited or truncated with its time kept
     gave "Nothing to be done" and flowed into the tables after a later edit.  Every job

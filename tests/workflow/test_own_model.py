@@ -1,9 +1,9 @@
 """docs/your-own-model.md, step by step, on a fresh copy of the repository.
 
 The tutorial's listings are the repository's files (so the tutorial cannot drift from the
-code), its check command passes, its quick run on the smoke profile writes the table and
-figure, and the two mistakes it shows stop the run with the message it quotes, before any
-NUTS run of the model.
+code), its check command passes, and the two mistakes it shows stop the run with the message
+it quotes, before any NUTS run of the model.  Its quick run on the smoke profile is checked
+in test_smoke.py, on the session's smoke run (so that this module need not wait for it).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pandas as pd
 import pytest
 from helpers import REPO, make_workdir, only, snakemake
 
@@ -75,14 +74,6 @@ def test_step_check_command(fresh):
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "model 'stoch_vol': Python model and Stan program agree" in proc.stdout
-
-
-def test_step_quick_run_on_smoke_profile(smoke_run):
-    """`make smoke` (the session's smoke run) writes the study's table beside the others."""
-    frame = pd.read_csv(smoke_run / "paper_figures/smoke/ours_stoch_vol_observability.csv")
-    assert frame["T"].tolist() == [5]
-    assert {"K_max_ratio", "K_stan_ratio", "joint_not_ok", "stan_failed_checks"} <= set(frame)
-    assert list(smoke_run.glob("results/stoch_vol_T5/check_model/*.json"))
 
 
 def test_step_study_command_makes_every_output(tmp_path):
@@ -288,6 +279,7 @@ observability_studies: []
 """
 
 
+@pytest.mark.slow  # stan: false, and what a dry run plans for a generated program (a rare path; issue 48)
 def test_own_model_without_stan_program_gets_a_generated_one(tmp_path):
     """A model module without stan/<slug>.stan: with ``stan: false`` no Stan job is planned
     (issue 46: once a traceback at the parse); with ``stan: true`` its program is generated
@@ -319,6 +311,7 @@ observability_studies: []
 """
 
 
+@pytest.mark.slow  # a refusal before any job (a rare path; issue 48)
 def test_own_model_with_support_constraints_needs_its_stan_program(tmp_path):
     """Support constraints (here a^2 + b^2 < 1) are no parameter bounds, so no program is
     generated for them: one line naming the constraint, before any job; ``stan: false``
@@ -400,6 +393,7 @@ def test_one_file_model_runs_through_nuts(tmp_path):
     assert (work / "paper_figures" / "one" / "ours_one_observability.csv").stat().st_size > 0
 
 
+@pytest.mark.slow  # a model module with a syntax error (a rare path; issue 48)
 def test_a_broken_model_module_stops_only_the_configs_that_use_it(tmp_path):
     """Found before (issue 46): a model file with a syntax error gave a 29-line traceback
     for every config, also those that do not use it."""

@@ -60,7 +60,14 @@ def test_lint_passes():
     assert "Lints for" not in proc.stdout + proc.stderr, proc.stdout + proc.stderr
 
 
-@pytest.mark.parametrize("profile", ["config/config.yaml", "config/paper.yaml"])
+@pytest.mark.parametrize(
+    "profile",
+    [
+        "config/config.yaml",
+        # the paper profile (about 74 CPU-hours, run rarely): its dry run in test-slow (issue 48)
+        pytest.param("config/paper.yaml", marks=pytest.mark.slow),
+    ],
+)
 def test_dry_run_profiles(profile):
     proc = subprocess.run(
         [sys.executable, "-m", "snakemake", "-n", "--cores", "2", "--configfile", profile],
@@ -128,3 +135,14 @@ def test_own_model_observability_study_written(smoke_run):
         assert 0.0 <= frame[col].iloc[0] <= 1.0
     assert (smoke_run / SMOKE_OUT / "ours_stoch_vol_observability.png").stat().st_size > 1000
     assert "|K^max|/K" in (smoke_run / SMOKE_OUT / "ours_stoch_vol_observability.md").read_text()
+
+
+def test_step_quick_run_on_smoke_profile(smoke_run):
+    """docs/your-own-model.md, its quick run: `make smoke` (the session's smoke run) writes
+    the study's table beside the others (the tutorial's other steps: test_own_model.py)."""
+    import pandas as pd
+
+    frame = pd.read_csv(smoke_run / SMOKE_OUT / "ours_stoch_vol_observability.csv")
+    assert frame["T"].tolist() == [5]
+    assert {"K_max_ratio", "K_stan_ratio", "joint_not_ok", "stan_failed_checks"} <= set(frame)
+    assert list(smoke_run.glob("results/stoch_vol_T5/check_model/*.json"))

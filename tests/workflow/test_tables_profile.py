@@ -47,6 +47,7 @@ def test_profile_is_the_papers_setting():
     ) == (4, 4000, 6000)
 
 
+@pytest.mark.slow  # `make tables` (2.2 h, run rarely) planned: its dry run in test-slow (issue 48)
 def test_dry_run_plans_every_trajectory(tmp_path):
     workdir = make_workdir(tmp_path)
     proc = snakemake(workdir, "-n", "--cores", "2", *TARGETS, "--configfile", "config/tables.yaml")
