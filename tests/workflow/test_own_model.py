@@ -15,7 +15,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
+from factories import same_a09
 from helpers import REPO, make_workdir, only, snakemake
 
 pytestmark = pytest.mark.workflow
@@ -217,7 +219,7 @@ def test_a_study_config_plans_its_study_outputs_only(tmp_path):
         f"paper_figures/mine/ours_stoch_vol_observability.{ext}" for ext in ("csv", "md", "png")
     ]
     assert "outputs_dir is not set" not in proc.stdout + proc.stderr
-    same = {"name": "same_T4", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 4, "K": 4}
+    same = same_a09(name="same_T4")
     conf["scenarios"].append({**same, "stan": False, "paper_ref": "same_a09_T4"})
     (work / "config" / "mine.yaml").write_text(yaml.safe_dump(conf))
     planned = _planned(snakemake(work, "-n", "--configfile", "config/mine.yaml"))
@@ -279,7 +281,7 @@ observability_studies: []
 """
 
 
-@pytest.mark.slow  # stan: false, and what a dry run plans for a generated program (a rare path; issue 48)
+@pytest.mark.slow  # stan: false; a dry run plans a generated program (rare path; issue 48)
 def test_own_model_without_stan_program_gets_a_generated_one(tmp_path):
     """A model module without stan/<slug>.stan: with ``stan: false`` no Stan job is planned
     (issue 46: once a traceback at the parse); with ``stan: true`` its program is generated
