@@ -287,3 +287,13 @@ def test_the_stan_models_are_those_of_the_stan_scenarios_once_each():
     models = {paths.scenarios[n]["model"] for n in paths.stan_scenarios}
     assert paths.stan_models == sorted(models)
     assert len(paths.stan_models) < len(paths.stan_scenarios)
+
+
+def test_a_model_without_a_stan_program_has_no_source_file(tmp_path):
+    """stan/<model>.stan where it exists; no file (an empty input) where the program is
+    generated from the model (issue 49: a model in one file)."""
+    paths = run_paths("smoke")
+    assert paths.stan_source("same") == "stan/same.stan"
+    config = paths.config
+    elsewhere = RunPaths.from_config(config, CacheKeys(config, "native", repo=tmp_path), "native")
+    assert elsewhere.stan_source("same") == []

@@ -144,20 +144,6 @@ def unwritable_problem(files):
     return write_problem(files, remedies, default="make it writable")
 
 
-def stan_programs():
-    """Model -> the Stan program NUTS runs and its C++ header (hand-written, else generated)."""
-    from ssmobs.stages.stan import stan_program
-
-    return {m: stan_program(m, config["stan"]["gradients"]) for m in PATHS.stan_models}
-
-
-def stan_source(model):
-    """stan/<model>.stan, or no file for a model whose program is generated (its key holds
-    the model's code: ssmobs.cache_keys.CacheKeys.stan_program)."""
-    path = f"stan/{model}.stan"
-    return path if (REPO / path).is_file() else []
-
-
 def stop_without_compiler():
     """Stop the run (a dry run: warn) when Stan programs must be built with the native
     driver here (the model check always uses it) and no C++ compiler is found: a cold cache
@@ -167,7 +153,7 @@ def stop_without_compiler():
 
     if not STAN_SCENARIOS or shutil.which(compiler()):
         return
-    unbuilt = housekeeping.unbuilt_programs(stan_programs())
+    unbuilt = housekeeping.unbuilt_programs(PATHS.stan_programs())
     if not unbuilt:
         return
     problem = housekeeping.missing_compiler_problem(unbuilt, compiler())
@@ -190,7 +176,7 @@ def stop_where_jobs_cannot_write():
     # a NUTS job builds its program too when the cache lacks it (its marker in results/
     # says only that it was built once, maybe in another cache)
     builds = any(job.rule.name in housekeeping.PROGRAM_BUILDING_RULES for job in jobs)
-    if builds and housekeeping.unbuilt_programs(stan_programs()):
+    if builds and housekeeping.unbuilt_programs(PATHS.stan_programs()):
         files.append(str(cache_root() / "native" / "-"))
     problem = unwritable_problem(files)
     if problem is not None:

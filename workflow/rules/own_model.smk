@@ -41,7 +41,7 @@ rule check_model_stan:
             "check_model_stan",
             wc.scenario,
             wc.key,
-            stan_source(SCENARIOS[wc.scenario]["model"]),
+            PATHS.stan_source(SCENARIOS[wc.scenario]["model"]),
         ),
         program=lambda wc: checked_program(SCENARIOS[wc.scenario]["model"]),
     output:

@@ -5,7 +5,7 @@ rule build_stan_model:
     """Compile stan/<model>.stan (or the program generated from a model without one) once
     with the configured backend (native, cmdstanpy, PyStan)."""
     input:
-        lambda wc: keyed_input("program", wc.model, wc.key, stan_source(wc.model)),
+        lambda wc: keyed_input("program", wc.model, wc.key, PATHS.stan_source(wc.model)),
     output:
         "results/shared/stan/{backend}/{model}/{key}.json",
     log:

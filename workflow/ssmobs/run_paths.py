@@ -121,6 +121,22 @@ class RunPaths:
         """The models of the scenarios with a NUTS stage, sorted, each once."""
         return sorted({sc["model"] for sc in self.scenarios.values() if sc["stan"]})
 
+    def stan_source(self, model: str) -> str | list[str]:
+        """``stan/<model>.stan``, or no file (an empty list, for a rule's input) for a model
+        whose Stan program is generated (its key holds the model's code:
+        :meth:`ssmobs.cache_keys.CacheKeys.stan_program`)."""
+        path = f"stan/{model}.stan"
+        return path if (self.keys.repo / path).is_file() else []
+
+    def stan_programs(self) -> dict[str, tuple[Any, Any]]:
+        """Model -> the Stan program NUTS runs and its C++ header or None (hand-written, else
+        generated: :func:`ssmobs.stages.stan.stan_program`), for every model of
+        :attr:`stan_models`."""
+        from .stages.stan import stan_program
+
+        gradients = self.config["stan"]["gradients"]
+        return {m: stan_program(m, gradients) for m in self.stan_models}
+
     @property
     def mu0_scenarios(self) -> list[str]:
         """The joint-MAP scenarios of the models the barrier-start sweep covers."""

@@ -82,14 +82,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             if not has_stan_file(sc["model"]):
                 from ..nuts.analytic_gradients import generation_problem
 
-                problem = generation_problem(model)
-                if problem is None and config["stan"]["backend"] == "pystan":
-                    problem = (
-                        f"model {sc['model']!r} has no Stan program stan/{sc['model']}.stan, "
-                        f"and the generated one needs external C++, which the pystan backend "
-                        f"does not take: choose stan.backend 'native', 'cmdstanpy' or 'auto', "
-                        f"or write stan/{sc['model']}.stan (docs/your-own-model.md)"
-                    )
+                problem = generation_problem(model, config["stan"]["backend"])
                 if problem is not None:
                     problems.append(
                         f"{where}.stan = True: {problem}; or set stan: false for this scenario"
@@ -322,7 +315,11 @@ def _paper_output_problems(config: dict) -> list[str]:
                 )
         models = [MODELS.get(sc["model"]) for sc in entries]
         if key == "figure3" and entries:
-            truths = {(sc["model"], repr(sc["omega"]), repr(x0_list(sc))) for sc in entries}
+            x0s = [sc["x0"] if isinstance(sc["x0"], list) else [sc["x0"]] for sc in entries]
+            truths = {
+                (sc["model"], repr(sc["omega"]), repr([float(v) for v in x0]))
+                for sc, x0 in zip(entries, x0s)
+            }
             if len(truths) > 1:
                 problems.append(
                     f"paper_outputs.figure3 = {short_repr(names)}: must share one model, omega "
@@ -495,8 +492,3 @@ def _problems_message(
             )
         problems = lines
     return f"{header}:\n  - " + "\n  - ".join(problems)
-
-
-def x0_list(sc: dict) -> list[float]:
-    x0 = sc["x0"]
-    return [float(v) for v in (x0 if isinstance(x0, list) else [x0])]

@@ -295,12 +295,20 @@ def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
     return code[:at] + "functions {\n" + decl + "}\n" + code[at:]
 
 
-def generation_problem(model: StateSpaceModel) -> str | None:
+def generation_problem(model: StateSpaceModel, backend: str | None = None) -> str | None:
     """One line when :func:`generated_stan_code` cannot write the model's program (support
-    constraints c(Omega) > 0, which Stan's parameter bounds do not express), else None."""
+    constraints c(Omega) > 0, which Stan's parameter bounds do not express) or the Stan
+    ``backend`` cannot run it (PyStan takes no external C++), else None."""
     w = sp.symbols(f"w0:{model.n_params}", real=True)
     if not model.support_constraints(list(w)):
-        return None
+        if backend != "pystan":
+            return None
+        return (
+            f"model {model.slug!r} has no Stan program stan/{model.slug}.stan, and the "
+            f"generated one needs external C++, which the pystan backend does not take: "
+            f"choose stan.backend 'native', 'cmdstanpy' or 'auto', or write "
+            f"stan/{model.slug}.stan (docs/your-own-model.md)"
+        )
     return (
         f"model '{model.slug}' has support constraints "
         f"({', '.join(model.constraint_text) or 'support_constraints'}), which a generated "
