@@ -297,3 +297,18 @@ def test_a_model_without_a_stan_program_has_no_source_file(tmp_path):
     config = paths.config
     elsewhere = RunPaths.from_config(config, CacheKeys(config, "native", repo=tmp_path), "native")
     assert elsewhere.stan_source("same") == []
+
+
+def test_rule_params_come_from_the_entries():
+    """The choice of K's and the study's params, the model check's program and the
+    trajectories' inputs, as the rules read them from RunPaths."""
+    paths = run_paths("config")
+    name = next(iter(paths.k_selections))
+    params = paths.select_k_params(name)
+    assert params["scenario"] is paths.scenarios[params["ksel"]["scenario"]]
+    model = paths.stan_models[0]
+    assert paths.checked_program(model) == [paths.program_marker(model)]
+    sc = paths.scenario_objects[paths.stan_scenarios[0]]
+    inputs = paths.trajectory_inputs(sc.name, sc.K)
+    assert inputs["checked"] == paths.check(sc.name)
+    assert f"_K{sc.K}_" in inputs["disturbances"]

@@ -99,8 +99,8 @@ def keyed_input(kind, name, key, paths):
 
 
 def register_stamp(name, inputs, params):
-    """Record the key of the table or figure rule whose stamp is ``PATHS.stamp(name)``: what
-    made its files in outputs_dir (keyed inputs, the content of other inputs, params, code).
+    """Record the key of the table or figure whose stamp is ``PATHS.stamp(name)``: what made
+    its files in outputs_dir (keyed inputs, the content of other inputs, params, code).
     A stamp of another key is removed before the DAG is built, so the rule reruns even where
     file times and .snakemake/ say nothing (e.g. a config edited back to an earlier one)."""
     STAMPS[PATHS.stamp(name)] = KEYS.output(f"{OUT}/{name}", inputs, params)

@@ -21,21 +21,15 @@ rule design_disturbances:
         "../scripts/design_disturbances.py"
 
 
-def trajectory_inputs(wildcards):
-    """The design disturbances and the model check behind one set of design trajectories."""
-    K = expect_key("trajectories", wildcards.scenario, wildcards.key)["K"]
-    sc = PATHS.scenario_objects[wildcards.scenario]
-    return {
-        "disturbances": PATHS.disturbances(sc.disturbance_dim, K, sc.method, sc.seed),
-        "checked": PATHS.check(wildcards.scenario),
-    }
-
-
 rule design_trajectories:
     """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1)), at
     its K or at the exact stage's K (the key says which)."""
     input:
-        unpack(trajectory_inputs),
+        unpack(
+            lambda wc: PATHS.trajectory_inputs(
+                wc.scenario, expect_key("trajectories", wc.scenario, wc.key)["K"]
+            )
+        ),
     output:
         trajectories="results/{scenario}/design_trajectories/{key}/trajectories.nc",
         checksum="results/{scenario}/design_trajectories/{key}/trajectories.nc.sha256",

@@ -28,15 +28,11 @@ rule k_selection_grid:
         "../scripts/k_selection_grid.py"
 
 
-def select_k_params(name):
-    return {"ksel": KSEL[name], "scenario": SCENARIOS[KSEL[name]["scenario"]]}
-
-
 for _name in KSEL:
     register_stamp(
         f"select_k_{_name}",
         [*PATHS.k_selection_grids(_name), "config/paper_values.yaml"],
-        select_k_params(_name),
+        PATHS.select_k_params(_name),
     )
 
 
@@ -60,8 +56,8 @@ rule select_k:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        ksel=lambda wc: select_k_params(wc.ksel)["ksel"],
-        scenario=lambda wc: select_k_params(wc.ksel)["scenario"],
+        ksel=lambda wc: PATHS.select_k_params(wc.ksel)["ksel"],
+        scenario=lambda wc: PATHS.select_k_params(wc.ksel)["scenario"],
         key=stamp_key,
     script:
         "../scripts/select_k.py"

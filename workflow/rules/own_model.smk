@@ -25,14 +25,6 @@ rule check_model:
         "../scripts/check_model.py"
 
 
-def checked_program(model):
-    """What the model check evaluates, when sampling builds it too: with the native backend,
-    build_stan_model's program, so the check runs the cached executable after the one
-    compile (no check job compiles, none waits on another's build lock).  A plain input:
-    a rebuilt program reruns its check, as it reruns the sampling."""
-    return [PATHS.program_marker(model)] if STAN_BACKEND == "native" else []
-
-
 rule check_model_stan:
     """The Python model against its Stan program at one scenario's true values under every
     prior variant: parameter order, log density, prior bounds (before its NUTS runs)."""
@@ -43,7 +35,7 @@ rule check_model_stan:
             wc.key,
             PATHS.stan_source(SCENARIOS[wc.scenario]["model"]),
         ),
-        program=lambda wc: checked_program(SCENARIOS[wc.scenario]["model"]),
+        program=lambda wc: PATHS.checked_program(SCENARIOS[wc.scenario]["model"]),
     output:
         "results/{scenario}/check_model_stan/{key}.json",
     log:
@@ -61,22 +53,11 @@ rule check_model_stan:
         "../scripts/check_model.py"
 
 
-def study_params(name):
-    scs = [SCENARIOS[n] for n in STUDIES[name]["scenarios"]]
-    return {
-        "study": STUDIES[name],
-        "scenarios": scs,
-        "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
-        "stan_names": [sc["name"] for sc in scs if sc["stan"]],
-        "stan_settings": config["stan"],
-    }
-
-
 for _name in STUDIES:
     register_stamp(
         f"observability_study_{_name}",
         [p for paths in PATHS.study_inputs(_name).values() for p in paths],
-        study_params(_name),
+        PATHS.study_params(_name),
     )
 
 
@@ -95,10 +76,10 @@ rule observability_study:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        study=lambda wc: study_params(wc.study)["study"],
-        scenarios=lambda wc: study_params(wc.study)["scenarios"],
-        joint_names=lambda wc: study_params(wc.study)["joint_names"],
-        stan_names=lambda wc: study_params(wc.study)["stan_names"],
+        study=lambda wc: PATHS.study_params(wc.study)["study"],
+        scenarios=lambda wc: PATHS.study_params(wc.study)["scenarios"],
+        joint_names=lambda wc: PATHS.study_params(wc.study)["joint_names"],
+        stan_names=lambda wc: PATHS.study_params(wc.study)["stan_names"],
         stan_settings=config["stan"],
         key=stamp_key,
     script:

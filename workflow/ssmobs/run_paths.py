@@ -223,6 +223,40 @@ class RunPaths:
         """The marker of a model's Stan program built with this run's backend."""
         return f"results/shared/stan/{self.backend}/{model}/{self.keys.program(model)}.json"
 
+    def checked_program(self, model: str) -> list[str]:
+        """What the model check evaluates, when sampling builds it too: with the native
+        backend, build_stan_model's program, so the check runs the cached executable after
+        the one compile (no check job compiles, none waits on another's build lock).  A plain
+        input: a rebuilt program reruns its check, as it reruns the sampling."""
+        return [self.program_marker(model)] if self.backend == "native" else []
+
+    def trajectory_inputs(self, name: str, K: int) -> dict[str, str]:
+        """The design disturbances and the model check behind the design trajectories of
+        scenario ``name`` at K."""
+        sc = self.scenario_objects[name]
+        return {
+            "disturbances": self.disturbances(sc.disturbance_dim, K, sc.method, sc.seed),
+            "checked": self.check(name),
+        }
+
+    def select_k_params(self, name: str) -> dict[str, Any]:
+        """What the choice of K of k_selection entry ``name`` reads: the entry and its
+        scenario."""
+        entry = self.k_selections[name]
+        return {"ksel": entry, "scenario": self.scenarios[entry["scenario"]]}
+
+    def study_params(self, name: str) -> dict[str, Any]:
+        """What observability study ``name`` reads: the entry, its scenarios, those with a
+        joint MAP and with NUTS, and the stan block."""
+        scs = [self.scenarios[n] for n in self.studies[name]["scenarios"]]
+        return {
+            "study": self.studies[name],
+            "scenarios": scs,
+            "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
+            "stan_names": [sc["name"] for sc in scs if sc["stan"]],
+            "stan_settings": self.config["stan"],
+        }
+
     def records_dir(self, name: str) -> str:
         """The per-trajectory NUTS records of a scenario (resumable, shared by batchings)."""
         return f"results/{name}/sample_nuts/records/{self.keys.nuts_records(name)}"
