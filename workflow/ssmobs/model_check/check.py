@@ -39,7 +39,7 @@ rule ``check_model`` runs it for every model a config uses, before any design tr
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -85,6 +85,20 @@ class CheckReport:
 
 
 # ----------------------------------------------------------------------------- driver
+
+
+def _first_problems(
+    cases: Sequence[CheckCase], problems_of: Callable[[int, CheckCase], list[str]]
+) -> list[str]:
+    """The problems of the first case (in order, with its index) that has any, else none:
+    one mistake, one message."""
+    for i, case in enumerate(cases):
+        found = problems_of(i, case)
+        if found:
+            return found
+    return []
+
+
 def check_model(
     slug: str,
     cases: Sequence[CheckCase] | None = None,
@@ -134,12 +148,12 @@ def check_model(
     )
     if report.problems:
         return report
-    for i, case in enumerate(cases):
-        found = stan_problems(
+    found = _first_problems(
+        cases,
+        lambda i, case: stan_problems(
             model, path, case, T=T, seed=seed + i, backend=backend, user_header=header
-        )
-        if found:
-            break
+        ),
+    )
     report.record(
         f"stan compiled: names, shapes, log density up to a constant, support "
         f"bounds ({len(cases)} case(s))",
@@ -150,10 +164,9 @@ def check_model(
     if generated is not None:
         from .analytic import GENERATED_RTOL, generated_problems
 
-        for i, case in enumerate(cases):
-            found = generated_problems(model, generated, case, T=T, seed=seed + i)
-            if found:
-                break
+        found = _first_problems(
+            cases, lambda i, case: generated_problems(model, generated, case, T=T, seed=seed + i)
+        )
         report.record(
             f"generated gradients: equal to the Python model's through Stan's bound "
             f"transforms to {GENERATED_RTOL:g} relative ({len(cases)} case(s))",
@@ -164,10 +177,9 @@ def check_model(
         return report
     from .analytic import ANALYTIC_RTOL, analytic_problems
 
-    for i, case in enumerate(cases):
-        found = analytic_problems(model, path, case, T=T, seed=seed + i)
-        if found:
-            break
+    found = _first_problems(
+        cases, lambda i, case: analytic_problems(model, path, case, T=T, seed=seed + i)
+    )
     report.record(
         f"analytic gradients: log density up to a constant and gradient equal to Stan's "
         f"autodiff to {ANALYTIC_RTOL:g} relative ({len(cases)} case(s))",
