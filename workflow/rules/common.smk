@@ -153,7 +153,7 @@ def stop_without_compiler():
 
     if not STAN_SCENARIOS or shutil.which(compiler()):
         return
-    unbuilt = housekeeping.unbuilt_programs(PATHS.stan_programs())
+    unbuilt = housekeeping.unbuilt_programs(PATHS.stan_programs)
     if not unbuilt:
         return
     problem = housekeeping.missing_compiler_problem(unbuilt, compiler())
@@ -176,7 +176,7 @@ def stop_where_jobs_cannot_write():
     # a NUTS job builds its program too when the cache lacks it (its marker in results/
     # says only that it was built once, maybe in another cache)
     builds = any(job.rule.name in housekeeping.PROGRAM_BUILDING_RULES for job in jobs)
-    if builds and housekeeping.unbuilt_programs(PATHS.stan_programs()):
+    if builds and housekeeping.unbuilt_programs(PATHS.stan_programs):
         files.append(str(cache_root() / "native" / "-"))
     problem = unwritable_problem(files)
     if problem is not None:

@@ -17,6 +17,7 @@ paths can be checked without Snakemake.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -128,10 +129,11 @@ class RunPaths:
         path = f"stan/{model}.stan"
         return path if (self.keys.repo / path).is_file() else []
 
+    @functools.cached_property
     def stan_programs(self) -> dict[str, tuple[Any, Any]]:
         """Model -> the Stan program NUTS runs and its C++ header or None (hand-written, else
         generated: :func:`ssmobs.stages.stan.stan_program`), for every model of
-        :attr:`stan_models`."""
+        :attr:`stan_models`; looked up (and generated) once per run."""
         from .stages.stan import stan_program
 
         gradients = self.config["stan"]["gradients"]
