@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from ssmobs.config.validation import ConfigError
+from ssmobs.config.validation import ConfigError, validate
 from ssmobs.reports.stan_variants import (
     OURS,
     VariantTableError,
@@ -71,6 +71,18 @@ def test_labels_say_what_differs_from_the_rows_own_setup():
     assert setup_label(zero, stan_setup(config, {})) == "every chain at 0"
     both = stan_setup(config, {"stan_settings": {"adapt_delta": 0.95, "iter_warmup": 80}})
     assert setup_label(both, stan_setup(config, {})) == "warmup 80, adapt_delta 0.95"
+
+
+def test_the_gradient_path_is_a_setup_of_its_own():
+    """Issue 49: the analytic path beside a row run with Stan's autodiff (the default)."""
+    autodiff = stan_setup(validate({"outputs_dir": "x", "scenarios": [SCENARIO]}), SCENARIO)
+    analytic_config = validate(
+        {"outputs_dir": "x", "stan": {"gradients": "analytic"}, "scenarios": [SCENARIO]}
+    )
+    analytic = stan_setup(analytic_config, SCENARIO)
+    assert autodiff["gradients"] == "autodiff"
+    assert setup_label(analytic, autodiff) == "analytic gradients"
+    assert setup_label(autodiff, analytic) == "Stan's autodiff gradients"
 
 
 def test_variants_line_up_under_their_rows_baseline(tmp_path):

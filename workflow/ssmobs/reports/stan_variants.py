@@ -27,8 +27,9 @@ from ssmobs.stage_code import code_digest, digest, file_digest
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
 TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")
-# the Stan set-up: the config's stan block (scenario's stan_settings override), inits, seed
-SETUP_KEYS = (*SAMPLER_FIELDS, "stan_init", "stan_seed")
+# the Stan set-up: the config's stan block (scenario's stan_settings override), the gradient
+# path (issue 49), inits, seed
+SETUP_KEYS = (*SAMPLER_FIELDS, "gradients", "stan_init", "stan_seed")
 OURS = "ours (the row's own set-up)"
 CAPTION = (
     "Section IV under Stan set-ups the paper leaves open: |K^Stan|/K with its exact binomial "
@@ -71,6 +72,8 @@ def _describe(key: str, value: Any) -> str:
         return "a seed per run" if value is None else f"one Stan seed ({value}) for all"
     if key == "iter_warmup":
         return f"warmup {value}"
+    if key == "gradients":
+        return {"analytic": "analytic gradients", "autodiff": "Stan's autodiff gradients"}[value]
     return f"{key} {value}"
 
 
