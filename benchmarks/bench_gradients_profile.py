@@ -23,22 +23,15 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from nuts_paths import compiled_programs, run_one, simulate
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT = ("same_a09_T20", "sep_ab_T75", "ranwalk_T100", "sep_d1_p2_T50")
 QUANTILES = (0.05, 0.5, 0.95)
-
-
-def _cpu() -> float:
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def main() -> None:
@@ -50,9 +43,6 @@ def main() -> None:
 
     from ssmobs.config.scenario import Scenario
     from ssmobs.config.validation import read_config_file, validate
-    from ssmobs.nuts.batch import NutsBatch, run_trajectories
-    from ssmobs.nuts.convergence import ConvergenceSettings
-    from ssmobs.stages.stan import sampler_settings, stan_program
     from ssmobs.stan_backends.native import NativeBackend
 
     config = validate(read_config_file(args.config))
@@ -63,18 +53,11 @@ def main() -> None:
     for name in [s for s in args.scenarios.split(",") if s]:
         sc = Scenario.from_config(entries[name])
         model = sc.model
-        stan_cfg = sc.stan_config(config["stan"])
         n = min(args.n, sc.K)
-        rng = np.random.default_rng(1)
-        eta = rng.standard_normal((n, sc.T, model.state_dim))
-        eps = rng.standard_normal((n, sc.T, model.obs_dim))
-        x, z = model.simulate(sc.omega, sc.x0, eta, eps)
-        bounds = sc.prior_bounds()
+        xz = simulate(sc, n)
         if sc.stan_init == "joint_map":
             raise SystemExit(f"{name}: stan_init joint_map is not measured here")
-        programs = {g: stan_program(model.slug, g) for g in ("autodiff", "analytic")}
-        for prog, header in programs.values():  # compiled before any clock starts
-            native.compile(prog, **({} if header is None else {"user_header": header}))
+        programs = compiled_programs(native, model.slug)
         cpu = {g: 0.0 for g in programs}
         wall = {g: 0.0 for g in programs}
         converged = {g: 0 for g in programs}
@@ -86,32 +69,13 @@ def main() -> None:
             for k in range(n):
                 order = ["autodiff", "analytic"] if k % 2 == 0 else ["analytic", "autodiff"]
                 for g in order:
-                    prog, header = programs[g]
-                    c0, w0 = _cpu(), time.perf_counter()
-                    batch = NutsBatch(
-                        model=model,
-                        stan_file=prog,
-                        z=z,
-                        x_true=x,
-                        bounds=bounds,
-                        omega_true=sc.omega,
-                        x0_true=sc.x0,
-                        scenario=sc.name,
-                        seed=sc.seed,
-                        sampler=sampler_settings(stan_cfg, 1),
-                        convergence=ConvergenceSettings(**config["convergence"]),
-                        init=sc.stan_init,
-                        stan_seed=sc.stan_seed,
-                        user_header=header,
-                    )
-                    (rec,) = run_trajectories(
-                        batch, native, [k], records_dir=Path(tmp) / g / "records"
-                    )
-                    cpu[g] += _cpu() - c0
-                    wall[g] += time.perf_counter() - w0
-                    driver[g] += rec["timings"]["backend"]["sample_cpu"]
-                    converged[g] += bool(rec["converged"])
-                    both[k] = both.get(k, True) and bool(rec["converged"])
+                    one = run_one(native, sc, config, programs[g], xz, k, Path(tmp) / g)
+                    rec = one.record
+                    cpu[g] += one.cpu_s
+                    wall[g] += one.wall_s
+                    driver[g] += one.driver_cpu_s
+                    converged[g] += one.converged
+                    both[k] = both.get(k, True) and one.converged
                     idx = [rec["theta_names"].index(v) for v in names]
                     row_stats = [
                         np.nan if rec[f] is None else rec[f][i]
