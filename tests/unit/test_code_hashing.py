@@ -98,3 +98,22 @@ def test_syntax_digest_keeps_docstrings_comments_and_layout_out(tmp_path):
         digests.append(syntax_digest(tmp_path / f"m{i}.py"))
     assert digests[0] == digests[1] != digests[2]
     assert len(digests[0]) == 16
+
+
+def test_a_module_edited_in_the_same_process_is_read_again(tmp_path):
+    """Each module's imports are parsed once per process and content (a Snakemake parse
+    reaches most modules from several stages): an edit between two closures is seen, and a
+    module added after the first closure is found."""
+    pkg = _write(tmp_path / "pkg", {"__init__.py": "", "a.py": "", "b.py": "", "glue.py": ""})
+    (pkg / "glue.py").write_text("from . import a\n")
+    assert import_closure(("glue.py",), pkg) == ("__init__.py", "a.py", "glue.py")
+    (pkg / "glue.py").write_text("from . import a, b\nfrom . import late\n")
+    assert import_closure(("glue.py",), pkg) == ("__init__.py", "a.py", "b.py", "glue.py")
+    (pkg / "late.py").write_text("")
+    assert import_closure(("glue.py",), pkg) == (
+        "__init__.py",
+        "a.py",
+        "b.py",
+        "glue.py",
+        "late.py",
+    )

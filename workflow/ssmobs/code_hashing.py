@@ -105,6 +105,34 @@ def _runtime_nodes(tree: ast.Module, functions: frozenset[str] | None) -> list[a
     return nodes
 
 
+#: one import statement where a module's code runs: ("from", level, module, names) or
+#: ("import", 0, None, names)
+_ImportSpec = tuple[str, int, str | None, tuple[str, ...]]
+#: (source text's SHA-256, functions) -> the module's import statements: a parse and walk
+#: of each module once per process, however many closures reach it (keyed by content, so an
+#: edited file is read again)
+_IMPORT_SPECS: dict[tuple[bytes, frozenset[str] | None], tuple[_ImportSpec, ...]] = {}
+
+
+def _import_specs(
+    source: str, path: Path, functions: frozenset[str] | None
+) -> tuple[_ImportSpec, ...]:
+    """The import statements of the module ``source`` where its code runs
+    (:func:`_runtime_nodes`), in the order of the walk."""
+    key = (hashlib.sha256(source.encode()).digest(), functions)
+    if key not in _IMPORT_SPECS:
+        tree = ast.parse(source, filename=str(path))
+        specs: list[_ImportSpec] = []
+        for node in _runtime_nodes(tree, functions):
+            if isinstance(node, ast.ImportFrom):
+                names = tuple(alias.name for alias in node.names)
+                specs.append(("from", node.level, node.module, names))
+            elif isinstance(node, ast.Import):
+                specs.append(("import", 0, None, tuple(alias.name for alias in node.names)))
+        _IMPORT_SPECS[key] = tuple(specs)
+    return _IMPORT_SPECS[key]
+
+
 def _imports(path: Path, package_dir: Path, functions: frozenset[str] | None = None) -> set[Path]:
     """Package modules that ``path`` imports where its code runs (:func:`_runtime_nodes`:
     relative and absolute imports of the package (named as ``package_dir``) at the top level
@@ -113,29 +141,28 @@ def _imports(path: Path, package_dir: Path, functions: frozenset[str] | None = N
     rel = path.relative_to(package_dir)
     pkg = list(rel.with_suffix("").parts)[:-1]
     found: set[Path] = set()
-    tree = ast.parse(path.read_text(), filename=str(path))
-    for node in _runtime_nodes(tree, functions):
-        if isinstance(node, ast.ImportFrom):
-            if node.level == 0:
-                if not (node.module or "").startswith(package):
+    for kind, level, module_name, names in _import_specs(path.read_text(), path, functions):
+        if kind == "from":
+            if level == 0:
+                if not (module_name or "").startswith(package):
                     continue
                 anchor: list[str] = []
-                module = (node.module or "").split(".")[1:]
+                module = (module_name or "").split(".")[1:]
             else:
-                anchor = pkg[: len(pkg) - (node.level - 1)] if node.level > 1 else pkg
-                module = (node.module or "").split(".") if node.module else []
+                anchor = pkg[: len(pkg) - (level - 1)] if level > 1 else pkg
+                module = module_name.split(".") if module_name else []
             base = ".".join([*anchor, *module])
             target = _module_file(base, package_dir)
             if target is not None:
                 found.add(target)
-            for alias in node.names:  # "from . import io": io is a module
-                sub = _module_file(".".join(p for p in (base, alias.name) if p), package_dir)
+            for name in names:  # "from . import io": io is a module
+                sub = _module_file(".".join(p for p in (base, name) if p), package_dir)
                 if sub is not None:
                     found.add(sub)
-        elif isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.startswith(f"{package}."):
-                    target = _module_file(".".join(alias.name.split(".")[1:]), package_dir)
+        else:
+            for name in names:
+                if name.startswith(f"{package}."):
+                    target = _module_file(".".join(name.split(".")[1:]), package_dir)
                     if target is not None:
                         found.add(target)
     return found
