@@ -15,6 +15,7 @@ from ssmobs.config.validation import validate
 from ssmobs.nuts.record_cache import program_hash
 from ssmobs.stage_code import (
     MODEL_REGISTRY,
+    NATIVE_SHADOW_HEADERS,
     NEUTRAL_MODULES,
     PACKAGE_DIR,
     STAGE_MODULES,
@@ -449,6 +450,70 @@ def test_the_native_driver_keys_the_stan_check_not_the_python_check(tmp_path):
     after = keys(conf, package_dir=work / "ssmobs")
     assert after.check_model("same_T4", stan=True) != stan_check
     assert after.check_model("same_T4") == python_check
+
+
+def test_the_shadow_header_keys_the_programs_and_the_records_not_the_checks(tmp_path):
+    """The header standing in for Stan's gradient.hpp is compiled into the driver and every
+    native program: an edit rebuilds them (the program's key) and reruns NUTS (the records'
+    key); the trajectories and the checks (the log-density mode never calls it) stay."""
+    work = tmp_path / "workflow"
+    shutil.copytree(
+        REPO / "workflow", work, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+    )
+    conf = smoke()
+    module_closure.cache_clear()
+
+    def some_keys() -> tuple[str, ...]:
+        k = keys(conf, package_dir=work / "ssmobs")
+        return (
+            k.program("same"),
+            k.nuts_records("same_T4"),
+            k.trajectories("same_T4"),
+            k.check_model("same_T4", stan=True),
+        )
+
+    before = some_keys()
+    (header,) = NATIVE_SHADOW_HEADERS
+    path = work / "ssmobs" / header
+    path.write_text(path.read_text() + "\n// an edit\n")
+    module_closure.cache_clear()
+    after = some_keys()
+    assert after[0] != before[0] and after[1] != before[1]  # the program and the records
+    assert after[2:] == before[2:]  # the trajectories and the Stan check
+
+
+def test_the_stage_code_names_every_shadow_header_the_builds_use():
+    from ssmobs.stan_backends import native_build
+
+    used = {
+        (native_build.SHADOW_INCLUDE_DIR / rel).relative_to(PACKAGE_DIR).as_posix()
+        for rel in native_build.shadow_headers()
+    }
+    assert used == set(NATIVE_SHADOW_HEADERS)
+
+
+@pytest.mark.parametrize("key", ["build_key", "driver_key"])
+def test_native_build_keys_follow_the_shadow_headers_bytes(tmp_path, monkeypatch, key):
+    """Cached programs and driver objects built with another shadow header (or none) are
+    not found under the current key."""
+    from ssmobs.stan_backends import native_build
+
+    def current() -> dict[str, str]:
+        return native_build.build_key("x") if key == "build_key" else native_build.driver_key()
+
+    ours = current()
+    copy_dir = tmp_path / "include"
+    shutil.copytree(native_build.SHADOW_INCLUDE_DIR, copy_dir)
+    monkeypatch.setattr(native_build, "SHADOW_INCLUDE_DIR", copy_dir)
+    assert current() == ours  # the same bytes elsewhere: the same key
+    header = copy_dir / "stan" / "model" / "gradient.hpp"
+    header.write_bytes(header.read_bytes() + b" ")
+    edited = current()
+    assert edited != ours and edited["shadow_headers"] != ours["shadow_headers"]
+    header.unlink()
+    without = current()
+    assert "shadow_headers" not in without  # the keys entries built before it had
+    assert {k: v for k, v in ours.items() if k != "shadow_headers"} == without
 
 
 def test_the_stan_identity_names_the_backend_and_its_stan():

@@ -61,13 +61,16 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
 }
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
 NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
+#: our headers the driver and every native program compile with in place of Stan's
+#: (``stan_backends/native_build.py``: SHADOW_INCLUDE_DIR; a test checks the two agree)
+NATIVE_SHADOW_HEADERS = ("stan_backends/native_include/stan/model/gradient.hpp",)
 #: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
 LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
 #: files outside the package's import graph that a stage's results depend on
 STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
     "design": (LCD_KERNEL,),
-    "program": (NATIVE_DRIVER,),
-    "nuts_records": (NATIVE_DRIVER,),
+    "program": (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+    "nuts_records": (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
 }
 #: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
 OUTPUT_SCRIPTS = (

@@ -6,8 +6,11 @@ Compiling
     temporary directory renamed into place when complete.  The driver is compiled once into
     an object file of its own (:func:`driver_object`, ``<cache_root>/native/driver-<key>/``)
     and linked with each program's object file, so a program costs one compile of the
-    stanc-generated C++ only (as CmdStan's ``main.o``).  A stanc or compiler error raises
-    RuntimeError with the tool's own message; nothing is written into the repository.
+    stanc-generated C++ only (as CmdStan's ``main.o``).  Both compiles see our headers in
+    :data:`SHADOW_INCLUDE_DIR` before httpstan's (Stan's ``stan/model/gradient.hpp``
+    replaced by one that reuses a message stream per thread; the wheel is not changed).  A
+    stanc or compiler error raises RuntimeError with the tool's own message; nothing is
+    written into the repository.
 
 Cached programs are self-contained
     An entry holds the executable ``driver``, the shared libraries it needs from the wheel
@@ -52,6 +55,10 @@ LOG = logging.getLogger("ssmobs.stan")
 
 #: the driver's C++ source
 DRIVER_SOURCE = Path(__file__).resolve().parent / "native_driver" / "driver.cpp"
+#: headers of ours that stand in for Stan's under the same names (``stan/model/gradient.hpp``:
+#: one message stream per thread instead of one per gradient call); on the include path
+#: before httpstan's for the driver and every program, and keyed (:func:`shadow_key`)
+SHADOW_INCLUDE_DIR = Path(__file__).resolve().parent / "native_include"
 #: preprocessor definitions httpstan builds its models with (same numerics as PyStan)
 DEFINES: tuple[str, ...] = (
     "BOOST_DISABLE_ASSERTS",
@@ -128,6 +135,23 @@ def compiler_version() -> str:
     return _tool_version([compiler(), "--version"])
 
 
+def shadow_headers() -> dict[str, str]:
+    """Relative path -> text of every header in :data:`SHADOW_INCLUDE_DIR`."""
+    root = SHADOW_INCLUDE_DIR
+    return {
+        p.relative_to(root).as_posix(): p.read_text()
+        for p in sorted(root.rglob("*.hpp"))
+        if p.is_file()
+    }
+
+
+def shadow_key() -> dict[str, str]:
+    """``{"shadow_headers": <hash>}`` of the headers that stand in for Stan's; empty without
+    any, so that the keys of entries built without them stay."""
+    headers = shadow_headers()
+    return {"shadow_headers": content_key(headers)} if headers else {}
+
+
 def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
     """What determines the executable; its hash names the cache directory.
 
@@ -147,7 +171,8 @@ def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
 
     ``user_header``: the text of a C++ header that defines the program's external functions
     (``stanc --allow-undefined``, included before the generated model), keyed as well;
-    absent without one, so the keys of the stock programs stay.
+    absent without one, so the keys of the stock programs stay.  The headers of ours that
+    stand in for Stan's (:func:`shadow_key`) are keyed too: both object files include them.
     """
     extra = (
         {}
@@ -159,6 +184,7 @@ def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
     )
     return {
         **extra,
+        **shadow_key(),
         "program": content_key({"code": code}),
         "objects": "driver.o + model.o",
         "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
@@ -192,19 +218,32 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
 
 
 def compile_flags() -> list[str]:
-    """The C++ compiler's flags for the driver and the programs (httpstan's headers)."""
-    return [*CXXFLAGS, *("-D" + d for d in DEFINES), f"-I{httpstan_dir() / 'include'}"]
+    """The C++ compiler's flags for the driver and the programs: our headers that stand in
+    for Stan's (:data:`SHADOW_INCLUDE_DIR`) first on the include path, then httpstan's."""
+    return [
+        *CXXFLAGS,
+        *("-D" + d for d in DEFINES),
+        f"-I{SHADOW_INCLUDE_DIR}",
+        f"-I{httpstan_dir() / 'include'}",
+    ]
 
 
-def driver_object() -> Path:
-    """The driver compiled once into ``driver.o`` (cached, keyed by the driver's source, the
-    Stan version and the flags); every program's executable links it."""
-    parts = {
+def driver_key() -> dict[str, str]:
+    """What determines ``driver.o``: the driver's source, the headers standing in for
+    Stan's, the Stan version and the flags."""
+    return {
+        **shadow_key(),
         "driver": content_key({"code": DRIVER_SOURCE.read_text()}),
         "stan": stan_version(),
         "httpstan": httpstan_version(),
         "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
     }
+
+
+def driver_object() -> Path:
+    """The driver compiled once into ``driver.o`` (cached, keyed by :func:`driver_key`);
+    every program's executable links it."""
+    parts = driver_key()
     cache_dir = cache_root() / "native" / f"driver-{content_key(parts)}"
     if not entry_complete(cache_dir, DRIVER_OBJECT):
         with build_lock(cache_dir):
