@@ -37,6 +37,23 @@ CASES = [
 ]
 
 
+#: the settings bullet of the paired NUTS benchmarks' sections
+SETTINGS_LINE = (
+    "- Settings: the paper's, 4 chains x (4000 + 6000), one chain at a time, native "
+    "backend; one trajectory per case from random disturbances (seed 1), x0 = 8."
+)
+
+
+def load_line(loads: list[float], why: str, what: str) -> str:
+    """The load bullet of a paired benchmark's section: the range of the 1-min load average,
+    ``why`` it was loaded (or ""), and that the two ``what`` ran interleaved."""
+    return (
+        f"- System load (1-min load average): {min(loads):.1f}-{max(loads):.1f} on "
+        f"{os.cpu_count()} CPUs{why}, so the ratios count, not the seconds; the two {what} "
+        "run interleaved, rep by rep (order alternating), with the same Stan seed."
+    )
+
+
 def trajectory_data(slug: str, omega: dict, T: int) -> dict:
     model = get_model(slug)
     rng = np.random.default_rng(1)
@@ -100,11 +117,8 @@ def main() -> None:
             f"- Date: {started:%Y-%m-%d %H:%M}-{finished:%H:%M} UTC",
             f"- Machine: {machine_info()}; {stan_version()}",
             f"- Command: `python benchmarks/bench_analytic_gradients.py --reps {args.reps}` (at `nice`)",
-            f"- System load (1-min load average): {min(loads):.1f}-{max(loads):.1f} on "
-            f"{os.cpu_count()} CPUs, so the ratios count, not the seconds; the two paths run "
-            f"interleaved, rep by rep (order alternating), with the same Stan seed.",
-            "- Settings: the paper's, 4 chains x (4000 + 6000), one chain at a time, native "
-            "backend; one trajectory per case from random disturbances (seed 1), x0 = 8.",
+            load_line(loads, "", "paths"),
+            SETTINGS_LINE,
             "- CPU: the driver's CPU seconds per whole NUTS run (its rusage); leapfrog: mean "
             "post-warmup `n_leapfrog__` per draw; speed-up: autodiff CPU / analytic CPU of each "
             "rep (the pair run back to back), median and range over reps; of sums: summed "

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_analytic_gradients import CASES, PAPER, trajectory_data
+from bench_analytic_gradients import CASES, PAPER, SETTINGS_LINE, load_line, trajectory_data
 from machine import machine_info, report
 from ssmobs.models import get_model
 from ssmobs.nuts.analytic_gradients import write_analytic_program
@@ -107,12 +107,8 @@ def main() -> None:
             f"- Machine: {machine_info()}; {stan_version()}",
             f"- Command: `python benchmarks/bench_gradient_stream.py --reps {args.reps} "
             f"--paths {','.join(paths)}` (at `nice -n 10`)",
-            f"- System load (1-min load average): {min(loads):.1f}-{max(loads):.1f} on "
-            f"{os.cpu_count()} CPUs (another benchmark on the other core), so the ratios "
-            "count, not the seconds; the two builds run interleaved, rep by rep (order "
-            "alternating), with the same Stan seed.",
-            "- Settings: the paper's, 4 chains x (4000 + 6000), one chain at a time, native "
-            "backend; one trajectory per case from random disturbances (seed 1), x0 = 8.",
+            load_line(loads, " (another benchmark on the other core)", "builds"),
+            SETTINGS_LINE,
             "- Builds: Stan's `stan/model/gradient.hpp` (a stringstream per gradient call) and "
             "ours first on the include path (one per thread, `native_include/`). CPU: the "
             "driver's CPU seconds per whole run (rusage); speed-up: Stan's CPU / ours of each "
