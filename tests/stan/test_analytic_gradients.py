@@ -176,6 +176,7 @@ def test_model_check_checks_a_one_file_model_by_its_generated_program(cubic_sens
     assert any(c.startswith("generated gradients: equal to") for c in report.checks)
 
 
+@pytest.mark.slow  # a rare path (a broken generator), with a program build of its own
 def test_planted_error_in_a_generated_program_is_one_line(cubic_sensor, tmp_path):
     from ssmobs.model_check.analytic import generated_problems
 

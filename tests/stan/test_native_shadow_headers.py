@@ -47,22 +47,27 @@ def include_dirs(marker: dict) -> list[str]:
     return [arg[2:] for arg in record["command"][0] if arg.startswith("-I")]
 
 
-def test_shadow_header_comes_first_on_the_include_path(monkeypatch, tmp_path):
+def test_shadow_header_comes_first_on_the_include_path():
     assert "stan/model/gradient.hpp" in native_build.shadow_headers()
     ours = NativeBackend().compile(stan_file("same"))
     assert include_dirs(ours) == [
         str(native_build.SHADOW_INCLUDE_DIR),
         str(native_build.httpstan_dir() / "include"),
     ]
-    stock_headers(monkeypatch, tmp_path)
-    stock = NativeBackend().compile(stan_file("same"))
-    assert stock["cache_dir"] != ours["cache_dir"]  # built apart, not found under our key
 
 
+# The two comparisons with Stan's own header build a driver and programs of their own (about
+# 90 CPU-s on an empty cache): they guard the header against a change of it or of Stan, and
+# run in `make test-slow`; `make test` keeps the include order above and the keys
+# (tests/unit/test_cache_keys.py).
+@pytest.mark.slow
 def test_same_draws_with_and_without_the_shadow_header(monkeypatch, tmp_path):
     data = _data("same", {"a": 0.9}, T=6)
+    ours_build = NativeBackend().compile(stan_file("same"))
     ours = NativeBackend().sample(stan_file("same"), data, 1234, SMALL)
     stock_headers(monkeypatch, tmp_path)
+    stock_build = NativeBackend().compile(stan_file("same"))
+    assert stock_build["cache_dir"] != ours_build["cache_dir"]  # not found under our key
     stock = NativeBackend().sample(stan_file("same"), data, 1234, SMALL)
     assert ours.params.keys() == stock.params.keys()
     for name in ours.params:
@@ -97,6 +102,7 @@ def chain_lines(output: str, chain: int) -> list[str]:
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threads", [1, 2])
 def test_messages_reach_the_logger_as_before(monkeypatch, tmp_path, threads):
     """A print in the model block runs at every gradient; with one stream per thread its
