@@ -61,9 +61,15 @@ STAGE_MODULES: dict[str, tuple[str, ...]] = {
 }
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
 NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
-#: our headers the driver and every native program compile with in place of Stan's
-#: (``stan_backends/native_build.py``: SHADOW_INCLUDE_DIR; a test checks the two agree)
-NATIVE_SHADOW_HEADERS = ("stan_backends/native_include/stan/model/gradient.hpp",)
+#: our headers the driver and every native program compile with in place of Stan's: every
+#: header below ``stan_backends/native_build.py``'s SHADOW_INCLUDE_DIR (a test checks the two
+#: agree)
+NATIVE_SHADOW_HEADERS = tuple(
+    sorted(
+        p.relative_to(PACKAGE_DIR).as_posix()
+        for p in (PACKAGE_DIR / "stan_backends" / "native_include").rglob("*.hpp")
+    )
+)
 #: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
 LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
 #: files outside the package's import graph that a stage's results depend on

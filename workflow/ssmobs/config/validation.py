@@ -19,6 +19,7 @@ from typing import Any
 
 import yaml
 
+from ..model_check.cases import x0_values
 from ..models import MODELS, StateSpaceModel
 from .files import MAX_CONFIG_VALUES, count_values
 from .files import check_config_files as check_config_files
@@ -315,11 +316,7 @@ def _paper_output_problems(config: dict) -> list[str]:
                 )
         models = [MODELS.get(sc["model"]) for sc in entries]
         if key == "figure3" and entries:
-            x0s = [sc["x0"] if isinstance(sc["x0"], list) else [sc["x0"]] for sc in entries]
-            truths = {
-                (sc["model"], repr(sc["omega"]), repr([float(v) for v in x0]))
-                for sc, x0 in zip(entries, x0s)
-            }
+            truths = {(sc["model"], repr(sc["omega"]), repr(x0_values(sc))) for sc in entries}
             if len(truths) > 1:
                 problems.append(
                     f"paper_outputs.figure3 = {short_repr(names)}: must share one model, omega "

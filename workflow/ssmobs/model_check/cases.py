@@ -63,15 +63,20 @@ def prior_variant_cases(model: StateSpaceModel, case: CheckCase) -> list[CheckCa
     return [c for c in cases if not model.check_true_values(c.omega, c.x0, c.prior)]
 
 
+def x0_values(sc: Mapping[str, Any]) -> list[float]:
+    """A scenario entry's x0 (a number or a list in the config) as a list of floats."""
+    x0 = sc["x0"]
+    return [float(v) for v in (x0 if isinstance(x0, list) else [x0])]
+
+
 def cases_from_scenarios(scenarios: Sequence[Mapping[str, Any]], slug: str) -> list[CheckCase]:
     """One case per distinct (omega, x0, prior) of the config's scenarios of this model."""
     out: list[CheckCase] = []
     for sc in scenarios:
         if sc["model"] != slug:
             continue
-        x0 = sc["x0"] if isinstance(sc["x0"], list) else [sc["x0"]]
         case = CheckCase(
-            {k: float(v) for k, v in sc["omega"].items()}, [float(v) for v in x0], sc.get("prior")
+            {k: float(v) for k, v in sc["omega"].items()}, x0_values(sc), sc.get("prior")
         )
         if case not in out:
             out.append(case)
