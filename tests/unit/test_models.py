@@ -66,6 +66,25 @@ def test_gradient_and_hessian_match_finite_differences(slug):
 
 
 @pytest.mark.parametrize("slug", sorted(MODELS))
+def test_the_value_has_the_same_bits_at_every_order(slug):
+    """The line search asks for the value alone (order 0, which skips the derivatives'
+    arrays); the Newton step for all of it: the two values must be the same numbers, or a
+    step accepted by the search would be judged on another function."""
+    model = get_model(slug)
+    theta, z = random_inside(model, T=6, K=5, seed=11)
+    (v0,) = neg2_log_posterior(model, theta, z, order=0)
+    v1, _ = neg2_log_posterior(model, theta, z, order=1)
+    v2, _, _ = neg2_log_posterior(model, theta, z, order=2)
+    vb, _, _ = neg2_log_posterior_blocks(model, theta, z)
+    assert v0.shape == (5,)
+    for other in (v1, v2, vb):
+        np.testing.assert_array_equal(v0, other)
+    # one trajectory: the leading axis is dropped, the number is the same
+    (single,) = neg2_log_posterior(model, theta[2], z[2], order=0)
+    assert np.ndim(single) == 0 and single == v0[2]
+
+
+@pytest.mark.parametrize("slug", sorted(MODELS))
 def test_block_hessian_equals_dense(slug):
     model = get_model(slug)
     theta, z = random_inside(model, T=5, K=4, seed=7)

@@ -136,10 +136,22 @@ def compile_model(model: StateSpaceModel) -> CompiledModel:
     )
 
 
-def _evaluate(term: _Term, arrays: list[np.ndarray], shape: tuple[int, ...]) -> list[np.ndarray]:
+def _evaluate(
+    term: _Term, arrays: list[np.ndarray], shape: tuple[int, ...], count: int | None = None
+) -> list[np.ndarray]:
+    """The term's value, gradient and Hessian entries (the first ``count`` of them, all for
+    None), each as a (K, T) float array; read-only views where an entry is a constant.
+
+    The per-call overhead matters: the joint MAP's line search calls this once per step of
+    every backtrack, often for a handful of trajectories (T = 4 in the choice of K)."""
     with np.errstate(all="ignore"):
         out = term.func(*arrays)
-    return [np.broadcast_to(np.asarray(v, dtype=float), shape) for v in out]
+    return [
+        v
+        if type(v) is np.ndarray and v.shape == shape and v.dtype == np.float64
+        else np.broadcast_to(np.asarray(v, dtype=float), shape)
+        for v in out[:count]
+    ]
 
 
 @lru_cache(maxsize=64)
@@ -246,8 +258,9 @@ def neg2_log_posterior(
     shape = (K, T)
     obs_args = om_cols + [states[:, 1:, i] for i in range(p)] + [z[:, :, i] for i in range(d)]
     tr_args = om_cols + [states[:, :-1, i] for i in range(p)] + [states[:, 1:, i] for i in range(p)]
-    obs = _evaluate(cm.obs, obs_args, shape)
-    tr = _evaluate(cm.trans, tr_args, shape)
+    needed = None if order >= 1 else 1  # the value alone for order 0
+    obs = _evaluate(cm.obs, obs_args, shape, needed)
+    tr = _evaluate(cm.trans, tr_args, shape, needed)
     value = obs[0].sum(axis=1) + tr[0].sum(axis=1)
     if bounds is not None:
         value = np.where(in_support(model, omega, bounds), value, np.inf)
