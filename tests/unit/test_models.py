@@ -67,9 +67,10 @@ def test_gradient_and_hessian_match_finite_differences(slug):
 
 @pytest.mark.parametrize("slug", sorted(MODELS))
 def test_the_value_has_the_same_bits_at_every_order(slug):
-    """The line search asks for the value alone (order 0, which skips the derivatives'
-    arrays); the Newton step for all of it: the two values must be the same numbers, or a
-    step accepted by the search would be judged on another function."""
+    """The line search asks for the value alone (order 0: the per-step terms' statements
+    pruned to the value's); the Newton step for all of it: the two values must be the same
+    numbers, or a step accepted by the search would be judged on another function (and the
+    joint MAP's results would move in the last bits)."""
     model = get_model(slug)
     theta, z = random_inside(model, T=6, K=5, seed=11)
     (v0,) = neg2_log_posterior(model, theta, z, order=0)

@@ -29,11 +29,27 @@ from .base import PriorBounds, StateSpaceModel
 
 @dataclass(frozen=True)
 class _Term:
-    """A lambdified per-step term: value, gradient and upper-triangle Hessian."""
+    """A lambdified per-step term: value, gradient and upper-triangle Hessian (``func``), and
+    the value alone (``value_func``: the same statements as ``func`` pruned to those the value
+    needs, so the same numbers, bit for bit)."""
 
     func: Callable
+    value_func: Callable
     n_local: int
     triu: tuple[np.ndarray, np.ndarray]
+
+
+def _needed_statements(
+    statements: list[tuple[sp.Symbol, sp.Expr]], result: sp.Expr
+) -> list[tuple[sp.Symbol, sp.Expr]]:
+    """The common subexpressions ``result`` depends on, in their order."""
+    wanted = set(result.free_symbols)
+    kept = []
+    for symbol, value in reversed(statements):
+        if symbol in wanted:
+            kept.append((symbol, value))
+            wanted |= value.free_symbols
+    return kept[::-1]
 
 
 def _compile(args: list[sp.Symbol], n_local: int, expr: sp.Expr) -> _Term:
@@ -41,8 +57,16 @@ def _compile(args: list[sp.Symbol], n_local: int, expr: sp.Expr) -> _Term:
     grad = [sp.diff(expr, v) for v in local]
     iu = np.triu_indices(n_local)
     hess = [sp.diff(grad[i], local[j]) for i, j in zip(*iu)]
-    func = sp.lambdify(args, [expr, *grad, *hess], modules="numpy", cse=True)
-    return _Term(func=func, n_local=n_local, triu=iu)
+    # one elimination of common subexpressions for both functions (what cse=True does)
+    statements, reduced = sp.cse([expr, *grad, *hess], list=False)
+    func = sp.lambdify(
+        args, [expr, *grad, *hess], modules="numpy", cse=lambda _: (statements, reduced)
+    )
+    value_only = _needed_statements(statements, reduced[0])
+    value_func = sp.lambdify(
+        args, [expr], modules="numpy", cse=lambda _: (value_only, [reduced[0]])
+    )
+    return _Term(func=func, value_func=value_func, n_local=n_local, triu=iu)
 
 
 @dataclass(frozen=True)
@@ -136,21 +160,19 @@ def compile_model(model: StateSpaceModel) -> CompiledModel:
     )
 
 
-def _evaluate(
-    term: _Term, arrays: list[np.ndarray], shape: tuple[int, ...], count: int | None = None
-) -> list[np.ndarray]:
-    """The term's value, gradient and Hessian entries (the first ``count`` of them, all for
-    None), each as a (K, T) float array; read-only views where an entry is a constant.
+def _evaluate(func: Callable, arrays: list[np.ndarray], shape: tuple[int, ...]) -> list[np.ndarray]:
+    """A term's lambdified ``func`` (:class:`_Term`) at ``arrays``, each result as a (K, T)
+    float array; read-only views where a result is a constant.
 
     The per-call overhead matters: the joint MAP's line search calls this once per step of
     every backtrack, often for a handful of trajectories (T = 4 in the choice of K)."""
     with np.errstate(all="ignore"):
-        out = term.func(*arrays)
+        out = func(*arrays)
     return [
         v
         if type(v) is np.ndarray and v.shape == shape and v.dtype == np.float64
         else np.broadcast_to(np.asarray(v, dtype=float), shape)
-        for v in out[:count]
+        for v in out
     ]
 
 
@@ -258,9 +280,12 @@ def neg2_log_posterior(
     shape = (K, T)
     obs_args = om_cols + [states[:, 1:, i] for i in range(p)] + [z[:, :, i] for i in range(d)]
     tr_args = om_cols + [states[:, :-1, i] for i in range(p)] + [states[:, 1:, i] for i in range(p)]
-    needed = None if order >= 1 else 1  # the value alone for order 0
-    obs = _evaluate(cm.obs, obs_args, shape, needed)
-    tr = _evaluate(cm.trans, tr_args, shape, needed)
+    if order == 0:  # the value alone (the line search)
+        obs = _evaluate(cm.obs.value_func, obs_args, shape)
+        tr = _evaluate(cm.trans.value_func, tr_args, shape)
+    else:
+        obs = _evaluate(cm.obs.func, obs_args, shape)
+        tr = _evaluate(cm.trans.func, tr_args, shape)
     value = obs[0].sum(axis=1) + tr[0].sum(axis=1)
     if bounds is not None:
         value = np.where(in_support(model, omega, bounds), value, np.inf)
@@ -345,12 +370,12 @@ def neg2_log_posterior_blocks(
     om_cols = [omega[:, i : i + 1] for i in range(m)]
     shape = (K, T)
     obs = _evaluate(
-        cm.obs,
+        cm.obs.func,
         om_cols + [states[:, 1:, i] for i in range(p)] + [z[:, :, i] for i in range(d)],
         shape,
     )
     tr = _evaluate(
-        cm.trans,
+        cm.trans.func,
         om_cols + [states[:, :-1, i] for i in range(p)] + [states[:, 1:, i] for i in range(p)],
         shape,
     )
