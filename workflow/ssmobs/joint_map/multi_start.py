@@ -64,7 +64,7 @@ import pandas as pd
 
 from ..binomial import clopper_pearson
 from ..models.base import PriorBounds, StateSpaceModel
-from ..models.log_posterior import compile_model, in_support, neg2_log_posterior
+from ..models.log_posterior import compile_constraints, in_support, neg2_log_posterior
 from .driver import JointMapResult, ProgressLike, initial_theta, joint_map
 from .settings import JointMapSettings
 
@@ -124,7 +124,7 @@ def start_points(
     if n_starts == 1:
         return np.asarray(points)
     lower, upper = start_box(bounds, omega_true, x0_true, span)
-    constraints = compile_model(model).constraints
+    constraints = compile_constraints(model)
     skip = 1
     while len(points) < n_starts:
         batch = lower + halton(4 * n_starts, lower.size, skip) * (upper - lower)

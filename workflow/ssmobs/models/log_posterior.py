@@ -143,6 +143,15 @@ class CompiledModel:
 
 
 @cache
+def compile_constraints(model: StateSpaceModel) -> ModelConstraints:
+    """The model constraints alone, lambdified (cached per model): what a support check
+    needs, without the per-step terms' symbolic derivatives (about half a second per model
+    and process, paid by every job that only asks whether Omega is inside)."""
+    w = list(sp.symbols(f"w0:{model.n_params}", real=True))
+    return ModelConstraints.compile(w, model.support_constraints(w))
+
+
+@cache
 def compile_model(model: StateSpaceModel) -> CompiledModel:
     """Differentiate the model's per-step terms and constraints symbolically (cached per model)."""
     m, p, d = model.n_params, model.state_dim, model.obs_dim
@@ -156,7 +165,7 @@ def compile_model(model: StateSpaceModel) -> CompiledModel:
         model=model,
         obs=obs,
         trans=trans,
-        constraints=ModelConstraints.compile(w, model.support_constraints(w)),
+        constraints=compile_constraints(model),
     )
 
 
@@ -235,7 +244,7 @@ def _full_from_triu(vals: list[np.ndarray], term: _Term) -> np.ndarray:
 
 def in_support(model: StateSpaceModel, omega: np.ndarray, bounds: PriorBounds) -> np.ndarray:
     """(K,) True where Omega is inside the prior box and the model constraints."""
-    return bounds.contains(omega) & compile_model(model).constraints.satisfied(omega)
+    return bounds.contains(omega) & compile_constraints(model).satisfied(omega)
 
 
 def neg2_log_posterior(
