@@ -23,6 +23,11 @@ from ..models import StateSpaceModel
 
 LOG_2PI = math.log(2 * math.pi)
 
+#: the smallest batch for which the p = 2 filter works on the blocks' entries (it makes about
+#: twice as many NumPy calls per step as the 2x2 matrix products, which cost more per element:
+#: entrywise is 2.0x faster at 660 elements, 2.8x at 30000, and slower below about 50)
+ENTRYWISE_MIN_BATCH = 64
+
 
 @dataclass(frozen=True)
 class KalmanMarginal:
@@ -79,15 +84,27 @@ def _kalman_p1(
     S = a0
     y = np.zeros(np.broadcast_shapes(z.shape[:-2], np.shape(f)))
     logdet = np.log(S)
-    quad = 0.0
+    quad: np.ndarray | float = 0.0
     Ss, ys = [S], [y]
+    # the sums over d in place, in the order of sum(): ((0 + z_t1 hr_1) + z_t2 hr_2) + ...
+    hr_i = [hr[..., i].copy() for i in range(d)]
+    z_i = [z[..., i].copy() for i in range(d)]
     for t in range(1, T + 1):
         g = bm / S
         S = (a_mid if t < T else a_end) - g * bm
-        b_t = sum(z[..., t - 1, i] * hr[..., i] for i in range(d))  # H' R^-1 z_t
-        y = b_t - g * y
-        quad = quad + y * y / S
-        logdet = logdet + np.log(S)
+        y_new = z_i[0][..., t - 1] * hr_i[0]  # H' R^-1 z_t
+        y_new += 0.0
+        for i in range(1, d):
+            y_new += z_i[i][..., t - 1] * hr_i[i]
+        y_new -= g * y
+        y = y_new
+        term = y * y
+        term /= S
+        if t == 1:
+            quad = quad + term
+        else:
+            quad += term
+        logdet += np.log(S)
         if smooth:
             Ss.append(S)
             ys.append(y)
@@ -145,22 +162,10 @@ def _kalman_general(
     c = ((z * z).sum(-2) / R).sum(-1)
     S = a0
     Si, det = _inv(S)
-    y = np.zeros(np.broadcast_shapes(z.shape[:-2], F.shape[:-2]) + (p,))
-    logdet = np.log(det)
-    quad = 0.0
-    Ss, Sis, ys = [S], [Si], [y]
-    for t in range(1, T + 1):
-        g = bm @ Si
-        S = (a_mid if t < T else a_end) - g @ bmt
-        b_t = (HtRi @ z[..., t - 1, :, None])[..., 0]
-        y = b_t - (g @ y[..., None])[..., 0]
-        Si, det = _inv(S)
-        quad = quad + np.einsum("...i,...ij,...j->...", y, Si, y)
-        logdet = logdet + np.log(det)
-        if smooth:
-            Ss.append(S)
-            Sis.append(Si)
-            ys.append(y)
+    shape = np.broadcast_shapes(z.shape[:-2], F.shape[:-2])
+    entrywise = d == 1 and math.prod(shape) >= ENTRYWISE_MIN_BATCH and _off_diagonal_zero(bm)
+    forward = _forward_diagonal if entrywise else _forward_blas
+    quad, logdet, Sis, ys = forward(a_mid, a_end, bm, HtRi, z, Si, det, shape, smooth)
     neg2 = (
         c
         - quad
@@ -182,3 +187,108 @@ def _kalman_general(
         P = Sis[t] + gi @ P @ np.swapaxes(gi, -1, -2)
         mean[..., t, :], var[..., t, :] = m, np.diagonal(P, axis1=-2, axis2=-1)
     return KalmanMarginal(neg2, mean, var)
+
+
+#: what a forward pass returns: the quadratic form and log-determinant sums, and (smooth
+#: only, else empty) S_t^-1 and the information vectors y_t for t = 0..T
+Forward = tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
+
+
+def _forward_blas(
+    a_mid: np.ndarray,
+    a_end: np.ndarray,
+    bm: np.ndarray,
+    HtRi: np.ndarray,
+    z: np.ndarray,
+    Si: np.ndarray,
+    det: np.ndarray,
+    shape: tuple[int, ...],
+    smooth: bool,
+) -> Forward:
+    """Forward elimination of the block-tridiagonal precision with 2x2 blocks (any F, d)."""
+    T = z.shape[-2]
+    bmt = np.swapaxes(bm, -1, -2)
+    y = np.zeros(shape + (2,))
+    logdet = np.log(det)
+    quad: np.ndarray | float = 0.0
+    Sis, ys = [Si], [y]
+    for t in range(1, T + 1):
+        g = bm @ Si
+        S = (a_mid if t < T else a_end) - g @ bmt
+        b_t = (HtRi @ z[..., t - 1, :, None])[..., 0]
+        y = b_t - (g @ y[..., None])[..., 0]
+        Si, det = _inv(S)
+        quad = quad + np.einsum("...i,...ij,...j->...", y, Si, y)
+        logdet = logdet + np.log(det)
+        if smooth:
+            Sis.append(Si)
+            ys.append(y)
+    return np.asarray(quad), logdet, (Sis if smooth else []), (ys if smooth else [])
+
+
+def _off_diagonal_zero(bm: np.ndarray) -> bool:
+    """Whether every block B = -Q^-1 F is diagonal (F diagonal and Q^-1 finite)."""
+    return not (np.any(bm[..., 0, 1]) or np.any(bm[..., 1, 0]))
+
+
+def _forward_diagonal(
+    a_mid: np.ndarray,
+    a_end: np.ndarray,
+    bm: np.ndarray,
+    HtRi: np.ndarray,
+    z: np.ndarray,
+    Si: np.ndarray,
+    det: np.ndarray,
+    shape: tuple[int, ...],
+    smooth: bool,
+) -> Forward:
+    """:func:`_forward_blas` for a diagonal B and d = 1, on the blocks' entries.
+
+    The same numbers to the bit: every product of 2x2 blocks that involves B has one
+    exactly zero term per entry (B's off-diagonal), so the sum of the two products is
+    the same whether the matrix library fuses the multiply-add or not, and it is written
+    out here term by term, zero term included (it keeps inf x 0 = NaN where the library
+    gets it).  g y has two non-zero terms and stays the library's product; the quadratic
+    form is einsum's order, (((y0 S00 y0 + y0 S01 y1) + y1 S10 y0) + y1 S11 y1).
+    """
+    T = z.shape[-2]
+    b00, b01, b10, b11 = bm[..., 0, 0], bm[..., 0, 1], bm[..., 1, 0], bm[..., 1, 1]
+    h0, h1 = HtRi[..., 0, 0], HtRi[..., 1, 0]
+    mid = [a_mid[..., i, j] for i in (0, 1) for j in (0, 1)]
+    end = [a_end[..., i, j] for i in (0, 1) for j in (0, 1)]
+    s00, s01, s10, s11 = (Si[..., i, j] for i in (0, 1) for j in (0, 1))
+    # g = B S^-1 (for the library's matrix-vector product); like S it does not depend on z
+    g = np.empty(np.broadcast_shapes(bm.shape[:-2], Si.shape[:-2]) + (2, 2))
+    y = np.zeros(shape + (2,))
+    logdet = np.log(det)
+    quad: np.ndarray | float = 0.0
+    Sis, ys = [Si], [y]
+    for t in range(1, T + 1):
+        np.add(b00 * s00, b01 * s10, out=g[..., 0, 0])
+        np.add(b00 * s01, b01 * s11, out=g[..., 0, 1])
+        np.add(b10 * s00, b11 * s10, out=g[..., 1, 0])
+        np.add(b10 * s01, b11 * s11, out=g[..., 1, 1])
+        g00, g01, g10, g11 = g[..., 0, 0], g[..., 0, 1], g[..., 1, 0], g[..., 1, 1]
+        a00, a01, a10, a11 = mid if t < T else end
+        # S = A - g B'
+        S00 = a00 - (g00 * b00 + g01 * b01)
+        S01 = a01 - (g00 * b10 + g01 * b11)
+        S10 = a10 - (g10 * b00 + g11 * b01)
+        S11 = a11 - (g10 * b10 + g11 * b11)
+        gy = g @ y[..., None]
+        z_t = z[..., t - 1, 0]
+        y = np.empty(shape + (2,))
+        np.subtract(h0 * z_t + 0.0, gy[..., 0, 0], out=y[..., 0])
+        np.subtract(h1 * z_t + 0.0, gy[..., 1, 0], out=y[..., 1])
+        y0, y1 = y[..., 0], y[..., 1]
+        # S^-1 as _inv
+        det = S00 * S11 - S01 * S10
+        s00, s11, s01, s10 = S11 / det, S00 / det, -S01 / det, -S10 / det
+        quad = quad + (y0 * s00 * y0 + y0 * s01 * y1 + y1 * s10 * y0 + y1 * s11 * y1)
+        logdet = logdet + np.log(det)
+        if smooth:
+            Si = np.empty(np.shape(det) + (2, 2))
+            Si[..., 0, 0], Si[..., 0, 1], Si[..., 1, 0], Si[..., 1, 1] = s00, s01, s10, s11
+            Sis.append(Si)
+            ys.append(y)
+    return np.asarray(quad), logdet, (Sis if smooth else []), (ys if smooth else [])
