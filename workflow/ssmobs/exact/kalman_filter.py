@@ -164,8 +164,12 @@ def _kalman_general(
     Si, det = _inv(S)
     shape = np.broadcast_shapes(z.shape[:-2], F.shape[:-2])
     entrywise = d == 1 and math.prod(shape) >= ENTRYWISE_MIN_BATCH and _off_diagonal_zero(bm)
-    forward = _forward_diagonal if entrywise else _forward_blas
-    quad, logdet, Sis, ys = forward(a_mid, a_end, bm, HtRi, z, Si, det, shape, smooth)
+    args = (a_mid, a_end, bm, HtRi, z, Si, det, shape, smooth)
+    if entrywise:
+        # the smoother's means and variances keep the zero terms (they are used unmasked)
+        quad, logdet, Sis, ys = _forward_diagonal(*args, zero_terms=smooth)
+    else:
+        quad, logdet, Sis, ys = _forward_blas(*args)
     neg2 = (
         c
         - quad
@@ -241,50 +245,77 @@ def _forward_diagonal(
     det: np.ndarray,
     shape: tuple[int, ...],
     smooth: bool,
+    zero_terms: bool = False,
 ) -> Forward:
     """:func:`_forward_blas` for a diagonal B and d = 1, on the blocks' entries.
 
-    The same numbers to the bit: every product of 2x2 blocks that involves B has one
-    exactly zero term per entry (B's off-diagonal), so the sum of the two products is
-    the same whether the matrix library fuses the multiply-add or not, and it is written
-    out here term by term, zero term included (it keeps inf x 0 = NaN where the library
-    gets it).  g y has two non-zero terms and stays the library's product; the quadratic
-    form is einsum's order, (((y0 S00 y0 + y0 S01 y1) + y1 S10 y0) + y1 S11 y1).
+    Every product of 2x2 blocks that involves B has one exactly zero term per entry (B's
+    off-diagonal), so the sum of the two products is the same whether the matrix library
+    fuses the multiply-add or not.  With ``zero_terms`` each entry is written out term by
+    term, zero term included: the library's numbers to the bit, non-finite ones included.
+    Without them a zero term is left out, which changes nothing (but the sign of a zero)
+    while every S_t^-1, t < T, is finite, where the zero term is +-0; and if one is not,
+    S_t+1 or a later S is not finite either, so log det and -2 log p are not finite on
+    both paths (their callers map that to log p = -inf).  g y has two non-zero terms and
+    stays the library's product (same operand shapes, so the same loop of the library);
+    the quadratic form is einsum's order, (((y0 S00 y0 + y0 S01 y1) + y1 S10 y0) + y1 S11 y1).
     """
     T = z.shape[-2]
-    b00, b01, b10, b11 = bm[..., 0, 0], bm[..., 0, 1], bm[..., 1, 0], bm[..., 1, 1]
-    h0, h1 = HtRi[..., 0, 0], HtRi[..., 1, 0]
-    mid = [a_mid[..., i, j] for i in (0, 1) for j in (0, 1)]
-    end = [a_end[..., i, j] for i in (0, 1) for j in (0, 1)]
+    b00, b01, b10, b11 = (bm[..., i, j].copy() for i in (0, 1) for j in (0, 1))
+    h0, h1 = HtRi[..., 0, 0].copy(), HtRi[..., 1, 0].copy()
+    mid = [a_mid[..., i, j].copy() for i in (0, 1) for j in (0, 1)]
+    end = [a_end[..., i, j].copy() for i in (0, 1) for j in (0, 1)]
     s00, s01, s10, s11 = (Si[..., i, j] for i in (0, 1) for j in (0, 1))
     # g = B S^-1 (for the library's matrix-vector product); like S it does not depend on z
     g = np.empty(np.broadcast_shapes(bm.shape[:-2], Si.shape[:-2]) + (2, 2))
+    g00, g01, g10, g11 = g[..., 0, 0], g[..., 0, 1], g[..., 1, 0], g[..., 1, 1]
     y = np.zeros(shape + (2,))
     logdet = np.log(det)
     quad: np.ndarray | float = 0.0
     Sis, ys = [Si], [y]
     for t in range(1, T + 1):
-        np.add(b00 * s00, b01 * s10, out=g[..., 0, 0])
-        np.add(b00 * s01, b01 * s11, out=g[..., 0, 1])
-        np.add(b10 * s00, b11 * s10, out=g[..., 1, 0])
-        np.add(b10 * s01, b11 * s11, out=g[..., 1, 1])
-        g00, g01, g10, g11 = g[..., 0, 0], g[..., 0, 1], g[..., 1, 0], g[..., 1, 1]
         a00, a01, a10, a11 = mid if t < T else end
-        # S = A - g B'
-        S00 = a00 - (g00 * b00 + g01 * b01)
-        S01 = a01 - (g00 * b10 + g01 * b11)
-        S10 = a10 - (g10 * b00 + g11 * b01)
-        S11 = a11 - (g10 * b10 + g11 * b11)
+        if zero_terms:
+            np.add(b00 * s00, b01 * s10, out=g00)
+            np.add(b00 * s01, b01 * s11, out=g01)
+            np.add(b10 * s00, b11 * s10, out=g10)
+            np.add(b10 * s01, b11 * s11, out=g11)
+            # S = A - g B'
+            S00 = a00 - (g00 * b00 + g01 * b01)
+            S01 = a01 - (g00 * b10 + g01 * b11)
+            S10 = a10 - (g10 * b00 + g11 * b01)
+            S11 = a11 - (g10 * b10 + g11 * b11)
+        else:
+            np.multiply(b00, s00, out=g00)
+            np.multiply(b00, s01, out=g01)
+            np.multiply(b11, s10, out=g10)
+            np.multiply(b11, s11, out=g11)
+            S00 = a00 - g00 * b00
+            S01 = a01 - g01 * b11
+            S10 = a10 - g10 * b00
+            S11 = a11 - g11 * b11
         gy = g @ y[..., None]
         z_t = z[..., t - 1, 0]
-        y = np.empty(shape + (2,))
-        np.subtract(h0 * z_t + 0.0, gy[..., 0, 0], out=y[..., 0])
-        np.subtract(h1 * z_t + 0.0, gy[..., 1, 0], out=y[..., 1])
-        y0, y1 = y[..., 0], y[..., 1]
+        y0 = h0 * z_t
+        y0 += 0.0  # the library's 0 + h z
+        y0 -= gy[..., 0, 0]
+        y1 = h1 * z_t
+        y1 += 0.0
+        y1 -= gy[..., 1, 0]
+        y = np.stack([y0, y1], -1)
         # S^-1 as _inv
         det = S00 * S11 - S01 * S10
         s00, s11, s01, s10 = S11 / det, S00 / det, -S01 / det, -S10 / det
-        quad = quad + (y0 * s00 * y0 + y0 * s01 * y1 + y1 * s10 * y0 + y1 * s11 * y1)
+        q = y0 * s00
+        q *= y0
+        for u, s_uv, v in ((y0, s01, y1), (y1, s10, y0), (y1, s11, y1)):
+            term = u * s_uv
+            term *= v
+            q += term
+        if t == 1:
+            quad = quad + q
+        else:
+            quad += q
         logdet = logdet + np.log(det)
         if smooth:
             Si = np.empty(np.shape(det) + (2, 2))
