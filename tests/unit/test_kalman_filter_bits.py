@@ -203,3 +203,28 @@ def test_p1_filter_equals_the_reference_formula_to_the_bit(slug, omega_shape, z_
         F, Q, H, R = model.state_space_matrices(omega)
         ref = _reference_p1(F[..., 0, 0], Q[..., 0], H[..., :, 0], R, z)
     assert _same_bits(got, ref)
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("slug", ["sep_d1_p2", "sep_d2_p1", "same"])
+@pytest.mark.parametrize(
+    ("omega_shape", "z_shape"), [((1, 300), (4, 1)), ((4, 300), (4, 1)), ((900,), (900,))]
+)
+def test_blocks_of_the_batch_give_the_whole_batch_numbers(
+    slug, omega_shape, z_shape, smooth, monkeypatch
+):
+    """The filter on cache-sized blocks of the batch's last axis (FILTER_BLOCK) gives the
+    numbers of one pass over the whole batch, shared and per-trajectory Omega alike."""
+    rng = np.random.default_rng(len(slug) + len(omega_shape))
+    model = get_model(slug)
+    omega = rng.uniform(0.2, 0.9, omega_shape + (model.n_params,))
+    if slug == "sep_d1_p2":
+        omega[..., :2] *= 0.7  # a^2 + b^2 < 1
+    z = 3 * rng.standard_normal(z_shape + (15, model.obs_dim))
+    whole = kalman_marginal(model, omega, z, smooth=smooth)
+    monkeypatch.setattr(kf, "FILTER_BLOCK", 70)
+    assert len(kf._blocks(np.broadcast_shapes(omega_shape, z_shape))) > 3
+    blocked = kalman_marginal(model, omega, z, smooth=smooth)
+    assert _same_bits(blocked.neg2_loglik, whole.neg2_loglik)
+    if smooth:
+        assert _same_bits(blocked.mean, whole.mean) and _same_bits(blocked.var, whole.var)

@@ -63,10 +63,54 @@ def kalman_marginal(
     omega = np.asarray(omega, dtype=float)
     z = np.asarray(z, dtype=float)
     F, Q, H, R = model.state_space_matrices(omega)
+    shape = np.broadcast_shapes(omega.shape[:-1], z.shape[:-2])
+    parts = []
     with np.errstate(all="ignore"):
-        if model.state_dim == 1:
-            return _kalman_p1(F[..., 0, 0], Q[..., 0], H[..., :, 0], R, z, smooth)
-        return _kalman_general(F, Q, H, R, z, smooth)
+        for block in _blocks(shape):
+            # each element's numbers depend on its own inputs only: blocks that fit in the
+            # cache give the same numbers as the whole batch
+            Fb, Qb, Hb, Rb, zb = (
+                _take(a, block, shape, n_core)
+                for a, n_core in ((F, 2), (Q, 1), (H, 2), (R, 1), (z, 2))
+            )
+            if model.state_dim == 1:
+                parts.append(_kalman_p1(Fb[..., 0, 0], Qb[..., 0], Hb[..., :, 0], Rb, zb, smooth))
+            else:
+                parts.append(_kalman_general(Fb, Qb, Hb, Rb, zb, smooth))
+    if len(parts) == 1:
+        return parts[0]
+    axis = len(shape) - 1
+    neg2 = np.concatenate([k.neg2_loglik for k in parts], axis)
+    if not smooth:
+        return KalmanMarginal(neg2)
+    mean = np.concatenate([k.mean for k in parts if k.mean is not None], axis)
+    var = np.concatenate([k.var for k in parts if k.var is not None], axis)
+    return KalmanMarginal(neg2, mean, var)
+
+
+#: the filter runs on blocks of about this many batch elements (along the batch's last
+#: axis), whose arrays stay in the CPU cache: 1.5x (p = 1) and 1.3x (p = 2) faster than
+#: whole fine grids of 13 x 29791 and 5 x 28561 elements, and 2048 or 32768 gain less
+FILTER_BLOCK = 8192
+
+
+def _blocks(shape: tuple[int, ...]) -> list[slice]:
+    """Slices of the batch's last axis holding about FILTER_BLOCK elements each."""
+    n = math.prod(shape)
+    if not shape or n <= FILTER_BLOCK:
+        return [slice(None)]
+    step = max(1, FILTER_BLOCK * shape[-1] // n)
+    return [slice(s, s + step) for s in range(0, shape[-1], step)]
+
+
+def _take(a: np.ndarray, block: slice, shape: tuple[int, ...], n_core: int) -> np.ndarray:
+    """``a``'s part in ``block`` of the batch's last axis (all of it where ``a`` is
+    broadcast along that axis); ``n_core`` trailing axes are not batch axes."""
+    n_batch = a.ndim - n_core
+    if block == slice(None) or n_batch < 1 or a.shape[n_batch - 1] == 1:
+        return a
+    assert a.shape[n_batch - 1] == shape[-1]
+    return a[(Ellipsis, block) + (slice(None),) * n_core]
 
 
 def _kalman_p1(
