@@ -228,3 +228,26 @@ def test_blocks_of_the_batch_give_the_whole_batch_numbers(
     assert _same_bits(blocked.neg2_loglik, whole.neg2_loglik)
     if smooth:
         assert _same_bits(blocked.mean, whole.mean) and _same_bits(blocked.var, whole.var)
+
+
+def test_matrices_with_smaller_batches_broadcast_as_in_the_reference():
+    """One trajectory, H and R shared by every Omega (batch shape 1) against F and Q per
+    Omega, for both filters: the in-place sums allocate the full batch."""
+    rng = np.random.default_rng(11)
+    n, T = 120, 12
+    z = rng.standard_normal((T, 2))
+    f, q = rng.uniform(0.3, 0.9, n), rng.uniform(0.2, 1.0, n)
+    h, r = np.array([[0.8, 0.5]]), np.array([[0.4, 0.7]])
+    got = kf._kalman_p1(f, q, h, r, z, False).neg2_loglik
+    assert got.shape == (n,) and _same_bits(got, _reference_p1(f, q, h, r, z))
+    zero = np.zeros(n)
+    F = np.stack([np.stack([f, zero], -1), np.stack([zero, f[::-1]], -1)], -2)
+    Q = np.stack([q, q[::-1]], -1)
+    H, R = np.array([[[0.6, 0.5]]]), np.array([[0.3]])
+    z1 = z[..., :1]
+    for smooth in (False, True):
+        got2 = kf._kalman_general(F, Q, H, R, z1, smooth)
+        ref2 = _reference_p2(F, Q, H, R, z1, smooth)
+        assert _same_bits(got2.neg2_loglik, ref2[0])
+        if smooth:
+            assert _same_bits(got2.mean, ref2[1]) and _same_bits(got2.var, ref2[2])

@@ -133,10 +133,11 @@ def _kalman_p1(
     # the sums over d in place, in the order of sum(): ((0 + z_t1 hr_1) + z_t2 hr_2) + ...
     hr_i = [hr[..., i].copy() for i in range(d)]
     z_i = [z[..., i].copy() for i in range(d)]
+    y_shape = np.broadcast_shapes(y.shape, np.shape(hr)[:-1], np.shape(bm))
     for t in range(1, T + 1):
         g = bm / S
         S = (a_mid if t < T else a_end) - g * bm
-        y_new = z_i[0][..., t - 1] * hr_i[0]  # H' R^-1 z_t
+        y_new = np.multiply(z_i[0][..., t - 1], hr_i[0], out=np.empty(y_shape))  # H' R^-1 z_t
         y_new += 0.0
         for i in range(1, d):
             y_new += z_i[i][..., t - 1] * hr_i[i]
@@ -148,7 +149,7 @@ def _kalman_p1(
             quad = quad + term
         else:
             quad += term
-        logdet += np.log(S)
+        logdet = logdet + np.log(S)
         if smooth:
             Ss.append(S)
             ys.append(y)
@@ -340,10 +341,10 @@ def _forward_diagonal(
             S11 = a11 - g11 * b11
         gy = g @ y[..., None]
         z_t = z[..., t - 1, 0]
-        y0 = h0 * z_t
+        y0 = np.multiply(h0, z_t, out=np.empty(shape))
         y0 += 0.0  # the library's 0 + h z
         y0 -= gy[..., 0, 0]
-        y1 = h1 * z_t
+        y1 = np.multiply(h1, z_t, out=np.empty(shape))
         y1 += 0.0
         y1 -= gy[..., 1, 0]
         y = np.stack([y0, y1], -1)
