@@ -153,20 +153,7 @@ def mixture_mode_quantiles(
     lo_m = np.where(big, mean, np.inf).min(1)
     hi_m = np.where(big, mean, -np.inf).max(1)
     sdm = sd if sd_mode is None else sd_mode
-    x = mean[:, 0].copy()  # the heaviest component (weights are sorted)
-    for _ in range(settings.mode_iter):
-        u = (x[:, None] - mean) / sdm
-        phi = w * np.exp(-0.5 * u * u) / sdm
-        f = phi.sum(1)
-        f1 = -(phi * u / sdm).sum(1)
-        f2 = (phi * (u * u - 1) / sdm**2).sum(1)
-        with np.errstate(all="ignore"):
-            g = f1 / f
-            gp = f2 / f - g * g
-            step = np.where(gp < 0, -g / gp, np.sign(g) * S / 4)
-        step = np.where(np.isfinite(step), step, 0.0)
-        x = np.clip(x + np.clip(step, -S / 2, S / 2), lo_m, hi_m)
-    mode = x
+    mode = _mixture_mode(w, mean, sdm, S, lo_m, hi_m, settings.mode_iter)
 
     # the quantiles element by element (trajectory, state): components last, and each step
     # only on the elements that have not converged yet
@@ -208,3 +195,49 @@ def mixture_mode_quantiles(
             )
         qs.append(x.reshape(M.shape))
     return mode, np.stack(qs, -1)
+
+
+def _mixture_mode(
+    w: np.ndarray,
+    mean: np.ndarray,
+    sd: np.ndarray,
+    S: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    n_iter: int,
+) -> np.ndarray:
+    """``n_iter`` safeguarded Newton steps on the log of sum_g w_g N(mean_g, sd_g^2) (axis 1)
+    from the heaviest component's mean (:func:`mixture_mode_quantiles`).
+
+    A step is a function of x alone, so an x that a step leaves unchanged to the bit stays
+    so: a trajectory (first axis) whose every x is such a fixed point drops out of the
+    remaining steps.  Its rows keep their layout (components on axis 1, states last), so the
+    sums over the components add in the same order as over all trajectories.
+    """
+    x = mean[:, 0].copy()  # the heaviest component (weights are sorted)
+    rows = np.arange(x.shape[0])
+    sd2 = sd**2
+    half, quarter = S / 2, S / 4
+    for _ in range(n_iter):
+        xr = x[rows]
+        u = (xr[:, None] - mean) / sd
+        uu = u * u  # -0.5 * u * u = -0.5 * uu: halving is exact
+        phi = w * np.exp(-0.5 * uu) / sd
+        f = phi.sum(1)
+        f1 = -(phi * u / sd).sum(1)
+        f2 = (phi * (uu - 1) / sd2).sum(1)
+        with np.errstate(all="ignore"):
+            g = f1 / f
+            gp = f2 / f - g * g
+            step = np.where(gp < 0, -g / gp, np.sign(g) * quarter)
+        step = np.where(np.isfinite(step), step, 0.0)
+        x_new = np.clip(xr + np.clip(step, -half, half), lo, hi)
+        x[rows] = x_new
+        moved = (x_new.view(np.uint64) != xr.view(np.uint64)).any(1)
+        if not moved.all():
+            rows = rows[moved]
+            if rows.size == 0:
+                break
+            w, mean, sd, sd2 = w[moved], mean[moved], sd[moved], sd2[moved]
+            half, quarter, lo, hi = half[moved], quarter[moved], lo[moved], hi[moved]
+    return x
