@@ -209,12 +209,12 @@ def _kalman_general(
     Si, det = _inv(S)
     shape = np.broadcast_shapes(z.shape[:-2], F.shape[:-2])
     entrywise = d == 1 and math.prod(shape) >= ENTRYWISE_MIN_BATCH and _off_diagonal_zero(bm)
-    args = (a_mid, a_end, bm, HtRi, z, Si, det, shape, smooth)
+    prec = _Precision(a_mid, a_end, bm, HtRi, Si, det, shape)
     if entrywise:
         # the smoother's means and variances keep the zero terms (they are used unmasked)
-        quad, logdet, Sis, ys = _forward_diagonal(*args, zero_terms=smooth)
+        quad, logdet, Sis, ys = _forward_diagonal(prec, z, smooth, zero_terms=smooth)
     else:
-        quad, logdet, Sis, ys = _forward_blas(*args)
+        quad, logdet, Sis, ys = _forward_blas(prec, z, smooth)
     neg2 = (
         c
         - quad
@@ -243,18 +243,32 @@ def _kalman_general(
 Forward = tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
 
 
-def _forward_blas(
-    a_mid: np.ndarray,
-    a_end: np.ndarray,
-    bm: np.ndarray,
-    HtRi: np.ndarray,
-    z: np.ndarray,
-    Si: np.ndarray,
-    det: np.ndarray,
-    shape: tuple[int, ...],
-    smooth: bool,
-) -> Forward:
+@dataclass(frozen=True)
+class _Precision:
+    """The blocks of the precision of (x_0..x_T) given Omega and z that a forward pass of
+    the p = 2 filter eliminates: diagonal blocks A (t < T and t = T), the off-diagonal
+    block B = -Q^-1 F, H' R^-1, and S_0^-1 with det S_0; ``shape`` is the batch's."""
+
+    a_mid: np.ndarray
+    a_end: np.ndarray
+    bm: np.ndarray
+    HtRi: np.ndarray
+    Si0: np.ndarray
+    det0: np.ndarray
+    shape: tuple[int, ...]
+
+
+def _forward_blas(prec: _Precision, z: np.ndarray, smooth: bool) -> Forward:
     """Forward elimination of the block-tridiagonal precision with 2x2 blocks (any F, d)."""
+    a_mid, a_end, bm, HtRi, Si, det = (
+        prec.a_mid,
+        prec.a_end,
+        prec.bm,
+        prec.HtRi,
+        prec.Si0,
+        prec.det0,
+    )
+    shape = prec.shape
     T = z.shape[-2]
     bmt = np.swapaxes(bm, -1, -2)
     y = np.zeros(shape + (2,))
@@ -281,16 +295,7 @@ def _off_diagonal_zero(bm: np.ndarray) -> bool:
 
 
 def _forward_diagonal(
-    a_mid: np.ndarray,
-    a_end: np.ndarray,
-    bm: np.ndarray,
-    HtRi: np.ndarray,
-    z: np.ndarray,
-    Si: np.ndarray,
-    det: np.ndarray,
-    shape: tuple[int, ...],
-    smooth: bool,
-    zero_terms: bool = False,
+    prec: _Precision, z: np.ndarray, smooth: bool, zero_terms: bool = False
 ) -> Forward:
     """:func:`_forward_blas` for a diagonal B and d = 1, on the blocks' entries.
 
@@ -305,6 +310,15 @@ def _forward_diagonal(
     stays the library's product (same operand shapes, so the same loop of the library);
     the quadratic form is einsum's order, (((y0 S00 y0 + y0 S01 y1) + y1 S10 y0) + y1 S11 y1).
     """
+    a_mid, a_end, bm, HtRi, Si, det = (
+        prec.a_mid,
+        prec.a_end,
+        prec.bm,
+        prec.HtRi,
+        prec.Si0,
+        prec.det0,
+    )
+    shape = prec.shape
     T = z.shape[-2]
     b00, b01, b10, b11 = (bm[..., i, j].copy() for i in (0, 1) for j in (0, 1))
     h0, h1 = HtRi[..., 0, 0].copy(), HtRi[..., 1, 0].copy()
