@@ -260,15 +260,8 @@ class _Precision:
 
 def _forward_blas(prec: _Precision, z: np.ndarray, smooth: bool) -> Forward:
     """Forward elimination of the block-tridiagonal precision with 2x2 blocks (any F, d)."""
-    a_mid, a_end, bm, HtRi, Si, det = (
-        prec.a_mid,
-        prec.a_end,
-        prec.bm,
-        prec.HtRi,
-        prec.Si0,
-        prec.det0,
-    )
-    shape = prec.shape
+    a_mid, a_end, bm, HtRi = prec.a_mid, prec.a_end, prec.bm, prec.HtRi
+    Si, det, shape = prec.Si0, prec.det0, prec.shape
     T = z.shape[-2]
     bmt = np.swapaxes(bm, -1, -2)
     y = np.zeros(shape + (2,))
@@ -310,15 +303,8 @@ def _forward_diagonal(
     stays the library's product (same operand shapes, so the same loop of the library);
     the quadratic form is einsum's order, (((y0 S00 y0 + y0 S01 y1) + y1 S10 y0) + y1 S11 y1).
     """
-    a_mid, a_end, bm, HtRi, Si, det = (
-        prec.a_mid,
-        prec.a_end,
-        prec.bm,
-        prec.HtRi,
-        prec.Si0,
-        prec.det0,
-    )
-    shape = prec.shape
+    a_mid, a_end, bm, HtRi = prec.a_mid, prec.a_end, prec.bm, prec.HtRi
+    Si, det, shape = prec.Si0, prec.det0, prec.shape
     T = z.shape[-2]
     b00, b01, b10, b11 = (bm[..., i, j].copy() for i in (0, 1) for j in (0, 1))
     h0, h1 = HtRi[..., 0, 0].copy(), HtRi[..., 1, 0].copy()
