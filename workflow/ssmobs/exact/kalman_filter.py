@@ -145,10 +145,7 @@ def _kalman_p1(
         y = y_new
         term = y * y
         term /= S
-        if t == 1:
-            quad = quad + term
-        else:
-            quad += term
+        quad = _add_term(quad, term)
         logdet = logdet + np.log(S)
         if smooth:
             Ss.append(S)
@@ -174,6 +171,15 @@ def _kalman_p1(
         v = 1 / Ss[t] + gi * gi * v
         mean[..., t, 0], var[..., t, 0] = m, v
     return KalmanMarginal(neg2, mean, var)
+
+
+def _add_term(total: np.ndarray | float, term: np.ndarray) -> np.ndarray:
+    """``total + term``, in place once ``total`` is an array (the first step's 0.0 + term
+    makes it one): the numbers of ``total = total + term``, without a new array per step."""
+    if isinstance(total, np.ndarray):
+        total += term
+        return total
+    return total + term
 
 
 def _inv(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -357,10 +363,7 @@ def _forward_diagonal(
             term = u * s_uv
             term *= v
             q += term
-        if t == 1:
-            quad = quad + q
-        else:
-            quad += q
+        quad = _add_term(quad, q)
         logdet = logdet + np.log(det)
         if smooth:
             Si = np.empty(np.shape(det) + (2, 2))
