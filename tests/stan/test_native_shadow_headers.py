@@ -1,6 +1,7 @@
 """The native backend's header that stands in for Stan's ``stan/model/gradient.hpp`` (one
-message stream per thread instead of one per gradient call, issue 49): programs built with it
-give the same draws and the same messages, bit for bit, as programs built with Stan's own."""
+message stream per thread instead of one per gradient call, the independent variables off
+the chain stack; issue 49): programs built with it, autodiff and analytic, give the same
+draws and the same messages, bit for bit, as programs built with Stan's own."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ssmobs.stages.stan import stan_program
 from ssmobs.stan_backends import SAMPLER_COLUMNS, SamplerSettings, native_build, stan_file
 from ssmobs.stan_backends.cache import BUILD_RECORD
 from ssmobs.stan_backends.native import NativeBackend
@@ -69,14 +71,16 @@ def test_shadow_header_comes_first_on_the_include_path():
 # run in `make test-slow`; `make test` keeps the include order above and the keys
 # (tests/unit/test_cache_keys.py).
 @pytest.mark.slow
-def test_same_draws_with_and_without_the_shadow_header(monkeypatch, tmp_path):
+@pytest.mark.parametrize("gradients", ["autodiff", "analytic"])
+def test_same_draws_with_and_without_the_shadow_header(monkeypatch, tmp_path, gradients):
     data = _data("same", {"a": 0.9}, T=6)
-    ours_build = NativeBackend().compile(stan_file("same"))
-    ours = NativeBackend().sample(stan_file("same"), data, 1234, SMALL)
+    program, header = stan_program("same", gradients)
+    ours_build = NativeBackend().compile(program, header)
+    ours = NativeBackend().sample(program, data, 1234, SMALL, user_header=header)
     stock_headers(monkeypatch, tmp_path)
-    stock_build = NativeBackend().compile(stan_file("same"))
+    stock_build = NativeBackend().compile(program, header)
     assert stock_build["cache_dir"] != ours_build["cache_dir"]  # not found under our key
-    stock = NativeBackend().sample(stan_file("same"), data, 1234, SMALL)
+    stock = NativeBackend().sample(program, data, 1234, SMALL, user_header=header)
     assert ours.params.keys() == stock.params.keys()
     for name in ours.params:
         np.testing.assert_array_equal(ours.params[name], stock.params[name], err_msg=name)

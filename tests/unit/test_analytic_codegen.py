@@ -15,7 +15,12 @@ from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.stan_source import stan_block
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import neg2_log_posterior
-from ssmobs.nuts.analytic_gradients import analytic_stan_code, function_name, header_code, stan_call
+from ssmobs.nuts.analytic_gradients import (
+    analytic_stan_code,
+    function_declaration,
+    header_code,
+    stan_call,
+)
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import program_code
 
@@ -49,7 +54,10 @@ def test_program_keeps_all_but_the_model_block(slug):
     for block in ("data", "parameters"):
         assert stan_block(new, block) == stan_block(code, block)
     assert stan_block(new, "model").strip() == stan_call(model)
-    assert f"real {function_name(model)}(data vector z" in stan_block(new, "functions")
+    assert stan_block(new, "functions").strip().startswith(function_declaration(model))
+    # the states go as the program declares them, no copy joins x0 and x
+    declared = "real x0" if model.state_dim == 1 else "vector x0"
+    assert declared in function_declaration(model) and "append_row" not in stan_call(model)
 
 
 def _evaluate_header(model, theta: np.ndarray, z: np.ndarray) -> tuple[float, np.ndarray]:

@@ -37,7 +37,7 @@ from ..models.base import StateSpaceModel
 #: program, or the generated C++ of this module
 GRADIENT_MODES: tuple[str, ...] = ("autodiff", "analytic")
 #: format of the generated files; change it whenever the generated text changes meaning
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 
 
 def function_name(model: StateSpaceModel) -> str:
@@ -145,7 +145,6 @@ def header_code(model: StateSpaceModel) -> str:
     w, xp, x, z = _symbols(model)
     obs = _step(model.obs_term(w, x, z), w + x, w, "o")
     trans = _step(model.trans_term(w, xp, x), w + xp + x, w, "r")
-    name = function_name(model)
     guard = f"SSMOBS_ANALYTIC_{model.slug.upper()}_HPP"
     g_w = [f"g_w[{i}]" for i in range(m)]
     now = [f"g_x[(t + 1) * {p} + {i}]" for i in range(p)]
@@ -192,45 +191,98 @@ def header_code(model: StateSpaceModel) -> str:
         "",
         f"}}  // namespace ssmobs_analytic_{model.slug}",
         "",
-        "//! The Stan function: z (data), Omega and the states (x_0, x_1..x_T time-major) as",
-        "//! vectors; one callback node on the tape adds adj * gradient to every operand.",
-        "template <typename T_z, typename T_w, typename T_x>",
-        "stan::return_type_t<T_w, T_x>",
-        f"{name}(const T_z& z, const T_w& omega, const T_x& states, std::ostream* pstream__) {{",
-        "  const Eigen::VectorXd z_v = stan::math::value_of(z);",
-        "  const Eigen::VectorXd w_v = stan::math::value_of(omega);",
-        "  const Eigen::VectorXd x_v = stan::math::value_of(states);",
-        f'  static constexpr const char* fn = "{name}";',
-        f'  stan::math::check_size_match(fn, "size of omega", w_v.size(), "m", {m});',
-        f"  const int T = static_cast<int>(z_v.size() / {d});",
-        f'  stan::math::check_size_match(fn, "size of z", z_v.size(), "d T", {d} * T);',
-        '  stan::math::check_size_match(fn, "size of the states", x_v.size(), "p (T + 1)",',
-        f"                               {p} * (T + 1));",
-        "  if constexpr (stan::is_constant_all<T_w, T_x>::value) {",
-        f"    Eigen::VectorXd g_w({m}), g_x(x_v.size());",
-        f"    return ssmobs_analytic_{model.slug}::value_gradient(z_v.data(), w_v.data(),",
-        "        x_v.data(), T, g_w.data(), g_x.data());",
-        "  } else {",
-        f"    stan::arena_t<Eigen::VectorXd> g_w({m}), g_x(x_v.size());",
-        f"    const double lp = ssmobs_analytic_{model.slug}::value_gradient(z_v.data(),",
-        "        w_v.data(), x_v.data(), T, g_w.data(), g_x.data());",
-        "    using vars = Eigen::Matrix<stan::math::var, Eigen::Dynamic, 1>;",
-        "    stan::arena_t<vars> w_arena = omega;",
-        "    stan::arena_t<vars> x_arena = states;",
-        "    return stan::math::make_callback_var(",
-        "        lp, [w_arena, x_arena, g_w, g_x](auto& vi) mutable {",
-        "          for (Eigen::Index i = 0; i < g_w.size(); ++i)",
-        "            w_arena.coeffRef(i).adj() += vi.adj() * g_w.coeff(i);",
-        "          for (Eigen::Index i = 0; i < g_x.size(); ++i)",
-        "            x_arena.coeffRef(i).adj() += vi.adj() * g_x.coeff(i);",
-        "        });",
-        "  }",
-        "}",
-        "",
+    ]
+    out += _stan_function(model)
+    out += [
         f"#endif  // {guard}",
         "",
     ]
     return "\n".join(out)
+
+
+def _stan_function(model: StateSpaceModel) -> list[str]:
+    """The Stan function's C++: the values of z, Omega, x_0 and x copied time-major into one
+    buffer per thread, :func:`header_code`'s ``value_gradient`` on them, and one callback
+    node on the tape that adds adj * gradient to every operand."""
+    m, p, d = model.n_params, model.state_dim, model.obs_dim
+    name, ns = function_name(model), f"ssmobs_analytic_{model.slug}"
+    var_vec = "Eigen::Matrix<stan::math::var, Eigen::Dynamic, 1>"
+    var_mat = "Eigen::Matrix<stan::math::var, Eigen::Dynamic, Eigen::Dynamic>"
+    x_arena = var_vec if p == 1 else var_mat
+    out = [
+        "//! The Stan function: z (data; a matrix when d > 1), Omega, x_0 (a real when p = 1)",
+        "//! and x_1..x_T (a matrix T x p when p > 1) as the program declares them; one",
+        "//! callback node on the tape adds adj * gradient to every operand.",
+        "template <typename T_z, typename T_w, typename T_x0, typename T_x>",
+        "stan::return_type_t<T_w, T_x0, T_x>",
+        f"{name}(const T_z& z, const T_w& omega, const T_x0& x0, const T_x& x,",
+        f"{' ' * (len(name) + 1)}std::ostream* pstream__) {{",
+        f'  static constexpr const char* fn = "{name}";',
+        "  const int T = static_cast<int>(z.rows());",
+        f'  stan::math::check_size_match(fn, "size of omega", omega.size(), "m", {m});',
+    ]
+    if d > 1:
+        out.append(f'  stan::math::check_size_match(fn, "columns of z", z.cols(), "d", {d});')
+    if p > 1:
+        out.append(f'  stan::math::check_size_match(fn, "size of x0", x0.size(), "p", {p});')
+        out.append(f'  stan::math::check_size_match(fn, "columns of x", x.cols(), "p", {p});')
+    out += [
+        '  stan::math::check_size_match(fn, "rows of x", x.rows(), "T", T);',
+        "  thread_local std::vector<double> values;  // no allocation per call",
+        f"  values.resize({m} + (T + 1) * {p} + T * {d});",
+        "  double* const w_v = values.data();",
+        f"  double* const x_v = w_v + {m};",
+        f"  double* const z_v = x_v + (T + 1) * {p};",
+        f"  for (int i = 0; i < {m}; ++i) w_v[i] = stan::math::value_of(omega.coeff(i));",
+    ]
+    if p == 1:
+        out.append("  x_v[0] = stan::math::value_of(x0);")
+    else:
+        out.append(f"  for (int i = 0; i < {p}; ++i) x_v[i] = stan::math::value_of(x0.coeff(i));")
+    out += [
+        "  for (int t = 0; t < T; ++t)",
+        f"    for (int i = 0; i < {p}; ++i)",
+        f"      x_v[(t + 1) * {p} + i] = stan::math::value_of(x.coeff(t, i));",
+        "  for (int t = 0; t < T; ++t)",
+        f"    for (int i = 0; i < {d}; ++i) z_v[t * {d} + i] = z.coeff(t, i);",
+        f"  const int n_grad = {m} + (T + 1) * {p};",
+        "  if constexpr (stan::is_constant_all<T_w, T_x0, T_x>::value) {",
+        "    thread_local std::vector<double> grad;",
+        "    grad.resize(n_grad);",
+        f"    return {ns}::value_gradient(z_v, w_v, x_v, T, grad.data(), grad.data() + {m});",
+        "  } else {",
+        "    double* const g =",
+        "        stan::math::ChainableStack::instance_->memalloc_.alloc_array<double>(n_grad);",
+        f"    const double lp = {ns}::value_gradient(z_v, w_v, x_v, T, g, g + {m});",
+        f"    stan::arena_t<{var_vec}> w_arena = omega;",
+    ]
+    if p == 1:
+        out.append("    stan::math::var x0_var = x0;")
+    else:
+        out.append(f"    stan::arena_t<{var_vec}> x0_var = x0;")
+    out += [
+        f"    stan::arena_t<{x_arena}> x_arena = x;",
+        "    return stan::math::make_callback_var(",
+        "        lp, [w_arena, x0_var, x_arena, g, T](auto& vi) mutable {",
+        "          const double a = vi.adj();",
+        f"          for (int i = 0; i < {m}; ++i) w_arena.coeffRef(i).adj() += a * g[i];",
+    ]
+    if p == 1:
+        out.append(f"          x0_var.adj() += a * g[{m}];")
+    else:
+        out.append(
+            f"          for (int i = 0; i < {p}; ++i) x0_var.coeffRef(i).adj() += a * g[{m} + i];"
+        )
+    out += [
+        "          for (int t = 0; t < T; ++t)",
+        f"            for (int i = 0; i < {p}; ++i)",
+        f"              x_arena.coeffRef(t, i).adj() += a * g[{m} + (t + 1) * {p} + i];",
+        "        });",
+        "  }",
+        "}",
+        "",
+    ]
+    return out
 
 
 # --------------------------------------------------------------------------- Stan program
@@ -258,12 +310,18 @@ def _block_span(bare: str, name: str) -> tuple[int, int, int] | None:
 
 
 def stan_call(model: StateSpaceModel) -> str:
-    """The model block's statement: the program's z, Omega and states as the function's
-    vectors (Theta's time-major order; ``x`` a ``matrix[T, p]`` when p > 1)."""
-    z = "z" if model.obs_dim == 1 else "to_vector(z')"
+    """The model block's statement: the program's z, Omega, x0 and x as it declares them
+    (``z`` a ``matrix[T, d]`` when d > 1, ``x0`` a ``vector[p]`` and ``x`` a
+    ``matrix[T, p]`` when p > 1)."""
     omega = "[" + ", ".join(model.param_names) + "]'"
-    states = "append_row(x0, x)" if model.state_dim == 1 else "append_row(x0, to_vector(x'))"
-    return f"target += {function_name(model)}({z}, {omega}, {states});"
+    return f"target += {function_name(model)}(z, {omega}, x0, x);"
+
+
+def function_declaration(model: StateSpaceModel) -> str:
+    """The Stan declaration (no body) of the generated function of :func:`header_code`."""
+    z = "data vector z" if model.obs_dim == 1 else "data matrix z"
+    states = "real x0, vector x" if model.state_dim == 1 else "vector x0, matrix x"
+    return f"real {function_name(model)}({z}, vector omega, {states});"
 
 
 def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
@@ -281,10 +339,7 @@ def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
         "}"
     )
     code = code[:start] + block + code[close + 1 :]
-    decl = (
-        f"  real {function_name(model)}(data vector z, vector omega, vector states);"
-        "  // generated C++\n"
-    )
+    decl = f"  {function_declaration(model)}  // generated C++\n"
     bare = _blank_comments(code)
     functions = _block_span(bare, "functions")
     if functions is not None:
@@ -350,7 +405,7 @@ def generated_stan_code(model: StateSpaceModel) -> str:
         f"// workflow/ssmobs/models/{model.slug}.py: its log posterior (2) with flat priors",
         "// on Omega over their intervals and a flat prior on x0.",
         "functions {",
-        f"  real {function_name(model)}(data vector z, vector omega, vector states);",
+        f"  {function_declaration(model)}",
         "}",
         "data {",
         "  int<lower=1> T;  // number of time steps",

@@ -45,6 +45,10 @@ EXIT_WRITE_FAILED = 5
 EXIT_INPUT_UNREADABLE = 6
 EXIT_ORPHANED = 7
 TMP_PREFIX = "ssmobs-native-"
+#: glibc keeps 7 freed blocks per size for a thread to reuse; a NUTS step frees and
+#: allocates more Eigen vectors of one size than that, so the rest took malloc's slow path
+#: (BENCHMARKS.md, "NUTS per step: fewer allocations").  Allocation does not touch a result.
+MALLOC_TUNABLE = "glibc.malloc.tcache_count=1024"
 
 
 def write_json_file(path: Path, obj: Mapping[str, Any]) -> None:
@@ -177,8 +181,20 @@ def kill_group(proc: subprocess.Popen) -> None:
             continue
 
 
+def driver_environment(env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """``env`` (default: this process's) with :data:`MALLOC_TUNABLE` added to
+    ``GLIBC_TUNABLES`` unless that already sets the tcache count (other C libraries ignore
+    the variable)."""
+    out = dict(os.environ if env is None else env)
+    tunables = out.get("GLIBC_TUNABLES", "")
+    if "glibc.malloc.tcache_count=" not in tunables:
+        out["GLIBC_TUNABLES"] = ":".join(t for t in (tunables, MALLOC_TUNABLE) if t)
+    return out
+
+
 def run_driver(cmd: list[str]) -> tuple[int, str]:
-    """Run the driver in its own process group; return (exit code, stdout + stderr).
+    """Run the driver in its own process group, in :func:`driver_environment`; return
+    (exit code, stdout + stderr).
 
     Any exception while it runs (KeyboardInterrupt, SIGTERM under
     :func:`sigterm_unwinds`) kills the group before propagating, so no driver outlives the
@@ -192,6 +208,7 @@ def run_driver(cmd: list[str]) -> tuple[int, str]:
         text=True,
         errors="replace",
         process_group=0,
+        env=driver_environment(),
     )
     try:
         out, _ = proc.communicate()
