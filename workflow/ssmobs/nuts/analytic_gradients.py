@@ -203,23 +203,25 @@ def header_code(model: StateSpaceModel) -> str:
 def _stan_function(model: StateSpaceModel) -> list[str]:
     """The Stan function's C++: the values of z, Omega, x_0 and x copied time-major into one
     buffer per thread, :func:`header_code`'s ``value_gradient`` on them, and one callback
-    node on the tape that adds adj * gradient to every operand."""
+    node on the tape that adds adj * gradient to every operand (no heap allocation)."""
     m, p, d = model.n_params, model.state_dim, model.obs_dim
     name, ns = function_name(model), f"ssmobs_analytic_{model.slug}"
     var_vec = "Eigen::Matrix<stan::math::var, Eigen::Dynamic, 1>"
     var_mat = "Eigen::Matrix<stan::math::var, Eigen::Dynamic, Eigen::Dynamic>"
     x_arena = var_vec if p == 1 else var_mat
+    omega = [f"omega{i}" for i in range(m)]
+    types = ", ".join([f"T_w{i}" for i in range(m)] + ["T_x0", "T_x"])
+    args = "".join(f"const T_w{i}& {w}, " for i, w in enumerate(omega))
     out = [
-        "//! The Stan function: z (data; a matrix when d > 1), Omega, x_0 (a real when p = 1)",
-        "//! and x_1..x_T (a matrix T x p when p > 1) as the program declares them; one",
-        "//! callback node on the tape adds adj * gradient to every operand.",
-        "template <typename T_z, typename T_w, typename T_x0, typename T_x>",
-        "stan::return_type_t<T_w, T_x0, T_x>",
-        f"{name}(const T_z& z, const T_w& omega, const T_x0& x0, const T_x& x,",
+        "//! The Stan function: z (data; a matrix when d > 1), each parameter of Omega, x_0 (a",
+        "//! real when p = 1) and x_1..x_T (a matrix T x p when p > 1) as the program declares",
+        "//! them; one callback node on the tape adds adj * gradient to every operand.",
+        f"template <typename T_z, {', '.join('typename ' + t for t in types.split(', '))}>",
+        f"stan::return_type_t<{types}>",
+        f"{name}(const T_z& z, {args}const T_x0& x0, const T_x& x,",
         f"{' ' * (len(name) + 1)}std::ostream* pstream__) {{",
         f'  static constexpr const char* fn = "{name}";',
         "  const int T = static_cast<int>(z.rows());",
-        f'  stan::math::check_size_match(fn, "size of omega", omega.size(), "m", {m});',
     ]
     if d > 1:
         out.append(f'  stan::math::check_size_match(fn, "columns of z", z.cols(), "d", {d});')
@@ -233,8 +235,8 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
         "  double* const w_v = values.data();",
         f"  double* const x_v = w_v + {m};",
         f"  double* const z_v = x_v + (T + 1) * {p};",
-        f"  for (int i = 0; i < {m}; ++i) w_v[i] = stan::math::value_of(omega.coeff(i));",
     ]
+    out += [f"  w_v[{i}] = stan::math::value_of({w});" for i, w in enumerate(omega)]
     if p == 1:
         out.append("  x_v[0] = stan::math::value_of(x0);")
     else:
@@ -246,7 +248,7 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
         "  for (int t = 0; t < T; ++t)",
         f"    for (int i = 0; i < {d}; ++i) z_v[t * {d} + i] = z.coeff(t, i);",
         f"  const int n_grad = {m} + (T + 1) * {p};",
-        "  if constexpr (stan::is_constant_all<T_w, T_x0, T_x>::value) {",
+        f"  if constexpr (stan::is_constant_all<{types}>::value) {{",
         "    thread_local std::vector<double> grad;",
         "    grad.resize(n_grad);",
         f"    return {ns}::value_gradient(z_v, w_v, x_v, T, grad.data(), grad.data() + {m});",
@@ -254,8 +256,9 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
         "    double* const g =",
         "        stan::math::ChainableStack::instance_->memalloc_.alloc_array<double>(n_grad);",
         f"    const double lp = {ns}::value_gradient(z_v, w_v, x_v, T, g, g + {m});",
-        f"    stan::arena_t<{var_vec}> w_arena = omega;",
     ]
+    out += [f"    stan::math::var {w}_var = {w};" for w in omega]
+    captures = ", ".join([f"{w}_var" for w in omega] + ["x0_var", "x_arena", "g", "T"])
     if p == 1:
         out.append("    stan::math::var x0_var = x0;")
     else:
@@ -263,10 +266,10 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
     out += [
         f"    stan::arena_t<{x_arena}> x_arena = x;",
         "    return stan::math::make_callback_var(",
-        "        lp, [w_arena, x0_var, x_arena, g, T](auto& vi) mutable {",
+        f"        lp, [{captures}](auto& vi) mutable {{",
         "          const double a = vi.adj();",
-        f"          for (int i = 0; i < {m}; ++i) w_arena.coeffRef(i).adj() += a * g[i];",
     ]
+    out += [f"          {w}_var.adj() += a * g[{i}];" for i, w in enumerate(omega)]
     if p == 1:
         out.append(f"          x0_var.adj() += a * g[{m}];")
     else:
@@ -310,18 +313,19 @@ def _block_span(bare: str, name: str) -> tuple[int, int, int] | None:
 
 
 def stan_call(model: StateSpaceModel) -> str:
-    """The model block's statement: the program's z, Omega, x0 and x as it declares them
-    (``z`` a ``matrix[T, d]`` when d > 1, ``x0`` a ``vector[p]`` and ``x`` a
-    ``matrix[T, p]`` when p > 1)."""
-    omega = "[" + ", ".join(model.param_names) + "]'"
-    return f"target += {function_name(model)}(z, {omega}, x0, x);"
+    """The model block's statement: the program's z, parameters, x0 and x as it declares
+    them (``z`` a ``matrix[T, d]`` when d > 1, ``x0`` a ``vector[p]`` and ``x`` a
+    ``matrix[T, p]`` when p > 1); no argument is a new vector."""
+    args = ", ".join(["z", *model.param_names, "x0", "x"])
+    return f"target += {function_name(model)}({args});"
 
 
 def function_declaration(model: StateSpaceModel) -> str:
     """The Stan declaration (no body) of the generated function of :func:`header_code`."""
     z = "data vector z" if model.obs_dim == 1 else "data matrix z"
+    omega = ", ".join(f"real omega{i}" for i in range(model.n_params))
     states = "real x0, vector x" if model.state_dim == 1 else "vector x0, matrix x"
-    return f"real {function_name(model)}({z}, vector omega, {states});"
+    return f"real {function_name(model)}({z}, {omega}, {states});"
 
 
 def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
