@@ -77,10 +77,10 @@ def _evaluate_header(model, theta: np.ndarray, z: np.ndarray) -> tuple[float, np
     }
     py = []
     for raw in body.splitlines():
-        line = raw.strip()
-        if not line or line.startswith(("//", "{", "}")):
+        line = raw.split("//", 1)[0].strip()  # C++ divides with a single slash
+        if not line or line.startswith(("{", "}")):
             continue
-        inside = len(raw) - len(raw.lstrip()) >= 6  # the statements of the loop over t
+        inside = len(raw) - len(raw.lstrip()) >= 4  # the statements of the loop over t
         loop = re.fullmatch(r"for \(int (\w) = 0; \w < (.*?); \+\+\w\) (.*)", line)
         if line.startswith("for (int t"):
             line = "for t in range(T):"
