@@ -111,7 +111,7 @@ def main() -> int:
     import numpy as np
     from ssmobs.model_check.cases import default_cases, sample_theta
     from ssmobs.models import get_model
-    from ssmobs.stan_backends.native_build import write_json_file
+    from ssmobs.stan_backends.native_run import write_json_file
 
     model = get_model(args.model)
     _, z, bounds = sample_theta(model, default_cases(model)[0], 20, 1, np.random.default_rng(1))

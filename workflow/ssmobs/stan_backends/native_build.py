@@ -25,19 +25,15 @@ Cached programs are self-contained
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import re
 import shutil
 import subprocess
 import time
-from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
 
-from ..io import json_default
 from .base import BackendError, log_captured
 from .cache import (
     build_lock,
@@ -193,11 +189,6 @@ def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
         "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + LDFLAGS),
         "runtime_libs": ",".join(RUNTIME_LIBS),
     }
-
-
-def write_json_file(path: Path, obj: Mapping[str, Any]) -> None:
-    """A data, init or point file in Stan's JSON (NumPy values converted)."""
-    path.write_text(json.dumps(dict(obj), default=json_default))
 
 
 def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:

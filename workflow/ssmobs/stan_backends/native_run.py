@@ -47,7 +47,8 @@ EXIT_ORPHANED = 7
 TMP_PREFIX = "ssmobs-native-"
 #: glibc keeps 7 freed blocks per size for a thread to reuse; a NUTS step frees and
 #: allocates more Eigen vectors of one size than that, so the rest took malloc's slow path
-#: (BENCHMARKS.md, "NUTS per step: fewer allocations").  Allocation does not touch a result.
+#: (BENCHMARKS.md, "NUTS per step: Stan's machinery before and after").  Allocation does
+#: not touch a result.
 MALLOC_TUNABLE = "glibc.malloc.tcache_count=1024"
 
 
