@@ -58,6 +58,14 @@ print(json.dumps({"exes": out, "GLIBC_TUNABLES": tunables}))
 """
 
 
+def git(*args: str) -> str:
+    """Output of ``git -C <this checkout> args``, stripped."""
+    done = subprocess.run(
+        ["git", "-C", str(ROOT), *args], capture_output=True, text=True, check=True
+    )
+    return done.stdout.strip()
+
+
 def build(checkout: Path, slugs: list[str]) -> dict:
     """Drivers of ``checkout``'s programs (compiled into the shared cache if missing)."""
     env = {**os.environ, "PYTHONPATH": str(checkout / "workflow")}
@@ -101,24 +109,9 @@ def main() -> None:
     wanted = {c.strip() for c in args.cases.split(",") if c.strip()}
     cases = [c for c in CASES if not wanted or c[0] in wanted]
     slugs = [slug for slug, _, _ in cases]
-    base_sha = subprocess.run(
-        ["git", "-C", str(ROOT), "rev-parse", "--short", args.base],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.strip()
-    here_sha = subprocess.run(
-        ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.strip()
-    dirty = subprocess.run(
-        ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.strip()
+    base_sha = git("rev-parse", "--short", args.base)
+    here_sha = git("rev-parse", "--short", "HEAD")
+    dirty = git("status", "--porcelain", "--untracked-files=no")
     with tempfile.TemporaryDirectory(prefix="bench-nuts-overhead-") as tmp_name:
         tmp = Path(tmp_name)
         worktree = tmp / "base"
