@@ -51,7 +51,7 @@ def test_planted_error_in_a_generated_term_is_one_line(tmp_path):
     good = write_analytic_program(model, stan_file("same"))
     text = good.header.read_text()
     # the gradient of the transition term in x_t, off by one part in a million
-    target = re.search(r"\n(\s+g_x\[\(t \+ 1\) \* 1 \+ 0\] \+= r_c4\*.*);\n", text)
+    target = re.search(r"\n(\s+gx_now0 \+= r_c4\*.*);\n", text)
     assert target is not None
     planted = text.replace(target.group(1), target.group(1) + "*1.000001")
     header = tmp_path / "same_analytic.hpp"
@@ -183,7 +183,7 @@ def test_planted_error_in_a_generated_program_is_one_line(cubic_sensor, tmp_path
     good = write_analytic_program(cubic_sensor, None)
     text = good.header.read_text()
     # the gradient of the observation term in b, off by one part in ten million
-    target = re.search(r"\n(\s+g_w\[0\] \+= .*);\n", text)
+    target = re.search(r"\n(\s+gw0 \+= .*);\n", text)
     assert target is not None
     header = tmp_path / "planted.hpp"
     header.write_text(text.replace(target.group(1), target.group(1) + "*1.0000001"))
