@@ -62,6 +62,23 @@ def test_planted_error_in_a_generated_term_is_one_line(tmp_path):
     assert "gradient in x[" in problems[0] and "differs from Stan's autodiff" in problems[0]
 
 
+@OWN_COMPILE
+def test_planted_error_in_the_tapeless_gradient_is_one_line(tmp_path):
+    """The sampler's gradient without the tape (ssmobs/gradient_slot.hpp), off by one part
+    in a million in a's bound transform: Stan's log density agrees, the sampler's does not."""
+    model = get_model("same")
+    good = write_analytic_program(model, stan_file("same"))
+    text = good.header.read_text()
+    target = re.search(r"\n(\s+out\[0\] = ssmobs::bound_chain\(.*\));\n", text)
+    assert target is not None
+    header = tmp_path / "same_analytic.hpp"
+    header.write_text(text.replace(target.group(1), target.group(1) + " * 1.000001"))
+    program = AnalyticProgram(stan_file=good.stan_file, header=header)
+    problems = analytic_problems(model, stan_file("same"), default_cases(model)[0], program=program)
+    assert len(problems) == 1 and "\n" not in problems[0]
+    assert "the sampler's gradient in a differs from Stan's autodiff" in problems[0]
+
+
 def _summaries(draws) -> np.ndarray:
     a = draws.params["a"].reshape(-1)
     x = draws.params["x"].reshape(-1, draws.params["x"].shape[-1])

@@ -19,6 +19,7 @@ from ssmobs.nuts.analytic_gradients import (
     analytic_stan_code,
     function_declaration,
     header_code,
+    slot_bounds,
     stan_call,
 )
 from ssmobs.stan_backends import stan_file
@@ -53,7 +54,7 @@ def test_program_keeps_all_but_the_model_block(slug):
     new = analytic_stan_code(model, code)
     for block in ("data", "parameters"):
         assert stan_block(new, block) == stan_block(code, block)
-    assert stan_block(new, "model").strip() == stan_call(model)
+    assert stan_block(new, "model").strip() == stan_call(model, slot_bounds(model, code))
     assert stan_block(new, "functions").strip().startswith(function_declaration(model))
     # the states go as the program declares them, no copy joins x0 and x
     declared = "real x0" if model.state_dim == 1 else "vector x0"
@@ -119,7 +120,65 @@ def test_whole_program_declares_what_the_model_check_reads():
     data = declared_names(stan_block(code, "data"))
     assert data == ["T", "z", "a_lower", "a_upper", "b_lower", "b_upper", "c_lower", "c_upper"]
     assert "matrix[T, 2] z;" in code and "real<lower=a_lo, upper=a_hi> a;" in code
-    assert stan_block(code, "model").strip() == stan_call(model)
+    bounds = [("a_lo", "a_hi"), ("b_lo", "b_hi"), ("c_lo", "c_hi")]
+    assert stan_block(code, "model").strip() == stan_call(model, bounds)
+    assert slot_bounds(model, code) == bounds
+
+
+#: what the shipped programs give the generated function as bounds; None: the tape
+SHIPPED_SLOT_BOUNDS = {
+    "same": [("a_lo", "a_hi")],
+    "sep": [("a_lo", "a_hi"), ("b_lo", "b_hi")],
+    "sep_d1_p2": None,  # b's bounds depend on a
+    "sep_d2_p1": [("a_lo", "a_hi"), ("b_lo", "b_hi"), ("c_lo", "c_hi")],
+    "sep_mult": [("a_lo", "a_upper")],
+    "sep_ranwalk": [("a_lower", "a_upper")],
+    "stoch_vol": [("phi_lower", "phi_upper"), ("sigma_lo", "sigma_upper")],
+}
+
+
+@pytest.mark.parametrize("slug", sorted(MODELS))
+def test_slot_bounds_of_the_shipped_programs(slug):
+    model = get_model(slug)
+    code = program_code(stan_file(slug))
+    assert slot_bounds(model, code) == SHIPPED_SLOT_BOUNDS[slug]
+    call = stan_call(model, slot_bounds(model, code))
+    assert call.count("not_a_number()") == (2 * model.n_params if slug == "sep_d1_p2" else 0)
+
+
+@pytest.mark.parametrize(
+    ("edit", "want"),
+    [
+        (lambda c: c, [("a_lo", "a_hi")]),
+        (
+            lambda c: c.replace("<lower=a_lo, upper=a_hi>", "<lower=a_lo>"),
+            [("a_lo", "positive_infinity()")],
+        ),
+        (
+            lambda c: c.replace("<lower=a_lo, upper=a_hi>", ""),
+            [("negative_infinity()", "positive_infinity()")],
+        ),
+        (lambda c: c.replace("upper=a_hi>", "upper=fmin(a_hi, 0.5 + 0 * x0)>"), None),
+        (lambda c: c.replace("<lower=a_lo, upper=a_hi>", "<offset=1>"), None),
+        (
+            lambda c: c.replace("model {", "transformed parameters {\n  real b = a;\n}\nmodel {"),
+            None,
+        ),
+        (lambda c: c.replace("real x0;", "real x00;"), None),
+        (
+            lambda c: c.replace("  real x0;  // initial state x_0\n", "").replace(
+                "vector[T] x;", "vector[T] x;\n  real x0;"
+            ),
+            None,
+        ),
+    ],
+)
+def test_slot_bounds_only_where_the_gradient_can_skip_the_tape(edit, want):
+    """Bounds go to the generated function only for Omega's reals bounded by data, then
+    x0 and x, and no transformed parameters: else the sampler keeps Stan's tape."""
+    model = get_model("same")
+    code = edit(program_code(stan_file("same")))
+    assert slot_bounds(model, code) == want
 
 
 def test_whole_program_refuses_support_constraints():

@@ -1,7 +1,9 @@
 """The analytic gradients of the model check (:mod:`ssmobs.model_check.check`, step 4): the log
 density and gradient generated from the model's terms (:mod:`ssmobs.nuts.analytic_gradients`)
 against Stan's autodiff of the hand-written program, both evaluated by the native driver's
-``--log-density`` mode at the same random points inside the support.
+``--log-density`` mode at the same random points inside the support: Stan's log density,
+then the sampler's (``--sampler-gradient``: Jacobian included, and for the generated
+program the gradient the function writes without Stan's tape, ``ssmobs/gradient_slot.hpp``).
 
 The values may differ by one additive constant (the hand-written program keeps Stan's
 normalising constants there); the gradients on the unconstrained scale must be equal.  Both
@@ -16,6 +18,7 @@ A model without a hand-written program runs a generated one
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +26,9 @@ from ..models import StateSpaceModel
 from ..nuts.analytic_gradients import AnalyticProgram, write_analytic_program
 from .cases import CheckCase, sample_theta
 from .stan import stan_point
+
+if TYPE_CHECKING:
+    from ..stan_backends.native_run import LogDensities
 
 #: relative tolerance of value (up to a constant) and gradient
 ANALYTIC_RTOL = 1e-12
@@ -64,13 +70,26 @@ def analytic_problems(
     program = program or write_analytic_program(model, stan_path)
     points = [stan_point(model, th, T) for th in theta]
     native = NativeBackend()
-    try:
-        auto = native.log_density(stan_path, data, points)
-        ana = native.log_density(program.stan_file, data, points, program.header)
-    except (ValueError, RuntimeError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        return [f"analytic gradients of '{model.slug}' ({case.label()}): {first}"]
     label = f"analytic gradients of '{model.slug}' ({case.label()})"
+    for sampler in (False, True):
+        try:
+            auto = native.log_density(stan_path, data, points, sampler=sampler)
+            ana = native.log_density(program.stan_file, data, points, program.header, sampler)
+        except (ValueError, RuntimeError) as err:
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            return [f"{label}: {first}"]
+        what = "the sampler's gradient" if sampler else "gradient"
+        problem = _compare(auto, ana, f"{label}", what, rtol)
+        if problem is not None:
+            return [problem]
+    return []
+
+
+def _compare(
+    auto: LogDensities, ana: LogDensities, label: str, what: str, rtol: float
+) -> str | None:
+    """The first disagreement of the analytic program's log densities with the autodiff
+    program's (values up to one constant, gradients equal to ``rtol``), or None."""
     names = unconstrained_names(auto.param_names, auto.dims)
     ref: float | None = None
     for i, (va, vs, ga, gs) in enumerate(
@@ -78,28 +97,28 @@ def analytic_problems(
     ):
         if (va is None) != (vs is None):
             which = "analytic" if va is None else "autodiff"
-            return [f"{label}: the {which} program alone rejects point {i}"]
+            return f"{label}: the {which} program alone rejects point {i}"
         if va is None or vs is None or ga is None or gs is None:
             continue
         gap = va - vs
         ref = gap if ref is None else ref
         if abs(gap - ref) > rtol * max(1.0, abs(vs)):
-            return [
+            return (
                 f"{label}: log density differs from Stan's autodiff by more than a constant: "
                 f"analytic - autodiff = {ref:.17g} at the first point, {gap:.17g} at point {i}"
-            ]
+            )
         g_a, g_s = np.asarray(ga), np.asarray(gs)
         scale = max(1.0, float(np.max(np.abs(g_s))))
         j = int(np.argmax(np.abs(g_a - g_s)))
         if abs(g_a[j] - g_s[j]) > rtol * scale:
-            return [
-                f"{label}: gradient in {names[j]} differs from Stan's autodiff at point {i}: "
+            return (
+                f"{label}: {what} in {names[j]} differs from Stan's autodiff at point {i}: "
                 f"{g_a[j]:.17g} vs {g_s[j]:.17g} (relative {abs(g_a[j] - g_s[j]) / scale:.2g} "
                 f"> {rtol:g})"
-            ]
+            )
     if ref is None:
-        return [f"{label}: Stan rejects every random point; nothing was compared"]
-    return []
+        return f"{label}: Stan rejects every random point; nothing was compared"
+    return None
 
 
 def _python_gradient(
@@ -131,6 +150,16 @@ def _bound_slope(value: float, lo: float, hi: float) -> float:
     return 1.0
 
 
+def _log_slope_slope(value: float, lo: float, hi: float) -> float:
+    """d/du log(d theta / d u) of the same transform: what the Jacobian adds to the
+    sampler's gradient."""
+    if np.isfinite(lo) and np.isfinite(hi):
+        return 1.0 - 2.0 * (value - lo) / (hi - lo)
+    if np.isfinite(lo) or np.isfinite(hi):
+        return 1.0
+    return 0.0
+
+
 def generated_problems(
     model: StateSpaceModel,
     program: AnalyticProgram,
@@ -152,24 +181,24 @@ def generated_problems(
     theta, z, bounds = sample_theta(model, case, T, n_points, rng)
     data = model.stan_data(z, bounds)
     label = f"generated program of '{model.slug}' ({case.label()})"
+    points = [stan_point(model, th, T) for th in theta]
+    native = NativeBackend()
     try:
-        dens = NativeBackend().log_density(
-            program.stan_file,
-            data,
-            [stan_point(model, th, T) for th in theta],
-            program.header,
-        )
+        dens = native.log_density(program.stan_file, data, points, program.header)
+        sampler = native.log_density(program.stan_file, data, points, program.header, True)
     except (ValueError, RuntimeError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         return [f"{label}: {first}"]
     names = unconstrained_names(dens.param_names, dens.dims)
     box = generated_bounds(model, bounds.lower, bounds.upper)
-    for i, (th, g) in enumerate(zip(theta, dens.gradients)):
-        if g is None:
+    for i, (th, g, g_sampler) in enumerate(zip(theta, dens.gradients, sampler.gradients)):
+        if g is None or g_sampler is None:
             return [f"{label}: Stan rejects point {i}, inside the Python model's support"]
         want = _python_gradient(model, th, z, T)
+        jacobian = dict.fromkeys(names, 0.0)
         for j, (lo, hi) in enumerate(box):
             want[model.param_names[j]] *= _bound_slope(float(th[j]), lo, hi)
+            jacobian[model.param_names[j]] = _log_slope_slope(float(th[j]), lo, hi)
         g_py = np.array([want[n] for n in names])
         g_st = np.asarray(g, dtype=float)
         scale = max(1.0, float(np.max(np.abs(g_py))))
@@ -179,5 +208,15 @@ def generated_problems(
                 f"{label}: gradient in {names[j]} differs from the Python model's at point "
                 f"{i}: {g_st[j]:.17g} vs {g_py[j]:.17g} (relative "
                 f"{abs(g_st[j] - g_py[j]) / scale:.2g} > {rtol:g})"
+            ]
+        # the sampler's gradient (no tape): the same plus d/du of the log Jacobian
+        g_sa = np.asarray(g_sampler, dtype=float)
+        want_sa = g_st + np.array([jacobian[n] for n in names])
+        j = int(np.argmax(np.abs(g_sa - want_sa)))
+        if abs(g_sa[j] - want_sa[j]) > ANALYTIC_RTOL * scale:
+            return [
+                f"{label}: the sampler's gradient in {names[j]} differs from the log "
+                f"density's plus its Jacobian's at point {i}: {g_sa[j]:.17g} vs "
+                f"{want_sa[j]:.17g}"
             ]
     return []

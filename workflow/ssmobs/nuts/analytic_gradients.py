@@ -37,7 +37,7 @@ from ..models.base import StateSpaceModel
 #: program, or the generated C++ of this module
 GRADIENT_MODES: tuple[str, ...] = ("autodiff", "analytic")
 #: format of the generated files; change it whenever the generated text changes meaning
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 
 
 def function_name(model: StateSpaceModel) -> str:
@@ -160,6 +160,9 @@ def header_code(model: StateSpaceModel) -> str:
         f"#ifndef {guard}",
         f"#define {guard}",
         "#include <stan/model/model_header.hpp>",
+        "#if __has_include(<ssmobs/gradient_slot.hpp>)  // the native backend's headers",
+        "#include <ssmobs/gradient_slot.hpp>",
+        "#endif",
         "",
         f"namespace ssmobs_analytic_{model.slug} {{",
         "",
@@ -194,6 +197,11 @@ def header_code(model: StateSpaceModel) -> str:
         "  return -0.5 * acc;",
         "}",
         "",
+        "#ifdef SSMOBS_GRADIENT_SLOT_HPP",
+        "//! the sampler may ask this program's log density for its gradient without the tape",
+        "static const bool writes_slots = (ssmobs::program_writes_slots() = true);",
+        "#endif",
+        "",
         f"}}  // namespace ssmobs_analytic_{model.slug}",
         "",
     ]
@@ -217,14 +225,20 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
     omega = [f"omega{i}" for i in range(m)]
     types = ", ".join([f"T_w{i}" for i in range(m)] + ["T_x0", "T_x"])
     args = "".join(f"const T_w{i}& {w}, " for i, w in enumerate(omega))
+    bound_args = "".join(f"const double {w}_lower, const double {w}_upper, " for w in omega)
+    pad = " " * (len(name) + 1)
     out = [
         "//! The Stan function: z (data; a matrix when d > 1), each parameter of Omega, x_0 (a",
         "//! real when p = 1) and x_1..x_T (a matrix T x p when p > 1) as the program declares",
-        "//! them; one callback node on the tape adds adj * gradient to every operand.",
+        "//! them, then each parameter's bounds (NaN: not given); one callback node on the tape",
+        "//! adds adj * gradient to every operand.  With doubles and an armed slot (the native",
+        "//! sampler, ssmobs/gradient_slot.hpp), the gradient on the unconstrained scale goes",
+        "//! to the slot instead: Omega's through its bound transform, then x_0, then x",
+        "//! column-major, as the program's parameters block orders them.",
         f"template <typename T_z, {', '.join('typename ' + t for t in types.split(', '))}>",
         f"stan::return_type_t<{types}>",
         f"{name}(const T_z& z, {args}const T_x0& x0, const T_x& x,",
-        f"{' ' * (len(name) + 1)}std::ostream* pstream__) {{",
+        f"{pad}{bound_args}std::ostream* pstream__) {{",
         f'  static constexpr const char* fn = "{name}";',
         "  const int T = static_cast<int>(z.rows());",
     ]
@@ -256,7 +270,28 @@ def _stan_function(model: StateSpaceModel) -> list[str]:
         f"  if constexpr (stan::is_constant_all<{types}>::value) {{",
         "    thread_local std::vector<double> grad;",
         "    grad.resize(n_grad);",
-        f"    return {ns}::value_gradient(z_v, w_v, x_v, T, grad.data(), grad.data() + {m});",
+        f"    const double lp = {ns}::value_gradient(z_v, w_v, x_v, T, grad.data(), "
+        f"grad.data() + {m});",
+        "#ifdef SSMOBS_GRADIENT_SLOT_HPP",
+        "    ssmobs::gradient_slot* const slot = ssmobs::armed_slot();",
+        "    const bool bounds_given = "
+        + " && ".join(f"!std::isnan({w}_lower) && !std::isnan({w}_upper)" for w in omega)
+        + ";",
+        "    if (slot != nullptr && bounds_given && slot->size == n_grad) {",
+        "      double* const out = slot->grad;",
+        "      const double* const u = slot->theta;",
+        *[
+            f"      out[{i}] = ssmobs::bound_chain(grad[{i}], u[{i}], {w}_lower, {w}_upper);"
+            for i, w in enumerate(omega)
+        ],
+        f"      for (int i = 0; i < {p}; ++i) out[{m} + i] = ssmobs::free_chain(grad[{m} + i]);",
+        f"      for (int i = 0; i < {p}; ++i)",
+        "        for (int t = 0; t < T; ++t)",
+        f"          out[{m + p} + i * T + t] = ssmobs::free_chain(grad[{m} + (t + 1) * {p} + i]);",
+        "      ++slot->writes;",
+        "    }",
+        "#endif",
+        "    return lp;",
         "  } else {",
         "    double* const g =",
         "        stan::math::ChainableStack::instance_->memalloc_.alloc_array<double>(n_grad);",
@@ -317,11 +352,18 @@ def _block_span(bare: str, name: str) -> tuple[int, int, int] | None:
     return None
 
 
-def stan_call(model: StateSpaceModel) -> str:
+#: a bound the program does not give the generated function: its gradient then goes
+#: through Stan's tape (the bound may depend on another parameter)
+NO_BOUND = "not_a_number()"
+
+
+def stan_call(model: StateSpaceModel, bounds: Sequence[tuple[str, str]] | None = None) -> str:
     """The model block's statement: the program's z, parameters, x0 and x as it declares
     them (``z`` a ``matrix[T, d]`` when d > 1, ``x0`` a ``vector[p]`` and ``x`` a
-    ``matrix[T, p]`` when p > 1); no argument is a new vector."""
-    args = ", ".join(["z", *model.param_names, "x0", "x"])
+    ``matrix[T, p]`` when p > 1; no argument is a new vector), then each parameter's
+    (lower, upper) bound expressions (:func:`slot_bounds`; None: :data:`NO_BOUND`)."""
+    pairs = bounds if bounds is not None else [(NO_BOUND, NO_BOUND)] * model.n_params
+    args = ", ".join(["z", *model.param_names, "x0", "x", *(e for pair in pairs for e in pair)])
     return f"target += {function_name(model)}({args});"
 
 
@@ -330,7 +372,67 @@ def function_declaration(model: StateSpaceModel) -> str:
     z = "data vector z" if model.obs_dim == 1 else "data matrix z"
     omega = ", ".join(f"real omega{i}" for i in range(model.n_params))
     states = "real x0, vector x" if model.state_dim == 1 else "vector x0, matrix x"
-    return f"real {function_name(model)}({z}, {omega}, {states});"
+    bounds = ", ".join(
+        f"data real omega{i}_lower, data real omega{i}_upper" for i in range(model.n_params)
+    )
+    return f"real {function_name(model)}({z}, {omega}, {states}, {bounds});"
+
+
+def _split_top(text: str, sep: str) -> list[str]:
+    """``text`` split at ``sep`` outside parentheses and brackets."""
+    parts, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        depth += {"(": 1, "[": 1, ")": -1, "]": -1}.get(ch, 0)
+        if ch == sep and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return parts
+
+
+_DECLARATION = re.compile(r"^(real|vector|matrix)\s*(?:<(.*)>)?\s*(\[[^\]]*\])?\s*(\w+)$", re.S)
+
+
+def slot_bounds(model: StateSpaceModel, code: str) -> list[tuple[str, str]] | None:
+    """(lower, upper) Stan expressions of each parameter of Omega when the program's
+    parameters block is Omega (reals, in the model's order, bounded by data alone), then
+    x0, then x, and it has no transformed parameters: then the sampler can take the
+    gradient from the generated function (``ssmobs/gradient_slot.hpp``).  None otherwise,
+    e.g. a bound that depends on another parameter (``stan/sep_d1_p2.stan``)."""
+    bare = _blank_comments(code)
+    if re.search(r"\btransformed\s+parameters\s*\{", bare):
+        return None
+    span = _block_span(bare, "parameters")
+    if span is None:
+        return None
+    statements = [t.strip() for t in bare[span[1] : span[2]].split(";")]
+    if statements and statements[-1] == "":
+        statements.pop()
+    found = [_DECLARATION.match(t) for t in statements]
+    if any(f is None for f in found):
+        return None
+    decls = [(f.group(1), f.group(2), f.group(3), f.group(4)) for f in found if f is not None]
+    m, p = model.n_params, model.state_dim
+    names = [d[3] for d in decls]
+    if names != [*model.param_names, "x0", "x"]:
+        return None
+    x0_kind, x_kind = ("real", "vector") if p == 1 else ("vector", "matrix")
+    if (decls[m][0], decls[m + 1][0]) != (x0_kind, x_kind) or decls[m][1] or decls[m + 1][1]:
+        return None
+    out = []
+    for kind, constraint, dims, _ in decls[:m]:
+        if kind != "real" or dims:
+            return None
+        found_bounds = {"lower": "negative_infinity()", "upper": "positive_infinity()"}
+        for part in _split_top(constraint or "", ",") if constraint else []:
+            key, eq, expr = part.partition("=")
+            if not eq or key.strip() not in found_bounds:
+                return None  # offset, multiplier
+            if any(re.search(rf"\b{n}\b", expr) for n in names):
+                return None  # a bound that depends on a parameter
+            found_bounds[key.strip()] = " ".join(expr.split())
+        out.append((found_bounds["lower"], found_bounds["upper"]))
+    return out
 
 
 def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
@@ -344,7 +446,7 @@ def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
     block = (
         "model {\n"
         f"  // the log posterior and its gradient from the terms of models/{model.slug}.py\n"
-        f"  {stan_call(model)}\n"
+        f"  {stan_call(model, slot_bounds(model, code))}\n"
         "}"
     )
     code = code[:start] + block + code[close + 1 :]
@@ -444,7 +546,8 @@ def generated_stan_code(model: StateSpaceModel) -> str:
     lines += ["}", "parameters {"]
     lines += [f"  real<lower={n}_lo, upper={n}_hi> {n};" for n in model.param_names]
     lines += [f"  {x0} x0;  // initial state x_0", f"  {x} x;  // states x_1..x_T", "}"]
-    lines += ["model {", f"  {stan_call(model)}", "}", ""]
+    bounds = [(f"{n}_lo", f"{n}_hi") for n in model.param_names]
+    lines += ["model {", f"  {stan_call(model, bounds)}", "}", ""]
     return "\n".join(lines)
 
 

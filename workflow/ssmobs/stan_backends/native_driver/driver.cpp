@@ -8,7 +8,8 @@
 //   driver --data data.json --output draws.bin --seed S --chains C --warmup W
 //          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
 //          [--init-radius R] [--parent-pid P] [--discard]
-//   driver --log-density --data data.json --output values.txt --init point.json ...
+//   driver --log-density [--sampler-gradient] --data data.json --output values.txt
+//          --init point.json ...
 //
 // With --log-density no sampling is done: for every --init file (a point on the
 // constrained scale, Stan JSON) the driver writes the model block's log density without
@@ -16,6 +17,8 @@
 // or that the model rejects the point.  Text output, one line each:
 //   "param <name> <dim>..."  for every parameter, in the program's order, then per point
 //   "ok <log density> <gradient>..."  or  "rejected <Stan's message on one line>".
+// With --sampler-gradient the log density and gradient are instead those the NUTS sampler
+// uses (stan::model::gradient: Jacobian included, constants dropped).
 //
 // Output, little-endian whatever the host: "SSMOBSD1" (8 bytes), uint32 header length L,
 // L bytes of header text "byteorder=little\nchains=C\ndraws=N\ncolumns=name1,name2,...\n",
@@ -37,6 +40,7 @@
 #include <stan/callbacks/writer.hpp>
 #include <stan/io/empty_var_context.hpp>
 #include <stan/io/json/json_data.hpp>
+#include <stan/model/gradient.hpp>
 #include <stan/model/log_prob_grad.hpp>
 #include <stan/math/prim/core/init_threadpool_tbb.hpp>
 #include <stan/services/sample/hmc_nuts_diag_e_adapt.hpp>
@@ -133,7 +137,7 @@ struct Args {
   long parent_pid = 0;
   int chains = 4, warmup = 1000, samples = 1000, max_depth = 10, threads = 1;
   double delta = 0.8, init_radius = 2.0;
-  bool discard = false, log_density = false;
+  bool discard = false, log_density = false, sampler_gradient = false;
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -151,6 +155,10 @@ Args parse(int argc, char** argv) {
     }
     if (k == "--log-density") {
       a.log_density = true;
+      continue;
+    }
+    if (k == "--sampler-gradient") {
+      a.sampler_gradient = true;
       continue;
     }
     if (i + 1 >= argc) usage("missing value after " + k);
@@ -179,6 +187,10 @@ Args parse(int argc, char** argv) {
     usage("chains, samples, threads, max-depth must be >= 1 and warmup >= 0");
   if (a.log_density) {
     if (a.output.empty()) usage("--log-density needs --output");
+  } else if (a.sampler_gradient) {
+    usage("--sampler-gradient needs --log-density");
+  }
+  if (a.log_density) {
     a.chains = static_cast<int>(a.inits.size());
   } else if (!a.inits.empty() && static_cast<int>(a.inits.size()) != a.chains) {
     usage("give one --init per chain or none");
@@ -250,7 +262,7 @@ std::string one_line(std::string text) {
 // --log-density: the log density and gradient at every point (see the file's header).
 int write_log_densities(const stan::model::model_base& model,
                         const std::vector<std::unique_ptr<stan::io::var_context>>& points,
-                        const std::string& path) {
+                        const std::string& path, bool sampler_gradient) {
   std::ostringstream out;
   out.precision(17);
   std::vector<std::string> names;
@@ -268,8 +280,17 @@ int write_log_densities(const stan::model::model_base& model,
     std::ostringstream msgs;
     try {
       model.transform_inits(*point, params_i, params_r, &msgs);
-      const double lp = stan::model::log_prob_grad<false, false>(model, params_r, params_i,
-                                                                  gradient, &msgs);
+      double lp;
+      if (sampler_gradient) {
+        Eigen::VectorXd q = Eigen::Map<Eigen::VectorXd>(params_r.data(), params_r.size());
+        Eigen::VectorXd g;
+        stan::callbacks::logger quiet;
+        stan::model::gradient(model, q, lp, g, quiet);
+        gradient.assign(g.data(), g.data() + g.size());
+      } else {
+        lp = stan::model::log_prob_grad<false, false>(model, params_r, params_i, gradient,
+                                                      &msgs);
+      }
       out << "ok " << lp;
       for (double g : gradient) out << ' ' << g;
       out << '\n';
@@ -329,7 +350,7 @@ int main(int argc, char** argv) {
   }
 
   if (a.log_density) {
-    const int code = write_log_densities(*model, inits, a.output);
+    const int code = write_log_densities(*model, inits, a.output, a.sampler_gradient);
     if (code != kOk) std::cerr << "cannot write " << a.output << ": " << std::strerror(errno) << "\n";
     return code;
   }
