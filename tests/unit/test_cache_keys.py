@@ -472,14 +472,35 @@ def test_the_shadow_header_keys_the_programs_and_the_records_not_the_checks(tmp_
             k.check_model("same_T4", stan=True),
         )
 
-    before = some_keys()
-    (header,) = NATIVE_SHADOW_HEADERS
-    path = work / "ssmobs" / header
-    path.write_text(path.read_text() + "\n// an edit\n")
+    assert len(NATIVE_SHADOW_HEADERS) == 2  # gradient.hpp and the slot it arms
+    for header in NATIVE_SHADOW_HEADERS:
+        before = some_keys()
+        path = work / "ssmobs" / header
+        path.write_text(path.read_text() + "\n// an edit\n")
+        module_closure.cache_clear()
+        after = some_keys()
+        assert after[0] != before[0] and after[1] != before[1], header  # program, records
+        assert after[2:] == before[2:], header  # the trajectories and the Stan check
+
+
+def test_with_analytic_gradients_the_shadow_headers_key_the_stan_check(tmp_path):
+    """With ``stan.gradients: analytic`` the check also compares the sampler's gradient
+    (``--sampler-gradient``, through our gradient.hpp and its slot): an edit of either
+    header reruns it."""
+    work = tmp_path / "workflow"
+    shutil.copytree(
+        REPO / "workflow", work, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+    )
+    conf = smoke()
+    conf["stan"] = {**conf["stan"], "gradients": "analytic"}
     module_closure.cache_clear()
-    after = some_keys()
-    assert after[0] != before[0] and after[1] != before[1]  # the program and the records
-    assert after[2:] == before[2:]  # the trajectories and the Stan check
+    for header in NATIVE_SHADOW_HEADERS:
+        before = keys(conf, package_dir=work / "ssmobs").check_model("same_T4", stan=True)
+        path = work / "ssmobs" / header
+        path.write_text(path.read_text() + "\n// an edit\n")
+        module_closure.cache_clear()
+        after = keys(conf, package_dir=work / "ssmobs").check_model("same_T4", stan=True)
+        assert after != before, header
 
 
 def test_the_stage_code_names_every_shadow_header_the_builds_use():
@@ -506,11 +527,18 @@ def test_native_build_keys_follow_the_shadow_headers_bytes(tmp_path, monkeypatch
     shutil.copytree(native_build.SHADOW_INCLUDE_DIR, copy_dir)
     monkeypatch.setattr(native_build, "SHADOW_INCLUDE_DIR", copy_dir)
     assert current() == ours  # the same bytes elsewhere: the same key
-    header = copy_dir / "stan" / "model" / "gradient.hpp"
-    header.write_bytes(header.read_bytes() + b" ")
-    edited = current()
-    assert edited != ours and edited["shadow_headers"] != ours["shadow_headers"]
-    header.unlink()
+    for header in (
+        copy_dir / "stan" / "model" / "gradient.hpp",
+        copy_dir / "ssmobs" / "gradient_slot.hpp",
+    ):
+        original = header.read_bytes()
+        header.write_bytes(original + b" ")
+        edited = current()
+        assert edited != ours and edited["shadow_headers"] != ours["shadow_headers"], header
+        header.write_bytes(original)
+        assert current() == ours
+    for header in copy_dir.rglob("*.hpp"):
+        header.unlink()
     without = current()
     assert "shadow_headers" not in without  # the keys entries built before it had
     assert {k: v for k, v in ours.items() if k != "shadow_headers"} == without

@@ -36,6 +36,7 @@ from .code_hashing import syntax_digest
 from .config.blocks import joint_map_settings, stan_settings
 from .stage_code import (
     NATIVE_DRIVER,
+    NATIVE_SHADOW_HEADERS,
     PACKAGE_DIR,
     REPO_DIR,
     code_digest,
@@ -201,6 +202,11 @@ class CacheKeys:
             payload["driver"] = file_digest(self.package_dir / NATIVE_DRIVER)
             # with analytic gradients the check compares them with Stan's autodiff as well
             payload.update(self.gradients())
+            if self.gradients() or not (self.repo / "stan" / f"{sc['model']}.stan").is_file():
+                # ... and the sampler's gradient, through our headers (--sampler-gradient)
+                payload["shadow_headers"] = {
+                    h: file_digest(self.package_dir / h) for h in NATIVE_SHADOW_HEADERS
+                }
         return self._key("check_model_stan" if stan else "check_model", name, payload)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
