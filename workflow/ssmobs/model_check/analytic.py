@@ -85,6 +85,12 @@ def analytic_problems(
     return []
 
 
+def _largest_gap(got: np.ndarray, want: np.ndarray, tol: float) -> int | None:
+    """The component where ``got`` differs most from ``want``, if by more than ``tol``."""
+    j = int(np.argmax(np.abs(got - want)))
+    return j if abs(got[j] - want[j]) > tol else None
+
+
 def _compare(
     auto: LogDensities, ana: LogDensities, label: str, what: str, rtol: float
 ) -> str | None:
@@ -109,8 +115,8 @@ def _compare(
             )
         g_a, g_s = np.asarray(ga), np.asarray(gs)
         scale = max(1.0, float(np.max(np.abs(g_s))))
-        j = int(np.argmax(np.abs(g_a - g_s)))
-        if abs(g_a[j] - g_s[j]) > rtol * scale:
+        j = _largest_gap(g_a, g_s, rtol * scale)
+        if j is not None:
             return (
                 f"{label}: {what} in {names[j]} differs from Stan's autodiff at point {i}: "
                 f"{g_a[j]:.17g} vs {g_s[j]:.17g} (relative {abs(g_a[j] - g_s[j]) / scale:.2g} "
@@ -201,22 +207,24 @@ def generated_problems(
             jacobian[model.param_names[j]] = _log_slope_slope(float(th[j]), lo, hi)
         g_py = np.array([want[n] for n in names])
         g_st = np.asarray(g, dtype=float)
-        scale = max(1.0, float(np.max(np.abs(g_py))))
-        j = int(np.argmax(np.abs(g_st - g_py)))
-        if abs(g_st[j] - g_py[j]) > rtol * scale:
-            return [
-                f"{label}: gradient in {names[j]} differs from the Python model's at point "
-                f"{i}: {g_st[j]:.17g} vs {g_py[j]:.17g} (relative "
-                f"{abs(g_st[j] - g_py[j]) / scale:.2g} > {rtol:g})"
-            ]
-        # the sampler's gradient (no tape): the same plus d/du of the log Jacobian
         g_sa = np.asarray(g_sampler, dtype=float)
-        want_sa = g_st + np.array([jacobian[n] for n in names])
-        j = int(np.argmax(np.abs(g_sa - want_sa)))
-        if abs(g_sa[j] - want_sa[j]) > ANALYTIC_RTOL * scale:
-            return [
-                f"{label}: the sampler's gradient in {names[j]} differs from the log "
-                f"density's plus its Jacobian's at point {i}: {g_sa[j]:.17g} vs "
-                f"{want_sa[j]:.17g}"
-            ]
+        scale = max(1.0, float(np.max(np.abs(g_py))))
+        checks = (
+            (g_st, g_py, rtol, "gradient in {} differs from the Python model's"),
+            # the sampler's gradient (no tape): that plus d/du of the log Jacobian
+            (
+                g_sa,
+                g_st + np.array([jacobian[n] for n in names]),
+                ANALYTIC_RTOL,
+                "the sampler's gradient in {} differs from the log density's plus its Jacobian's",
+            ),
+        )
+        for got, expected, tol, what in checks:
+            k = _largest_gap(got, expected, tol * scale)
+            if k is not None:
+                return [
+                    f"{label}: {what.format(names[k])} at point {i}: {got[k]:.17g} vs "
+                    f"{expected[k]:.17g} (relative {abs(got[k] - expected[k]) / scale:.2g} "
+                    f"> {tol:g})"
+                ]
     return []
