@@ -24,7 +24,7 @@ import time
 import numpy as np
 from machine import machine_info, report
 from ssmobs.models import get_model
-from ssmobs.nuts.analytic_gradients import write_analytic_program
+from ssmobs.nuts.analytic_program import write_analytic_program
 from ssmobs.stan_backends import SamplerSettings, stan_file
 from ssmobs.stan_backends.native import NativeBackend
 from ssmobs.stan_backends.native_build import stan_version

@@ -29,7 +29,7 @@ import numpy as np
 from bench_analytic_gradients import CASES, PAPER, SETTINGS_LINE, load_line, trajectory_data
 from machine import machine_info, report
 from ssmobs.models import get_model
-from ssmobs.nuts.analytic_gradients import write_analytic_program
+from ssmobs.nuts.analytic_program import write_analytic_program
 from ssmobs.stan_backends import Draws, native_build, stan_file
 from ssmobs.stan_backends.native import NativeBackend
 from ssmobs.stan_backends.native_build import stan_version

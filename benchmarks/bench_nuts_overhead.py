@@ -41,7 +41,10 @@ ROOT = Path(__file__).resolve().parents[1]
 _BUILD = """
 import json, sys
 from ssmobs.models import get_model
-from ssmobs.nuts.analytic_gradients import write_analytic_program
+try:  # since the sixth session of 2026-12-05
+    from ssmobs.nuts.analytic_program import write_analytic_program
+except ImportError:
+    from ssmobs.nuts.analytic_gradients import write_analytic_program
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.native import NativeBackend
 from ssmobs.stan_backends import native_run

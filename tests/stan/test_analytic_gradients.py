@@ -13,7 +13,7 @@ from ssmobs.model_check.analytic import analytic_problems
 from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.check import check_model
 from ssmobs.models import MODELS, get_model
-from ssmobs.nuts.analytic_gradients import AnalyticProgram, write_analytic_program
+from ssmobs.nuts.analytic_program import AnalyticProgram, write_analytic_program
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
 from ssmobs.stan_backends.native import NativeBackend
@@ -215,7 +215,7 @@ def test_support_constraints_stop_a_one_file_model_in_one_line(monkeypatch):
     """sep_d1_p2's a^2 + b^2 < 1 is no parameter bound: without its hand-written program
     the check names the constraint and the remedy in one line, before any compile."""
     from ssmobs.models.sep_d1_p2 import SepD1P2
-    from ssmobs.nuts.analytic_gradients import generation_problem
+    from ssmobs.nuts.analytic_program import generation_problem
 
     class Unwritten(SepD1P2):
         slug = "test_unwritten"

@@ -15,10 +15,10 @@ from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.stan_source import stan_block
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import neg2_log_posterior
-from ssmobs.nuts.analytic_gradients import (
+from ssmobs.nuts.analytic_gradients import header_code
+from ssmobs.nuts.analytic_program import (
     analytic_stan_code,
     function_declaration,
-    header_code,
     slot_bounds,
     stan_call,
 )
@@ -112,7 +112,7 @@ def test_header_arithmetic_is_the_python_model(slug):
 
 def test_whole_program_declares_what_the_model_check_reads():
     from ssmobs.model_check.stan_source import declared_names, expected_parameters
-    from ssmobs.nuts.analytic_gradients import generated_stan_code
+    from ssmobs.nuts.analytic_program import generated_stan_code
 
     model = get_model("sep_d2_p1")
     code = generated_stan_code(model)
@@ -182,7 +182,7 @@ def test_slot_bounds_only_where_the_gradient_can_skip_the_tape(edit, want):
 
 
 def test_whole_program_refuses_support_constraints():
-    from ssmobs.nuts.analytic_gradients import generated_stan_code
+    from ssmobs.nuts.analytic_program import generated_stan_code
 
     with pytest.raises(ValueError, match="a\\^2 \\+ b\\^2 < 1|support constraints"):
         generated_stan_code(get_model("sep_d1_p2"))

@@ -139,7 +139,7 @@ ALLOWED = {
     "exact": {"models"},
     "model_check": {"models", "stan_backends", "nuts"},
     # config: a model without a Stan program is refused when no program can be generated
-    # for it (nuts.analytic_gradients.generation_problem)
+    # for it (nuts.analytic_program.generation_problem)
     "config": {"models", "stan_backends", "model_check", "nuts"},
     "design": {"models", "config"},
     "reports": {"models", "config", "joint_map", "nuts", "cache_keys", "stage_code"},

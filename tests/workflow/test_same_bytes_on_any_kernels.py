@@ -168,3 +168,33 @@ def test_the_compiled_lcd_kernel_gives_the_same_bytes_under_any_kernels_and_thre
     digests = {name: probe(env, LCD_KERNEL) for name, env in runs}
     assert len(digests) >= (6 if lcd_native.has_avx2() else 5)
     assert len(set(digests.values())) == 1, digests
+
+
+@pytest.mark.stan
+def test_the_tapeless_gradient_gives_the_same_draws_on_any_thread_count():
+    """The native driver runs chains in threads; the analytic program's gradient without
+    Stan's tape keeps per-thread state (ssmobs/gradient_slot.hpp): 4 chains on 1 or on 4
+    threads give the same draws.  (The driver links neither NumPy nor OpenBLAS, so the
+    kernels above do not reach it.)"""
+    import numpy as np
+    from ssmobs.models import get_model
+    from ssmobs.nuts.analytic_program import write_analytic_program
+    from ssmobs.stan_backends import stan_file
+    from ssmobs.stan_backends.base import SamplerSettings
+    from ssmobs.stan_backends.native import NativeBackend
+
+    model = get_model("sep_ranwalk")
+    rng = np.random.default_rng(11)
+    _, z = model.simulate(
+        np.array([0.8]), np.array([1.0]), rng.normal(size=(1, 30, 1)), rng.normal(size=(1, 30, 1))
+    )
+    data = model.stan_data(z[0], model.prior_bounds({"a": 0.8}))
+    program = write_analytic_program(model, stan_file("sep_ranwalk"))
+    draws = []
+    for workers in (1, 4):
+        settings = SamplerSettings(chains=4, iter_warmup=200, iter_sampling=200, workers=workers)
+        d = NativeBackend().sample(program.stan_file, data, 5, settings, user_header=program.header)
+        draws.append({k: np.asarray(v) for k, v in {**d.params, **d.sample_stats}.items()})
+    assert draws[0].keys() == draws[1].keys()
+    for k in draws[0]:
+        assert np.array_equal(draws[0][k], draws[1][k], equal_nan=True), k

@@ -81,7 +81,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             # gradients; ssmobs.stages.stan.stan_program): not for support constraints
             # nor for PyStan, which takes no external C++
             if not has_stan_file(sc["model"]):
-                from ..nuts.analytic_gradients import generation_problem
+                from ..nuts.analytic_program import generation_problem
 
                 problem = generation_problem(model, config["stan"]["backend"])
                 if problem is not None:

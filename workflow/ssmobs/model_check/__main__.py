@@ -28,7 +28,7 @@ def _stan_problem(slug: str, backend: str) -> str | None:
     from ..stan_backends import has_stan_file, stan_file
 
     if not has_stan_file(slug):  # the program generated from the model, if it can be
-        from ..nuts.analytic_gradients import generation_problem, write_analytic_program
+        from ..nuts.analytic_program import generation_problem, write_analytic_program
 
         problem = generation_problem(get_model(slug))
         if problem is not None:

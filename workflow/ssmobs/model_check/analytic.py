@@ -11,7 +11,7 @@ to ``rtol`` relative (1e-12: what is left is rounding in another summation order
 first disagreement is one line naming the point and the component.
 
 A model without a hand-written program runs a generated one
-(:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`), which has no autodiff twin:
+(:func:`ssmobs.nuts.analytic_program.generated_stan_code`), which has no autodiff twin:
 :func:`generated_problems` compares its gradient with the Python model's instead.
 """
 
@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..models import StateSpaceModel
-from ..nuts.analytic_gradients import AnalyticProgram, write_analytic_program
+from ..nuts.analytic_program import AnalyticProgram, write_analytic_program
 from .cases import CheckCase, sample_theta
 from .stan import stan_point
 
@@ -176,11 +176,11 @@ def generated_problems(
     rtol: float = GENERATED_RTOL,
 ) -> list[str]:
     """The generated whole program of a model without a hand-written one
-    (:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`), which has no autodiff twin: its
+    (:func:`ssmobs.nuts.analytic_program.generated_stan_code`), which has no autodiff twin: its
     gradient on Stan's unconstrained scale against the Python model's gradient of the same
     terms (NumPy's evaluation, not the C++), times the slopes of Stan's bound transforms,
     at random points inside the support (empty list: they agree)."""
-    from ..nuts.analytic_gradients import generated_bounds
+    from ..nuts.analytic_program import generated_bounds
     from ..stan_backends.native import NativeBackend
 
     rng = np.random.default_rng(seed)

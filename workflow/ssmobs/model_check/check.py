@@ -22,7 +22,7 @@ comparison of the two is only meaningful when both encode the same log posterior
    points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.model_check.analytic`).
 
 A model without ``stan/<slug>.stan`` is checked with the program generated from it
-(:func:`ssmobs.nuts.analytic_gradients.generated_stan_code`, the one NUTS runs): steps 2 and 3
+(:func:`ssmobs.nuts.analytic_program.generated_stan_code`, the one NUTS runs): steps 2 and 3
 on that program, and in step 4 its gradient against the Python model's (it has no
 autodiff twin); a model whose support constraints no generated program can express stops
 with one line.
@@ -133,7 +133,7 @@ def check_model(
     if stan_path is not None or has_stan_file(slug):
         path = Path(stan_path) if stan_path is not None else stan_file(slug)
     else:  # no hand-written program: the one the workflow generates and runs
-        from ..nuts.analytic_gradients import generation_problem, write_analytic_program
+        from ..nuts.analytic_program import generation_problem, write_analytic_program
 
         problem = generation_problem(model)
         report.record("stan program generated from the model", [problem] if problem else [])

@@ -53,14 +53,14 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
     program with its model block calling the log density and gradient generated from the
     model's terms (:mod:`ssmobs.nuts.analytic_gradients`), in the cache.  A model without
     ``stan/<model>.stan`` gets a whole generated program (always analytic: parameters and
-    bounds from the model, :func:`~ssmobs.nuts.analytic_gradients.generated_stan_code`);
+    bounds from the model, :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
     ValueError (one line) for a model whose support constraints it cannot express."""
     from ..stan_backends import has_stan_file, stan_file
 
     if gradients not in ("autodiff", "analytic"):
         raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
     from ..models import get_model
-    from ..nuts.analytic_gradients import write_analytic_program
+    from ..nuts.analytic_program import write_analytic_program
 
     if not has_stan_file(model):
         generated = write_analytic_program(get_model(model), None)
