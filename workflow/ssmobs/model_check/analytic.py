@@ -76,13 +76,18 @@ def analytic_problems(
             auto = native.log_density(stan_path, data, points, sampler=sampler)
             ana = native.log_density(program.stan_file, data, points, program.header, sampler)
         except (ValueError, RuntimeError) as err:
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-            return [f"{label}: {first}"]
+            return [f"{label}: {_first_line(err)}"]
         what = "the sampler's gradient" if sampler else "gradient"
         problem = _compare(auto, ana, f"{label}", what, rtol)
         if problem is not None:
             return [problem]
     return []
+
+
+def _first_line(err: Exception) -> str:
+    """The first line of a backend's error, or its type's name when it has no text."""
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__
 
 
 def _largest_gap(got: np.ndarray, want: np.ndarray, tol: float) -> int | None:
@@ -193,8 +198,7 @@ def generated_problems(
         dens = native.log_density(program.stan_file, data, points, program.header)
         sampler = native.log_density(program.stan_file, data, points, program.header, True)
     except (ValueError, RuntimeError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        return [f"{label}: {first}"]
+        return [f"{label}: {_first_line(err)}"]
     names = unconstrained_names(dens.param_names, dens.dims)
     box = generated_bounds(model, bounds.lower, bounds.upper)
     for i, (th, g, g_sampler) in enumerate(zip(theta, dens.gradients, sampler.gradients)):
