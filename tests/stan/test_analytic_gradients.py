@@ -21,9 +21,9 @@ from ssmobs.stan_backends.native import NativeBackend
 pytestmark = pytest.mark.stan
 
 #: `make test` compiles one generated program, model Same's (the other tests of this module
-#: use it too); each other model's is one more compile of about a minute on a cold cache, and
-#: analytic gradients are a setting a user opts into (stan.gradients), so they run with
-#: `slow` (`make test-slow`, issue 48)
+#: use it too); each other model's is one more compile of about a minute on a cold cache
+#: (`make run` compiles and checks all of them), so they run with `slow` (`make test-slow`,
+#: issue 48)
 FAST = ("same",)
 #: a compile of a program that only this test uses (a planted error, a generated whole
 #: program): `make test-slow` (issue 48)
@@ -39,10 +39,46 @@ def test_analytic_equals_autodiff(slug):
         assert analytic_problems(model, stan_file(slug), case, seed=i) == []
 
 
-def test_check_model_runs_the_analytic_check():
+def test_check_model_runs_the_analytic_check_on_the_one_program_nuts_runs(monkeypatch):
+    compiled = []
+    real = NativeBackend.compile
+
+    def recording(self, stan_path, *args, **kwargs):
+        compiled.append(str(stan_path))
+        return real(self, stan_path, *args, **kwargs)
+
+    monkeypatch.setattr(NativeBackend, "compile", recording)
     report = check_model("same", gradients="analytic")
     assert report.problems == []
     assert any(c.startswith("analytic gradients:") for c in report.checks)
+    program = write_analytic_program(get_model("same"), stan_file("same"))
+    assert compiled and set(compiled) == {str(program.stan_file)}
+
+
+def test_the_twin_is_the_hand_written_model_block():
+    """--autodiff-twin evaluates the program's hand-written statements: the hand-written
+    program's log density and gradients, bit for bit (Stan's constants kept, so its value
+    differs from the generated block's by one constant); without it the generated block."""
+    model = get_model("same")
+    rng = np.random.default_rng(5)
+    omega, T = np.array([0.8]), 6
+    _, z = model.simulate(
+        omega, np.array([2.0]), rng.normal(size=(1, T, 1)), rng.normal(size=(1, T, 1))
+    )
+    data = model.stan_data(z[0], model.prior_bounds(omega))
+    points = [{"a": a, "x0": 1.5, "x": list(np.linspace(-1, 2, T) * a)} for a in (0.3, 0.8)]
+    program = write_analytic_program(model, stan_file("same"))
+    native = NativeBackend()
+    for sampler in (False, True):
+        own = native.log_density(stan_file("same"), data, points, sampler=sampler)
+        twin = native.log_density(
+            program.stan_file, data, points, program.header, sampler, twin=True
+        )
+        generated = native.log_density(program.stan_file, data, points, program.header, sampler)
+        assert twin.values == own.values and twin.gradients == own.gradients
+        if not sampler:  # constants kept: the two blocks differ by one constant
+            gaps = [t - g for t, g in zip(twin.values, generated.values)]
+            assert gaps[0] != 0 and abs(gaps[0] - gaps[1]) < 1e-9
 
 
 @OWN_COMPILE

@@ -1,5 +1,6 @@
 """The generated analytic gradients (issue 49) without compiling: byte-stable text, a Stan
-program that keeps everything of the hand-written one but its model block, and a header
+program that keeps everything of the hand-written one and adds the generated model block
+beside its own (one compile for NUTS and the model check's twin), and a header
 whose value and gradient, read back as arithmetic, are the Python model's."""
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.stan_source import stan_block
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.log_posterior import neg2_log_posterior
-from ssmobs.nuts.analytic_gradients import header_code
+from ssmobs.nuts.analytic_gradients import header_code, switch_name
 from ssmobs.nuts.analytic_program import (
     analytic_stan_code,
     function_declaration,
@@ -48,14 +49,22 @@ def test_generation_is_byte_stable(slug):
 
 
 @pytest.mark.parametrize("slug", sorted(MODELS))
-def test_program_keeps_all_but_the_model_block(slug):
+def test_program_keeps_everything_and_adds_the_generated_model_block(slug):
     model = get_model(slug)
     code = program_code(stan_file(model.slug))
     new = analytic_stan_code(model, code)
     for block in ("data", "parameters"):
         assert stan_block(new, block) == stan_block(code, block)
-    assert stan_block(new, "model").strip() == stan_call(model, slot_bounds(model, code))
-    assert stan_block(new, "functions").strip().startswith(function_declaration(model))
+    # the switch picks the generated call; the hand-written statements follow unchanged
+    model_block = stan_block(new, "model")
+    head, _, rest = model_block.partition("} else {")
+    assert head.strip().startswith(f"if ({switch_name(model)}()) {{")
+    assert head.strip().endswith(stan_call(model, slot_bounds(model, code)))
+    own = rest.split("\n", 1)[1].rstrip().removesuffix("}")
+    assert own.split() == stan_block(code, "model").split()
+    functions = stan_block(new, "functions").strip()
+    assert functions.startswith(function_declaration(model))
+    assert f"int {switch_name(model)}();" in functions
     # the states go as the program declares them, no copy joins x0 and x
     declared = "real x0" if model.state_dim == 1 else "vector x0"
     assert declared in function_declaration(model) and "append_row" not in stan_call(model)

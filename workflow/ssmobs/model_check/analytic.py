@@ -1,9 +1,11 @@
 """The analytic gradients of the model check (:mod:`ssmobs.model_check.check`, step 4): the log
 density and gradient generated from the model's terms (:mod:`ssmobs.nuts.analytic_gradients`)
-against Stan's autodiff of the hand-written program, both evaluated by the native driver's
-``--log-density`` mode at the same random points inside the support: Stan's log density,
-then the sampler's (``--sampler-gradient``: Jacobian included, and for the generated
-program the gradient the function writes without Stan's tape, ``ssmobs/gradient_slot.hpp``).
+against Stan's autodiff of the hand-written statements.  The analytic program holds both
+model blocks (:func:`ssmobs.nuts.analytic_program.analytic_stan_code`), so one compile
+serves NUTS and this check: the native driver's ``--log-density`` mode evaluates it at the
+same random points inside the support as it is and with ``--autodiff-twin``; Stan's log
+density, then the sampler's (``--sampler-gradient``: Jacobian included, and for the
+generated function the gradient it writes without Stan's tape, ``ssmobs/gradient_slot.hpp``).
 
 The values may differ by one additive constant (the hand-written program keeps Stan's
 normalising constants there); the gradients on the unconstrained scale must be equal.  Both
@@ -23,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..models import StateSpaceModel
+from ..nuts.analytic_gradients import switch_name
 from ..nuts.analytic_program import AnalyticProgram, write_analytic_program
 from .cases import CheckCase, sample_theta
 from .stan import stan_point
@@ -61,7 +64,10 @@ def analytic_problems(
     program: AnalyticProgram | None = None,
 ) -> list[str]:
     """Analytic against autodiff for one case (empty list: they agree).  ``program``: the
-    generated program to check (default: generated from the model and ``stan_path``)."""
+    program to check (default: generated from the model and its Stan program
+    ``stan_path``).  The autodiff side is the program's own twin when it holds both model
+    blocks (one compile), else ``stan_path`` compiled apart (a whole generated program
+    against a hand-written one)."""
     from ..stan_backends.native import NativeBackend
 
     rng = np.random.default_rng(seed)
@@ -71,9 +77,15 @@ def analytic_problems(
     points = [stan_point(model, th, T) for th in theta]
     native = NativeBackend()
     label = f"analytic gradients of '{model.slug}' ({case.label()})"
+    has_twin = f"{switch_name(model)}()" in program.stan_file.read_text()
     for sampler in (False, True):
         try:
-            auto = native.log_density(stan_path, data, points, sampler=sampler)
+            if has_twin:
+                auto = native.log_density(
+                    program.stan_file, data, points, program.header, sampler, twin=True
+                )
+            else:
+                auto = native.log_density(stan_path, data, points, sampler=sampler)
             ana = native.log_density(program.stan_file, data, points, program.header, sampler)
         except (ValueError, RuntimeError) as err:
             return [f"{label}: {_first_line(err)}"]
@@ -108,7 +120,7 @@ def _compare(
     ):
         if (va is None) != (vs is None):
             which = "analytic" if va is None else "autodiff"
-            return f"{label}: the {which} program alone rejects point {i}"
+            return f"{label}: the {which} model block alone rejects point {i}"
         if va is None or vs is None or ga is None or gs is None:
             continue
         gap = va - vs

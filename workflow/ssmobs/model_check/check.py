@@ -18,8 +18,10 @@ comparison of the two is only meaningful when both encode the same log posterior
    every finite prior bound are accepted, points just outside and points violating a model
    constraint are rejected).
 4. With analytic gradients (config key ``stan.gradients``): the log density and gradient
-   generated from the model's terms against Stan's autodiff of the program, at random
-   points, to 1e-12 relative (value up to a constant; :mod:`ssmobs.model_check.analytic`).
+   generated from the model's terms against Stan's autodiff of the program's own
+   statements, at random points, to 1e-12 relative (value up to a constant;
+   :mod:`ssmobs.model_check.analytic`).  Steps 3 and 4 then run the program NUTS runs,
+   which holds both model blocks: one compile per model.
 
 A model without ``stan/<slug>.stan`` is checked with the program generated from it
 (:func:`ssmobs.nuts.analytic_program.generated_stan_code`, the one NUTS runs): steps 2 and 3
@@ -141,17 +143,24 @@ def check_model(
             return report
         generated = write_analytic_program(model, None)
         path = generated.stan_file
-    header = None if generated is None else generated.header
     report.record(
         f"stan source {path.name}: parameter names/order, data declarations",
         stan_source_problems(model, path),
     )
     if report.problems:
         return report
+    # what steps 3 and 4 compile: the program NUTS runs
+    analytic = None
+    if generated is None and gradients == "analytic":
+        from ..nuts.analytic_program import write_analytic_program
+
+        analytic = write_analytic_program(model, path)
+    program = generated or analytic
+    compiled, header = (path, None) if program is None else (program.stan_file, program.header)
     found = _first_problems(
         cases,
         lambda i, case: stan_problems(
-            model, path, case, T=T, seed=seed + i, backend=backend, user_header=header
+            model, compiled, case, T=T, seed=seed + i, backend=backend, user_header=header
         ),
     )
     report.record(
@@ -178,7 +187,8 @@ def check_model(
     from .analytic import ANALYTIC_RTOL, analytic_problems
 
     found = _first_problems(
-        cases, lambda i, case: analytic_problems(model, path, case, T=T, seed=seed + i)
+        cases,
+        lambda i, case: analytic_problems(model, path, case, T=T, seed=seed + i, program=analytic),
     )
     report.record(
         f"analytic gradients: log density up to a constant and gradient equal to Stan's "

@@ -34,12 +34,19 @@ from ..models.base import StateSpaceModel
 #: program, or the generated C++ of this module
 GRADIENT_MODES: tuple[str, ...] = ("autodiff", "analytic")
 #: format of the generated files; change it whenever the generated text changes meaning
-GENERATOR_VERSION = 4
+GENERATOR_VERSION = 5
 
 
 def function_name(model: StateSpaceModel) -> str:
     """The external Stan function of a model's analytic log density."""
     return f"ssmobs_{model.slug}_log_density"
+
+
+def switch_name(model: StateSpaceModel) -> str:
+    """The external Stan function that picks a model block in a program holding both
+    (:func:`ssmobs.nuts.analytic_program.analytic_stan_code`): 1 the generated function, 0
+    the hand-written statements under Stan's autodiff (the model check's twin only)."""
+    return f"ssmobs_{model.slug}_use_generated"
 
 
 # --------------------------------------------------------------------------- C++ printing
@@ -204,6 +211,17 @@ def header_code(model: StateSpaceModel) -> str:
     ]
     out += _stan_function(model)
     out += [
+        "//! 1: the model block calls the function above; 0 only in the native driver's",
+        "//! --log-density --autodiff-twin mode (the program's own statements under Stan's",
+        "//! autodiff, what the model check compares with).",
+        f"inline int {switch_name(model)}(std::ostream* pstream__) {{",
+        "#ifdef SSMOBS_GRADIENT_SLOT_HPP",
+        "  return ssmobs::autodiff_twin() ? 0 : 1;",
+        "#else",
+        "  return 1;",
+        "#endif",
+        "}",
+        "",
         f"#endif  // {guard}",
         "",
     ]

@@ -19,7 +19,7 @@ from pathlib import Path
 import sympy as sp
 
 from ..models.base import StateSpaceModel
-from .analytic_gradients import GENERATOR_VERSION, function_name, header_code
+from .analytic_gradients import GENERATOR_VERSION, function_name, header_code, switch_name
 
 
 # --------------------------------------------------------------------------- Stan program
@@ -130,21 +130,30 @@ def slot_bounds(model: StateSpaceModel, code: str) -> list[tuple[str, str]] | No
 
 
 def analytic_stan_code(model: StateSpaceModel, code: str) -> str:
-    """The Stan program ``code`` (with its includes expanded) with its ``model`` block
-    replaced by the call of the generated function, declared in ``functions``."""
+    """The Stan program ``code`` (with its includes expanded) holding both model blocks: the
+    call of the generated function, which NUTS runs, and ``code``'s own statements, which
+    only the model check runs (the native driver's ``--autodiff-twin``) to compare the two
+    from one compile; the switch and the function are declared in ``functions``."""
     bare = _blank_comments(code)
     span = _block_span(bare, "model")
     if span is None:
         raise ValueError(f"the Stan program of model '{model.slug}' has no model block")
-    start, _, close = span
+    start, opened, close = span
     block = (
         "model {\n"
-        f"  // the log posterior and its gradient from the terms of models/{model.slug}.py\n"
-        f"  {stan_call(model, slot_bounds(model, code))}\n"
+        f"  if ({switch_name(model)}()) {{\n"
+        f"    // the log posterior and its gradient from the terms of models/{model.slug}.py\n"
+        f"    {stan_call(model, slot_bounds(model, code))}\n"
+        "  } else {  // the hand-written statements under Stan's autodiff (the model check)"
+        f"{code[opened:close]}"
+        "  }\n"
         "}"
     )
     code = code[:start] + block + code[close + 1 :]
-    decl = f"  {function_declaration(model)}  // generated C++\n"
+    decl = (
+        f"  {function_declaration(model)}  // generated C++\n"
+        f"  int {switch_name(model)}();  // generated C++: 1 but in the model check's twin\n"
+    )
     bare = _blank_comments(code)
     functions = _block_span(bare, "functions")
     if functions is not None:

@@ -167,19 +167,25 @@ class NativeBackend:
         points: list[dict],
         user_header: str | os.PathLike | None = None,
         sampler: bool = False,
+        twin: bool = False,
     ) -> LogDensities:
         """The model block's log density (no Jacobian, constants kept) and its gradient on
         the unconstrained scale at each point (constrained values, Stan's names), by the
         program's executable in its ``--log-density`` mode: one compile serves sampling and
         the model check.  ``sampler``: instead the log density and gradient the NUTS sampler
         takes (Jacobian included, constants dropped; for a generated program the gradient
-        without the tape).  ValueError when the data are rejected; BackendError otherwise."""
+        without the tape).  ``twin``: a program holding both model blocks
+        (:func:`ssmobs.nuts.analytic_program.analytic_stan_code`) evaluates its hand-written
+        one under Stan's autodiff.  ValueError when the data are rejected; BackendError
+        otherwise."""
         marker = self.compile(stan_file, user_header)
         label = Path(marker["stan_file"]).name
         with self._run_dir(data) as tmp:
             cmd = [marker["exe_file"], "--log-density", "--data", str(tmp / "data.json")]
             if sampler:
                 cmd.append("--sampler-gradient")
+            if twin:
+                cmd.append("--autodiff-twin")
             for i, point in enumerate(points):
                 write_json_file(tmp / f"point{i}.json", point)
                 cmd += ["--init", str(tmp / f"point{i}.json")]

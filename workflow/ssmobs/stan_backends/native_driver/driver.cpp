@@ -8,8 +8,8 @@
 //   driver --data data.json --output draws.bin --seed S --chains C --warmup W
 //          --samples N --delta D --max-depth M [--init init.json ...] [--threads K]
 //          [--init-radius R] [--parent-pid P] [--discard]
-//   driver --log-density [--sampler-gradient] --data data.json --output values.txt
-//          --init point.json ...
+//   driver --log-density [--sampler-gradient] [--autodiff-twin] --data data.json
+//          --output values.txt --init point.json ...
 //
 // With --log-density no sampling is done: for every --init file (a point on the
 // constrained scale, Stan JSON) the driver writes the model block's log density without
@@ -18,7 +18,10 @@
 //   "param <name> <dim>..."  for every parameter, in the program's order, then per point
 //   "ok <log density> <gradient>..."  or  "rejected <Stan's message on one line>".
 // With --sampler-gradient the log density and gradient are instead those the NUTS sampler
-// uses (stan::model::gradient: Jacobian included, constants dropped).
+// uses (stan::model::gradient: Jacobian included, constants dropped).  With --autodiff-twin
+// a program holding both model blocks (ssmobs.nuts.analytic_program) evaluates its
+// hand-written one under Stan's autodiff instead of the generated function
+// (ssmobs/gradient_slot.hpp); sampling always runs the generated function.
 //
 // Output, little-endian whatever the host: "SSMOBSD1" (8 bytes), uint32 header length L,
 // L bytes of header text "byteorder=little\nchains=C\ndraws=N\ncolumns=name1,name2,...\n",
@@ -41,6 +44,7 @@
 #include <stan/io/empty_var_context.hpp>
 #include <stan/io/json/json_data.hpp>
 #include <stan/model/gradient.hpp>
+#include <ssmobs/gradient_slot.hpp>
 #include <stan/model/log_prob_grad.hpp>
 #include <stan/math/prim/core/init_threadpool_tbb.hpp>
 #include <stan/services/sample/hmc_nuts_diag_e_adapt.hpp>
@@ -137,7 +141,7 @@ struct Args {
   long parent_pid = 0;
   int chains = 4, warmup = 1000, samples = 1000, max_depth = 10, threads = 1;
   double delta = 0.8, init_radius = 2.0;
-  bool discard = false, log_density = false, sampler_gradient = false;
+  bool discard = false, log_density = false, sampler_gradient = false, twin = false;
 };
 
 [[noreturn]] void usage(const std::string& why) {
@@ -159,6 +163,10 @@ Args parse(int argc, char** argv) {
     }
     if (k == "--sampler-gradient") {
       a.sampler_gradient = true;
+      continue;
+    }
+    if (k == "--autodiff-twin") {
+      a.twin = true;
       continue;
     }
     if (i + 1 >= argc) usage("missing value after " + k);
@@ -187,8 +195,9 @@ Args parse(int argc, char** argv) {
     usage("chains, samples, threads, max-depth must be >= 1 and warmup >= 0");
   if (a.log_density) {
     if (a.output.empty()) usage("--log-density needs --output");
-  } else if (a.sampler_gradient) {
-    usage("--sampler-gradient needs --log-density");
+  } else if (a.sampler_gradient || a.twin) {
+    usage(a.twin ? "--autodiff-twin needs --log-density"
+                 : "--sampler-gradient needs --log-density");
   }
   if (a.log_density) {
     a.chains = static_cast<int>(a.inits.size());
@@ -349,6 +358,7 @@ int main(int argc, char** argv) {
     return kDataRejected;
   }
 
+  ssmobs::autodiff_twin() = a.twin;
   if (a.log_density) {
     const int code = write_log_densities(*model, inits, a.output, a.sampler_gradient);
     if (code != kOk) std::cerr << "cannot write " << a.output << ": " << std::strerror(errno) << "\n";

@@ -38,6 +38,14 @@ inline bool& program_writes_slots() {
   return writes;
 }
 
+//! Whether a program that holds both model blocks (ssmobs.nuts.analytic_program) runs the
+//! hand-written one under Stan's autodiff instead of the generated function: set only by
+//! the driver's --log-density --autodiff-twin (the model check's comparison of the two).
+inline bool& autodiff_twin() {
+  static bool twin = false;
+  return twin;
+}
+
 //! d/du of the log density for Stan's transform u -> theta of a parameter bounded by
 //! (lower, upper) (infinite: no bound), from g = d/d theta, as Stan's reverse pass
 //! computes it with the log density's adjoint 1 (stan/math/rev/fun/lub_constrain.hpp,
