@@ -8,22 +8,32 @@ on first use, cached afterwards); PyStan's ``log_prob`` is the oracle it is comp
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 from ssmobs.model_check.cases import CheckCase, sample_theta
 from ssmobs.model_check.check import check_model
 from ssmobs.model_check.stan import stan_density, stan_point, stan_problems
 from ssmobs.models import MODELS, get_model
-from ssmobs.stan_backends import stan_file
+from ssmobs.stan_backends import has_stan_file, stan_file
 
 pytestmark = pytest.mark.stan
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("slug", sorted(MODELS))
 def test_every_model_agrees_with_its_stan_program(slug):
-    report = check_model(slug)
+    """The check the default profile runs, on the program `make run` compiled: with analytic
+    gradients its hand-written statements are compared too (the program's autodiff twin)."""
+    gradients = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["stan"]["gradients"]
+    report = check_model(slug, gradients=gradients)
     assert report.problems == []
     assert any("stan compiled" in c for c in report.checks)
+    if gradients == "analytic" and has_stan_file(slug):
+        assert any(c.startswith("analytic gradients:") for c in report.checks)
 
 
 #: a test that compiles a broken copy of a program (about 30-50 CPU-s each, cached by content

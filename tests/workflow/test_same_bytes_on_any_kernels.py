@@ -33,8 +33,9 @@ CONFIG = {
     "observability_studies": [],
     "observability_maps": [],
     "k_selection": [],
-    "stan": {"chains": 2, "iter_warmup": 150, "iter_sampling": 150, "batch_size": 3,
-             "keep_draws": [0]},
+    # the default profile's NUTS path, and the program `make run` compiled for it
+    "stan": {"gradients": "analytic", "chains": 2, "iter_warmup": 150, "iter_sampling": 150,
+             "batch_size": 3, "keep_draws": [0]},
     "convergence": {"ess_bulk_min": 50, "ess_tail_min": 50},
 }  # fmt: skip
 
