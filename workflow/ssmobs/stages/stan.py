@@ -50,8 +50,10 @@ def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
 def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
     """The Stan program NUTS runs for ``model`` and its C++ header (config key
     ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
-    program with its model block calling the log density and gradient generated from the
-    model's terms (:mod:`ssmobs.nuts.analytic_gradients`), in the cache.  A model without
+    program whose model block calls the log density and gradient generated from the model's
+    terms (:mod:`ssmobs.nuts.analytic_gradients`), its own statements kept beside for the
+    model check (:func:`~ssmobs.nuts.analytic_program.analytic_stan_code`), in the cache.  A
+    model without
     ``stan/<model>.stan`` gets a whole generated program (always analytic: parameters and
     bounds from the model, :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
     ValueError (one line) for a model whose support constraints it cannot express."""
