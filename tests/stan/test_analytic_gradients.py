@@ -39,6 +39,17 @@ def test_analytic_equals_autodiff(slug):
         assert analytic_problems(model, stan_file(slug), case, seed=i) == []
 
 
+def _same_data(a: float, x0: float, T: int, seed: int) -> dict:
+    """Stan data of model Same: one trajectory simulated from (a, x0), its prior bounds."""
+    model = get_model("same")
+    rng = np.random.default_rng(seed)
+    omega = np.array([a])
+    _, z = model.simulate(
+        omega, np.array([x0]), rng.normal(size=(1, T, 1)), rng.normal(size=(1, T, 1))
+    )
+    return model.stan_data(z[0], model.prior_bounds(omega))
+
+
 def test_check_model_runs_the_analytic_check_on_the_one_program_nuts_runs(monkeypatch):
     compiled = []
     real = NativeBackend.compile
@@ -60,12 +71,8 @@ def test_the_twin_is_the_hand_written_model_block():
     program's log density and gradients, bit for bit (Stan's constants kept, so its value
     differs from the generated block's by one constant); without it the generated block."""
     model = get_model("same")
-    rng = np.random.default_rng(5)
-    omega, T = np.array([0.8]), 6
-    _, z = model.simulate(
-        omega, np.array([2.0]), rng.normal(size=(1, T, 1)), rng.normal(size=(1, T, 1))
-    )
-    data = model.stan_data(z[0], model.prior_bounds(omega))
+    T = 6
+    data = _same_data(a=0.8, x0=2.0, T=T, seed=5)
     points = [{"a": a, "x0": 1.5, "x": list(np.linspace(-1, 2, T) * a)} for a in (0.3, 0.8)]
     program = write_analytic_program(model, stan_file("same"))
     native = NativeBackend()
@@ -128,12 +135,7 @@ def test_draws_equal_in_distribution_over_seeds():
     of a and the mean and sd of x_5, each path over 6 seeds; the two paths' averages differ
     by less than 4.5 standard errors of their difference (the run-to-run spread)."""
     model = get_model("same")
-    rng = np.random.default_rng(7)
-    omega, T = np.array([0.7]), 20
-    x, z = model.simulate(
-        omega, np.array([8.0]), rng.normal(size=(1, T, 1)), rng.normal(size=(1, T, 1))
-    )
-    data = model.stan_data(z[0], model.prior_bounds(omega))
+    data = _same_data(a=0.7, x0=8.0, T=20, seed=7)
     program = write_analytic_program(model, stan_file("same"))
     settings = SamplerSettings(chains=2, iter_warmup=300, iter_sampling=500)
     native = NativeBackend()

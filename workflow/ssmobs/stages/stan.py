@@ -53,9 +53,9 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
     program whose model block calls the log density and gradient generated from the model's
     terms (:mod:`ssmobs.nuts.analytic_gradients`), its own statements kept beside for the
     model check (:func:`~ssmobs.nuts.analytic_program.analytic_stan_code`), in the cache.  A
-    model without
-    ``stan/<model>.stan`` gets a whole generated program (always analytic: parameters and
-    bounds from the model, :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
+    model without ``stan/<model>.stan`` gets a whole generated program (always analytic:
+    parameters and bounds from the model,
+    :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
     ValueError (one line) for a model whose support constraints it cannot express."""
     from ..stan_backends import has_stan_file, stan_file
 
