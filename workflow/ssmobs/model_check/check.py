@@ -131,12 +131,12 @@ def check_model(
     )
     if report.problems or not stan:
         return report
+    from ..nuts.analytic_program import generation_problem, write_analytic_program
+
     generated = None
     if stan_path is not None or has_stan_file(slug):
         path = Path(stan_path) if stan_path is not None else stan_file(slug)
     else:  # no hand-written program: the one the workflow generates and runs
-        from ..nuts.analytic_program import generation_problem, write_analytic_program
-
         problem = generation_problem(model)
         report.record("stan program generated from the model", [problem] if problem else [])
         if report.problems:
@@ -152,8 +152,6 @@ def check_model(
     # what steps 3 and 4 compile: the program NUTS runs
     analytic = None
     if generated is None and gradients == "analytic":
-        from ..nuts.analytic_program import write_analytic_program
-
         analytic = write_analytic_program(model, path)
     program = generated or analytic
     compiled, header = (path, None) if program is None else (program.stan_file, program.header)
