@@ -166,14 +166,13 @@ def umask():
 @pytest.mark.parametrize("mask", [0o022, 0o027, 0o002])
 def test_atomic_outputs_get_the_mode_the_umask_implies(tmp_path, umask, mask):
     import pandas as pd
-    import xarray as xr
     from ssmobs.reports.figures import _plt, save_figure
 
     umask(mask)
     io.write_json(tmp_path / "a.json", {"x": 1})
     io.write_text(tmp_path / "b.md", "table\n")
     io.write_parquet(tmp_path / "c.parquet", pd.DataFrame({"x": [1.0]}))
-    io.write_netcdf(tmp_path / "d.nc", xr.Dataset({"x": ("k", np.arange(3.0))}))
+    io.write_netcdf(tmp_path / "d.nc", {"x": (("k",), np.arange(3.0))}, {})
     plt = _plt()
     fig, _ = plt.subplots()
     save_figure(fig, [tmp_path / "e.png", tmp_path / "e.pdf"])

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import math
 
-from scipy import stats
-
 
 def clopper_pearson(successes: float, trials: float, level: float = 0.95) -> tuple[float, float]:
     """Exact two-sided interval of a binomial proportion x / K at ``level``.
@@ -33,6 +31,8 @@ def clopper_pearson(successes: float, trials: float, level: float = 0.95) -> tup
             f"need whole counts 0 <= successes <= trials, got {successes!r} of {trials!r}"
         )
     alpha = 1.0 - level
+    from scipy import stats  # here: the Snakefile imports this module, and stats costs 0.5 s
+
     lower = 0.0 if x == 0 else float(stats.beta.ppf(alpha / 2, x, n - x + 1))
     upper = 1.0 if x == n else float(stats.beta.ppf(1 - alpha / 2, x + 1, n - x))
     return lower, upper

@@ -15,7 +15,8 @@ import os
 import re
 import tempfile
 import threading
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,7 +24,6 @@ import numpy as np
 
 if TYPE_CHECKING:
     import pandas
-    import xarray
 
     from .models.base import StateSpaceModel
 
@@ -317,26 +317,78 @@ def read_checked_json(path: str | os.PathLike, required: Sequence[str] = ()) -> 
     return obj
 
 
-def write_netcdf(path: str | os.PathLike, dataset: xarray.Dataset) -> None:
-    """Write an xarray Dataset atomically with the pinned h5netcdf engine."""
-    with atomic_path(path, suffix=".nc") as tmp:
-        dataset.to_netcdf(tmp, engine="h5netcdf")
+@dataclass(frozen=True)
+class NetcdfData:
+    """A NetCDF file's variables (name -> values), their dimension names and its global
+    attributes, read without xarray (whose import costs each job about half a second)."""
+
+    variables: dict[str, np.ndarray]
+    dims: dict[str, tuple[str, ...]]
+    attrs: dict[str, Any]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.variables[name]
 
 
-def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> xarray.Dataset:
+def write_netcdf(
+    path: str | os.PathLike,
+    variables: Mapping[str, tuple[tuple[str, ...], np.ndarray]],
+    attrs: Mapping[str, Any],
+) -> None:
+    """Write ``variables`` (name -> (dimension names, values)) and the global ``attrs`` as
+    NetCDF-4 with h5netcdf, atomically.  A variable named like one of its dimensions is that
+    dimension's coordinate; text becomes variable-length strings (as xarray writes them)."""
+    import h5netcdf
+    import h5py
+
+    arrays = {name: (tuple(dims), np.asarray(values)) for name, (dims, values) in variables.items()}
+    sizes: dict[str, int] = {}
+    for name, (dims, values) in arrays.items():
+        if len(dims) != values.ndim:
+            raise ValueError(
+                f"variable {name}: {len(dims)} dimension names for {values.ndim}-d values"
+            )
+        for dim, n in zip(dims, values.shape, strict=True):
+            if sizes.setdefault(dim, n) != n:
+                raise ValueError(f"dimension {dim}: length {n} in {name}, {sizes[dim]} before")
+    coordinates = [name for name, (dims, _) in arrays.items() if dims == (name,)]
+    with atomic_path(path, suffix=".nc") as tmp, h5netcdf.File(tmp, "w") as f:
+        f.dimensions = sizes
+        for name in [*coordinates, *(n for n in arrays if n not in coordinates)]:
+            dims, values = arrays[name]
+            if values.dtype.kind == "U":
+                f.create_variable(name, dims, dtype=h5py.string_dtype(), data=values.astype(object))
+            else:
+                f.create_variable(name, dims, data=values)
+        f.attrs.update(attrs)
+
+
+def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> NetcdfData:
     """Load a NetCDF file fully into memory; CorruptFileError naming the file if unreadable."""
-    import xarray as xr
+    import h5netcdf
 
     path = Path(path)
     try:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            ds = ds.load()
+        with h5netcdf.File(path, "r") as f:
+            variables = {name: _loaded(var[...]) for name, var in f.variables.items()}
+            dims = {name: tuple(var.dimensions) for name, var in f.variables.items()}
+            attrs = dict(f.attrs)
     except Exception as err:  # h5py raises several types for damaged files
         raise CorruptFileError(f"{path}: not a readable NetCDF file ({err})") from err
-    missing = [v for v in required_vars if v not in ds.variables]
+    missing = [v for v in required_vars if v not in variables]
     if missing:
         raise CorruptFileError(f"{path}: missing variables {missing}")
-    return ds
+    return NetcdfData(variables=variables, dims=dims, attrs=attrs)
+
+
+def _loaded(values: Any) -> np.ndarray:
+    """Variable-length strings as a NumPy text array, other values as read."""
+    values = np.asarray(values)
+    if values.dtype.kind in "OS":
+        return np.asarray(
+            [v.decode() if isinstance(v, bytes) else v for v in values.ravel()], dtype=str
+        ).reshape(values.shape)
+    return values
 
 
 def write_parquet(path: str | os.PathLike, frame: pandas.DataFrame) -> None:
@@ -370,34 +422,34 @@ def array_checksum(*arrays: np.ndarray) -> str:
 
 
 # ---------------------------------------------------------------- joint MAP (Sec. III.B)
-def joint_map_dataset(result: Any, model: StateSpaceModel, T: int, attrs: dict) -> xarray.Dataset:
+def write_joint_map(
+    path: str | os.PathLike, result: Any, model: StateSpaceModel, T: int, attrs: dict
+) -> None:
     """Full Theta_hat and local variances of every k of a
-    :class:`~ssmobs.joint_map.driver.JointMapResult` as a labelled dataset (dims ``k``,
-    ``component`` = ``model.theta_names(T)``), for :func:`write_netcdf`."""
-    import xarray as xr
-
-    names = model.theta_names(T)
-    return xr.Dataset(
-        {
-            "theta_hat": (("k", "component"), result.theta_hat),
-            "local_variance": (("k", "component"), result.local_variance),
-            "status": (("k",), np.asarray(result.status, dtype=str)),
-        },
-        coords={"k": np.arange(result.theta_hat.shape[0]), "component": names},
-        attrs=attrs,
-    )
+    :class:`~ssmobs.joint_map.driver.JointMapResult`, labelled (dimensions ``k`` and
+    ``component`` = ``model.theta_names(T)``)."""
+    variables = {
+        "k": (("k",), np.arange(result.theta_hat.shape[0])),
+        "component": (("component",), np.asarray(model.theta_names(T), dtype=str)),
+        "theta_hat": (("k", "component"), result.theta_hat),
+        "local_variance": (("k", "component"), result.local_variance),
+        "status": (("k",), np.asarray(result.status, dtype=str)),
+    }
+    write_netcdf(path, variables, attrs)
 
 
 # ---------------------------------------------------------------- design disturbances
 def write_disturbances(path: str | os.PathLike, result: Any) -> None:
     """Store a :class:`~ssmobs.design.disturbances.DesignResult` as the paper's (q x K) matrix."""
-    import xarray as xr
-
     matrix = np.asarray(result.matrix, dtype=float)
-    ds = xr.Dataset(
-        {"disturbance": (("component", "k"), matrix)},
-        coords={"component": np.arange(matrix.shape[0]), "k": np.arange(matrix.shape[1])},
-        attrs={
+    write_netcdf(
+        path,
+        {
+            "component": (("component",), np.arange(matrix.shape[0])),
+            "k": (("k",), np.arange(matrix.shape[1])),
+            "disturbance": (("component", "k"), matrix),
+        },
+        {
             "method": result.method,
             "q": int(result.q),
             "K": int(result.K),
@@ -412,7 +464,6 @@ def write_disturbances(path: str | os.PathLike, result: Any) -> None:
             "(Hanebeck & Czado, Sec. III.A)",
         },
     )
-    write_netcdf(path, ds)
 
 
 def read_disturbances(
@@ -420,7 +471,7 @@ def read_disturbances(
 ) -> tuple[np.ndarray, dict]:
     """Load a disturbance matrix (q x K) and its attributes; CorruptFileError if damaged."""
     ds = read_netcdf(path, required_vars=["disturbance"])
-    matrix = np.asarray(ds["disturbance"].values, dtype=float)
+    matrix = np.asarray(ds["disturbance"], dtype=float)
     attrs = dict(ds.attrs)
     if attrs.get("checksum") != array_checksum(matrix):
         raise CorruptFileError(f"{path}: checksum mismatch (file damaged or edited)")

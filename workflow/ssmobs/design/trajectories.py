@@ -69,28 +69,27 @@ def make_trajectories(
 
 
 def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:
-    import xarray as xr
-
     K, T, p = traj.x.shape
     d = traj.z.shape[2]
-    ds = xr.Dataset(
-        {"x": (("k", "t", "state"), traj.x), "z": (("k", "t", "obs"), traj.z)},
-        coords={
-            "k": np.arange(K),
-            "t": np.arange(1, T + 1),
-            "state": np.arange(p),
-            "obs": np.arange(d),
+    io.write_netcdf(
+        path,
+        {
+            "k": (("k",), np.arange(K)),
+            "t": (("t",), np.arange(1, T + 1)),
+            "state": (("state",), np.arange(p)),
+            "obs": (("obs",), np.arange(d)),
+            "x": (("k", "t", "state"), traj.x),
+            "z": (("k", "t", "obs"), traj.z),
         },
-        attrs={**traj.attrs, "checksum": io.array_checksum(traj.x, traj.z)},
+        {**traj.attrs, "checksum": io.array_checksum(traj.x, traj.z)},
     )
-    io.write_netcdf(path, ds)
 
 
 def read_trajectories(path: str | os.PathLike) -> Trajectories:
     """Load and validate a trajectories file (CorruptFileError naming the file if damaged)."""
     ds = io.read_netcdf(path, required_vars=["x", "z"])
-    x = np.asarray(ds["x"].values, dtype=float)
-    z = np.asarray(ds["z"].values, dtype=float)
+    x = np.asarray(ds["x"], dtype=float)
+    z = np.asarray(ds["z"], dtype=float)
     attrs = dict(ds.attrs)
     if attrs.get("checksum") != io.array_checksum(x, z):
         raise io.CorruptFileError(f"{path}: checksum mismatch (file damaged or edited)")

@@ -115,8 +115,6 @@ def run_joint_map(
         )
     io.write_parquet(table, frame)
     if theta is not None:
-        io.write_netcdf(
-            theta, io.joint_map_dataset(result, model, traj.T, {"scenario": scenario.name})
-        )
+        io.write_joint_map(theta, result, model, traj.T, {"scenario": scenario.name})
     io.write_json(summary, info)
     return info

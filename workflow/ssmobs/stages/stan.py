@@ -189,8 +189,8 @@ def _theta_hat(path: PathLike, K: int) -> Any:
     import numpy as np
 
     ds = io.read_netcdf(path, required_vars=["theta_hat"])
-    theta = np.asarray(ds["theta_hat"].values, dtype=float)
-    if theta.shape[0] != K or ds["k"].values.tolist() != list(range(K)):
+    theta = np.asarray(ds["theta_hat"], dtype=float)
+    if theta.shape[0] != K or ds["k"].tolist() != list(range(K)):
         raise io.CorruptFileError(f"{path}: joint MAP of {theta.shape[0]} trajectories, K = {K}")
     return theta
 
