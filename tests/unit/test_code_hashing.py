@@ -117,3 +117,14 @@ def test_a_module_edited_in_the_same_process_is_read_again(tmp_path):
         "glue.py",
         "late.py",
     )
+
+
+def test_a_syntax_digest_edited_in_the_same_process_is_computed_again(tmp_path):
+    """The digests are kept per process by content: an edit between two calls is seen, and
+    going back to the first text gives the first digest."""
+    path = tmp_path / "m.py"
+    digests = []
+    for body in ("x = 1\n", "x = 2\n", "x = 1\n"):
+        path.write_text(body)
+        digests.append(syntax_digest(path))
+    assert digests[0] == digests[2] != digests[1]

@@ -159,3 +159,12 @@ def test_the_records_are_keyed_by_every_sampler_setting_but_the_workers():
     schedules chains and changes no draw."""
     assert set(SAMPLER_FIELDS) == set(_fields(SamplerSettings)) - {"workers"}
     assert set(SAMPLER_FIELDS) <= set(SCHEMA["stan"]["properties"])
+
+
+def test_the_schema_reads_the_same_with_and_without_libyaml():
+    """load_schema parses with libyaml where PyYAML has it; its tree is the pure-Python
+    parser's."""
+    import yaml
+    from ssmobs.config.schema import SCHEMA_PATH, load_schema
+
+    assert load_schema() == yaml.safe_load(SCHEMA_PATH.read_text())

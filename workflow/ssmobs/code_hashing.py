@@ -30,16 +30,25 @@ from pathlib import Path
 _DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
 
 
+#: source bytes' SHA-256 -> :func:`syntax_digest`: each module parsed once per process,
+#: however many stages' keys hash it (keyed by content, so an edited file is read again)
+_SYNTAX_DIGESTS: dict[bytes, str] = {}
+
+
 def syntax_digest(path: str | Path) -> str:
     """SHA-256 (16 hex digits) of a Python module's syntax tree (``ast.dump``, decoded as
     Python decodes the file) without its docstrings: what the module computes, so an edit
     of a comment, a docstring or the layout keeps it; another Python version may change
     it (which recomputes)."""
-    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
-    for node in ast.walk(tree):
-        if isinstance(node, _DOCUMENTED) and ast.get_docstring(node, clean=False) is not None:
-            node.body = node.body[1:] or [ast.Pass()]
-    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+    source = Path(path).read_bytes()
+    key = hashlib.sha256(source).digest()
+    if key not in _SYNTAX_DIGESTS:
+        tree = ast.parse(source, filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, _DOCUMENTED) and ast.get_docstring(node, clean=False) is not None:
+                node.body = node.body[1:] or [ast.Pass()]
+        _SYNTAX_DIGESTS[key] = hashlib.sha256(ast.dump(tree).encode()).hexdigest()[:16]
+    return _SYNTAX_DIGESTS[key]
 
 
 def _module_file(name: str, package_dir: Path) -> Path | None:

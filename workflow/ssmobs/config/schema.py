@@ -32,8 +32,9 @@ class ConfigError(ValueError):
 
 
 def load_schema() -> dict:
-    """The config schema (:data:`SCHEMA_PATH`), read afresh."""
-    return yaml.safe_load(SCHEMA_PATH.read_text())
+    """The config schema (:data:`SCHEMA_PATH`), read afresh (by libyaml where PyYAML has
+    it: the same tree, parsed in a tenth of the time)."""
+    return yaml.load(SCHEMA_PATH.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
 @functools.lru_cache(maxsize=1)
