@@ -21,18 +21,16 @@ of x_0), an alternative shown beside the paper's start.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
+import pandas as pd
 
 from ..estimator_moments import moment_entries, stat_key
 from ..models.base import PriorBounds, StateSpaceModel
 from .barrier import LogBarrier, initial_mu_values, minimize_barrier
 from .checks import STATUSES, check_maxima
 from .settings import JointMapSettings
-
-if TYPE_CHECKING:  # pandas is imported where a table is made (0.3 s a job)
-    import pandas as pd
 
 
 @dataclass
@@ -91,8 +89,6 @@ class JointMapResult:
     def to_frame(self, model: StateSpaceModel, T: int) -> pd.DataFrame:
         """One row per k: k, status, reason, neg2_log_post, eig_ratio, grad_max, iterations,
         and for every component c of Omega and x_0 its estimate ``c`` and ``lvar_c``."""
-        import pandas as pd
-
         names = model.theta_names(T)
         head = model.n_params + model.state_dim
         frame = pd.DataFrame(

@@ -58,18 +58,15 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
 
 from ..binomial import clopper_pearson
 from ..models.base import PriorBounds, StateSpaceModel
 from ..models.log_posterior import compile_constraints, in_support, neg2_log_posterior
 from .driver import JointMapResult, ProgressLike, initial_theta, joint_map
 from .settings import JointMapSettings
-
-if TYPE_CHECKING:  # pandas is imported where a table is made (0.3 s a job)
-    import pandas as pd
 
 #: the verdicts of a trajectory's maxima (module docstring)
 VERDICTS: tuple[str, ...] = ("unique", "several", "undetermined", "none")
@@ -203,8 +200,6 @@ class MultiStartResult:
 
     def columns(self) -> pd.DataFrame:
         """Per-k columns beside the joint-MAP table (one row per k, in order of k)."""
-        import pandas as pd
-
         n_max = self.n_maxima
         verdict = self.verdict
         return pd.DataFrame(
