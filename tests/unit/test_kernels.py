@@ -3,6 +3,7 @@ and pins them (issue 34)."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -65,6 +66,27 @@ def test_a_process_started_with_the_environment_has_the_fixed_kernels():
     assert out.stdout.startswith("kernels: BLAS openblas")
     if kernels.covered():
         assert " Haswell x1" in out.stdout and "AVX512" not in out.stdout
+
+
+def test_scipys_blas_is_listed_without_importing_scipy_linalg():
+    """in_force loads SciPy's OpenBLAS from the wheel's folder: the same libraries, kernels
+    and threads as after importing scipy.linalg, which it leaves unimported (a job's 0.35 s);
+    SciPy's extensions then use the library already loaded (no second copy)."""
+    code = (
+        "import json, sys; from ssmobs import kernels; first = kernels.in_force(); "
+        "unimported = 'scipy.linalg' not in sys.modules; import scipy.linalg; "
+        "from threadpoolctl import threadpool_info; "
+        "n = sum(i['user_api'] == 'blas' for i in threadpool_info()); "
+        "print(json.dumps([first, kernels.in_force(), unimported, n]))"
+    )
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **kernels.environment()}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    first, after_import, unimported, n_blas = json.loads(out.stdout)
+    assert unimported
+    assert first == after_import
+    assert len(first["blas"]) == n_blas == 2  # NumPy's and SciPy's, each once
+    assert any("scipy_openblas-" in blas["library"] for blas in first["blas"])
 
 
 def test_a_job_started_without_it_refuses_to_compute():

@@ -126,12 +126,30 @@ def restart_with_fixed_kernels() -> None:
         os.execv(sys.executable, [sys.executable, *sys.argv])
 
 
+def _load_scipy_blas() -> None:
+    """Load SciPy's own OpenBLAS, so that :func:`in_force` lists it: the wheel's library in
+    ``scipy.libs/`` (the file SciPy's extensions name, so they find it loaded), without
+    importing ``scipy.linalg`` (0.35 CPU-s, in jobs that mostly need no SciPy); a SciPy
+    without that folder (another build) is imported."""
+    import ctypes
+    import importlib.util
+
+    spec = importlib.util.find_spec("scipy")
+    if spec is not None and spec.origin is not None:
+        libs = sorted((Path(spec.origin).parents[1] / "scipy.libs").glob("libscipy_openblas*.so"))
+        if len(libs) == 1:
+            ctypes.CDLL(str(libs[0]))
+            return
+    import scipy.linalg  # noqa: F401 - loads SciPy's OpenBLAS
+
+
 def in_force() -> dict[str, Any]:
     """What this process computes with: OpenBLAS libraries (kernel, threads, version) and
     NumPy's enabled dispatch targets above its baseline (loads NumPy and threadpoolctl)."""
     import numpy as np
-    import scipy.linalg  # noqa: F401 - loads SciPy's own OpenBLAS, so that it is listed
     from threadpoolctl import threadpool_info
+
+    _load_scipy_blas()
 
     features = _numpy_features()
     dispatch = [t for t in _numpy_dispatch() if features.get(t)]
