@@ -382,13 +382,10 @@ def read_netcdf(path: str | os.PathLike, required_vars: Sequence[str] = ()) -> N
 
 
 def _loaded(values: Any) -> np.ndarray:
-    """Variable-length strings as a NumPy text array, other values as read."""
+    """Variable-length strings (read as Python strings) as a NumPy text array, other
+    values as read."""
     values = np.asarray(values)
-    if values.dtype.kind in "OS":
-        return np.asarray(
-            [v.decode() if isinstance(v, bytes) else v for v in values.ravel()], dtype=str
-        ).reshape(values.shape)
-    return values
+    return values.astype(str) if values.dtype.kind == "O" else values
 
 
 def write_parquet(path: str | os.PathLike, frame: pandas.DataFrame) -> None:
