@@ -5,8 +5,10 @@
 #
 #   benchmarks/newcomer.sh REPO WORKDIR   ->  WORKDIR/newcomer.tsv (one line per step)
 #
-# Steps: `make setup` (venv and pip from the package index), `make run` (default config,
-# compiles included), `make run` again (nothing to do), `make test`.  The caches (pip,
+# Steps: `make setup` (venv and pip from the package index), the machine's yardstick
+# (benchmarks/yardstick.py: a fixed NumPy workload, to tell the machine's speed that hour from
+# the code's), `make run` (default config, compiles included), `make run` again (nothing to
+# do), `make test`, the yardstick again.  The caches (pip,
 # compiled Stan programs, httpstan, Snakemake, matplotlib) all live under XDG_CACHE_HOME,
 # which points at an empty folder inside WORKDIR.
 set -euo pipefail
@@ -41,6 +43,7 @@ step() {  # step NAME COMMAND...: time one command in the clone, log to WORKDIR/
 }
 
 step setup make setup
+step yardstick_before .venv/bin/python benchmarks/yardstick.py
 step run make run
 # the default profile's outputs with the provenance of this run, ready to be committed
 if [[ $last_rc == 0 ]]; then
@@ -51,4 +54,6 @@ if [[ $last_rc == 0 ]]; then
 fi
 step rerun make run
 step test make test
+step yardstick_after .venv/bin/python benchmarks/yardstick.py
 cat "$out"
+cat "$work"/yardstick_*.log
