@@ -274,6 +274,39 @@ def test_chunking_does_not_change_results_and_progress_counts(same_t20):
     assert (chunked.status == res.status).all()
 
 
+def test_halvings_in_one_evaluation_give_the_same_bits_with_fewer_evaluations(monkeypatch):
+    """The line search's halvings several at a time (``LINE_SEARCH_VALUES``) accept the step
+    that one halving per evaluation accepts, to the bit, in every trajectory.  The data: a
+    random set of the choice of K's size (Same, T = 4, K = 500) in which some trajectories
+    backtrack tens of times per Newton step."""
+    from ssmobs.joint_map import barrier
+
+    model, x, z = design("same", [0.9], [8.0], T=4, K=500, seed=4)
+    bounds = model.prior_bounds([0.9])
+    evaluations: list[int] = []
+    value_only = barrier.neg2_log_posterior
+
+    def counted(model, theta, z, bounds=None, order=0):
+        if order == 0:
+            evaluations.append(theta.shape[0])
+        return value_only(model, theta, z, bounds, order=order)
+
+    monkeypatch.setattr(barrier, "neg2_log_posterior", counted)
+    results, counts = {}, {}
+    for values in (0, barrier.LINE_SEARCH_VALUES):  # 0: one halving per evaluation
+        monkeypatch.setattr(barrier, "LINE_SEARCH_VALUES", values)
+        evaluations.clear()
+        results[values] = joint_map(model, z, bounds, [0.9], [8.0])
+        counts[values] = len(evaluations)
+    one, many = results[0], results[barrier.LINE_SEARCH_VALUES]
+    for name in ("theta_hat", "neg2_log_post", "grad_max", "local_variance", "eig_ratio"):
+        a, b = getattr(one, name), getattr(many, name)
+        assert np.array_equal(a.view(np.uint64), b.view(np.uint64)), name
+    assert np.array_equal(one.iterations, many.iterations)
+    assert (one.status == many.status).all() and (one.reason == many.reason).all()
+    assert counts[barrier.LINE_SEARCH_VALUES] < counts[0] / 2, counts
+
+
 def test_d2_p1_and_d1_p2_run():
     for slug, omega, x0 in [
         ("sep_d2_p1", [0.9, 0.9, 0.9], [8.0]),
