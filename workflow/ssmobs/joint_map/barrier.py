@@ -194,6 +194,10 @@ def _damped_newton_direction(
     return d, tau
 
 
+#: the machine epsilon of the float64 arithmetic (the line search's and the stop's round-off
+#: allowances)
+EPS = float(np.finfo(float).eps)
+
 #: after the first trial step of every trajectory, the line search tries as many halvings
 #: of the step in one evaluation as keep it at about this many per-step terms of -2 pi
 #: (trial points x T); 0: one halving per evaluation.  One trajectory often backtracks tens
@@ -250,8 +254,7 @@ def _armijo_backtracks(
     m = model.n_params
     P0t, at, st = np.tile(P0, n_try), alphas.reshape(-1), np.tile(search.slope, n_try)
     Pt = ft + np.tile(search.mu, n_try) * barrier.value(trial[:, :m])
-    eps = np.finfo(float).eps
-    ok = np.isfinite(Pt) & (Pt <= P0t + c1 * at * st + 16 * eps * np.abs(P0t))
+    ok = np.isfinite(Pt) & (Pt <= P0t + c1 * at * st + 16 * EPS * np.abs(P0t))
     ok = ok.reshape(n_try, rows)
     first = np.where(ok.any(axis=0), ok.argmax(axis=0), -1)
     return first, steps, alphas
@@ -278,7 +281,6 @@ def minimize_barrier(
     reason = np.full(K, "max-iter", dtype=object)
     active = np.ones(K, dtype=bool)
     tau_last = np.zeros(K)
-    eps = np.finfo(float).eps
 
     def grad_p(g: np.ndarray, bg: np.ndarray, mu_a: np.ndarray) -> np.ndarray:
         gp = g.copy()
@@ -332,7 +334,7 @@ def minimize_barrier(
             d[uphill] = -gps[uphill]
             slope[uphill] = -np.einsum("kj,kj->k", gps[uphill], gps[uphill])
         # a full step smaller than rounding at mu_min: nothing left to gain
-        tiny = (np.abs(d).max(axis=1) <= 4 * eps * (1.0 + np.abs(th).max(axis=1))) & (
+        tiny = (np.abs(d).max(axis=1) <= 4 * EPS * (1.0 + np.abs(th).max(axis=1))) & (
             mu_s <= settings.mu_min
         )
         if tiny.any():
