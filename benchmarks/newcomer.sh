@@ -6,8 +6,8 @@
 #   benchmarks/newcomer.sh REPO WORKDIR   ->  WORKDIR/newcomer.tsv (one line per step)
 #
 # Steps: `make setup` (venv and pip from the package index), the machine's yardstick
-# (benchmarks/yardstick.py: a fixed NumPy workload, to tell the machine's speed that hour from
-# the code's), `make run` (default config, compiles included), `make run` again (nothing to
+# (benchmarks/yardstick.py: a fixed NumPy workload; in its first uses it did not follow the
+# run's speed, BENCHMARKS.md), `make run` (default config, compiles included), `make run` again (nothing to
 # do), `make test`, the yardstick again.  The caches (pip,
 # compiled Stan programs, httpstan, Snakemake, matplotlib) all live under XDG_CACHE_HOME,
 # which points at an empty folder inside WORKDIR.
