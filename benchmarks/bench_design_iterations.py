@@ -44,7 +44,8 @@ def optimise(
     s0: Any, K: int, b_max: float, *, memory: int, scale: Any, rel_tol: float
 ) -> tuple[Any, float, int, int]:
     """The workflow's optimisation (`disturbances._optimise_half`'s settings) on s = scale * y;
-    returns (half-set, raw distance, iterations, evaluations)."""
+    returns (half-set, raw distance, iterations, evaluations).  It returns SciPy's last point
+    where the workflow keeps the best point seen; the ``plain`` check shows they agree."""
     import numpy as np
     from scipy import optimize
     from ssmobs.design.disturbances import GRAD_TOL, MAX_ITER
