@@ -6,11 +6,11 @@
 #   benchmarks/newcomer.sh REPO WORKDIR   ->  WORKDIR/newcomer.tsv (one line per step)
 #
 # Steps: `make setup` (venv and pip from the package index), the machine's yardstick
-# (benchmarks/yardstick.py: a fixed NumPy workload; in its first uses it did not follow the
-# run's speed, BENCHMARKS.md), `make run` (default config, compiles included), `make run` again (nothing to
-# do), `make test`, the yardstick again.  The caches (pip,
-# compiled Stan programs, httpstan, Snakemake, matplotlib) all live under XDG_CACHE_HOME,
-# which points at an empty folder inside WORKDIR.
+# (benchmarks/yardstick.py: a fixed NumPy workload that follows the run's speed only
+# sometimes, BENCHMARKS.md), `make run` (default config, compiles included), `make run`
+# again (nothing to do), `make test`, the yardstick again.  The caches (pip, compiled Stan
+# programs, httpstan, Snakemake, matplotlib) all live under XDG_CACHE_HOME, which points at
+# an empty folder inside WORKDIR.
 set -euo pipefail
 repo=${1:?usage: newcomer.sh REPO WORKDIR}
 work=${2:?usage: newcomer.sh REPO WORKDIR}

@@ -2,10 +2,11 @@
 
 These machines' speed varies by 20-40 % from hour to hour (BENCHMARKS.md, Newcomer), so a
 whole-run time alone cannot tell a change of the code from a change of the machine.
-`benchmarks/newcomer.sh` runs this before `make run` and after `make test`.  In its first
-uses it did not follow the run (2026-12-06: 0.257 CPU-s beside the slowest of four runs,
-0.366 beside the fastest; BENCHMARKS.md): it runs alone on one core with the machine's own
-kernels, the run on both cores with the workflow's.  Record it; do not divide by it yet.
+`benchmarks/newcomer.sh` runs this before `make run` and after `make test`.  It follows
+the run only sometimes (BENCHMARKS.md, 2026-12-06: 0.257 CPU-s beside the slowest of four
+runs and 0.366 beside the fastest; later 0.468 and 0.326 beside a slow and a fast run of
+the same code): it runs alone on one core with the machine's own kernels, the run on both
+cores with the workflow's.  Record it; do not divide by it.
 
 The workload (issue 48's yardstick): 40 evaluations of sum_ij exp(-|x_i - x_j|^2 / 2) over
 the 1000 x 1000 pairs of 1000 fixed points in 8 dimensions, one OpenBLAS thread.  Prints
