@@ -748,3 +748,109 @@ def test_analytic_gradients_key_every_nuts_output_and_autodiff_keys_nothing():
         c.gather("same_T4", 4),
     )
     assert a.check_model("same_T4", stan=True) == c.check_model("same_T4", stan=True)
+
+
+# ---------------------------------------------------------------- the model check (issue 61)
+#: an edit of each input the model check reads (stan.gradients: against Stan only)
+CHECK_INPUT_EDITS = [
+    ("model", "sep_ranwalk"),
+    ("omega", {"a": 0.8}),
+    ("x0", 7),
+    ("prior", {"a": [0, 1.5]}),  # an interval prior is checked as configured
+]
+#: fields the model check does not read: the key stays
+CHECK_UNREAD_EDITS = [
+    ("T", 5),
+    ("K", 16),
+    ("seed", 3),
+    ("method", "random"),
+    ("description", "a new text"),
+    ("prior", "unrestricted"),  # every named variant is checked whichever the scenario picks
+]
+
+
+@pytest.mark.parametrize("stan", [False, True])
+@pytest.mark.parametrize(("field", "value"), CHECK_INPUT_EDITS)
+def test_each_input_of_the_model_check_keys_it(stan, field, value):
+    """Found stale before (issue 61): the check's key had no prior, so a finished run then
+    ``prior: {a: [0, 1.5]}`` reran no check while a fresh clone refused the config."""
+    base = smoke()
+    edited = copy.deepcopy(base)
+    edited["scenarios"][0][field] = value
+    a, b = keys(base), keys(edited)
+    assert a.check_inputs("same_T4", stan) != b.check_inputs("same_T4", stan)
+    assert a.check_model("same_T4", stan) != b.check_model("same_T4", stan)
+
+
+@pytest.mark.parametrize("stan", [False, True])
+@pytest.mark.parametrize(("field", "value"), CHECK_UNREAD_EDITS)
+def test_a_field_the_model_check_does_not_read_leaves_its_key(stan, field, value):
+    base = smoke()
+    edited = copy.deepcopy(base)
+    edited["scenarios"][0][field] = value
+    assert keys(base).check_model("same_T4", stan) == keys(edited).check_model("same_T4", stan)
+
+
+def test_the_gradient_path_keys_the_stan_check_only():
+    analytic = smoke("analytic")
+    a, b = keys(smoke()), keys(analytic)
+    assert b.check_inputs("same_T4", stan=True)["gradients"] == "analytic"
+    assert a.check_model("same_T4", stan=True) != b.check_model("same_T4", stan=True)
+    assert a.check_model("same_T4") == b.check_model("same_T4")
+
+
+@pytest.mark.parametrize(
+    "prior", [None, "restricted", "unrestricted", {"a": [0, 1.5]}, {"a": "half_line"}]
+)
+def test_the_model_check_reads_the_same_cases_from_its_inputs_as_from_the_scenario(prior):
+    """The rule passes :meth:`CacheKeys.check_inputs` only: the cases the check builds from
+    it are those it would build from the whole scenario entry, so what is keyed is what is
+    read."""
+    from ssmobs.model_check.cases import cases_from_scenarios, prior_variant_cases
+    from ssmobs.models import get_model
+
+    conf = smoke()
+    sc = conf["scenarios"][0]
+    if prior is None:
+        sc.pop("prior", None)
+    else:
+        sc["prior"] = prior
+    model = get_model("same")
+
+    def cases(entries):
+        found = cases_from_scenarios(entries, "same")
+        return [c for case in found for c in prior_variant_cases(model, case)]
+
+    inputs = keys(conf).check_inputs("same_T4")
+    assert inputs["model"] == "same" and cases(inputs["scenarios"]) == cases([sc])
+
+
+def test_a_generated_programs_keys_do_not_follow_the_gradient_switch(tmp_path, monkeypatch):
+    """Issue 60: a model without ``stan/<model>.stan`` runs the same generated program
+    whatever ``stan.gradients`` says, so switching it reruns none of its Stan jobs; a model
+    with its own program has another program under ``analytic``."""
+    import ssmobs.nuts.analytic_program as analytic_program
+    import ssmobs.stan_backends as backends
+    from ssmobs.stages.stan import stan_program
+
+    made = []
+
+    class Program:
+        stan_file, header = Path("generated.stan"), Path("generated.hpp")
+
+    def write(model, path):
+        made.append((model.slug, path))
+        return Program
+
+    monkeypatch.setattr(analytic_program, "write_analytic_program", write)
+    monkeypatch.setattr(backends, "has_stan_file", lambda slug: False)
+    assert stan_program("same", "autodiff") == stan_program("same", "analytic")
+    assert made == [("same", None), ("same", None)]  # the one generated program, both ways
+
+    (tmp_path / "stan").mkdir()  # no stan/same.stan: its program is generated
+    a, b = keys(smoke(), repo=tmp_path), keys(smoke("analytic"), repo=tmp_path)
+    assert a.program("same") == b.program("same")
+    assert a.nuts_records("same_T4") == b.nuts_records("same_T4")
+    assert a.check_model("same_T4", stan=True) == b.check_model("same_T4", stan=True)
+    own = keys(smoke()), keys(smoke("analytic"))  # stan/same.stan of the repository
+    assert own[0].nuts_records("same_T4") != own[1].nuts_records("same_T4")

@@ -81,3 +81,23 @@ def test_a_job_start_without_the_fixed_kernels_stops_before_the_sweep(tmp_path):
     out, leftover = _start(tmp_path, {"OPENBLAS_NUM_THREADS": "4"})
     assert out.returncode != 0 and "KernelsNotFixed" in out.stderr
     assert leftover.exists()
+
+
+#: scripts that still read the config: their rule (workflow/rules/stan.smk) must pass the
+#: setting as a param first (issue 62)
+READ_THE_CONFIG = {"build_stan_model"}
+
+
+def test_scripts_read_their_params_not_the_config():
+    """What a script reads is what its rule passes (and its key holds): a script reading
+    ``snakemake.config`` reads settings its stage's key may leave out (issue 62)."""
+    reading = {
+        s.stem
+        for s in SCRIPTS
+        for node in ast.walk(ast.parse(s.read_text()))
+        if isinstance(node, ast.Attribute)
+        and node.attr == "config"
+        and isinstance(node.value, ast.Name)
+        and node.value.id == "snakemake"
+    }
+    assert reading == READ_THE_CONFIG

@@ -18,9 +18,8 @@ rule check_model:
         mem_mb=4000,
         runtime=30,
     params:
-        model=lambda wc: SCENARIOS[wc.scenario]["model"],
-        scenarios=lambda wc: [SCENARIOS[wc.scenario]],
-        stan=False,
+        # what the check reads, and its key is made of (ssmobs.cache_keys.CacheKeys.check_inputs)
+        inputs=lambda wc: KEYS.check_inputs(wc.scenario, stan=False),
     script:
         "../scripts/check_model.py"
 
@@ -46,9 +45,7 @@ rule check_model_stan:
         mem_mb=4000,
         runtime=30,
     params:
-        model=lambda wc: SCENARIOS[wc.scenario]["model"],
-        scenarios=lambda wc: [SCENARIOS[wc.scenario]],
-        stan=True,
+        inputs=lambda wc: KEYS.check_inputs(wc.scenario, stan=True),
     script:
         "../scripts/check_model.py"
 

@@ -4,14 +4,15 @@ from ssmobs import log
 from ssmobs.model_check.check import run_check_model
 
 logger = log.start_job(snakemake)
+inputs = snakemake.params.inputs  # what the check's key is made of (CacheKeys.check_inputs)
 report = run_check_model(
-    snakemake.params.model,
-    snakemake.params.scenarios,
+    inputs["model"],
+    inputs["scenarios"],
     snakemake.output[0],
-    stan=snakemake.params.stan,
+    stan=inputs["stan"],
     # no file for a model without stan/<model>.stan: the check generates its program
-    stan_path=(snakemake.input.get("stan") or None) if snakemake.params.stan else None,
-    gradients=snakemake.config["stan"]["gradients"] if snakemake.params.stan else "autodiff",
+    stan_path=(snakemake.input.get("stan") or None) if inputs["stan"] else None,
+    gradients=inputs["gradients"],
 )
 for line in report.checks:
-    logger.info("model %s: checked %s", snakemake.params.model, line)
+    logger.info("model %s: checked %s", inputs["model"], line)

@@ -70,6 +70,20 @@ SAMPLER_FIELDS = (
 )
 
 
+def check_case(sc: Mapping[str, Any]) -> dict[str, Any]:
+    """What the model check reads of scenario entry ``sc``
+    (:func:`ssmobs.model_check.cases.cases_from_scenarios`): its model, true values and
+    start, and its prior where that is an interval prior (a parameter with its own
+    ``[lower, upper]``), which is checked as configured; a named prior variant is no input,
+    as every variant of the model is checked whichever the scenario picks
+    (:func:`ssmobs.model_check.cases.prior_variant_cases`)."""
+    case = _pick(sc, ("model", "omega", "x0"))
+    prior = sc.get("prior")
+    if isinstance(prior, Mapping) and any(not isinstance(v, str) for v in prior.values()):
+        case["prior"] = dict(prior)
+    return case
+
+
 class UnknownKeyError(KeyError):
     """A keyed path was asked for whose key the current config does not produce."""
 
@@ -184,25 +198,48 @@ class CacheKeys:
             "design", "shared", {"design": self.config["design"], "code": self.code("design")}
         )
 
-    def check_model(self, name: str, stan: bool = False) -> str:
-        """The model check at a scenario's true values: the Python model alone (gates the
-        design trajectories) or against the Stan program (gates the NUTS runs).  Every
-        prior variant is checked, so the prior is no part of the key."""
+    def has_stan_file(self, model: str) -> bool:
+        """Whether ``model`` has a hand-written ``stan/<model>.stan`` (else its program is
+        generated from its Python module)."""
+        return (self.repo / "stan" / f"{model}.stan").is_file()
+
+    def check_inputs(self, name: str, stan: bool = False) -> dict[str, Any]:
+        """Everything the model check of scenario ``name`` reads of the config, as the rule
+        passes it (its only params) and as :meth:`check_model` keys it, so the two cannot
+        drift: the model, the scenario's case (:func:`check_case`) and, against Stan, the
+        gradient path its program takes (``autodiff`` for a generated program, which is
+        analytic whatever the setting and checked the same way)."""
         sc = self.scenarios[name]
+        mode = self.config["stan"].get("gradients", "autodiff")
+        return {
+            "model": sc["model"],
+            "scenarios": [check_case(sc)],
+            "stan": stan,
+            "gradients": mode if stan and self.has_stan_file(sc["model"]) else "autodiff",
+        }
+
+    def check_model(self, name: str, stan: bool = False) -> str:
+        """The model check at a scenario's true values (:meth:`check_inputs`): the Python
+        model alone (gates the design trajectories) or against the Stan program (gates the
+        NUTS runs)."""
+        inputs = self.check_inputs(name, stan)
+        model = inputs["model"]
+        (case,) = inputs["scenarios"]
         payload: dict[str, Any] = {
-            "case": _pick(sc, ("model", "omega", "x0")),
-            "model_code": self.model_code(sc["model"]),
+            "case": case,
+            "model_code": self.model_code(model),
             "code": self.code("check_model"),
         }
         if stan:
             # the check runs the program in the native driver's log-density mode, whatever
             # backend samples: keyed by the program, that backend's Stan and the driver
-            payload["stan"] = self.stan_program(sc["model"])
+            payload["stan"] = self.stan_program(model)
             payload["check_backend"] = self.check_backend
             payload["driver"] = file_digest(self.package_dir / NATIVE_DRIVER)
             # with analytic gradients the check compares them with Stan's autodiff as well
-            payload.update(self.gradients())
-            if self.gradients() or not (self.repo / "stan" / f"{sc['model']}.stan").is_file():
+            gradients = inputs["gradients"]
+            payload.update({} if gradients == "autodiff" else {"gradients": gradients})
+            if gradients != "autodiff" or not self.has_stan_file(model):
                 # ... and the sampler's gradient, through our headers (--sampler-gradient)
                 payload["shadow_headers"] = {
                     h: file_digest(self.package_dir / h) for h in NATIVE_SHADOW_HEADERS
@@ -231,11 +268,13 @@ class CacheKeys:
         }
         return self._key("joint_map", name, payload)
 
-    def gradients(self) -> dict[str, str]:
-        """``{"gradients": "analytic"}`` when NUTS runs the generated analytic gradients
-        (config key ``stan.gradients``), else nothing, so the keys of autodiff runs stay."""
+    def gradients(self, model: str) -> dict[str, str]:
+        """``{"gradients": "analytic"}`` when NUTS runs ``model`` with the generated analytic
+        gradients (config key ``stan.gradients``), else nothing, so the keys of autodiff
+        runs stay.  A model without ``stan/<model>.stan`` runs its generated program, the
+        same whatever the setting (:func:`ssmobs.stages.stan.stan_program`): nothing."""
         mode = self.config["stan"].get("gradients", "autodiff")
-        return {} if mode == "autodiff" else {"gradients": mode}
+        return {} if mode == "autodiff" or not self.has_stan_file(model) else {"gradients": mode}
 
     def program(self, model: str) -> str:
         """The compiled-program marker of ``model`` for the configured backend and its Stan
@@ -245,8 +284,8 @@ class CacheKeys:
             "backend": self.backend,
             "stan": self.stan_program(model),
             "code": self.code("program"),
-            **self.gradients(),
-            **({"model_code": self.model_code(model)} if self.gradients() else {}),
+            **self.gradients(model),
+            **({"model_code": self.model_code(model)} if self.gradients(model) else {}),
         }
         return self._key("program", model, payload)
 
@@ -269,7 +308,7 @@ class CacheKeys:
             "model_code": self.model_code(sc["model"]),
             "code": self.code("nuts_records"),
             # analytic gradients: draws equal in distribution, not bit for bit
-            **self.gradients(),
+            **self.gradients(sc["model"]),
         }
         return self._key("nuts_records", name, payload)
 
