@@ -206,6 +206,10 @@ def run_gather_nuts(
 ) -> dict:
     """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
 
+    The table marks in ``off_support`` every marginal MAP or quantile off its prior support
+    or from draws that ran off (:func:`ssmobs.nuts.off_support.mark_off_support`; the summary
+    counts those rows in ``n_off_support``).
+
     The batch tables hold the configured convergence checks applied to the records'
     diagnostics (:func:`ssmobs.nuts.convergence.apply_thresholds`), so other thresholds rebuild
     the tables without new sampling; each is checked against its records first
@@ -213,6 +217,7 @@ def run_gather_nuts(
     import pandas as pd
 
     from ..design.trajectories import read_trajectories
+    from ..nuts.off_support import mark_off_support
     from ..nuts.record_cache import check_batch_records
     from ..nuts.stan_metrics import stan_summary
 
@@ -229,7 +234,11 @@ def run_gather_nuts(
             f"k = {expected.start}, {expected.start + expected.step}, ..., "
             f"{expected[-1] if len(expected) else '-'} exactly once"
         )
+    # every marginal MAP or quantile off the prior support or run off, marked in the file
+    bounds = traj.model.prior_bounds(traj.omega, scenario.prior)
+    frame = mark_off_support(frame, traj.model, bounds, traj.T)
     info = stan_summary(frame, traj.model, traj.omega, traj.x0, traj.x)
+    info["n_off_support"] = int((frame["off_support"] != "").sum())
     info.update(
         scenario=scenario.name, model=traj.model.slug, T=traj.T, stan_init=scenario.stan_init
     )
