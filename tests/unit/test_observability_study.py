@@ -7,23 +7,32 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from fake_propriety import PROPER, FakePropriety, analysis
 from ssmobs.config.scenario import Scenario
-from ssmobs.reports.observability_study import run_observability_study, study_table
+from ssmobs.reports import observability_study as study
+from ssmobs.reports.observability_study import run_observability_study
 
 pytestmark = pytest.mark.unit
 
 
+def study_table(*args, **kwargs):
+    """The study table with every posterior proper unless a test says otherwise."""
+    return study.study_table(*args, **{"propriety": PROPER, **kwargs})
+
+
+def _entry(T):
+    return {
+        "name": f"sv_T{T}",
+        "model": "stoch_vol",
+        "x0": 0,
+        "T": T,
+        "K": 4,
+        "omega": {"phi": 0.9, "sigma": 0.5},
+    }
+
+
 def scenario(T):
-    return Scenario.from_config(
-        {
-            "name": f"sv_T{T}",
-            "model": "stoch_vol",
-            "x0": 0,
-            "T": T,
-            "K": 4,
-            "omega": {"phi": 0.9, "sigma": 0.5},
-        }
-    )
+    return Scenario.from_config(_entry(T))
 
 
 def joint(k_max):
@@ -96,6 +105,7 @@ def test_run_writes_csv_md_png(tmp_path):
         out["md"],
         out["png"],
         stan_settings={"chains": 2, "iter_warmup": 3, "iter_sampling": 4},
+        propriety=PROPER,
     )
     back = pd.read_csv(out["csv"])
     assert back["K_max_ratio"].tolist() == [0.5] and back["K_stan_ratio"].tolist() == [0.25]
@@ -152,3 +162,55 @@ def test_an_estimate_off_the_support_or_from_draws_that_ran_off_is_not_a_number(
         {"sv_T20": stan_frame([True] * 4, [""] * 4)},
     )
     assert clean.loc[0, "not_shown"] == "none"
+
+
+def test_every_row_says_what_is_not_shown_even_without_a_stan_stage():
+    frame = study_table([scenario(20)], {"sv_T20": joint(1)}, {}, {})
+    assert frame.loc[0, "not_shown"] == "none"
+
+
+def test_an_improper_posterior_shows_no_stan_number_and_says_why():
+    improper = analysis(stoch_vol=FakePropriety(improper=("x0 drops out at phi = 0",)))
+    stan = {"n_stan": 3, "ratio": 0.75, "K": 4, "phi_mean": 0.85}
+    tables = {"sv_T20": stan_frame([True, True, True, False], ["", "", "", "rhat"])}
+    frame = study_table(
+        [scenario(20)], {"sv_T20": joint(2)}, {"sv_T20": stan}, tables, propriety=improper
+    )
+    row = frame.iloc[0]
+    assert row["improper"] == "improper: x0 drops out at phi = 0"
+    for column in ("K_stan", "K_stan_ratio", "K_stan_ratio_lo95", "phi_mean_marginal"):
+        assert np.isnan(row[column]), column
+    assert np.isnan(row["phi_map_median_all_k"])
+    assert row["K_max"] == 2 and row["stan_failed_checks"] == "rhat 1"
+    assert row["not_shown"].startswith("every Stan number (improper posterior)")
+    proper = study_table([scenario(20)], {"sv_T20": joint(2)}, {"sv_T20": stan}, tables)
+    assert proper.loc[0, "K_stan"] == 3 and "improper" not in proper.columns
+
+
+def test_caption_states_what_ran(tmp_path):
+    cfg = {"chains": 4, "iter_warmup": 4000, "iter_sampling": 6000}
+    off = Scenario.from_config({**_entry(20), "stan": False, "name": "off_T20"})
+    assert study.stan_caption([off], cfg) == "Stan: off."
+    assert study.stan_caption([scenario(20)], cfg) == "Stan: 4 chains x (4000 + 6000) iterations."
+    own = Scenario.from_config({**_entry(50), "stan_settings": {"iter_sampling": 500}})
+    both = study.stan_caption([scenario(20), own, off], cfg)
+    assert both == (
+        "Stan: 4 chains x (4000 + 6000) iterations (sv_T20); "
+        "4 chains x (4000 + 500) iterations (sv_T50); off (off_T20)."
+    )
+    (tmp_path / "j.json").write_text(json.dumps(joint(2)))
+    out = {ext: tmp_path / f"o.{ext}" for ext in ("csv", "md", "png")}
+    run_observability_study(
+        {"name": "x"},
+        [off],
+        {"off_T20": tmp_path / "j.json"},
+        {},
+        {},
+        out["csv"],
+        out["md"],
+        out["png"],
+        stan_settings=cfg,
+        propriety=PROPER,
+    )
+    first = out["md"].read_text().splitlines()[0]
+    assert first.endswith("Stan: off.") and "4000" not in first

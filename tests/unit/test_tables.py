@@ -7,12 +7,14 @@ import math
 import pandas as pd
 import pytest
 from factories import same_a09
+from fake_propriety import PROPER, FakePropriety, analysis
 from ssmobs.binomial import clopper_pearson
 from ssmobs.reports.tables import (
     exact_vs_stan_table,
     section_iv,
     section_iv_compact,
     table_ii,
+    table_iii,
     write_table,
 )
 
@@ -86,14 +88,14 @@ def rows() -> list[dict]:
 
 
 def test_both_stages_read_with_component_stat_keys():
-    t2 = table_ii(rows()[:1], PAPER).set_index(["estimator", "statistic"])
+    t2 = table_ii(rows()[:1], PAPER, propriety=PROPER).set_index(["estimator", "statistic"])
     assert t2.loc[("joint MAP", "mean"), "a_ours"] == 0.94
     assert t2.loc[("marginal MAP", "mean"), "a_ours"] == 0.897
     assert t2.loc[("joint MAP", "mean"), "a_paper"] == 0.95
 
 
 def test_wide_summary_keeps_its_columns_and_adds_intervals():
-    wide = section_iv(rows(), PAPER).set_index("scenario")
+    wide = section_iv(rows(), PAPER, propriety=PROPER).set_index("scenario")
     assert {"joint_mean_a", "marginal_mean_a", "cover90_a", "K_max_frac"} <= set(wide.columns)
     assert wide.loc["s", "joint_mean_a"] == 0.94
     assert (wide.loc["s", "K_max_frac_lo95"], wide.loc["s", "K_max_frac_hi95"]) == clopper_pearson(
@@ -107,16 +109,16 @@ def test_k_stan_counts_over_the_stan_runs_of_a_subset():
     sub = rows()[:1]
     sub[0]["config"] = {**sub[0]["config"], "stan_every": 4}
     sub[0]["marginal"] = {**sub[0]["marginal"], "K": 10, "n_stan": 8}  # k = 0, 4, ..., 36
-    wide = section_iv(sub, PAPER).iloc[0]
+    wide = section_iv(sub, PAPER, propriety=PROPER).iloc[0]
     assert (wide["K"], wide["K_stan_runs"], wide["K_stan"]) == (40, 10, 8)
     assert wide["K_stan_frac"] == 0.8 and wide["K_max_frac"] == 0.5  # the joint MAP ran all K
     assert (wide["K_stan_frac_lo95"], wide["K_stan_frac_hi95"]) == clopper_pearson(8, 10)
-    compact = section_iv_compact(sub, PAPER).iloc[0]
+    compact = section_iv_compact(sub, PAPER, propriety=PROPER).iloc[0]
     assert compact["Stan runs"] == 10 and compact["K^Stan/K (95 % CI)"].startswith("0.80 [")
 
 
 def test_compact_summary_is_one_short_row_per_scenario(tmp_path):
-    compact = section_iv_compact(rows(), PAPER)
+    compact = section_iv_compact(rows(), PAPER, propriety=PROPER)
     assert list(compact.columns) == [
         "scenario",
         "T",
@@ -196,3 +198,50 @@ def test_k_selection_distribution_counts_each_chosen_k_over_the_seeds():
     nested = dist[dist["sets"] == "nested"]
     assert list(nested["n_seeds"]) == [4] and list(nested["share"]) == [1.0]
     assert set(dist["seeds"]) == {4} and set(dist["K_paper"]) == {300}
+
+
+# ------------------------------------------------- improper posteriors (issue 60)
+SAME_IMPROPER = analysis(same=FakePropriety(improper=("x0 drops out at a = 0",)))
+
+
+def test_improper_scenario_shows_no_stan_number_in_the_wide_summary():
+    wide = section_iv(rows(), PAPER, propriety=SAME_IMPROPER).set_index("scenario")
+    s = wide.loc["s"]
+    assert s["improper"] == "improper: x0 drops out at a = 0" and wide.loc["own", "improper"] == ""
+    for column in ("K_stan", "K_stan_frac", "K_stan_frac_lo95", "marginal_mean_a", "cover90_a"):
+        assert math.isnan(s[column]), column
+    assert s["K_stan_runs"] == 40 and s["joint_mean_a"] == 0.94  # what ran; the joint MAP
+    assert s["K_stan_frac_paper"] == 3680 / 4000  # the paper's own value stays
+    assert "edge" not in wide.columns
+
+
+def test_improper_scenario_says_so_in_words_in_the_compact_summary():
+    compact = section_iv_compact(rows(), PAPER, propriety=SAME_IMPROPER).set_index("scenario")
+    s = compact.loc["s"]
+    assert s["K^Stan/K (95 % CI)"] == "not shown: improper"
+    assert s["marginal MAP mean"] == "not shown: improper" and s["Cover90"] == "not shown: improper"
+    assert s["improper"] == "improper: x0 drops out at a = 0"
+    assert s["K^max/K (95 % CI)"] == "0.50 [0.34, 0.66]"  # the joint MAP's count stays
+    assert compact.loc["own", "K^Stan/K (95 % CI)"] == ""  # Stan did not run there
+
+
+def test_edge_finding_keeps_the_numbers_and_notes_it():
+    edge = analysis(same=FakePropriety(edge=("x0 drops out as a -> 0 (end of the support)",)))
+    compact = section_iv_compact(rows(), PAPER, propriety=edge).set_index("scenario")
+    assert compact.loc["s", "marginal MAP mean"] == "a 0.897, x0 8.05"
+    assert compact.loc["s", "edge"].startswith("x0 drops out as a -> 0")
+    assert "improper" not in compact.columns
+    t2 = table_ii(rows()[:1], PAPER, propriety=edge).set_index(["estimator", "statistic"])
+    assert t2.loc[("marginal MAP", "mean"), "a_ours"] == 0.897 and "edge" in t2.columns
+
+
+def test_tables_ii_and_iii_leave_the_stan_cells_of_an_improper_posterior_empty():
+    t2 = table_ii(rows()[:1], PAPER, propriety=SAME_IMPROPER).set_index(["estimator", "statistic"])
+    assert math.isnan(t2.loc[("marginal MAP", "mean"), "a_ours"])
+    assert math.isnan(t2.loc[("marginal MAP", "mean"), "a_rel_diff"])
+    assert t2.loc[("marginal MAP", "mean"), "a_paper"] == 0.90
+    assert t2.loc[("joint MAP", "mean"), "a_ours"] == 0.94
+    assert set(t2["improper"]) == {"improper: x0 drops out at a = 0"}
+    t3 = table_iii(rows()[:1], PAPER, propriety=SAME_IMPROPER)
+    assert t3["ours"].isna().all() and t3["K_stan"].isna().all()
+    assert not table_iii(rows()[:1], PAPER, propriety=PROPER)["ours"].isna().all()

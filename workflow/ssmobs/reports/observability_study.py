@@ -7,6 +7,12 @@ III.C), each with its exact binomial 95 % interval (``_lo95``, ``_hi95``), with 
 reasons the others failed (joint-MAP status counts, failed convergence checks), the
 marginal-MAP means of Omega over K^Stan and, as a diagnostic of where the draws went,
 the median over all K of the KDE modes of Omega (converged or not).
+
+Every row has ``not_shown`` (which numbers are left out and why: off the prior support, run
+off, or an improper posterior; "none") and, with a multi-start joint MAP, ``K_max_unique``
+and ``K_max_undetermined``.  A scenario whose posterior is improper
+(:mod:`ssmobs.reports.propriety_notes`) shows none of its Stan numbers and gives the reason
+in ``improper``; the caption states the NUTS settings that ran ("Stan: off" where none did).
 """
 
 from __future__ import annotations
@@ -25,6 +31,22 @@ from ..config.scenario import Scenario
 from ..estimator_moments import EstimatorSummary
 from ..joint_map.checks import STATUSES
 from ..nuts.convergence import CHECKS
+from ..nuts.off_support import RUNOFF_MAGNITUDE, unusable
+from .propriety_notes import (
+    PosteriorNote,
+    ProprietyAnalysis,
+    add_note_columns,
+    posterior_note,
+)
+
+__all__ = [
+    "RUNOFF_MAGNITUDE",
+    "run_observability_study",
+    "stan_caption",
+    "study_row",
+    "study_table",
+    "unusable",
+]
 
 
 def _int_or_nan(value: Any) -> float | int:
@@ -37,10 +59,12 @@ def study_row(
     joint: Mapping[str, Any] | None,
     stan: Mapping[str, Any] | None,
     stan_table: pd.DataFrame | None,
+    note: PosteriorNote | None = None,
 ) -> dict[str, Any]:
     """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega;
     |K^max_unique|, its ratio and |K^max_undetermined| where the joint MAP ran from several
-    starts."""
+    starts; ``not_shown`` ("none" when every number is shown).  ``note``: the posterior's propriety; an improper one leaves
+    every Stan number (|K^Stan|, its ratio, the marginal-MAP means, the KDE modes) NaN."""
     model = scenario.model
     row: dict[str, Any] = {
         "scenario": scenario.name,
@@ -99,28 +123,16 @@ def study_row(
             row[f"{n}_map_median_all_k"] = float(np.median(kept)) if kept.size else np.nan
             for reason, n_k in Counter(r for r in reasons if r).items():
                 dropped.append(f"{col} of {n_k} k {reason}")
-        row["not_shown"] = "; ".join(dropped) or "none"
-    elif dropped:
-        row["not_shown"] = "; ".join(dropped)
+    if note is not None and note.is_improper:
+        stan_columns = [
+            k for k in row if k.startswith(("K_stan", "stan_")) or k.endswith("_marginal")
+        ]
+        stan_columns += [k for k in row if k.endswith("_map_median_all_k")]
+        row.update({k: np.nan for k in stan_columns if k != "stan_failed_checks"})
+        dropped = [d for d in dropped if not d.startswith(tuple(stan_columns))]
+        dropped.insert(0, "every Stan number (improper posterior)")
+    row["not_shown"] = "; ".join(dropped) or "none"
     return row
-
-
-#: a marginal MAP, quantile or mean beyond this magnitude comes from draws that ran off
-RUNOFF_MAGNITUDE = 1e100
-
-
-def unusable(value: float, support: tuple[float, float]) -> str:
-    """Why ``value`` (an estimate of a parameter with prior support ``support``) is not
-    shown as a number: off the support or from draws that ran off ("" if usable; NaN is
-    "not computed", not a reason)."""
-    if not np.isfinite(value):
-        return ""
-    if abs(value) > RUNOFF_MAGNITUDE:
-        return f"from draws that ran off (|value| > {RUNOFF_MAGNITUDE:g})"
-    lo, hi = support
-    if not lo <= value <= hi:
-        return f"off the support ({lo:g}, {hi:g})"
-    return ""
 
 
 def study_table(
@@ -128,13 +140,44 @@ def study_table(
     joint: Mapping[str, Mapping],
     stan: Mapping[str, Mapping],
     stan_tables: Mapping[str, pd.DataFrame],
+    *,
+    propriety: ProprietyAnalysis | None = None,
 ) -> pd.DataFrame:
-    """Rows of :func:`study_row` sorted by T (a stage not run gives NaN)."""
+    """Rows of :func:`study_row` sorted by T (a stage not run gives NaN), with the columns
+    ``improper`` and ``edge`` where some scenario has such a finding (``propriety``: the
+    analysis, the project's when None)."""
+    notes = [posterior_note(sc, propriety) for sc in scenarios]
     rows = [
-        study_row(sc, joint.get(sc.name), stan.get(sc.name), stan_tables.get(sc.name))
-        for sc in scenarios
+        study_row(sc, joint.get(sc.name), stan.get(sc.name), stan_tables.get(sc.name), note)
+        for sc, note in zip(scenarios, notes, strict=True)
     ]
+    add_note_columns(rows, notes)
     return pd.DataFrame(rows).sort_values("T", kind="stable").reset_index(drop=True)
+
+
+def stan_caption(scenarios: Sequence[Scenario], stan_settings: Mapping[str, Any] | None) -> str:
+    """What NUTS ran, for a caption: "Stan: off" where no scenario ran it, else the chains and
+    iterations of each setting that ran (the scenario's own ``stan_settings`` over the
+    config's stan block ``stan_settings``), naming the scenarios where not all share it."""
+    ran = [sc for sc in scenarios if sc.stan]
+    if not ran:
+        return "Stan: off."
+    if not stan_settings:
+        return ""
+    groups: dict[str, list[str]] = {}
+    for sc in ran:
+        cfg = sc.stan_config(stan_settings)
+        text = (
+            f"{cfg['chains']} chains x ({cfg['iter_warmup']} + {cfg['iter_sampling']}) iterations"
+        )
+        groups.setdefault(text, []).append(sc.name)
+    off = [sc.name for sc in scenarios if not sc.stan]
+    if len(groups) == 1 and not off:
+        return f"Stan: {next(iter(groups))}."
+    parts = [f"{text} ({', '.join(names)})" for text, names in groups.items()]
+    if off:
+        parts.append(f"off ({', '.join(off)})")
+    return "Stan: " + "; ".join(parts) + "."
 
 
 def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> None:
@@ -180,9 +223,10 @@ def run_observability_study(
     png: str | os.PathLike,
     *,
     stan_settings: Mapping[str, Any] | None = None,
+    propriety: ProprietyAnalysis | None = None,
 ) -> pd.DataFrame:
     """Rule observability_study: read the scenario summaries, write table (CSV, Markdown)
-    and figure (PNG)."""
+    and figure (PNG); ``stan_settings``: the config's stan block (for the caption)."""
     frame = study_table(
         scenarios,
         {n: io.read_json(p) for n, p in joint.items()},
@@ -191,6 +235,7 @@ def run_observability_study(
             n: io.read_parquet(p, required_columns=["converged", "failed_checks"])
             for n, p in stan_tables.items()
         },
+        propriety=propriety,
     )
     io.write_text(csv, frame.to_csv(index=False, float_format="%.6g", na_rep=""))
     model = scenarios[0].model
@@ -198,11 +243,8 @@ def run_observability_study(
         f"Observability of {model.title} ({study['name']}, ours): |K^max|/K (joint MAP, "
         f"Sec. III.B) and |K^Stan|/K (NUTS, Sec. III.C) over T."
     )
-    if stan_settings:
-        caption += (
-            f" Stan: {stan_settings['chains']} chains x ({stan_settings['iter_warmup']}"
-            f" + {stan_settings['iter_sampling']}) iterations."
-        )
+    ran = stan_caption(scenarios, stan_settings)
+    caption += f" {ran}" if ran else ""
     shown = frame.astype(object).where(frame.notna(), None)
     io.write_text(
         md, caption + "\n\n" + shown.to_markdown(index=False, floatfmt=".4g", missingval="") + "\n"

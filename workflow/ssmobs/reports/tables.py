@@ -4,6 +4,11 @@ Every table is a pandas DataFrame written as CSV, Markdown and LaTeX.  A value t
 states appears in a ``paper`` column next to ``ours``, with ``rel_diff`` =
 RD(ours, paper) = |ours - paper| / max(|ours|, |paper|) (Sec. IV.A); where the paper gives
 no value the cells are empty.
+
+A scenario whose posterior is improper (:mod:`ssmobs.reports.propriety_notes`) shows none of
+its Stan numbers (|K^Stan|, marginal MAPs, intervals, coverage, bias, MSE) as a number: the
+column ``improper`` gives the reason and the cells say "not shown: improper" or are empty;
+a documented end-of-support finding is noted in ``edge`` and keeps its numbers.
 """
 
 from __future__ import annotations
@@ -21,6 +26,13 @@ import yaml
 from .. import io
 from ..binomial import clopper_pearson, format_fraction
 from ..estimator_moments import EstimatorSummary
+from .propriety_notes import (
+    NOT_SHOWN_IMPROPER,
+    PosteriorNote,
+    ProprietyAnalysis,
+    add_note_columns,
+    config_note,
+)
 
 
 def load_paper_values(path: str | os.PathLike) -> dict[str, Any]:
@@ -86,16 +98,27 @@ def write_table(
 STATS = (("mean", "mean"), ("var", "variance"), ("mse", "MSE"))
 
 
-def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+def _notes(rows: Sequence[dict], propriety: ProprietyAnalysis | None) -> list[PosteriorNote]:
+    """The propriety of every row's scenario (its ``config`` entry)."""
+    return [config_note(r["config"], propriety) for r in rows]
+
+
+def table_ii(
+    rows: Iterable[dict], paper: Mapping, *, propriety: ProprietyAnalysis | None = None
+) -> pd.DataFrame:
     """Table II: empirical mean, variance and MSE of (a, x0), joint vs marginal MAP.
 
-    ``rows``: one dict per scenario with keys ``scenario``, ``T``, ``paper_ref``,
-    ``joint`` (joint_map summary), ``marginal`` (gather_nuts summary, may be None) and
-    ``exact`` (exact_marginal summary at its K, may be None): ``<comp>_ours`` is Stan + KDE,
-    ``<comp>_exact`` the exact marginal posterior's (marginal-MAP rows only).
+    ``rows``: one dict per scenario with keys ``config`` (its config entry), ``scenario``,
+    ``T``, ``paper_ref``, ``joint`` (joint_map summary), ``marginal`` (gather_nuts summary,
+    may be None) and ``exact`` (exact_marginal summary at its K, may be None):
+    ``<comp>_ours`` is Stan + KDE, ``<comp>_exact`` the exact marginal posterior's
+    (marginal-MAP rows only).  A scenario whose posterior is improper leaves its Stan cells
+    empty and says why in ``improper``; ``propriety``: the analysis (the project's when None).
     """
     out = []
-    for r in sorted(rows, key=lambda r: r["T"]):
+    notes: list[PosteriorNote] = []
+    ordered = sorted(rows, key=lambda r: r["T"])
+    for r, note in zip(ordered, _notes(ordered, propriety), strict=True):
         pv = paper.get(r["paper_ref"], {})
         for est_key, stage, est_name in (
             ("joint", "joint", "joint MAP"),
@@ -110,14 +133,17 @@ def table_ii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                     "estimator": est_name,
                     "statistic": stat_name,
                 }
+                hidden = stage == "stan" and note.is_improper
                 for comp in ("a", "x0"):
-                    ours = summ.stat(comp, stat)
+                    ours = math.nan if hidden else summ.stat(comp, stat)
                     ref = _get(pv, est_key, stat, comp)
                     row[f"{comp}_ours"] = ours
                     row[f"{comp}_exact"] = exact.stat(comp, stat)
                     row[f"{comp}_paper"] = _num(ref)
                     row[f"{comp}_rel_diff"] = rel_diff(ours, ref)
                 out.append(row)
+                notes.append(note)
+    add_note_columns(out, notes)
     return pd.DataFrame(out)
 
 
@@ -136,17 +162,22 @@ def _table_iii_value(summary: EstimatorSummary, comp: str | None, stat: str) -> 
     return summary.states(stat) if comp is None else summary.stat(comp, stat)
 
 
-def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+def table_iii(
+    rows: Iterable[dict], paper: Mapping, *, propriety: ProprietyAnalysis | None = None
+) -> pd.DataFrame:
     """Table III: Cover90 of (a, x0), mean over t of Cover90(x_t), |Bias(x_t)|, MSE(x_t);
     ``ours`` = Stan + KDE, ``exact`` = exact marginal posteriors (over ``n_exact`` of
-    ``K_exact`` trajectories)."""
+    ``K_exact`` trajectories).  A scenario whose posterior is improper leaves ``ours``,
+    ``rel_diff`` and ``K_stan`` empty and says why in ``improper``."""
     out = []
-    for r in sorted(rows, key=lambda r: r["T"]):
+    notes: list[PosteriorNote] = []
+    ordered = sorted(rows, key=lambda r: r["T"])
+    for r, note in zip(ordered, _notes(ordered, propriety), strict=True):
         pv = paper.get(r["paper_ref"], {})
         summ = EstimatorSummary.read("stan", r.get("marginal"))
         exact = EstimatorSummary.read("exact", r.get("exact"))
         for label, (comp, stat), ref_path in TABLE_III:
-            ours = _table_iii_value(summ, comp, stat)
+            ours = math.nan if note.is_improper else _table_iii_value(summ, comp, stat)
             ref = _get(pv, *ref_path)
             out.append(
                 {
@@ -157,11 +188,13 @@ def table_iii(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                     "exact": _table_iii_value(exact, comp, stat),
                     "paper": _num(ref),
                     "rel_diff": rel_diff(ours, ref),
-                    "K_stan": summ.count if summ.present else None,
+                    "K_stan": summ.count if summ.present and not note.is_improper else None,
                     "K_exact": exact.get("K"),
                     "n_exact": exact.count if exact.present else None,
                 }
             )
+            notes.append(note)
+    add_note_columns(out, notes)
     return pd.DataFrame(out)
 
 
@@ -180,7 +213,30 @@ def _multi_start_rows(rows: list[dict]) -> bool:
     return any("K_max_unique" in (r.get("joint") or {}) for r in rows)
 
 
-def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+#: the Section IV summary's columns that hold a Stan result (a prefix ends in "_")
+STAN_RESULT_COLUMNS = (
+    "K_stan",
+    "K_stan_frac",
+    "K_stan_frac_lo95",
+    "K_stan_frac_hi95",
+    "K_stan_frac_rel_diff",
+    "mean_cover90_states",
+    "mean_abs_bias_states",
+    "mean_mse_states",
+    "marginal_",
+    "cover90_",
+)
+
+
+def _is_stan_result(column: str) -> bool:
+    return any(
+        column.startswith(c) if c.endswith("_") else column == c for c in STAN_RESULT_COLUMNS
+    )
+
+
+def section_iv(
+    rows: Iterable[dict], paper: Mapping, *, propriety: ProprietyAnalysis | None = None
+) -> pd.DataFrame:
     """One row per scenario: settings, |K^max| and |K^Stan| (ours and the paper's, also as
     fractions of K, since our K may be smaller than the paper's) and the estimator
     properties of every Omega component and x0; ``exact_*`` columns: the exact marginal
@@ -193,11 +249,18 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
     distinct maximum that passes the checks, from enough starts), ``K_max_undetermined``
     (one maximum, from too few passing starts), ``K_max_several`` and
     ``K_paper_start_highest``, and the fraction ``K_max_unique_frac`` with its interval
-    (NaN for single-start scenarios); without any, these columns are absent."""
+    (NaN for single-start scenarios); without any, these columns are absent.
+
+    A scenario whose posterior is improper (``propriety``, the project's analysis when
+    None) has its Stan results (:data:`STAN_RESULT_COLUMNS`) empty and the reason in
+    ``improper``; ``K_stan_runs`` still counts the runs.  The exact columns stay: they
+    describe the posterior restricted to the basin of its interior maximum
+    (:mod:`ssmobs.exact.marginal`)."""
     rows = list(rows)
     multi = _multi_start_rows(rows)
+    notes = _notes(rows, propriety)
     out = []
-    for r in rows:
+    for r, note in zip(rows, notes, strict=True):
         sc = r["config"]
         joint = EstimatorSummary.read("joint", r.get("joint"))
         marg = EstimatorSummary.read("stan", r.get("marginal"))
@@ -269,23 +332,31 @@ def section_iv(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
         row["exact_mean_cover90_states"] = ex.states("cover90")
         row["exact_mean_abs_bias_states"] = ex.states("abs_bias")
         row["exact_mean_mse_states"] = ex.states("mse")
+        if note.is_improper:
+            row.update({k: math.nan for k in row if _is_stan_result(k)})
         out.append(row)
+    add_note_columns(out, notes)
     return pd.DataFrame(out)
 
 
-def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
+def section_iv_compact(
+    rows: Iterable[dict], paper: Mapping, *, propriety: ProprietyAnalysis | None = None
+) -> pd.DataFrame:
     """The Section IV summary a person reads: one row per scenario with T, K, |K^max|/K and
     |K^Stan|/K with their exact binomial 95 % intervals beside the paper's (at the paper's
     K; ours over the Stan runs, K or every ``stan_every``-th of the K), and the
     marginal-MAP mean and Cover90 of every component of Omega and x0 (over K^Stan).  The
     wide table (:func:`section_iv`) holds everything else.  When a scenario's joint MAP ran
-    from several starts, |K^max_unique|/K with its interval stands beside |K^max|/K."""
+    from several starts, |K^max_unique|/K with its interval stands beside |K^max|/K.  A
+    scenario whose posterior is improper says "not shown: improper" in its Stan cells and
+    why in ``improper``; ``edge`` notes an end-of-support finding (numbers kept)."""
     from ..models import get_model
 
     rows = list(rows)
     multi = _multi_start_rows(rows)
+    notes = _notes(rows, propriety)
     out = []
-    for r in rows:
+    for r, note in zip(rows, notes, strict=True):
         sc = r["config"]
         joint = EstimatorSummary.read("joint", r.get("joint"))
         marg = EstimatorSummary.read("stan", r.get("marginal"))
@@ -315,6 +386,10 @@ def section_iv_compact(rows: Iterable[dict], paper: Mapping) -> pd.DataFrame:
                 "Cover90": _per_component(marg, comps, "cover90"),
             }
         )
+        if note.is_improper and sc["stan"]:
+            for column in ("K^Stan/K (95 % CI)", "marginal MAP mean", "Cover90"):
+                out[-1][column] = NOT_SHOWN_IMPROPER
+    add_note_columns(out, notes)
     return pd.DataFrame(out)
 
 
