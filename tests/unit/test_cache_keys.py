@@ -854,3 +854,91 @@ def test_a_generated_programs_keys_do_not_follow_the_gradient_switch(tmp_path, m
     assert a.check_model("same_T4", stan=True) == b.check_model("same_T4", stan=True)
     own = keys(smoke()), keys(smoke("analytic"))  # stan/same.stan of the repository
     assert own[0].nuts_records("same_T4") != own[1].nuts_records("same_T4")
+
+
+# ---------------------------------------------------------------- dynamic imports (issue 61)
+#: a one-file model (no stan/<model>.stan) whose helper, outside the package, is imported by
+#: each form a model may use: the helper's edit must move its keys
+DYNAMIC_IMPORTS = {
+    "import_module": "import importlib\nhelper = importlib.import_module('dynhelper_k61')\n",
+    "from_importlib": (
+        "from importlib import import_module\nhelper = import_module('dynhelper_k61')\n"
+    ),
+    "__import__": "helper = __import__('dynhelper_k61')\n",
+    "inside_a_function": (
+        "def helper_scale():\n    import dynhelper_k61\n    return dynhelper_k61.SCALE\n"
+    ),
+    "__import__fromlist": "pkg = __import__('dynpkg_k61', fromlist=['dynhelper_k61'])\n",
+}
+
+
+def _dynamic_model(header: str) -> dict[str, str]:
+    return {
+        "models/dyn61.py": header
+        + "from .same import Same\n\n\nclass Dyn61(Same):\n    slug = 'dyn61'\n"
+    }
+
+
+@pytest.mark.parametrize("form", sorted(DYNAMIC_IMPORTS))
+def test_a_helper_imported_by_any_form_keys_the_model(tmp_path, monkeypatch, form):
+    """Found stale before (issue 61): a model loading its helper with
+    ``importlib.import_module("myhelper")`` kept its numbers after the helper was edited."""
+    package = _write(_workflow_copy(tmp_path), _dynamic_model(DYNAMIC_IMPORTS[form]))
+    user = tmp_path / "userlib"
+    helper = "dynpkg_k61/dynhelper_k61.py" if "fromlist" in form else "dynhelper_k61.py"
+    _write(user, {helper: "SCALE = 1.0\n", "dynpkg_k61/__init__.py": ""})
+    monkeypatch.syspath_prepend(str(user))
+    (tmp_path / "stan").mkdir()  # a one-file model: its program is generated
+    conf = smoke()
+    next(sc for sc in conf["scenarios"] if sc["name"] == "same_T4")["model"] = "dyn61"
+
+    def model_keys():
+        module_closure.cache_clear()
+        k = keys(conf, repo=tmp_path, package_dir=package)
+        return k.model_code("dyn61"), k.trajectories("same_T4"), k.nuts_records("same_T4")
+
+    before = model_keys()
+    name = "dynpkg_k61.dynhelper_k61" if "fromlist" in form else "dynhelper_k61"
+    assert f"import:{name}" in before[0]
+    (user / helper).write_text("SCALE = 1.5\n")
+    after = model_keys()
+    assert before[1] != after[1] and before[2] != after[2]
+
+
+def test_a_package_helper_imported_relative_to_the_model_keys_it(tmp_path):
+    package = _write(
+        _workflow_copy(tmp_path),
+        {
+            **_dynamic_model(
+                "import importlib\nmix = importlib.import_module('._mix', __package__)\n"
+            ),
+            "models/_mix.py": "SCALE = 1.0\n",
+        },
+    )
+    conf = smoke()
+    next(sc for sc in conf["scenarios"] if sc["name"] == "same_T4")["model"] = "dyn61"
+    module_closure.cache_clear()
+    assert "models/_mix.py" in keys(conf, repo=tmp_path, package_dir=package).model_code("dyn61")
+
+
+@pytest.mark.parametrize(
+    "header",
+    [
+        "import importlib\nNAME = 'dynhelper_k61'\nhelper = importlib.import_module(NAME)\n",
+        "import os\nhelper = __import__(os.environ.get('HELPER', 'dynhelper_k61'))\n",
+        "import runpy\nhelper = runpy.run_path('dynhelper_k61.py')\n",
+    ],
+)
+def test_an_import_that_cannot_be_followed_is_refused_naming_the_module_and_line(tmp_path, header):
+    from ssmobs.code_hashing import DynamicImportError
+
+    package = _write(_workflow_copy(tmp_path), _dynamic_model(header))
+    conf = smoke()
+    next(sc for sc in conf["scenarios"] if sc["name"] == "same_T4")["model"] = "dyn61"
+    module_closure.cache_clear()
+    line = header.count("\n")  # the call is on the header's last line
+    with pytest.raises(DynamicImportError) as err:
+        keys(conf, repo=tmp_path, package_dir=package).model_code("dyn61")
+    message = str(err.value)
+    assert "ssmobs.models.dyn61" in message and f"line {line})" in message
+    assert "\n" not in message

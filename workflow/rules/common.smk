@@ -16,6 +16,7 @@ from ssmobs.models import ModelDefinitionError  # noqa: E402
 from ssmobs.run_paths import MAP_CELLS_DIR, RunPaths  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
+from ssmobs.code_hashing import DynamicImportError  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
 from ssmobs.config.preflight import lock_holders, use_package_of, write_problem  # noqa: E402
 
@@ -74,7 +75,10 @@ EXACT_VS_STAN_SCENARIOS = PATHS.exact_vs_stan_scenarios
 #: the design sets of this config's design settings and code
 DESIGN_DIR = PATHS.design_dir
 #: every cell of every observability map with its key (issue 21); every other key up front
-MAP_CELLS = PATHS.compute_every_key()
+try:  # a model whose code imports by a form that cannot be followed cannot be keyed
+    MAP_CELLS = PATHS.compute_every_key()
+except DynamicImportError as err:
+    raise WorkflowError(str(err)) from None
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
 STAMPS = {}
 #: stamps of rules made on request only (not targets of `all`), with their current keys

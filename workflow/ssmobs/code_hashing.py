@@ -11,6 +11,11 @@ ignores its docstrings: what keys a result by the code that made it.
   environment (:func:`environment_dirs`) that package modules import, directly or not (a
   user's helper module on ``PYTHONPATH``, a module of the project tree).
 
+Imports are read wherever they run: import statements at the top level and inside
+functions, and ``importlib.import_module`` / ``__import__`` of a string literal
+(:func:`dynamic_import`); a model's code that imports by a name that is no literal cannot
+be keyed and is refused (:func:`refuse_unfollowable_imports`).
+
 Nothing here knows the workflow: the package's directory and the modules to leave out are
 arguments (:mod:`ssmobs.cache_keys` names the workflow's).
 """
@@ -114,6 +119,99 @@ def _runtime_nodes(tree: ast.Module, functions: frozenset[str] | None) -> list[a
     return nodes
 
 
+class DynamicImportError(ValueError):
+    """A module imports code by a form that cannot be followed (a non-literal name), so the
+    code it runs cannot be keyed; the message names the file and line."""
+
+
+#: calls that import the module their first argument names (``importlib.import_module``,
+#: ``__import__``): followed where that name is a string literal
+_IMPORT_CALLS = frozenset({"import_module", "__import__"})
+#: calls that load code no literal module name shows (a file path, a loader)
+_LOADER_CALLS = frozenset({"spec_from_file_location", "SourceFileLoader", "run_path"})
+
+
+def _argument(call: ast.Call, position: int, keyword: str) -> ast.expr | None:
+    """The argument of ``call`` at ``position`` or named ``keyword``, or None."""
+    if len(call.args) > position:
+        return call.args[position]
+    return next((k.value for k in call.keywords if k.arg == keyword), None)
+
+
+def _literal(node: ast.expr | None) -> object:
+    return node.value if isinstance(node, ast.Constant) else None
+
+
+def _called_name(call: ast.Call) -> str | None:
+    func = call.func
+    if isinstance(func, ast.Name):
+        return func.id
+    return func.attr if isinstance(func, ast.Attribute) else None
+
+
+def dynamic_import(call: ast.Call) -> list[tuple[int, str]] | None:
+    """What the call ``call`` imports: [] for a call that imports nothing, a list of
+    (level, name) for ``importlib.import_module`` or ``__import__`` of a string literal
+    (level > 0: relative to the calling module's package, as ``__package__`` or a literal
+    package names it; a literal package resolves the name, level 0), None for an import or
+    a load that cannot be followed (a name that is no literal, a file loader)."""
+    called = _called_name(call)
+    if called in _LOADER_CALLS:
+        return None
+    if called not in _IMPORT_CALLS:
+        return []
+    name = _literal(_argument(call, 0, "name"))
+    if not isinstance(name, str) or not name.strip("."):
+        return None
+    level = len(name) - len(name.lstrip("."))
+    name = name.lstrip(".")
+    if called == "__import__":
+        level_arg = _argument(call, 4, "level")
+        given = 0 if level_arg is None else _literal(level_arg)
+        if not isinstance(given, int) or isinstance(given, bool):
+            return None
+        level = given
+        fromlist = _argument(call, 3, "fromlist")
+        names = [] if fromlist is None else getattr(fromlist, "elts", None)
+        if names is None or not all(isinstance(_literal(n), str) for n in names):
+            return None
+        return [(level, name), *((level, f"{name}.{_literal(n)}") for n in names)]
+    if level:
+        package = _argument(call, 1, "package")
+        if isinstance(package, ast.Name) and package.id in ("__package__", "__name__"):
+            return [(level, name)]
+        anchor = _literal(package)
+        if not isinstance(anchor, str):
+            return None
+        parts = anchor.split(".")
+        return [(0, ".".join([*parts[: len(parts) - (level - 1)], name]))]
+    return [(0, name)]
+
+
+def unfollowable_imports(path: str | Path) -> list[int]:
+    """The lines of ``path`` that import or load code by a form :func:`dynamic_import`
+    cannot follow (anywhere in its code but under ``if TYPE_CHECKING:``)."""
+    tree = ast.parse(Path(path).read_bytes(), filename=str(path))
+    return sorted(
+        node.lineno
+        for node in _walk(tree.body)
+        if isinstance(node, ast.Call) and dynamic_import(node) is None
+    )
+
+
+def refuse_unfollowable_imports(path: str | Path, module: str) -> None:
+    """Raise :class:`DynamicImportError` (one line naming ``module``, its file and line)
+    when ``path`` imports code by a form that cannot be followed, so cannot be keyed."""
+    lines = unfollowable_imports(path)
+    if lines:
+        raise DynamicImportError(
+            f"module {module} ({path}, line {lines[0]}) imports or loads code by a name that "
+            f"is no string literal, so the code it runs cannot be keyed and its results could "
+            f"be reused after that code changed: import it with an import statement or "
+            f"importlib.import_module('<name>')"
+        )
+
+
 #: one import statement where a module's code runs: ("from", level, module, names) or
 #: ("import", 0, None, names)
 _ImportSpec = tuple[str, int, str | None, tuple[str, ...]]
@@ -138,6 +236,12 @@ def _import_specs(
                 specs.append(("from", node.level, node.module, names))
             elif isinstance(node, ast.Import):
                 specs.append(("import", 0, None, tuple(alias.name for alias in node.names)))
+            elif isinstance(node, ast.Call):  # importlib.import_module("..."), __import__
+                for level, name in dynamic_import(node) or []:
+                    if level:
+                        specs.append(("from", level, name, ()))
+                    else:
+                        specs.append(("import", 0, None, (name,)))
         _IMPORT_SPECS[key] = tuple(specs)
     return _IMPORT_SPECS[key]
 
@@ -243,25 +347,30 @@ def imported_names(path: str | Path, module: str, is_package: bool = False) -> s
         parts = name.split(".")
         names.update(".".join(parts[: i + 1]) for i in range(len(parts)))
 
+    def relative(level: int, name: str | None) -> str:
+        anchor = package.split(".") if package else []
+        anchor = anchor[: len(anchor) - (level - 1)] if level > 1 else anchor
+        if not anchor:  # beyond the top level: the import fails where it runs
+            return ""
+        return ".".join([*anchor, *([name] if name else [])])
+
     for node in _walk(tree.body):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 add(alias.name)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                anchor = package.split(".") if package else []
-                anchor = anchor[: len(anchor) - (node.level - 1)] if node.level > 1 else anchor
-                if not anchor:  # beyond the top level: the import fails where it runs
-                    continue
-                base = ".".join([*anchor, *([node.module] if node.module else [])])
-            else:
-                base = node.module or ""
+            base = relative(node.level, node.module) if node.level else node.module or ""
             if not base:
                 continue
             add(base)
             for alias in node.names:
                 if alias.name != "*":
                     names.add(f"{base}.{alias.name}")
+        elif isinstance(node, ast.Call):  # importlib.import_module("..."), __import__
+            for level, name in dynamic_import(node) or []:
+                target = relative(level, name) if level else name
+                if target:
+                    add(target)
     return names
 
 
@@ -305,7 +414,10 @@ def outside_modules(
     """What code ``modules`` (name, file, is a package) of ``package`` run outside it and
     outside the pinned ``environment`` folders: every module they import, directly or through
     each other, whose file lies elsewhere (a user's own module on ``PYTHONPATH``, a module of
-    the project tree), by name; and the names of ``package``'s modules those import."""
+    the project tree), by name; and the names of ``package``'s modules those import.  Import
+    statements anywhere in a module count, and so do ``importlib.import_module`` and
+    ``__import__`` of a string literal; a module of ``modules`` or outside that imports by a
+    form that cannot be followed is refused (:func:`refuse_unfollowable_imports`)."""
     env = tuple(environment)
     outside: dict[str, Path] = {}
     own: set[str] = set()
@@ -316,6 +428,7 @@ def outside_modules(
         if name in seen:
             continue
         seen.add(name)
+        refuse_unfollowable_imports(path, name)
         for imported in sorted(imported_names(path, name, is_package)):
             top = imported.partition(".")[0]
             if top == package:
