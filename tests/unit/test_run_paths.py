@@ -212,6 +212,9 @@ def test_the_targets_are_every_stage_and_output_of_the_config(smoke):
     assert {smoke.joint_summary(n) for n in smoke.joint_scenarios} <= set(targets)
     assert {smoke.stan_summary(n) for n in smoke.stan_scenarios} <= set(targets)
     assert {smoke.exact_summary(n) for n in smoke.exact_scenarios} <= set(targets)
+    # every model check, also where what it gates is cached (issue 61: a changed prior)
+    assert {smoke.check(n) for n in smoke.scenarios} <= set(targets)
+    assert {smoke.check(n, stan=True) for n in smoke.stan_scenarios} <= set(targets)
     out = smoke.outputs_dir
     for name in smoke.maps:
         assert f"{out}/map_{name}.png" in targets

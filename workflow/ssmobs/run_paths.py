@@ -372,6 +372,10 @@ class RunPaths:
         (intermediate outputs of this config found damaged, made again in this run)."""
         out = self.outputs_dir
         targets = [self.trajectories(name) for name in self.scenarios] + list(damaged)
+        # every model check of this config, also where the outputs it gates exist: a config
+        # is accepted or refused alike on a fresh clone and on any cache
+        targets += [self.check(name) for name in self.scenarios]
+        targets += [self.check(name, stan=True) for name in self.stan_scenarios]
         targets += [self.joint_summary(name) for name in self.joint_scenarios]
         targets += [self.stan_summary(name) for name in self.stan_scenarios]
         for name in self.k_selections:
