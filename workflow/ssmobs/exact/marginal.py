@@ -36,6 +36,16 @@ maximum (the box of step 3 stops at the valley between it and the improper bound
 the boundary, relative to the basin's (along the axis through the mode), so a user sees
 where the interior basin does not dominate.
 
+Interior singularities.  Where a prior support contains a point at which x_0 drops out of
+the likelihood (a coefficient that carries x_0 is 0 there, as a in Sep with an unrestricted
+prior, or two components become indistinguishable, as c = d in (Sep, d=1, p=2)), p(Omega |
+z) diverges at that point inside the support.  :func:`ssmobs.exact.boundaries.interior_dropouts`
+finds it on each bounded axis through the mode (the rank of the observability matrix of
+x_0), the slope toward it is measured as at the ends, and where it is improper the box stops
+at the valley between it and the mode: the marginal MAP and quantiles are those of the
+interior maximum's basin, never of the spike, and ``spike_ratio`` counts the spike's mass
+on the mode's side.
+
 The steps live in their own modules: the grid over Omega (steps 1-3) in
 :mod:`ssmobs.exact.omega_grid`, the state mixtures (step 4) in
 :mod:`ssmobs.exact.state_mixtures`, the boundary slopes and the valley limits in
@@ -52,7 +62,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..models import PriorBounds, StateSpaceModel
-from .boundaries import boundary_slopes, improper, valley_limits
+from .boundaries import (
+    boundary_slopes,
+    improper,
+    interior_dropouts,
+    interior_slopes,
+    interior_valleys,
+    valley_limits,
+)
 from .omega_grid import (
     coarse_search,
     fine_grid,
@@ -88,6 +105,10 @@ class ExactResult:
     slopes_lower: np.ndarray  # (K, m) d log p / d log(distance to lower boundary)
     slopes_upper: np.ndarray  # (K, m)
     info: dict
+    #: (K, m) where x0 drops out inside the support along each axis (NaN: nowhere), and the
+    #: slope toward it; None for a scenario without any such point
+    interior_points: np.ndarray | None = None
+    slopes_interior: np.ndarray | None = None
 
     def to_frame(self, model: StateSpaceModel) -> pandas.DataFrame:
         """One row per trajectory, columns like the Stan stage's gather table:
@@ -98,7 +119,11 @@ class ExactResult:
         negligible against the interior mode's basin; reported, not used as a filter),
         ``n_local_max``, ``box_truncated``, ``improper_lower_<p>``/``improper_upper_<p>``,
         ``slope_lower_<p>``/``slope_upper_<p>``, ``mode_<p>``, ``laplace_sd_<p>`` and
-        ``<name>_map``/``_q5``/``_q95`` for every component of Theta."""
+        ``<name>_map``/``_q5``/``_q95`` for every component of Theta.  Where x0 drops out
+        of the likelihood inside the support (:func:`ssmobs.exact.boundaries.interior_dropouts`)
+        for some trajectory, also ``interior_<p>`` (the point, NaN: none on that axis),
+        ``slope_interior_<p>`` and ``improper_interior_<p>`` (the marginal is not integrable
+        there: the estimates are those of the interior maximum's basin)."""
         import pandas as pd
 
         K = self.theta_map.shape[0]
@@ -121,6 +146,12 @@ class ExactResult:
             )
             cols[f"mode_{pname}"] = self.joint_mode[:, i]
             cols[f"laplace_sd_{pname}"] = self.laplace_sd[:, i]
+        if self.interior_points is not None and self.slopes_interior is not None:
+            for i, pname in enumerate(model.param_names):
+                slope = self.slopes_interior[:, i]
+                cols[f"interior_{pname}"] = self.interior_points[:, i]
+                cols[f"slope_interior_{pname}"] = slope
+                cols[f"improper_interior_{pname}"] = improper(slope, finite=True)
         for j, name in enumerate(self.theta_names):
             cols[f"{name}_map"] = self.theta_map[:, j]
             cols[f"{name}_q5"] = self.theta_q5[:, j]
@@ -191,6 +222,24 @@ def exact_marginal(
         (cut_lower, cut_upper),
         settings=settings,
     )
+    # x0 dropping out inside the support: a spike the basin must stop short of, as at the ends
+    inner = interior_dropouts(model, bounds, mode, settings.margin)
+    found_inner = bool(np.isfinite(inner).any())
+    slopes_inner = interior_slopes(model, z, bounds, mode, inner) if found_inner else None
+    if slopes_inner is not None:
+        lim_lo, lim_hi, inner_ratio = interior_valleys(
+            model,
+            axes,
+            z,
+            bounds,
+            u,
+            H,
+            inner,
+            slopes_inner,
+            (lim_lo, lim_hi),
+            settings=settings,
+        )
+        spike_ratio = np.maximum(spike_ratio, inner_ratio)
     lpu, lo_box, hi_box, truncated = fine_grid(
         model, axes, z, bounds, u, sd, lim_lo, lim_hi, settings=settings
     )
@@ -229,4 +278,6 @@ def exact_marginal(
         slopes_lower=slopes_lower,
         slopes_upper=slopes_upper,
         info=info,
+        interior_points=inner if found_inner else None,
+        slopes_interior=slopes_inner,
     )

@@ -26,7 +26,8 @@ def exact_summary(
 ) -> dict:
     """The Stan stage's statistics (:func:`ssmobs.nuts.stan_metrics.stan_summary`, over the
     trajectories with a unique interior maximum) plus Definition 3's counts and the share of
-    trajectories whose posterior is improper at each boundary."""
+    trajectories whose posterior is improper at each boundary and, where x0 drops out inside
+    the support, at that point (``improper_interior_<p>_share``, ``interior_<p>_median``)."""
     from ..exact.marginal import MAXIMA_KINDS
     from ..nuts.stan_metrics import stan_summary
 
@@ -43,6 +44,14 @@ def exact_summary(
             slopes = frame[f"slope_{side}_{name}"].to_numpy(dtype=float)
             info[f"slope_{side}_{name}_median"] = (
                 float(np.nanmedian(slopes)) if np.isfinite(slopes).any() else math.nan
+            )
+        if f"improper_interior_{name}" in frame.columns:  # x0 drops out inside the support
+            info[f"improper_interior_{name}_share"] = float(
+                frame[f"improper_interior_{name}"].mean()
+            )
+            points = frame[f"interior_{name}"].to_numpy(dtype=float)
+            info[f"interior_{name}_median"] = (
+                float(np.nanmedian(points)) if np.isfinite(points).any() else math.nan
             )
     return info
 
