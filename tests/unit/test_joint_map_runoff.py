@@ -72,3 +72,29 @@ def test_runoff_direction_names_the_fastest_changing_components():
     after[2:] = [0.01, 0.02, -0.02]  # log ratios -2.3 for x0 and x
     assert runoff_direction(model, before, after) == "b -> +inf, x0 -> 0, x -> 0"
     assert runoff_direction(model, before, before) == ""
+
+
+@pytest.mark.parametrize("limit", [1e4, 1e6])
+def test_a_ridge_that_passes_the_divergence_limit_is_a_ridge_wherever_the_limit_cuts(limit):
+    """Issue 60: passing |Theta| > divergence_limit is no gain.  Along the Ricker model's
+    exact ridge runs pass any limit (c -> +inf, x -> -inf) without the density rising; the
+    continued run measures -2 pi and finds the flat direction.  Before, trajectory 13 of
+    this set said ``unbounded`` at the default limit, and which ones did depended on where
+    the limit cut the run."""
+    model = Ricker()
+    omega, x0 = np.array([1.0, 0.1, 1.0]), np.array([2.0])
+    z = trajectories(model, omega, x0, T=50, K=20, seed=1)
+    res = joint_map(
+        model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(divergence_limit=limit)
+    )
+    assert Counter(res.status) == {"ridge": 20}
+    passed = [k for k in range(20) if "passed divergence_limit" in res.reason[k]]
+    assert 13 in passed  # |Theta| passed the limit, and the label is still ridge
+    assert len(passed) >= (2 if limit < 1e5 else 1)
+
+
+def test_runoff_settings_are_checked():
+    with pytest.raises(ValueError, match="runoff_margin"):
+        JointMapSettings(runoff_margin=0.5)
+    with pytest.raises(ValueError, match="runoff_reach"):
+        JointMapSettings(runoff_reach=float("inf"))

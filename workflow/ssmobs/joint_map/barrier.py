@@ -267,13 +267,23 @@ def minimize_barrier(
     barrier: LogBarrier,
     settings: JointMapSettings,
     mu_start: float | np.ndarray,
+    divergence_limit: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Batched primal barrier-Newton minimisation of -2 pi from ``theta0`` (module docstring).
 
+    ``divergence_limit``: optional (K,) limit of |Theta|_inf per trajectory instead of
+    ``settings.divergence_limit`` (the continued runs of
+    :func:`ssmobs.joint_map.checks.runoff_check`).
     Returns theta (K, n), iterations (K,), final mu (K,) and the stop reason (K,) str:
     converged, max-iter, line-search, non-finite, diverged, at-boundary.
     """
     K, n = theta0.shape
+    limit = np.broadcast_to(
+        np.asarray(
+            settings.divergence_limit if divergence_limit is None else divergence_limit, float
+        ),
+        (K,),
+    )
     m = model.n_params
     theta = theta0.astype(float).copy()
     mu = np.broadcast_to(np.asarray(mu_start, dtype=float), (K,)).copy()
@@ -366,7 +376,7 @@ def minimize_barrier(
         reason[idx[stuck]] = "line-search"
         active[idx[stuck]] = False
         iters[idx[accepted]] += 1
-        big = np.abs(theta[idx]).max(axis=1) > settings.divergence_limit
+        big = np.abs(theta[idx]).max(axis=1) > limit[idx]
         reason[idx[big]] = "diverged"
         active[idx[big]] = False
         s_now = barrier.slacks(theta[idx, :m])

@@ -5,10 +5,13 @@ The checks are applied in this order (the first that applies wins):
 ``failed``
     value, gradient, Hessian or Theta_hat not finite (reason in ``reason``).
 ``unbounded``
-    the iterates ran off to infinity (``|Theta|_inf`` above ``divergence_limit``), or a run
-    that did not converge still gains while running outward (``gradient`` below): the
-    supremum is approached at infinity, and there is no maximum.  The reason names the
-    direction (``b -> +inf``).
+    a run that did not converge (stopped by the iteration limit or the line search, or past
+    ``divergence_limit``) still gains when followed (:func:`runoff_check`): -2 pi falls by
+    more than ``ridge_value_tol (1 + |-2 pi|)`` in each of two continued segments while a
+    magnitude grows by 10 % at least: the supremum is approached at infinity, and there is
+    no maximum.  The reason names the direction (``b -> +inf``) and the two gains.  Passing
+    ``divergence_limit`` alone is not enough: a run along a ridge passes it too (it is then
+    ``ridge``, or ``boundary`` or ``gradient`` by what the continued run shows).
 ``boundary``
     the optimum lies on the boundary of the prior's support: a slack below
     ``boundary_tol``, or (for a converged run) a barrier multiplier mu / s_i above
@@ -23,11 +26,14 @@ The checks are applied in this order (the first that applies wins):
     A run stopped by ``max_newton_iter`` or the line search is followed for up to two
     segments of ``runoff_iter`` more iterations (:func:`runoff_check`) to say why it did
     not converge:
-    ``unbounded`` (with the direction) if -2 pi keeps decreasing while Theta moves outward
-    (some component grows in magnitude), as at a supremum at infinity of any size;
+    ``unbounded`` (with the direction) if -2 pi keeps decreasing while Theta moves outward,
+    as at a supremum at infinity of any size;
     ``ridge`` if the continued run converges to a point whose checks find a ridge (a flat
-    direction, e.g. an exact invariance of the density), or moves without changing -2 pi;
-    else it stays ``gradient`` (the reason says whether it converges with more iterations).
+    direction, e.g. an exact invariance of the density), or moves without changing -2 pi
+    (by at most ``ridge_value_tol (1 + |-2 pi|) / runoff_margin``: a margin of 100 below
+    the gain that counts, so that rounding moves no run between the two labels);
+    ``boundary`` if it ends on the boundary; else it stays ``gradient`` (the reason says
+    whether it converges with more iterations).
 ``ridge``
     eigenvalue ratio lambda_min / lambda_max below ``eig_ratio_min`` (r_0 = 1e-5) and a new
     optimisation started at Theta_hat + h v_min (v_min the unit eigenvector of the smallest
@@ -38,7 +44,7 @@ The checks are applied in this order (the first that applies wins):
     all checks passed: k belongs to K^max.
 
 ``STATUSES`` lists them; ``unbounded`` and the ``ridge`` of a run that did not converge
-(issue 47) replace what was ``boundary`` (ran off past ``divergence_limit``) and
+(issues 47, 60) replace what was ``boundary`` (ran off past ``divergence_limit``) and
 ``gradient`` (max-iter): neither is ever ``ok``, so K^max is the same.
 
 Eigenvalues: lambda_max by Lanczos on H, lambda_min and v_min by Lanczos on H^{-1} (applied
@@ -147,11 +153,11 @@ def check_maxima(
         "failed",
         lambda k: f"non-finite value/gradient/Hessian at the result (optimiser stop: {stop[k]})",
     )
-    assign(
+    assign(  # until the continued run (runoff_check) has measured a gain
         stop == "diverged",
         "unbounded",
         lambda k: (
-            f"iterates ran off to infinity (|Theta|_inf > {settings.divergence_limit:g}): "
+            f"iterates passed divergence_limit (|Theta|_inf > {settings.divergence_limit:g}): "
             + beyond_limit(model, theta[k], settings.divergence_limit)
         ),
     )
@@ -186,10 +192,13 @@ def check_maxima(
         ),
     )
 
-    slow = np.flatnonzero((status == "gradient") & np.isin(stop, ("max-iter", "line-search")))
+    slow = np.flatnonzero(
+        ((status == "gradient") & np.isin(stop, ("max-iter", "line-search")))
+        | ((status == "unbounded") & (stop == "diverged"))
+    )
     if follow_runoff and slow.size:
         new_status, new_reason = runoff_check(
-            model, z[slow], theta[slow], f[slow], barrier, settings
+            model, z[slow], theta[slow], f[slow], barrier, settings, stop[slow] == "diverged"
         )
         for j, k in enumerate(slow):
             status[k] = new_status[j]
@@ -280,22 +289,34 @@ def beyond_limit(model: StateSpaceModel, theta: np.ndarray, limit: float) -> str
     return ", ".join(parts) or "no component"
 
 
-def runoff_direction(model: StateSpaceModel, before: np.ndarray, after: np.ndarray) -> str:
-    """Where one Theta ran in a continued run: the components of Omega and x_0, and the
-    states' largest magnitude (``x``), whose magnitude changed fastest (log ratio at least
-    half the largest and above log 1.1), as ``b -> +inf`` (growing), ``x -> inf`` or
-    ``x0 -> 0`` (shrinking)."""
+#: a component "runs" (outward or towards 0) in a continued run when its magnitude changes
+#: by at least this factor (:func:`runoff_direction`, :func:`runoff_check`)
+RUNOFF_FACTOR = 1.1
+
+
+def magnitude_changes(model: StateSpaceModel, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """log(|after| / |before|) of each component of Omega and x_0 and of the states' largest
+    magnitude (last), 0 where not finite."""
     head = model.n_params + model.state_dim
-    names = [*model.theta_names(0), "x"]
     with np.errstate(all="ignore"):
         mags_before = np.append(np.abs(before[:head]), np.abs(before[head:]).max(initial=0.0))
         mags_after = np.append(np.abs(after[:head]), np.abs(after[head:]).max(initial=0.0))
         change = np.log(mags_after / mags_before)
-    change = np.where(np.isfinite(change), change, 0.0)
+    return np.where(np.isfinite(change), change, 0.0)
+
+
+def runoff_direction(model: StateSpaceModel, before: np.ndarray, after: np.ndarray) -> str:
+    """Where one Theta ran in a continued run: the components of Omega and x_0, and the
+    states' largest magnitude (``x``), whose magnitude changed fastest (log ratio at least
+    half the largest and above log ``RUNOFF_FACTOR``), as ``b -> +inf`` (growing),
+    ``x -> inf`` or ``x0 -> 0`` (shrinking)."""
+    head = model.n_params + model.state_dim
+    names = [*model.theta_names(0), "x"]
+    change = magnitude_changes(model, before, after)
     top = np.abs(change).max(initial=0.0)
     parts = []
     for j, c in enumerate(change):
-        if abs(c) >= max(0.5 * top, np.log(1.1)):
+        if abs(c) >= max(0.5 * top, np.log(RUNOFF_FACTOR)):
             sign = ("+" if after[j] > 0 else "-") if j < head else ""  # x: its magnitude
             parts.append(f"{names[j]} -> {sign + 'inf' if c > 0 else '0'}")
     return ", ".join(parts)
@@ -325,32 +346,51 @@ def runoff_check(
     f_hat: np.ndarray,
     barrier: LogBarrier,
     settings: JointMapSettings,
+    diverged: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Why a run stopped by the iteration limit or the line search did not converge: follow
-    it for up to two segments of ``settings.runoff_iter`` Newton iterations at mu = mu_min
-    (module docstring).
+    """Why a run did not converge (stopped by the iteration limit or the line search, or
+    ``diverged``: past ``divergence_limit``): follow it for two segments of
+    ``settings.runoff_iter`` Newton iterations at mu = mu_min, each allowed to run to
+    ``runoff_reach`` times the |Theta|_inf it starts from (module docstring), and measure
+    what -2 pi does.  With ``tol = ridge_value_tol (1 + |-2 pi(Theta_hat)|)``:
 
     - the continued run converges: the checks there decide; ``ok`` keeps ``gradient`` (it
       only needed more iterations), a ridge, or a Hessian that is singular along a flat
       direction (smallest eigenvalue below ``eig_ratio_min`` times the largest, and the
-      re-optimisation from a shift along it moves, :func:`ridge_check`), gives ``ridge``;
-    - it ran off (past ``divergence_limit``), or -2 pi decreased by more than
-      ``ridge_value_tol`` (1 + |-2 pi|) in *both* segments while Theta moved outward:
-      ``unbounded`` (a maximum attracts Newton's method quadratically, so a run that still
-      gains after two segments is not approaching one);
-    - it moved in the second segment without changing -2 pi: ``ridge`` (flat direction).
+      re-optimisation from a shift along it moves, :func:`ridge_check`), gives ``ridge``,
+      the boundary ``boundary``;
+    - -2 pi fell by more than ``tol`` in *both* segments while Theta moved outward (the
+      magnitude of a component of Omega or x_0, or the states' largest, grew by the factor
+      ``RUNOFF_FACTOR`` (1.1) at least over the two segments): ``unbounded`` (a maximum
+      attracts Newton's method quadratically, so a run that still gains after two segments
+      is not approaching one).  Passing a divergence limit alone is no gain: a run along a
+      ridge that runs off to infinity passes it too;
+    - it moved in the second segment while -2 pi changed by at most ``tol /
+      runoff_margin``: ``ridge`` (flat direction);
+    - else the checks at the end of the second segment: a ridge there gives ``ridge``, the
+      boundary ``boundary``, anything else ``gradient`` (a change of -2 pi between
+      ``tol / runoff_margin`` and ``tol`` is neither a gain nor flat).
 
-    Returns per trajectory the status (``unbounded``, ``ridge`` or ``gradient``) and the
-    reason (what the continued run did).  Theta_hat itself is not changed.
+    Returns per trajectory the status (``unbounded``, ``ridge``, ``boundary`` or
+    ``gradient``) and the reason (what the continued run did).  Theta_hat itself is not
+    changed.
     """
     cont = dataclasses.replace(settings, max_newton_iter=settings.runoff_iter)
     K = theta.shape[0]
+    diverged = np.zeros(K, dtype=bool) if diverged is None else np.asarray(diverged, dtype=bool)
     status = np.full(K, "gradient", dtype=object)
     reason = np.full(K, "", dtype=object)
-    flat_tol = settings.ridge_value_tol * (1.0 + np.abs(f_hat))
+    gain_tol = settings.ridge_value_tol * (1.0 + np.abs(f_hat))
+    flat_tol = gain_tol / settings.runoff_margin
     points, values, stops, checks = [theta], [f_hat], [], []
     for _segment in range(2):
-        new, _, mu, stop = minimize_barrier(model, z, points[-1], barrier, cont, settings.mu_min)
+        with np.errstate(all="ignore"):
+            reach = np.maximum(
+                settings.divergence_limit, settings.runoff_reach * np.abs(points[-1]).max(axis=1)
+            )
+        new, _, mu, stop = minimize_barrier(
+            model, z, points[-1], barrier, cont, settings.mu_min, divergence_limit=reach
+        )
         with np.errstate(all="ignore"):
             (f_new,) = neg2_log_posterior(model, new, z, None, order=0)
         points.append(new)
@@ -378,23 +418,23 @@ def runoff_check(
         first, second = checks[0]["status"][k], checks[1]["status"][k]
         drops = [values[i][k] - values[i + 1][k] for i in range(2)]
         where = runoff_direction(model, theta[k], points[2][k])
-        outward = np.abs(points[2][k]).max() > np.abs(theta[k]).max() or "inf" in where
+        # some magnitude grew by RUNOFF_FACTOR at least: not a move by rounding
+        outward = magnitude_changes(model, theta[k], points[2][k]).max() >= np.log(RUNOFF_FACTOR)
         if stops[0][k] == "converged":
             flat = "" if first in ("ok", "ridge") else singular_ridge(k, 1)
             if first == "ok":
                 reason[k] = f"passes the checks after up to {n_it} more iterations"
-                reason[k] += ": raise max_newton_iter"
+                reason[k] += ": raise " + ("divergence_limit" if diverged[k] else "max_newton_iter")
             elif first == "ridge" or flat:
                 status[k] = "ridge"
                 reason[k] = f"converges within {n_it} more iterations; "
                 reason[k] += flat or f"a ridge there ({checks[0]['reason'][k]})"
             else:
+                status[k] = "boundary" if first == "boundary" else "gradient"
                 reason[k] = f"converges within {n_it} more iterations: {first}"
                 reason[k] += f" ({checks[0]['reason'][k]})"
             continue
-        if "unbounded" in (first, second) or (
-            min(drops) > flat_tol[k] and outward and stops[1][k] != "converged"
-        ):
+        if min(drops) > gain_tol[k] and outward and stops[1][k] != "converged":
             status[k] = "unbounded"
             reason[k] = (
                 f"-2 pi still decreases ({drops[0]:.3g}, then {drops[1]:.3g} in two segments "
@@ -416,5 +456,11 @@ def runoff_check(
             reason[k] = f"after {2 * n_it} more iterations, "
             reason[k] += flat or f"a ridge there ({checks[1]['reason'][k]})"
         else:
+            status[k] = "boundary" if second == "boundary" else "gradient"
             reason[k] = f"after {2 * n_it} more iterations: {second} ({checks[1]['reason'][k]})"
+            if diverged[k] or second == "unbounded":
+                reason[k] += (
+                    f"; -2 pi fell by {drops[0]:.3g}, then {drops[1]:.3g}: not a gain above "
+                    f"{gain_tol[k]:.3g} in both segments"
+                )
     return status, reason

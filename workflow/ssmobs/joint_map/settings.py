@@ -34,7 +34,7 @@ class JointMapSettings:
       ``max_damping_tries``, ``eigen_method``, ``lanczos_steps``;
     - the thresholds of our checks that the paper does not name: ``pd_tol``,
       ``ridge_shift``, ``boundary_tol``, ``boundary_stop_tol``, ``boundary_near_tol``,
-      ``divergence_limit``, ``runoff_iter``.
+      ``divergence_limit``, ``runoff_iter``, ``runoff_reach``, ``runoff_margin``.
 
     A fixed value changes by an edit of this module, which moves the key of every result
     computed with it (:mod:`ssmobs.cache_keys` hashes the code a stage runs), so no cached
@@ -106,6 +106,15 @@ class JointMapSettings:
     #: iterations to tell a run-off (unbounded) or a flat direction (ridge) from a slow
     #: convergence (:func:`ssmobs.joint_map.checks.runoff_check`)
     runoff_iter: int = 50
+    #: a continued segment of that run counts as diverged only past this many times its
+    #: start's |Theta|_inf (and never below divergence_limit), so that a run that passed
+    #: divergence_limit is followed too and its gain measured
+    runoff_reach: float = 100.0
+    #: a continued segment is flat (a ridge) when -2 pi changes by at most
+    #: ridge_value_tol * (1 + |-2 pi|) / runoff_margin, and gains when it falls by more than
+    #: ridge_value_tol * (1 + |-2 pi|): between the two the label stays ``gradient``, so that
+    #: no change of -2 pi at the level of rounding moves a run from one label to another
+    runoff_margin: float = 100.0
     #: extreme eigenvalues of the Hessian: "lanczos" (structured, O(n) per step) or "dense"
     eigen_method: str = "lanczos"
     #: Lanczos steps (exact spectrum when >= |Theta|)
@@ -160,6 +169,11 @@ class JointMapSettings:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"joint-MAP setting {name}={getattr(self, name)!r} must be >= 1")
+        for name in ("runoff_reach", "runoff_margin"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 1):
+                raise ValueError(
+                    f"joint-MAP setting {name}={getattr(self, name)!r} must be a number >= 1"
+                )
         if not 0 < self.mu_factor < 1:
             raise ValueError(f"joint-MAP setting mu_factor={self.mu_factor!r} must be in (0, 1)")
         if not 0 < self.fraction_to_boundary < 1:
