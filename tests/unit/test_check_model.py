@@ -283,3 +283,79 @@ def test_the_check_command_on_a_cold_cache_without_a_compiler_says_one_line(
     assert err.count("\n") == 1 and "Traceback" not in err
     assert "finds no C++ compiler 'no-such-compiler': install g++" in err
     assert "same.stan" in err and "--no-stan" in err
+
+
+# ------------------------------------------------ symmetries and propriety (issue 60)
+def _patch_model(monkeypatch, model):
+    import ssmobs.model_check.__main__ as cli
+    import ssmobs.model_check.check as cm
+
+    monkeypatch.setattr(cm, "get_model", lambda slug: model)
+    monkeypatch.setattr(cli, "get_model", lambda slug: model)
+    return cm, cli
+
+
+def test_the_check_reports_symmetries_and_propriety_per_scenario_prior(monkeypatch, tmp_path):
+    import json
+
+    from two_component_model import TwoComponents
+
+    model = TwoComponents()
+    cm, _ = _patch_model(monkeypatch, model)
+    scenario = {"model": model.slug, "omega": {"a1": 0.9, "a2": 0.3}, "x0": [2.0, -1.0]}
+    scenario["prior"] = None
+    out = tmp_path / "check.json"
+    report = cm.run_check_model(model.slug, [scenario], out, stan=False)
+    written = json.loads(out.read_text())
+    assert written == report.to_dict()
+    assert list(written)[:5] == ["slug", "ok", "checks", "failed", "problems"]
+    assert [r["name"] for r in written["symmetries"]] == ["swap (a1, x_1) <-> (a2, x_2)"]
+    (prior,) = written["propriety"]  # the scenario's prior only
+    assert prior["prior"] == "a1: (-1, 1), a2: (-1, 1)"
+    assert prior["label"].startswith("improper: x0_1 drops out of the likelihood at a1 = 0")
+    assert len(prior["improper"]) == 3 and prior["edge"] == []
+    assert written["symmetry_warnings"] == []
+
+
+def test_the_check_command_prints_the_symmetry_table(monkeypatch, capsys):
+    from phase_model import PhaseTracking
+
+    _patch_model(monkeypatch, PhaseTracking())
+    from ssmobs.model_check.__main__ import main
+
+    assert main(["test_phase", "--no-stan"]) == 0
+    out = capsys.readouterr().out
+    assert "symmetries of model 'test_phase' (found from its terms" in out
+    assert "  translation (infinite order)  x -> x + 2*pi" in out
+    assert "  reflection" in out and "(mu, x) -> (-mu, pi - x)" in out
+    assert "    improper: x -> x + 2*pi (x0 and every state together) leaves the density" in out
+
+
+def test_a_declared_mirror_image_is_checked_against_the_found_maps(monkeypatch):
+    from growth_model import Growth
+    from phase_model import PhaseTracking
+
+    # the growth model declares x -> -x, which the search finds: no warning
+    cm, _ = _patch_model(monkeypatch, Growth())
+    report = cm.check_model("test_growth", stan=False)
+    assert report.analysis is not None and report.analysis.warnings == []
+    assert report.to_dict()["symmetries"][0]["name"] == "x -> -x"
+
+    class FourPi(PhaseTracking):
+        """Declares x -> x + 4 pi (a symmetry, but no found map's image) and x -> -x (not
+        one: the drift mu would have to change sign too)."""
+
+        def mirror_images(self, theta):
+            theta = np.asarray(theta, dtype=float)
+            shifted = np.concatenate([theta[:, :2], theta[:, 2:] + 4 * np.pi], axis=1)
+            flipped = np.concatenate([theta[:, :2], -theta[:, 2:]], axis=1)
+            return [shifted, flipped]
+
+    cm, _ = _patch_model(monkeypatch, FourPi())
+    report = cm.check_model("test_phase", stan=False)
+    assert not report.problems  # warnings, not problems
+    first, second = report.analysis.warnings
+    assert first.startswith("mirror_images: declared image 1 is not the image under any")
+    assert "leaves -2 log pi unchanged at random points" in first
+    assert "declared image 2" in second and "changes -2 log pi" in second
+    assert report.to_dict()["symmetry_warnings"] == [first, second]

@@ -1,7 +1,8 @@
 """The command line of the model check: ``python -m ssmobs.model_check <slug> [--configfile
 config/x.yaml] [--no-stan] [--backend pystan] [--gradients analytic]`` checks one model
-(:func:`ssmobs.model_check.check.check_model`), prints what was checked and exits 1 on a
-problem.
+(:func:`ssmobs.model_check.check.check_model`), prints what was checked, the model's
+symmetries and the propriety of its posterior per prior (found from its terms), and exits 1
+on a problem.
 
 Being the package's command line, it may read a config file (:mod:`ssmobs.config`), which
 the check itself never imports (the config's validation runs the check's Python stage).
@@ -90,6 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     cases = default_cases(model)
+    prior_cases = None
     if args.configfile:
         from ..config.validation import ConfigError, read_config_file, validate
 
@@ -98,16 +100,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ConfigError as err:
             print(f"error: {err}", file=sys.stderr)
             return 2
-        cases += [c for c in cases_from_scenarios(config["scenarios"], args.slug) if c not in cases]
+        prior_cases = cases_from_scenarios(config["scenarios"], args.slug) or None
+        cases += [c for c in prior_cases or [] if c not in cases]
     problem = None if args.no_stan else _stan_problem(args.slug, args.backend)
     if problem is not None:
         print(f"error: {problem}", file=sys.stderr)
         return 2
     report = check_model(
-        args.slug, cases, stan=not args.no_stan, backend=args.backend, gradients=args.gradients
+        args.slug,
+        cases,
+        stan=not args.no_stan,
+        backend=args.backend,
+        gradients=args.gradients,
+        prior_cases=prior_cases,
     )
     for line in report.checks:
         print(f"checked  {line}")
+    if report.analysis is not None:
+        print("\n".join(report.analysis.lines(args.slug)))
     if report.problems:
         print(f"failed   {report.failed}", file=sys.stderr)
         print(f"model '{args.slug}': {len(report.problems)} problem(s):", file=sys.stderr)

@@ -23,6 +23,12 @@ comparison of the two is only meaningful when both encode the same log posterior
    :mod:`ssmobs.model_check.analytic`).  Steps 3 and 4 then run the program NUTS runs,
    which holds both model blocks: one compile per model.
 
+Once step 1 passes, the model's symmetries and the propriety of its posterior under each
+checked prior are found from its terms and reported (printed, and written under the keys
+``symmetries``, ``propriety`` and ``symmetry_warnings`` of the check's file;
+:mod:`ssmobs.model_check.symmetry_report`): findings, never problems.  A ``mirror_images``
+declaration whose images no found symmetry gives is a warning line.
+
 A model without ``stan/<slug>.stan`` is checked with the program generated from it
 (:func:`ssmobs.nuts.analytic_program.generated_stan_code`, the one NUTS runs): steps 2 and 3
 on that program, and in step 4 its gradient against the Python model's (it has no
@@ -30,8 +36,10 @@ autodiff twin); a model whose support constraints no generated program can expre
 with one line.
 
 Each step lives in its own module: the cases in :mod:`ssmobs.model_check.cases`, step 1 in
-:mod:`ssmobs.model_check.python`, step 2 in :mod:`ssmobs.model_check.stan_source`, step 3 in
-:mod:`ssmobs.model_check.stan`; this module runs them in turn and reports.
+:mod:`ssmobs.model_check.python` (the symmetry report in
+:mod:`ssmobs.model_check.symmetry_report`), step 2 in
+:mod:`ssmobs.model_check.stan_source`, step 3 in :mod:`ssmobs.model_check.stan`; this module
+runs them in turn and reports.
 
 Its command line is :mod:`ssmobs.model_check.__main__` (``python -m ssmobs.model_check``); the
 Snakemake
@@ -41,12 +49,14 @@ rule ``check_model`` runs it for every model a config uses, before any design tr
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..models import get_model
+from ..log import LOGGER_NAME
+from ..models import StateSpaceModel, get_model
 from .cases import (
     CheckCase,
     ModelCheckError,
@@ -57,6 +67,7 @@ from .cases import (
 from .python import CHECK_T, model_check_seed, python_stage_problems
 from .stan import stan_problems
 from .stan_source import stan_source_problems
+from .symmetry_report import SymmetryReport, symmetry_report
 
 
 @dataclass
@@ -68,15 +79,22 @@ class CheckReport:
     checks: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     failed: str = ""
+    #: the symmetries and propriety found from the terms (after the Python stage passes)
+    analysis: SymmetryReport | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "slug": self.slug,
             "ok": not self.problems,
             "checks": self.checks,
             "failed": self.failed,
             "problems": self.problems,
         }
+        if self.analysis is not None:
+            out["symmetries"] = self.analysis.symmetries
+            out["propriety"] = self.analysis.propriety
+            out["symmetry_warnings"] = self.analysis.warnings
+        return out
 
     def record(self, check: str, problems: Sequence[str]) -> None:
         """A check's outcome: passed (``checks``) or the failed one with its problems."""
@@ -101,6 +119,15 @@ def _first_problems(
     return []
 
 
+def _analysis(model: StateSpaceModel, cases: list[CheckCase], T: int, seed: int) -> SymmetryReport:
+    """The symmetry report; an analysis that fails is a warning line, not a problem."""
+    try:
+        return symmetry_report(model, cases, T, seed)
+    except Exception as err:  # noqa: BLE001 - reported as a warning
+        why = " ".join(f"{type(err).__name__}: {err}".split())
+        return SymmetryReport(warnings=[f"the symmetry and propriety analysis failed: {why}"])
+
+
 def check_model(
     slug: str,
     cases: Sequence[CheckCase] | None = None,
@@ -110,12 +137,16 @@ def check_model(
     seed: int | None = None,
     backend: str = "native",
     gradients: str = "autodiff",
+    prior_cases: Sequence[CheckCase] | None = None,
 ) -> CheckReport:
     """Every check of this module for one model; the report lists each problem found.
 
     ``cases`` default to :func:`default_cases`; ``stan=False`` skips the Stan checks (for a
     config that never runs Stan for this model).  Checks stop at the first stage, and within
-    it at the first case, with problems, so that one mistake gives one message.
+    it at the first case, with problems, so that one mistake gives one message.  Once the
+    Python stage passes, the symmetries and the propriety of the posterior under the prior
+    of each of ``prior_cases`` (default ``cases``) are found from the terms
+    (:mod:`ssmobs.model_check.symmetry_report`): reported, never a problem.
     """
     from ..stan_backends import has_stan_file, stan_file
 
@@ -129,6 +160,8 @@ def check_model(
         f"differences, simulated disturbances recovered by the terms ({len(cases)} case(s))",
         found,
     )
+    if not report.problems:
+        report.analysis = _analysis(model, list(prior_cases) if prior_cases else cases, T, seed)
     if report.problems or not stan:
         return report
     from ..nuts.analytic_program import generation_problem, write_analytic_program
@@ -214,12 +247,23 @@ def run_check_model(
         for case in prior_variant_cases(model, scenario_case):
             if case not in cases:
                 cases.append(case)
-    report = check_model(slug, cases, stan=stan, stan_path=stan_path, gradients=gradients)
+    scenario_cases = cases_from_scenarios(scenarios, slug)
+    report = check_model(
+        slug,
+        cases,
+        stan=stan,
+        stan_path=stan_path,
+        gradients=gradients,
+        prior_cases=scenario_cases or None,
+    )
     if report.problems:
         raise ModelCheckError(
             f"model '{slug}': the Python model and the Stan program "
             f"disagree:\n  - " + "\n  - ".join(report.problems)
         )
+    if report.analysis is not None:
+        for line in report.analysis.lines(slug):
+            logging.getLogger(LOGGER_NAME).info("%s", line)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     Path(out).write_text(json.dumps(report.to_dict(), indent=2) + "\n")
     return report

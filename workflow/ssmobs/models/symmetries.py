@@ -422,6 +422,8 @@ def model_symmetries(model: StateSpaceModel) -> ModelSymmetries:
         syms = model_symbols(model)
         rng = np.random.default_rng(SEARCH_SEED)
         discrete, unconfirmed = discrete_symmetries(model, syms, rng)
+        order = {"sign": 0, "permutation": 1, "translation": 2, "reflection": 3}
+        discrete.sort(key=lambda s: (order[s.kind], len(s.name), s.name))
         _MEMO[key] = ModelSymmetries(
             discrete=tuple(discrete),
             ridges=tuple(ridges(model, syms, rng)),
