@@ -214,3 +214,12 @@ def test_caption_states_what_ran(tmp_path):
     )
     first = out["md"].read_text().splitlines()[0]
     assert first.endswith("Stan: off.") and "4000" not in first
+
+
+def test_the_projects_analysis_notes_the_edge_phi_to_zero_and_keeps_the_numbers():
+    """With models.propriety itself: the SV model with phi on (0, 1) has x0 dropping out as
+    phi -> 0, an end of the support: noted, numbers kept."""
+    stan = {"n_stan": 3, "ratio": 0.75, "K": 4, "phi_mean": 0.85}
+    frame = study.study_table([scenario(20)], {"sv_T20": joint(2)}, {"sv_T20": stan}, {})
+    assert "phi -> 0" in frame.loc[0, "edge"] and "improper" not in frame.columns
+    assert frame.loc[0, "K_stan"] == 3 and frame.loc[0, "phi_mean_marginal"] == 0.85

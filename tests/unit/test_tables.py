@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import pandas as pd
 import pytest
@@ -245,3 +246,39 @@ def test_tables_ii_and_iii_leave_the_stan_cells_of_an_improper_posterior_empty()
     t3 = table_iii(rows()[:1], PAPER, propriety=SAME_IMPROPER)
     assert t3["ours"].isna().all() and t3["K_stan"].isna().all()
     assert not table_iii(rows()[:1], PAPER, propriety=PROPER)["ours"].isna().all()
+
+
+def test_the_projects_analysis_marks_sep_with_a_on_minus_one_one_improper():
+    """With models.propriety itself: Sep with a unrestricted is improper at a = 0 inside
+    the support; Same with a on (0, 1) has the documented edge a -> 0 and keeps its numbers."""
+    sep = rows()[0]
+    sep["config"] = {
+        **sep["config"],
+        "name": "sep_b",
+        "model": "sep",
+        "omega": {"a": 0.9, "b": 0.9},
+        "prior": {"a": "unrestricted", "b": "restricted"},
+    }
+    same = rows()[0]
+    wide = section_iv([sep, same], PAPER).set_index("scenario")
+    assert (
+        wide.loc["sep_b", "improper"].startswith("improper: ")
+        and "a = 0" in wide.loc["sep_b", "improper"]
+    )
+    assert math.isnan(wide.loc["sep_b", "K_stan"]) and math.isnan(
+        wide.loc["sep_b", "marginal_mean_a"]
+    )
+    assert wide.loc["s", "improper"] == "" and wide.loc["s", "marginal_mean_a"] == 0.897
+    assert "a -> 0" in wide.loc["s", "edge"]
+
+
+def test_an_undecided_propriety_is_shown_in_words_not_as_numbers():
+    @dataclass(frozen=True)
+    class Undecided(FakePropriety):
+        undetermined: tuple[str, ...] = ("x0 may drop out where a = b, not solved",)
+
+    wide = section_iv(rows(), PAPER, propriety=analysis(same=Undecided())).set_index("scenario")
+    assert wide.loc["s", "improper"] == (
+        "may be improper (not decided): x0 may drop out where a = b, not solved"
+    )
+    assert math.isnan(wide.loc["s", "K_stan"])

@@ -140,7 +140,8 @@ def figure_observability_ratios(
     """|K^max|/K and |K^Stan|/K for every scenario, ours beside the paper's, each bar with
     its exact binomial 95 % interval (``<fraction>_lo95`` / ``_hi95`` of the Section IV
     summary, :mod:`ssmobs.binomial`): at K = 40 about +-0.15, at the paper's K = 4000 about
-    +-0.015."""
+    +-0.015.  A scenario whose posterior is improper (the summary's ``improper`` column) has
+    no bar of ours for |K^Stan|/K but the word "improper"."""
     plt = _plt()
     n = len(frame)
     height = max(3.0, 0.35 * n + 1.5)
@@ -166,6 +167,9 @@ def figure_observability_ratios(
                 xerr=np.where(np.isfinite(err), err, 0.0),
                 error_kw={"lw": 0.8, "capsize": 2},
             )
+        if col == "K_stan_frac" and "improper" in frame.columns:
+            for row in np.flatnonzero(frame["improper"].fillna("").astype(bool).to_numpy()):
+                ax.text(0.01, y[row] - bar / 2, "improper", va="center", fontsize=7)
         ax.set_xlim(0, 1.05)
         ax.set_title(f"{title} (95 % interval)")
         ax.set_xlabel("fraction")

@@ -63,8 +63,9 @@ def study_row(
 ) -> dict[str, Any]:
     """One row: T, K, both ratios, why trajectories failed, marginal-MAP means of Omega;
     |K^max_unique|, its ratio and |K^max_undetermined| where the joint MAP ran from several
-    starts; ``not_shown`` ("none" when every number is shown).  ``note``: the posterior's propriety; an improper one leaves
-    every Stan number (|K^Stan|, its ratio, the marginal-MAP means, the KDE modes) NaN."""
+    starts; ``not_shown`` ("none" when every number is shown).  ``note``: the posterior's
+    propriety; an improper one leaves every Stan number (|K^Stan|, its ratio, the
+    marginal-MAP means, the KDE modes) NaN."""
     model = scenario.model
     row: dict[str, Any] = {
         "scenario": scenario.name,

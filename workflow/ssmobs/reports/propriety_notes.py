@@ -28,10 +28,14 @@ NOT_SHOWN_IMPROPER = "not shown: improper"
 
 
 class ProprietyAnswer(Protocol):
-    """What :func:`ssmobs.models.propriety.posterior_propriety` returns (its ``Propriety``)."""
+    """What :func:`ssmobs.models.propriety.posterior_propriety` returns (its ``Propriety``;
+    an ``undetermined`` tuple, what the analysis could not decide, is read where present)."""
 
-    improper: tuple[str, ...]
-    edge: tuple[str, ...]
+    @property
+    def improper(self) -> tuple[str, ...]: ...
+
+    @property
+    def edge(self) -> tuple[str, ...]: ...
 
     @property
     def is_improper(self) -> bool: ...
@@ -66,13 +70,16 @@ class PosteriorNote:
 
 def posterior_note(scenario: Scenario, analysis: ProprietyAnalysis | None = None) -> PosteriorNote:
     """The propriety of ``scenario``'s posterior under its prior (``analysis`` defaults to
-    :func:`propriety_analysis`)."""
+    :func:`propriety_analysis`).  What the analysis could not decide makes the posterior one
+    that may be improper: its numbers are not shown either, and the words say so."""
     analysis = analysis or propriety_analysis()
     model = scenario.model
     answer = analysis(model, model.prior_bounds(scenario.omega, scenario.prior))
-    return PosteriorNote(
-        improper=answer.label() if answer.is_improper else "", edge="; ".join(answer.edge)
-    )
+    reasons = [answer.label()] if answer.is_improper else []
+    undecided: tuple[str, ...] = getattr(answer, "undetermined", ())
+    if undecided:
+        reasons.append("may be improper (not decided): " + "; ".join(undecided))
+    return PosteriorNote(improper="; ".join(reasons), edge="; ".join(answer.edge))
 
 
 def config_note(
