@@ -1,5 +1,5 @@
-"""What the workflow tidies before and after a run (ssmobs.housekeeping): the lock policy,
-stale stamps, damaged files, leftovers of an earlier config and the guards' lines."""
+"""What the workflow tidies before and after a run (ssmobs.housekeeping): stale stamps,
+damaged files, leftovers of an earlier config and the guards' lines."""
 
 from __future__ import annotations
 
@@ -12,44 +12,6 @@ from ssmobs import housekeeping as hk
 from ssmobs.io import checksum_problem, damaged_files, record_checksums, write_checksum
 
 pytestmark = pytest.mark.unit
-
-
-# -- the lock --------------------------------------------------------------------------------
-
-
-def test_only_the_planning_process_may_change_files():
-    decision = hk.lock_decision(main_process=False, locks=True, holders=[], dry_run=False)
-    assert decision == hk.LockDecision(False)
-
-
-@pytest.mark.parametrize("dry_run", [False, True])
-def test_without_a_live_lock_files_may_change(dry_run):
-    assert hk.lock_decision(True, True, [], dry_run) == hk.LockDecision(True)
-
-
-def test_nolock_ignores_the_lock_holders():
-    assert hk.lock_decision(True, False, [123], False).may_change
-
-
-def test_a_live_lock_stops_a_run_and_names_the_processes():
-    decision = hk.lock_decision(True, True, [4242, 4343], dry_run=False)
-    assert not decision.may_change and decision.warning is None
-    assert decision.error is not None
-    assert "Snakemake process(es) [4242, 4343] run here" in decision.error
-    assert "stops before it removes or writes anything" in decision.error
-
-
-def test_a_live_lock_lets_a_dry_run_go_on_changing_nothing():
-    decision = hk.lock_decision(True, True, [4242], dry_run=True)
-    assert not decision.may_change and decision.error is None
-    assert decision.warning is not None and "this dry run moves no stale stamp aside" in (
-        decision.warning
-    )
-
-
-def test_a_lock_whose_holders_are_unknown_advises_unlock():
-    decision = hk.lock_decision(True, True, None, dry_run=False)
-    assert decision.error is not None and "snakemake --unlock" in decision.error
 
 
 # -- stale stamps ----------------------------------------------------------------------------

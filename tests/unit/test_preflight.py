@@ -149,58 +149,6 @@ def test_snakemakes_own_reader_of_configfile_fails_before_the_workflow_runs(tmp_
     assert isinstance(err.value, (IsADirectoryError, UnicodeDecodeError))
 
 
-# ------------------------------------------------------------------------ stale locks
-def make_lock(workdir: Path) -> None:
-    locks = workdir / ".snakemake" / "locks"
-    locks.mkdir(parents=True)
-    (locks / "0.output.lock").write_text("results/x\n")
-
-
-def fake_snakemake(cwd: Path) -> subprocess.Popen:
-    """A process whose command line mentions snakemake, running in ``cwd``."""
-    proc = subprocess.Popen(
-        [sys.executable, "-c", "import time; time.sleep(60)", "snakemake"], cwd=cwd
-    )
-    time.sleep(0.2)
-    return proc
-
-
-def test_no_lock_nothing_to_do(tmp_path):
-    assert preflight.unlock_if_stale(tmp_path, None) is None
-
-
-@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs /proc (Linux)")
-def test_lock_of_a_running_snakemake_is_left_alone(tmp_path):
-    make_lock(tmp_path)
-    other = tmp_path / "elsewhere"
-    other.mkdir()
-    proc = fake_snakemake(tmp_path)
-    elsewhere = fake_snakemake(other)
-    try:
-        found = preflight.snakemake_processes(tmp_path)
-        assert proc.pid in found and elsewhere.pid not in found
-        note = preflight.unlock_if_stale(tmp_path, None)
-        assert f"PIDs [{proc.pid}]" in note and "left as it is" in note
-        assert preflight.lock_files(tmp_path)
-    finally:
-        for p in (proc, elsewhere):
-            p.kill()
-            p.wait()
-
-
-@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs /proc (Linux)")
-def test_lock_holders_are_the_live_snakemake_processes_of_a_locked_directory(tmp_path):
-    assert preflight.lock_holders(tmp_path) == []  # no lock
-    make_lock(tmp_path)
-    assert preflight.lock_holders(tmp_path) == []  # a stale lock: no process holds it
-    proc = fake_snakemake(tmp_path)
-    try:
-        assert preflight.lock_holders(tmp_path) == [proc.pid]
-    finally:
-        proc.kill()
-        proc.wait()
-
-
 # ------------------------------------------------- configs that silently mean something else
 SCENARIO = "scenarios:\n  - name: s\n    model: same\n    omega: {a: 0.9}\n    x0: 8\n"
 

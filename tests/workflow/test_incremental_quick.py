@@ -12,6 +12,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -102,6 +103,93 @@ def test_a_run_refused_by_a_live_lock_changes_nothing(tmp_path):
     assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in kept} == before
     # that run has ended: its lock is stale and this run goes on
     assert "select_k" in rules_run(ksel_run(work, [4, 12]))
+
+
+#: a stand-in for a live run: holds the run lock of its working directory until killed
+HOLD_THE_RUN_LOCK = """
+import fcntl, os, time
+fd = os.open(".snakemake/ssmobs_run.lock", os.O_RDWR | os.O_CREAT, 0o644)
+fcntl.flock(fd, fcntl.LOCK_EX)
+os.pwrite(fd, f"{os.getpid()}\\n".encode(), 0)
+print("held", flush=True)
+time.sleep(300)
+"""
+
+
+def _snapshot(work: Path) -> dict[Path, tuple[int, bytes]]:
+    """Every file of results/ and outputs_dir with its time and bytes."""
+    files = [p for d in ("results", KSEL["outputs_dir"]) for p in (work / d).rglob("*")]
+    return {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in files if p.is_file()}
+
+
+@RARE_PATH
+@pytest.mark.parametrize("second", ["the same config", "another config, same outputs_dir"])
+def test_a_run_refused_by_the_run_lock_changes_nothing_and_says_so(tmp_path, second):
+    """Found before (issue 61): of two configs with one outputs_dir started together, the
+    run that lost Snakemake's lock had first removed the other's stamps and tables, then
+    ended with Snakemake's LockException; of two runs of one config, the second got
+    Snakemake's --unlock advice.  The run lock is taken before any tidying."""
+    work = make_workdir(tmp_path / "locked")
+    ksel_run(work, [4, 8])
+    before = _snapshot(work)
+    assert any(p.suffix == ".key" for p in before)
+    config = CONFIG
+    if second != "the same config":  # its stamps are stale: unlocked, it would remove them
+        conf = yaml.safe_load(yaml.safe_dump(KSEL))
+        conf["k_selection"][0]["K_grid"] = [4, 12]
+        config = "config/ksel_other.yaml"
+        (work / config).write_text(yaml.safe_dump(conf, sort_keys=False))
+    live = subprocess.Popen(
+        [sys.executable, "-c", HOLD_THE_RUN_LOCK], cwd=work, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert live.stdout is not None and live.stdout.readline().strip() == "held"
+        proc = snakemake(work, KSEL_TARGET, "--cores", "2", "--configfile", config, check=False)
+    finally:
+        live.kill()
+        live.wait()
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    line = f"another run of this workflow works in this directory (PID {live.pid})"
+    assert f"{line}: this run stops before it removes or writes anything" in text, text[-2000:]
+    assert "--unlock" not in text and "LockException" not in text
+    assert _snapshot(work) == before
+
+
+@RARE_PATH
+def test_of_two_configs_started_together_one_runs_and_the_other_changes_nothing(tmp_path):
+    """Two live runs: the first holds the run lock while it computes a new point; the
+    second, whose stamps the first's config makes stale, stops in one line, and the first
+    finishes with its tables in place."""
+    work = make_workdir(tmp_path / "two")
+    ksel_run(work, [4, 8])
+    conf = yaml.safe_load(yaml.safe_dump(KSEL))
+    conf["k_selection"][0]["K_grid"] = [4, 16]
+    (work / "config/ksel_first.yaml").write_text(yaml.safe_dump(conf, sort_keys=False))
+    lock = work / ".snakemake" / "ssmobs_run.lock"
+    lock.unlink(missing_ok=True)
+    first = subprocess.Popen(
+        [sys.executable, "-m", "snakemake", KSEL_TARGET, "--cores", "1"]
+        + ["--configfile", "config/ksel_first.yaml"],
+        cwd=work,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not (lock.is_file() and lock.read_text().strip() == str(first.pid)):
+        assert time.monotonic() < deadline and first.poll() is None, "the first run took no lock"
+        time.sleep(0.05)
+    second = snakemake(work, KSEL_TARGET, "--cores", "1", "--configfile", CONFIG, check=False)
+    out, _ = first.communicate(timeout=1800)
+    assert first.returncode == 0, out[-3000:]
+    text = second.stdout + second.stderr
+    assert second.returncode != 0
+    assert f"works in this directory (PID {first.pid})" in text, text[-2000:]
+    assert "--unlock" not in text and "LockException" not in text
+    stamps = list((work / "results" / "outputs" / KSEL["outputs_dir"]).glob("*.key"))
+    assert stamps and (work / KSEL_TARGET).is_file()
+    assert list(work.glob("results/shared/k_selection_points/*/*/K16.json"))  # the first's
 
 
 def variant_table_workdir(dest: Path) -> Path:

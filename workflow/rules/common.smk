@@ -18,7 +18,8 @@ from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.code_hashing import DynamicImportError  # noqa: E402
 from ssmobs.stan_backends.base import BackendError  # noqa: E402
-from ssmobs.config.preflight import lock_holders, use_package_of, write_problem  # noqa: E402
+from ssmobs.config.preflight import use_package_of, write_problem  # noqa: E402
+from ssmobs.config.run_lock import lock_decision, lock_holders, take_run_lock  # noqa: E402
 
 # Snakemake reads --configfile files itself and keeps the last of two duplicate keys
 ssmobs_config.check_config_files(workflow.configfiles, error=WorkflowError)
@@ -32,6 +33,32 @@ try:  # also finds and checks every model module
 except (ConfigError, ModelDefinitionError) as err:
     files = ", ".join(map(str, workflow.configfiles)) or "(none)"
     raise WorkflowError(f"config file(s) {files}: {err}") from None
+
+
+def is_dry_run():
+    return bool(workflow.dryrun or getattr(workflow.output_settings, "dryrun", False))
+
+
+@functools.cache
+def may_change_files_before_the_lock():
+    """Whether this process may tidy files (stale stamps and tables, damaged files,
+    leftovers) before Snakemake takes its lock: it must hold the run lock of this directory
+    and no other live Snakemake its own (ssmobs.config.run_lock); a run that may not stops
+    here with one line, a dry run goes on changing nothing."""
+    locks = getattr(workflow.execution_settings, "lock", True)  # not with --nolock
+    main = workflow.is_main_process
+    other_run = take_run_lock(Path.cwd()) if main and locks else None
+    holders = lock_holders(Path.cwd()) if main and locks and other_run is None else []
+    decision = lock_decision(main, locks, holders, is_dry_run(), other_run)
+    if decision.error is not None:
+        raise WorkflowError(decision.error)
+    if decision.warning is not None:
+        logger.warning(decision.warning)
+    return decision.may_change
+
+
+# the lock first: a run refused by it has changed no file (nothing above writes one)
+may_change_files_before_the_lock()
 
 try:  # "auto" is resolved here, so the concrete backend is part of the rules' params
     STAN_BACKEND = resolve_backend(config["stan"]["backend"])
@@ -136,10 +163,6 @@ wildcard_constraints:
     key=r"[0-9a-f]{12}",
 
 
-def is_dry_run():
-    return bool(workflow.dryrun or getattr(workflow.output_settings, "dryrun", False))
-
-
 def unwritable_problem(files):
     """One line when a folder that ``files`` go into cannot be written, else None."""
     from ssmobs.stan_backends.cache import cache_root
@@ -185,21 +208,6 @@ def stop_where_jobs_cannot_write():
     problem = unwritable_problem(files)
     if problem is not None:
         raise WorkflowError(f"{problem}; no job was started")
-
-
-@functools.cache
-def may_change_files_before_the_lock():
-    """Whether this process may remove stale files before Snakemake takes its lock
-    (ssmobs.housekeeping.lock_decision); a run that may not stops here."""
-    locks = getattr(workflow.execution_settings, "lock", True)  # not with --nolock
-    main = workflow.is_main_process
-    holders = lock_holders(Path.cwd()) if main and locks else []
-    decision = housekeeping.lock_decision(main, locks, holders, is_dry_run())
-    if decision.error is not None:
-        raise WorkflowError(decision.error)
-    if decision.warning is not None:
-        logger.warning(decision.warning)
-    return decision.may_change
 
 
 def stamped_outputs(path):

@@ -11,9 +11,10 @@ reused (it takes stock of the files then):
   (:func:`damaged_batch_repairs`), and any output that no longer matches the checksum its
   job recorded (:func:`damaged_output_repairs`);
 
-all of them only while no other live Snakemake run holds the lock of the directory
-(:func:`lock_decision`).  After a successful run of every target, the tables and figures
-that no job of this config makes are moved out of outputs_dir (:func:`leftover_outputs`).
+all of them only while no other run holds the lock of the directory
+(:func:`ssmobs.config.run_lock.lock_decision`).  After a successful run of every target,
+the tables and figures that no job of this config makes are moved out of outputs_dir
+(:func:`leftover_outputs`).
 
 Every decision here is a function of paths and data that returns what to change and what
 to say; the few functions that read or change files say so and decide nothing.
@@ -48,49 +49,6 @@ class Repairs:
     changes: list[Change] = field(default_factory=list)
     targets: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-
-
-# -- the lock --------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LockDecision:
-    """Whether this process may change files before Snakemake takes its lock, and what to
-    say: a ``warning`` (a dry run goes on, changing nothing) or an ``error`` (a run stops)."""
-
-    may_change: bool
-    warning: str | None = None
-    error: str | None = None
-
-
-def lock_decision(
-    main_process: bool, locks: bool, holders: list[int] | None, dry_run: bool
-) -> LockDecision:
-    """May the process remove stale files before Snakemake's lock?  Only the process that
-    plans the run (``main_process``; not a cluster job) while no other live Snakemake run
-    holds the lock (``holders``: [] none, else their PIDs, None where a lock exists and
-    /proc cannot tell; ignored with ``locks`` off, i.e. ``--nolock``).  While one does, a
-    run stops before it removes or writes anything (Snakemake would refuse it after the
-    removals, advising an --unlock that would break the live run); a dry run goes on."""
-    if not main_process:
-        return LockDecision(False)
-    if not locks or holders == []:
-        return LockDecision(True)
-    who = (
-        f"Snakemake process(es) {holders} run here"
-        if holders
-        else "if no other run uses this directory, remove the lock with `snakemake --unlock`"
-    )
-    msg = f"another Snakemake run holds the lock of this directory ({who})"
-    if dry_run:
-        return LockDecision(False, warning=f"{msg}: this dry run moves no stale stamp aside")
-    return LockDecision(
-        False,
-        error=(
-            f"{msg}: this run stops before it removes or writes anything; "
-            f"start it again when that run has finished"
-        ),
-    )
 
 
 # -- stale stamps ----------------------------------------------------------------------------

@@ -15,21 +15,22 @@ budget),
   it knows which jobs run (:func:`write_problem`);
 * with ``--unlock-stale``: when a killed run left Snakemake's lock in ``.snakemake/locks``
   and no Snakemake process runs in this directory, removes it with ``snakemake --unlock``
-  (Snakemake would otherwise refuse to start).  Whether a process runs here is read from
-  ``/proc`` (Linux); where that is not possible the lock is left and the remedy printed.
+  (Snakemake would otherwise refuse to start; :func:`ssmobs.config.run_lock.unlock_if_stale`).
+  Whether a process runs here is read from ``/proc`` (Linux); where that is not possible the
+  lock is left and the remedy printed.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ..models import ModelDefinitionError
+from .run_lock import unlock_if_stale
 from .validation import README, ConfigError, read_config_file, short_list, validate
 
 
@@ -159,89 +160,6 @@ def snakemake_folder_problem() -> str | None:
             "Snakemake keeps its lock and records in .snakemake/ of the working directory: "
             "make it writable, or run in a writable copy of the workflow"
         ),
-    )
-
-
-# ------------------------------------------------------------------------ stale locks
-def lock_files(workdir: str | os.PathLike) -> list[Path]:
-    """Snakemake's lock files in ``workdir`` (left behind when Snakemake was killed)."""
-    locks = Path(workdir) / ".snakemake" / "locks"
-    return sorted(p for p in locks.iterdir() if p.is_file()) if locks.is_dir() else []
-
-
-def _ancestors() -> set[int]:
-    pids, pid = {os.getpid()}, os.getppid()
-    while pid > 1 and pid not in pids:
-        pids.add(pid)
-        try:
-            stat = Path(f"/proc/{pid}/stat").read_text()
-            pid = int(stat.rsplit(")", 1)[1].split()[1])
-        except (OSError, ValueError, IndexError):
-            break
-    return pids
-
-
-def snakemake_processes(workdir: str | os.PathLike) -> list[int] | None:
-    """PIDs of processes whose command line mentions snakemake and that run in ``workdir``
-    (or whose directory cannot be read); None where /proc is not available."""
-    proc = Path("/proc")
-    if not (proc / "self" / "cmdline").exists():
-        return None
-    workdir = Path(workdir).resolve()
-    skip = _ancestors()
-    found = []
-    for entry in proc.iterdir():
-        if not entry.name.isdigit() or int(entry.name) in skip:
-            continue
-        try:
-            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if not any(b"snakemake" in arg for arg in cmdline):
-            continue
-        try:
-            cwd = Path(os.readlink(entry / "cwd")).resolve()
-        except OSError:  # another user's process, or one that just ended: assume it is here
-            if entry.exists():
-                found.append(int(entry.name))
-            continue
-        if cwd == workdir:
-            found.append(int(entry.name))
-    return sorted(found)
-
-
-def lock_holders(workdir: str | os.PathLike) -> list[int] | None:
-    """The Snakemake processes that may hold the lock of ``workdir``: [] when there is no
-    lock or it is stale (no Snakemake process runs there), else their PIDs (None where a
-    lock exists and /proc cannot tell)."""
-    return snakemake_processes(workdir) if lock_files(workdir) else []
-
-
-def unlock_if_stale(workdir: str | os.PathLike, configfile: str | None) -> str | None:
-    """Remove a stale Snakemake lock of ``workdir``; returns what was done (None: no lock)."""
-    if not lock_files(workdir):
-        return None
-    remedy = (
-        "if no other Snakemake run uses this directory, remove it with "
-        "`snakemake --unlock` (with the same --configfile), then rerun"
-    )
-    running = snakemake_processes(workdir)
-    if running is None:
-        return f"a Snakemake lock exists in {workdir}/.snakemake/locks; {remedy}"
-    if running:
-        return (
-            f"a Snakemake lock exists and Snakemake processes run in {workdir} "
-            f"(PIDs {running}); left as it is"
-        )
-    cmd = [sys.executable, "-m", "snakemake", "--unlock"]
-    if configfile:
-        cmd += ["--configfile", str(configfile)]
-    proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True)
-    if proc.returncode != 0:
-        return f"could not remove the stale lock ({proc.stderr.strip()[-500:]}); {remedy}"
-    return (
-        f"removed a stale Snakemake lock in {workdir} (left by a killed run; no "
-        f"Snakemake process runs there)"
     )
 
 
