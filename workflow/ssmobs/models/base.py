@@ -198,13 +198,17 @@ class StateSpaceModel:
         )
 
     def mirror_images(self, theta: np.ndarray) -> list[np.ndarray]:
-        """Images of Theta = (Omega, x_0, x_1..x_T), rows (K, |Theta|), under maps that leave
-        -2 pi unchanged for every z (symmetries of the model, e.g. x -> -x when z sees only
-        x^2 and the dynamics are odd); none by default.
+        """Images of Theta = (Omega, x_0, x_1..x_T), rows (K, |Theta|), under symmetries of
+        the model (maps that leave -2 pi unchanged for every z) *outside* the families the
+        workflow searches; none by default.
 
-        The multi-start (:mod:`ssmobs.joint_map.multi_start`) starts again from the image of every
-        maximum it finds, so that a maximum and its mirror image, of the same height, are
-        both found and the trajectory is not counted as having one maximum.
+        Sign changes, permutations of interchangeable blocks, translations by a period and
+        reflections such as x -> pi - x are found from :meth:`obs_term` and :meth:`trans_term`
+        (:func:`ssmobs.models.symmetries.model_symmetries`; docs/method/symmetries.md) and
+        need no declaration.  The multi-start (:mod:`ssmobs.joint_map.multi_start`) starts
+        again from the images of every maximum it finds, so that a maximum and its image, of
+        the same height, are both found and the trajectory is not counted as having one
+        maximum; the model check warns about a declared image that no found map gives.
         """
         return []
 
