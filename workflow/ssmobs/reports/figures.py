@@ -96,8 +96,10 @@ def figure_joint_vs_marginal(
     """Figure 3 (Sec. IV.A): pairwise scatter of joint-MAP estimates (a^, x0^) over K^max
     (left) and marginal-MAP estimates over K^Stan (right), one colour per T; true values as
     lines.  ``panels``: dicts with ``T``, ``joint`` (DataFrame with <name>, x0) and
-    ``marginal`` (DataFrame with <name>_map, x0_map), either possibly empty; ``name``: the
-    parameter on the x axis (the paper's a).
+    ``marginal`` (DataFrame with <name>_map, x0_map), either possibly empty, and optionally
+    ``improper`` (the reason the posterior is improper: its marginal MAPs are not drawn and
+    the legend says "improper" instead of |K^Stan|); ``name``: the parameter on the x axis
+    (the paper's a).
     """
     plt = _plt()
     import seaborn as sns
@@ -114,6 +116,9 @@ def figure_joint_vs_marginal(
             color=colour,
             label=f"T={panel['T']} (|K^max|={len(j)})",
         )
+        if panel.get("improper"):  # no marginal MAP of an improper posterior is drawn
+            axes[1].scatter([], [], s=6, color=colour, label=f"T={panel['T']} (improper)")
+            continue
         axes[1].scatter(
             m[f"{name}_map"],
             m["x0_map"],

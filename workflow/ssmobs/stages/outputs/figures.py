@@ -36,6 +36,7 @@ def run_figure_joint_vs_marginal(
 
     from ...models import get_model
     from ...reports.figures import figure_joint_vs_marginal
+    from ...reports.propriety_notes import config_note
 
     name, truth = "a", (0.9, 8.0)
     if scenarios:
@@ -50,6 +51,8 @@ def run_figure_joint_vs_marginal(
                 "T": sc["T"],
                 "joint": j[j["status"] == "ok"],
                 "marginal": m[m["converged"].astype(bool)],
+                # an improper posterior's marginal MAPs are no estimates: not drawn
+                "improper": config_note(sc).improper,
             }
         )
     if not panels:
@@ -105,8 +108,11 @@ def run_figure_exact_vs_stan(
     table_paths: list[str],
 ) -> pandas.DataFrame:
     """Rule figure_exact_vs_stan: Stan + KDE marginal MAP against the exact one, per k: the
-    figure, and the table of median and largest differences (returned)."""
+    figure, and the table of median and largest differences (returned).  Where the posterior
+    is improper the caption says so: neither column is then an estimate of the posterior
+    (the exact one is the interior maximum's basin's)."""
     from ...reports.figures import figure_exact_vs_stan
+    from ...reports.propriety_notes import posterior_note
     from ...reports.tables import exact_vs_stan_table, write_table
 
     model = scenario.model
@@ -126,10 +132,16 @@ def run_figure_exact_vs_stan(
     both = stan["converged"].to_numpy(bool) & exact["converged"].to_numpy(bool)
     figure_exact_vs_stan(stan[both], exact[both], names, scenario.name, figure_paths)
     table = exact_vs_stan_table(stan[both], exact[both], names)
-    write_table(
-        table,
-        table_paths,
+    caption = (
         f"Stan + KDE against the exact marginal posterior, {scenario.name}: median and "
-        "largest |difference| over the trajectories converged in both",
+        "largest |difference| over the trajectories converged in both"
     )
+    note = posterior_note(scenario)
+    if note.is_improper:
+        caption += (
+            f". The posterior is {note.improper}; the exact values are those of the "
+            "interior maximum's basin (the spike cut off), and neither column is an estimate "
+            "of the posterior"
+        )
+    write_table(table, table_paths, caption)
     return table
