@@ -16,6 +16,7 @@ from ricker_model import Ricker
 from ssmobs.models import get_model
 from ssmobs.models.propriety import model_dropouts, posterior_propriety
 from two_component_model import TwoComponents
+from two_gain_model import TwoGains
 
 pytestmark = pytest.mark.unit
 
@@ -47,6 +48,22 @@ def test_a_ridge_is_improper_only_where_its_orbits_have_infinite_mass():
     # e^(-2 s) as they fall: finite mass
     boxed = model.prior_bounds({"a": 1.0, "b": 0.5, "c": 0.5}, {"b": [0, 1], "c": [0, 1]})
     assert posterior_propriety(model, boxed).improper == ()
+
+
+def test_a_scaling_ridge_is_improper_where_an_end_of_its_orbit_stays_in_the_box():
+    model = TwoGains()
+    omega = {"a": 0.5, "b": 0.5, "c": 0.5}
+    reason = (
+        "the ridge (b, c) -> (b e^s, c e^-s) leaves the density unchanged along orbits of "
+        "infinite mass inside the prior"
+    )
+    assert posterior_propriety(model, model.prior_bounds(omega)).improper == (reason,)
+    # b on (0, 1), c on (0, inf): the orbit runs on as b -> 0, c -> inf (volume kept)
+    one_side = model.prior_bounds(omega, {"b": [0, 1]})
+    assert posterior_propriety(model, one_side).improper == (reason,)
+    # both on (0, 1): every orbit is a finite stretch
+    both = model.prior_bounds(omega, {"b": [0, 1], "c": [0, 1]})
+    assert posterior_propriety(model, both).improper == ()
 
 
 def test_x0_dropping_out_inside_the_prior_is_improper_and_at_its_end_an_edge():

@@ -15,6 +15,7 @@ from ricker_model import Ricker
 from ssmobs.models import get_model
 from ssmobs.models.symmetries import model_symmetries, preserves_box
 from two_component_model import TwoComponents
+from two_gain_model import TwoGains
 
 pytestmark = pytest.mark.unit
 
@@ -175,6 +176,31 @@ def test_scaling_and_exact_ridge_of_the_ricker_model():
     nudged = theta.copy()
     nudged[:, 3:] += 0.5
     assert not np.allclose(ricker_density(nudged, z), base)
+
+
+def two_gain_density(theta, z):
+    w, x = _split(theta, 3, 1)
+    a, bc = w[:, :1], w[:, 1:2] * w[:, 2:]
+    xp, xt = x[:, :-1, 0], x[:, 1:, 0]
+    return np.sum((z - bc * xt) ** 2 + (xt - a * xp) ** 2, axis=1)
+
+
+def test_scaling_ridge_of_two_gains_that_moves_no_state():
+    model = TwoGains()
+    found = _assert_invariant(model, two_gain_density, 3, 1)
+    (ridge,) = found.ridges
+    assert ridge.name == "(b, c) -> (b e^s, c e^-s)"
+    assert ridge.scaling == (0.0, 1.0, -1.0, 0.0) and ridge.translation == (0.0,) * 4
+    assert ridge.unbounded == ()  # x0 does not move
+    rng = np.random.default_rng(4)
+    theta = _points(3, 1, rng)
+    z = rng.normal(0, 1.5, (theta.shape[0], T))
+    for s in (-2.0, 1.5):
+        moved = ridge.follow(model, theta, s)
+        assert np.allclose(moved[:, 1] * moved[:, 2], theta[:, 1] * theta[:, 2])
+        assert np.allclose(two_gain_density(moved, z), two_gain_density(theta, z))
+    # the swap b <-> c and the sign maps are discrete symmetries besides
+    assert "swap b <-> c" in {s.name for s in found.discrete}
 
 
 # --------------------------------------------------------------- the shipped models

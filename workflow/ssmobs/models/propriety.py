@@ -377,10 +377,14 @@ def posterior_propriety(model: StateSpaceModel, bounds: PriorBounds) -> Propriet
             )
     for ridge in syms.ridges:
         if _ridge_improper(model, ridge, bounds):
-            moved = ", ".join(ridge.unbounded) if ridge.unbounded else "the orbit"
+            moved = (
+                f" ({', '.join(ridge.unbounded)} flat on the line and moved without bound)"
+                if ridge.unbounded
+                else ""
+            )
             improper.append(
                 f"the ridge {ridge.name} leaves the density unchanged along orbits of infinite "
-                f"mass inside the prior ({moved} flat and unbounded along it)"
+                f"mass inside the prior{moved}"
             )
     drops = model_dropouts(model)
     undetermined += drops.undetermined

@@ -329,6 +329,8 @@ def _describe(model: StateSpaceModel, cand: _Candidate) -> tuple[str, str]:
         if pairs:
             left = ", ".join(a for a, _ in pairs)
             right = ", ".join(b for _, b in pairs)
+            if len(pairs) == 1:
+                return f"swap {left} <-> {right}", kind
             return f"swap ({left}) <-> ({right})", kind
     if len(moved_from) == 1:
         return f"{moved_from[0]} -> {moved_to[0]}", kind
