@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -61,3 +62,84 @@ def test_joint_map_estimate_bounds_the_measured_peak(slug, omega, x0):
         )
     )
     assert used <= budget.joint_map_bytes(model, T, K)
+
+
+# ------------------------------------------------------------------------ time budget
+def test_joint_map_time_estimate_bounds_the_measured_cpu():
+    """K trajectories x 2 starts of the model measured slowest per Theta component
+    ((Sep, d=1, p=2)): the CPU the multi-start really takes stays below the estimate."""
+    import time
+
+    from ssmobs.joint_map.multi_start import multi_start_joint_map
+
+    slug, omega, x0, T, K = "sep_d1_p2", [0.6, 0.5, 0.9, 0.9], [8.0, 8.0], 60, 10
+    model = get_model(slug)
+    q = (model.obs_dim + model.state_dim) * T
+    _, z = model.design_trajectories(omega, x0, np.random.default_rng(0).standard_normal((q, K)), T)
+    bounds = model.prior_bounds(omega)
+    start = time.process_time()
+    multi_start_joint_map(
+        model, z, bounds, np.asarray(omega), np.asarray(x0), JointMapSettings(n_starts=2)
+    )
+    used = time.process_time() - start
+    assert used <= K * 2 * budget.joint_map_start_seconds(model, T)
+
+
+def n_starts_config(n_starts: int) -> dict:
+    entry = {"name": "s", "model": "same", "omega": {"a": 0.9}, "x0": 8, "T": 20, "K": 100}
+    return {"scenarios": [entry], "joint_map": {"n_starts": n_starts}}
+
+
+def test_a_million_starts_are_refused_with_the_estimate_and_the_rule():
+    from ssmobs.config import validation as cfg
+
+    with pytest.raises(cfg.ConfigError) as err:
+        cfg.validate(n_starts_config(1_000_000))
+    lines = str(err.value).splitlines()
+    assert len(lines) == 2, lines
+    hours = 100 * 1_000_000 * budget.joint_map_start_seconds(get_model("same"), 20) / 3600
+    assert lines[1].startswith(
+        f"  - the joint-MAP starts of the run would take about {hours:.3g} CPU hours "
+        f"(largest: scenario 's': {hours:.3g}), more than limits.joint_map_cpu_hours = 48; "
+        f"the estimate is K x n_starts x 2 ms per component of Theta"
+    )
+    assert "reduce joint_map.n_starts (now 1000000)" in lines[1]
+    assert hours > 500  # weeks of CPU
+    # the scenario's own n_starts counts, the block's is overridden
+    config = n_starts_config(1)
+    config["scenarios"][0]["joint_map_n_starts"] = 1_000_000
+    with pytest.raises(cfg.ConfigError, match="joint-MAP starts of the run would take"):
+        cfg.validate(config)
+    config["limits"] = {"joint_map_cpu_hours": 1e4}
+    assert cfg.validate(config)["scenarios"][0]["joint_map_n_starts"] == 1_000_000
+
+
+def test_a_map_counts_every_cell_and_a_scenario_without_joint_map_none():
+    from ssmobs.config import validation as cfg
+
+    config = cfg.validate(n_starts_config(8))
+    config["scenarios"].append({**config["scenarios"][0], "name": "t", "joint_map": False})
+    config["observability_maps"] = [
+        {"name": "m", "base": {"model": "same"}, "values": [0.5, 0.9], "T": [4, 20], "K": 10}
+    ]
+    seconds = budget.joint_map_cpu_seconds(config)
+    same = get_model("same")
+    assert set(seconds) == {"scenario 's'", "observability map 'm'"}
+    assert seconds["scenario 's'"] == 100 * 8 * budget.joint_map_start_seconds(same, 20)
+    cells = 2 * (budget.joint_map_start_seconds(same, 4) + budget.joint_map_start_seconds(same, 20))
+    assert seconds["observability map 'm'"] == pytest.approx(10 * 8 * cells)
+
+
+def test_every_committed_profile_fits_the_time_budget():
+    import yaml
+    from ssmobs.config import validation as cfg
+
+    repo = Path(__file__).resolve().parents[2]
+    profiles = [*(repo / "config").glob("*.yaml"), *(repo / "config").glob("*/*.yaml")]
+    for path in sorted(profiles):
+        raw = yaml.safe_load(path.read_text())
+        if not isinstance(raw, dict) or "scenarios" not in raw:
+            continue
+        config = cfg.validate(raw)
+        hours = sum(budget.joint_map_cpu_seconds(config).values()) / 3600
+        assert hours <= 1.4, (path.name, hours)  # config/README.md says so

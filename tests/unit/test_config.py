@@ -337,9 +337,11 @@ def test_runaway_size_refused_naming_scenario_estimate_and_limit():
 
 def test_raised_limits_accept_it_and_accept_strings_from_the_command_line():
     c = huge()
-    c["limits"] = {"job_memory_gib": "100000", "jobs": "1000000"}  # as --config passes them
+    # as --config passes them
+    c["limits"] = {"job_memory_gib": "100000", "jobs": "1000000", "joint_map_cpu_hours": "1e6"}
     c["stan"] = {"batch_size": 1000}
-    assert cfg.validate(c)["limits"] == {"job_memory_gib": 100000, "jobs": 1000000}
+    limits = {"job_memory_gib": 100000, "jobs": 1000000, "joint_map_cpu_hours": 1e6}
+    assert cfg.validate(c)["limits"] == limits
 
 
 def test_too_many_jobs_refused_even_when_memory_fits():
@@ -527,6 +529,45 @@ def test_outputs_dir_in_a_folder_of_the_workflow_refused(value):
     """Issue 35: outputs_dir .git, config or results were accepted."""
     msg = refused({**base(), "outputs_dir": value})
     assert f"outputs_dir = {value!r}: would write into" in msg and "allowed: a folder" in msg
+
+
+@pytest.mark.parametrize(
+    ("link", "target", "shown"),
+    [
+        ("paper_figures/mine", "../results", "results, inside results/"),
+        ("paper_figures/mine", "../results/stages", "results/stages, inside results/"),
+        ("out", "results", "results, inside results/"),
+        ("paper_figures", ".snakemake", ".snakemake/mine, inside .snakemake/"),
+        ("paper_figures/mine", "..", "., the working directory itself"),
+    ],
+)
+def test_outputs_dir_that_resolves_into_a_folder_of_the_workflow_refused(
+    tmp_path, monkeypatch, link, target, shown
+):
+    """Issue 61 item 8: an outputs_dir linked into results/ was accepted and the tables
+    landed beside the stages' folders."""
+    monkeypatch.chdir(tmp_path)
+    for folder in ("results/stages", ".snakemake"):
+        (tmp_path / folder).mkdir(parents=True)
+    (tmp_path / link).parent.mkdir(parents=True, exist_ok=True)
+    (tmp_path / link).symlink_to(target)
+    value = "out" if link == "out" else "paper_figures/mine"
+    lines = refused({**base(), "outputs_dir": value}).splitlines()
+    assert len(lines) == 2
+    assert lines[1] == (
+        f"  - outputs_dir = {value!r}: resolves (symbolic links followed) to {shown}, which "
+        f"holds the workflow, its cache or git's data; allowed: a folder that resolves outside "
+        f"{', '.join(sorted(cfg.RESERVED_DIRS))} (e.g. paper_figures/mine)"
+    )
+
+
+def test_outputs_dir_linked_elsewhere_in_the_working_directory_accepted(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "paper_figures").mkdir()
+    (tmp_path / "paper_figures" / "mine").symlink_to("../elsewhere")
+    config = {**base(), "outputs_dir": "paper_figures/mine"}
+    assert cfg.validate(config)["outputs_dir"] == "paper_figures/mine"
 
 
 def test_a_name_longer_than_a_file_name_can_hold_refused():

@@ -44,7 +44,8 @@ def test_fifty_large_scenarios_give_a_short_message_naming_the_count():
     lines = problem_lines(config_of(scenarios(50)))
     text = "\n".join(lines)
     assert len(lines) <= 20, text
-    # one line per kind: the design sets' memory, gather_nuts' memory, the number of jobs
+    # one line per kind: the design sets' memory, gather_nuts' memory, the number of jobs,
+    # the joint-MAP starts' CPU hours
     memory = [x for x in lines if "design_disturbances job needs" in x]
     assert len(memory) == 1, text
     assert memory[0].startswith("  - 50 scenarios alike, the first: scenario 'big_scenario_00'")
@@ -52,7 +53,8 @@ def test_fifty_large_scenarios_give_a_short_message_naming_the_count():
     assert others in memory[0]
     assert len([x for x in lines if "gather_nuts job needs" in x]) == 1
     assert "every one: .venv/bin/python -m ssmobs.config.preflight --all CONFIGFILE" in lines[0]
-    assert "(101 problems of 3 kinds" in lines[0]
+    assert "(102 problems of 4 kinds" in lines[0]
+    assert len([x for x in lines if "joint-MAP starts of the run would take" in x]) == 1
 
 
 def test_values_that_differ_are_still_one_kind():
@@ -85,7 +87,8 @@ def test_one_scenarios_messages_are_given_as_before():
         "memory (K = 200000, T = 400, q = 800, design), more than limits.job_memory_gib = "
         "10 GiB; reduce the sizes or raise the limit (config/README.md, section 'limits')"
     )
-    assert len(lines) == 3  # and the gather_nuts job's
+    assert len(lines) == 4  # and the gather_nuts job's, and the joint-MAP starts' hours
+    assert lines[3].startswith("  - the joint-MAP starts of the run would take about")
 
 
 def test_three_alike_are_still_given_one_by_one():
@@ -99,7 +102,7 @@ def test_three_alike_are_still_given_one_by_one():
 def test_every_problem_on_request():
     lines = problem_lines(config_of(scenarios(50)), every_problem=True)
     assert lines[0] == "invalid configuration:"
-    assert len(lines) == 1 + 101
+    assert len(lines) == 1 + 102
 
 
 def run_preflight(*args: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -122,7 +125,7 @@ def test_preflight_prints_the_summary_and_every_problem_with_all(tmp_path):
     assert f"python -m ssmobs.config.preflight --all {path}" in short.stderr
     every = run_preflight("--all", str(path), cwd=tmp_path)
     assert every.returncode == 1
-    assert len(every.stderr.splitlines()) == 1 + 101
+    assert len(every.stderr.splitlines()) == 1 + 102
     assert "scenario 'big_scenario_49': a gather_nuts job needs" in every.stderr
 
 

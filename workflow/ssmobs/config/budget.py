@@ -20,6 +20,11 @@ the (q x q) covariance, joint MAP about 6 x the (K x |Theta|) results plus one c
 working set (36-73 numbers per Theta component and trajectory, measured for the six models
 at T = 4..300; we take 100), Figure 4 about 10 numbers per Theta component and grid point.
 Each estimate is multiplied by :data:`MARGIN`.
+
+A time budget besides: the CPU hours of the joint-MAP starts of the run (K trajectories x
+n_starts starts per scenario and map cell, :func:`joint_map_cpu_seconds`), above
+``limits.joint_map_cpu_hours``, stop it with the estimate and the rule (``n_starts:
+1000000`` would run for years).
 """
 
 from __future__ import annotations
@@ -46,6 +51,13 @@ JOINT_MAP_CHUNK_WORK = 2e5
 JOINT_MAP_PER_THETA = 100
 #: jobs besides the per-scenario ones: tables, figures 2-4, observability figure, `all`
 FIXED_JOBS = 7
+#: CPU seconds of one joint-MAP start of one trajectory per Theta component, up to
+#: |Theta| = JOINT_MAP_CPU_SQRT_FROM (above it the cost grows as |Theta|^1.5): about 2.5
+#: times the largest measured (2026-12-07, process CPU of the multi-start's joint_map
+#: calls): 0.017-0.41 ms with 40-100 trajectories (Same T = 50 to (Sep, d=1, p=2) T = 100,
+#: |Theta| 52-303), up to 0.87 ms with 10 (the batch's fixed cost shared by fewer)
+JOINT_MAP_CPU_S_PER_THETA = 2e-3
+JOINT_MAP_CPU_SQRT_FROM = 200
 
 
 @dataclass(frozen=True)
@@ -256,9 +268,59 @@ def job_counts(config: dict) -> dict[str, int]:
     return counts
 
 
+def joint_map_start_seconds(model: StateSpaceModel, T: int) -> float:
+    """Estimated CPU seconds of one joint-MAP start of one trajectory (Sec. III.B; checks
+    and ridge re-optimisation included): :data:`JOINT_MAP_CPU_S_PER_THETA` per Theta
+    component, times sqrt(|Theta| / :data:`JOINT_MAP_CPU_SQRT_FROM`) above that size."""
+    n = model.n_theta(T)
+    return JOINT_MAP_CPU_S_PER_THETA * n * max(1.0, math.sqrt(n / JOINT_MAP_CPU_SQRT_FROM))
+
+
+def joint_map_cpu_seconds(config: dict) -> dict[str, float]:
+    """Estimated CPU seconds of the joint-MAP stage (all starts) by scenario and
+    observability map: K x n_starts x :func:`joint_map_start_seconds` (the choice of K and
+    Figure 4 use the paper's one start and are left out)."""
+    block = config["joint_map"]["n_starts"]
+    out: dict[str, float] = {}
+    for sc in config["scenarios"]:
+        if not sc["joint_map"]:
+            continue
+        starts = sc.get("joint_map_n_starts") or block
+        model = MODELS[sc["model"]]
+        out[f"scenario '{sc['name']}'"] = sc["K"] * starts * joint_map_start_seconds(model, sc["T"])
+    for entry in config.get("observability_maps", []):
+        model = MODELS[entry["base"]["model"]]
+        starts = entry["base"].get("joint_map_n_starts") or block
+        cells = len(entry["values"]) * sum(joint_map_start_seconds(model, T) for T in entry["T"])
+        out[f"observability map '{entry['name']}'"] = entry["K"] * starts * cells
+    return out
+
+
+def time_problems(config: dict) -> list[str]:
+    """One message when the joint-MAP starts of the run would take more than
+    ``limits.joint_map_cpu_hours`` CPU hours (:func:`joint_map_cpu_seconds`)."""
+    limit = config["limits"]["joint_map_cpu_hours"]
+    seconds = joint_map_cpu_seconds(config)
+    total = sum(seconds.values())
+    if total <= 3600 * limit:
+        return []
+    largest = sorted(seconds.items(), key=lambda kv: -kv[1])[:3]
+    detail = ", ".join(f"{who}: {s / 3600:.3g}" for who, s in largest)
+    n_starts = config["joint_map"]["n_starts"]
+    return [
+        f"the joint-MAP starts of the run would take about {total / 3600:.3g} CPU hours "
+        f"(largest: {detail}), more than limits.joint_map_cpu_hours = {limit}; the estimate "
+        f"is K x n_starts x {1e3 * JOINT_MAP_CPU_S_PER_THETA:g} ms per component of Theta "
+        f"(x sqrt(|Theta| / {JOINT_MAP_CPU_SQRT_FROM}) above {JOINT_MAP_CPU_SQRT_FROM}) per "
+        f"scenario and map cell; reduce joint_map.n_starts (now {n_starts}), "
+        f"joint_map_n_starts or K, or raise the limit (config/README.md, section 'limits')"
+    ]
+
+
 def problems(config: dict) -> list[str]:
-    """One message per job kind above ``limits.job_memory_gib`` and one if there are more
-    than ``limits.jobs`` jobs; empty when the run fits."""
+    """One message per job kind above ``limits.job_memory_gib``, one if there are more
+    than ``limits.jobs`` jobs and one if the joint-MAP starts exceed
+    ``limits.joint_map_cpu_hours`` (:func:`time_problems`); empty when the run fits."""
     limits = config["limits"]
     mem_limit = limits["job_memory_gib"] * GIB
     out = []
@@ -281,4 +343,4 @@ def problems(config: dict) -> list[str]:
             f"(now {config['stan']['batch_size']}) or raise limits.jobs "
             f"(config/README.md, section 'limits')"
         )
-    return out
+    return out + time_problems(config)

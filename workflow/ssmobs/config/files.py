@@ -9,14 +9,24 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from .schema import MAX_REPR, ConfigError, cut_text, short_repr
+from .schema import (
+    MAX_REPR,
+    PLAIN_FLOAT,
+    PLAIN_INF,
+    PLAIN_INT,
+    PLAIN_NAN,
+    YAML12_ONLY,
+    ConfigError,
+    cut_text,
+    number_form,
+    short_repr,
+)
 
 #: largest config file read (bytes); a config has a few kB
 MAX_CONFIG_BYTES = 5 * 2**20
@@ -78,28 +88,6 @@ class ConfigLoader(yaml.SafeLoader):
 
 _INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
 _STR_TAG = "tag:yaml.org,2002:str"
-#: numbers of YAML 1.2 that PyYAML (YAML 1.1) reads as strings: octal 0o7, 1e3, 1.5e3
-_YAML12_ONLY = re.compile(r"[-+]?(0o[0-7]+|0x[0-9a-fA-F]+|[0-9]+(\.[0-9]*)?[eE][-+]?[0-9]+)")
-#: the numbers YAML 1.2 (core schema) and YAML 1.1 both read alike: a decimal integer
-#: without leading zeros, a decimal float, .inf, .nan
-_PLAIN_INT = re.compile(r"[-+]?(0|[1-9][0-9]*)")
-_PLAIN_FLOAT = re.compile(
-    r"[-+]?(\.[0-9]+|(0|[1-9][0-9]*)(\.[0-9]*)?)([eE][-+]?[0-9]+)?|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN)"
-)
-
-
-def _number_form(text: str) -> str:
-    """What makes ``text`` a YAML 1.1 number form that YAML 1.2 reads otherwise or not at all."""
-    body = text.lstrip("+-")
-    if "_" in body:
-        return "digits with underscores"
-    if ":" in body:
-        return "a base-60 (sexagesimal) number"
-    if body[:2].lower() == "0x":
-        return "a hexadecimal number"
-    if body[:2].lower() == "0o" or body[:2].lower() == "0b":
-        return "an octal or binary number"
-    return "a number with a leading zero (YAML 1.1 reads it as octal)"
 
 
 def _refuse_yaml11_numbers(
@@ -113,7 +101,7 @@ def _refuse_yaml11_numbers(
     seen.add(id(node))
     if isinstance(node, yaml.ScalarNode):
         where = f"key {'.'.join(path)!r}: " if path else ""
-        if node.tag == _STR_TAG and node.style is None and _YAML12_ONLY.fullmatch(node.value):
+        if node.tag == _STR_TAG and node.style is None and YAML12_ONLY.fullmatch(node.value):
             raise RefusedYAMLError(
                 problem=(
                     f"{where}{node.value} is a number in YAML 1.2 but a string here (YAML "
@@ -124,8 +112,10 @@ def _refuse_yaml11_numbers(
         if node.tag not in (_INT_TAG, _FLOAT_TAG):
             return
         text = str(node.value)
-        plain = _PLAIN_INT if node.tag == _INT_TAG else _PLAIN_FLOAT
-        if plain.fullmatch(text) or (node.tag == _FLOAT_TAG and _PLAIN_INT.fullmatch(text)):
+        if PLAIN_INT.fullmatch(text) or (
+            node.tag == _FLOAT_TAG
+            and any(p.fullmatch(text) for p in (PLAIN_FLOAT, PLAIN_INF, PLAIN_NAN))
+        ):
             return
         try:
             read = loader.construct_object(node)
@@ -134,7 +124,7 @@ def _refuse_yaml11_numbers(
         shown = f"it would run as {read!r}" if read is not None else "it is no number"
         raise RefusedYAMLError(
             problem=(
-                f"{where}{text} is {_number_form(text)}, a YAML 1.1 form that YAML 1.2 "
+                f"{where}{text} is {number_form(text)}, a YAML 1.1 form that YAML 1.2 "
                 f"reads otherwise ({shown}); write the number in plain decimal digits"
             ),
             problem_mark=node.start_mark,

@@ -2,7 +2,8 @@
 
 :func:`load_schema` reads ``workflow/schemas/config.schema.yaml``; :func:`schema_problems`
 checks a value against (part of) it, filling in its defaults, and words every problem as
-key, value and what is allowed.  This module imports nothing of the package, so every other
+key, value and what is allowed; the number forms a config takes (:func:`plain_number`) and
+those that YAML 1.1 and 1.2 read differently (:func:`number_form`).  This module imports nothing of the package, so every other
 module (the cross-field checks of :mod:`ssmobs.config.validation`, :mod:`ssmobs.config.scenario`)
 can use it.
 """
@@ -289,58 +290,49 @@ def _key(path: tuple) -> str:
     return out or "(top level)"
 
 
-def nonfinite_problems(obj: Any, path: tuple = ()) -> list[str]:
-    """Every NaN or infinite number anywhere in the config (JSON schema ranges let NaN pass)."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return [f"{_key(path)} = {obj!r}: must be a finite number"]
-    if isinstance(obj, dict):
-        return [p for k, v in obj.items() for p in nonfinite_problems(v, path + (k,))]
-    if isinstance(obj, list):
-        return [p for i, v in enumerate(obj) for p in nonfinite_problems(v, path + (i,))]
-    return []
+# ------------------------------------------------------------------------ number forms
+#: the number forms a config takes, read alike by YAML 1.2 (core schema) and YAML 1.1:
+#: decimal digits without a leading zero, a decimal fraction with an optional exponent
+#: (``1e3``, a number in YAML 1.2, text in YAML 1.1, which reads no number otherwise)
+PLAIN_INT = re.compile(r"[-+]?(0|[1-9][0-9]*)")
+PLAIN_FLOAT = re.compile(r"[-+]?(\.[0-9]+|(0|[1-9][0-9]*)(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
+PLAIN_INF = re.compile(r"([-+]?)\.(inf|Inf|INF)")
+PLAIN_NAN = re.compile(r"\.(nan|NaN|NAN)")
+#: what else YAML 1.2's core schema reads as a number: leading zeros, octal 0o7, hex 0x8
+YAML12_OTHER = re.compile(
+    r"[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+|[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?"
+)
+#: numbers of YAML 1.2 that PyYAML (YAML 1.1) reads as text: octal 0o7, 1e3, 1.5e3
+YAML12_ONLY = re.compile(r"[-+]?(0o[0-7]+|0x[0-9a-fA-F]+|[0-9]+(\.[0-9]*)?[eE][-+]?[0-9]+)")
+#: how a config writes numbers, for the messages
+PLAIN_DIGITS = "a number in plain decimal digits (e.g. 10, 0.5, 1.0e+3)"
 
 
-def scalars_from_command_line(instance: Any, schema: dict) -> Any:
-    """``instance`` with every string where the schema wants no string, but a number,
-    boolean or null, read as a YAML scalar of that type (in place; returns it).
+def number_form(text: str) -> str:
+    """What makes ``text`` a number form that YAML 1.1 and YAML 1.2 read differently."""
+    body = text.lstrip("+-")
+    if "_" in body:
+        return "digits with underscores"
+    if ":" in body:
+        return "a base-60 (sexagesimal) number"
+    if body[:2].lower() == "0x":
+        return "a hexadecimal number"
+    if body[:2].lower() in ("0o", "0b"):
+        return "an octal or binary number"
+    return "a number with a leading zero"
 
-    Snakemake parses nested values of ``--config`` (and of a profile's ``config:``) with
-    YAML's BaseLoader, i.e. as strings: ``--config 'stan={chains: 1}'`` gives
-    ``{'chains': '1'}``.  A string that is no such scalar stays and the schema names it.
-    """
-    forms = schema.get("oneOf") or [schema]
-    kinds = {k for form in forms for k in _types(form)}
-    if isinstance(instance, str):
-        if "string" in kinds or not kinds & {"integer", "number", "boolean", "null"}:
-            return instance
-        if len(instance) > MAX_REPR:
-            return instance
-        try:
-            parsed = yaml.safe_load(instance)
-        except yaml.YAMLError:
-            return instance
-        number = isinstance(parsed, (int, float)) and not isinstance(parsed, bool)
-        if (
-            (parsed is None and "null" in kinds)
-            or (isinstance(parsed, bool) and "boolean" in kinds)
-            or (number and kinds & {"integer", "number"})  # 1.0 for an integer: refused later
-        ):
-            return parsed
-        return instance
-    kind = "object" if isinstance(instance, dict) else "array" if isinstance(instance, list) else ""
-    form = next((f for f in forms if kind and kind in _types(f)), None)
-    if form is None:
-        return instance
-    if isinstance(instance, dict):
-        props, extra = form.get("properties", {}), form.get("additionalProperties")
-        for key, value in list(instance.items()):
-            sub = props.get(key, extra)
-            if isinstance(sub, dict):
-                instance[key] = scalars_from_command_line(value, sub)
-    elif isinstance(form.get("items"), dict):
-        for i, value in enumerate(instance):
-            instance[i] = scalars_from_command_line(value, form["items"])
-    return instance
+
+def plain_number(text: str) -> int | float | None:
+    """The number ``text`` writes in a plain decimal form (:data:`PLAIN_INT`,
+    :data:`PLAIN_FLOAT`, ``.inf``, ``.nan``), as YAML 1.2 reads it; None for other text."""
+    if PLAIN_INT.fullmatch(text):
+        return int(text)
+    if PLAIN_FLOAT.fullmatch(text):
+        return float(text)
+    inf = PLAIN_INF.fullmatch(text)
+    if inf:
+        return -math.inf if inf[1] == "-" else math.inf
+    return math.nan if PLAIN_NAN.fullmatch(text) else None
 
 
 @functools.lru_cache(maxsize=1)

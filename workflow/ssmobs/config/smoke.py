@@ -31,6 +31,8 @@ from typing import Any
 
 import yaml
 
+from .numbers import text_number_problems
+from .schema import load_schema
 from .validation import ConfigError, validate
 
 #: design trajectories per scenario and per map cell in a smoke run (the smoke profile's
@@ -40,6 +42,13 @@ SMOKE_K = 4
 STAN_SIZES = ("chains", "iter_warmup", "iter_sampling", "batch_size")
 #: the smoke profile
 SMOKE_PROFILE = Path(__file__).resolve().parents[3] / "config" / "smoke.yaml"
+
+
+def _at_most(value: Any, cap: Any) -> Any:
+    """min(value, cap) for two integers; any other value as it is (the config check then
+    names it: a float K is refused there, not cut to an integer here)."""
+    whole = all(isinstance(v, int) and not isinstance(v, bool) for v in (value, cap))
+    return min(value, cap) if whole else value
 
 
 def smoke_overlay(
@@ -55,17 +64,18 @@ def smoke_overlay(
     out = copy.deepcopy(config)
     out["outputs_dir"] = f"paper_figures/smoke_{name}"
     for sc in out.get("scenarios", []):
-        sc["K"] = min(int(sc["K"]), SMOKE_K)
+        if "K" in sc:
+            sc["K"] = _at_most(sc["K"], SMOKE_K)
         if sc.get("exact_K") is not None:
-            sc["exact_K"] = min(int(sc["exact_K"]), SMOKE_K)
+            sc["exact_K"] = _at_most(sc["exact_K"], SMOKE_K)
         if "stan_every" in sc:
-            sc["stan_every"] = min(int(sc["stan_every"]), sc["K"])
+            sc["stan_every"] = _at_most(sc["stan_every"], sc.get("K"))
         own = sc.get("stan_settings") or {}
         for key in ("chains", "iter_warmup", "iter_sampling"):
             if key in own:
                 own[key] = sizes[key]
     for entry in out.get("observability_maps", []):
-        entry["K"] = min(int(entry.get("K", SMOKE_K)), SMOKE_K)
+        entry["K"] = _at_most(entry.get("K", SMOKE_K), SMOKE_K)
     for entry in out.get("k_selection", []):
         entry["K_grid"] = list(k_grid)
         if "seeds" in entry:
@@ -76,7 +86,7 @@ def smoke_overlay(
     ess = 100 * int(sizes["chains"])
     conv = out["convergence"] = dict(out.get("convergence") or {})
     for key in ("ess_bulk_min", "ess_tail_min"):
-        conv[key] = min(int(conv.get(key, ess)), ess)
+        conv[key] = _at_most(conv.get(key, ess), ess)
     return out
 
 
@@ -99,6 +109,10 @@ def write_overlay(source: str | Path, out: str | Path) -> dict[str, Any]:
     from .preflight import load_config_file
 
     config = load_config_file(source)
+    # quoted numbers read as the config check reads them, so that the sizes are cut
+    problems = text_number_problems(config, load_schema())
+    if problems:
+        raise ConfigError(f"config file {source}: " + "; ".join(problems))
     overlay = smoke_overlay(config, Path(source).stem)
     try:
         validate(copy.deepcopy(overlay))

@@ -8,7 +8,10 @@ scenario entry, :func:`ssmobs.config.scenario.entry_problems`.
 
 The ground floor below it, which imports nothing of the package: the schema, its messages
 and :class:`ConfigError` (:mod:`ssmobs.config.schema`), the strict reading of config files
-(:mod:`ssmobs.config.files`).  Their names that callers take from here are imported below.
+(:mod:`ssmobs.config.files`); beside it, numbers written as text and non-finite numbers
+(:mod:`ssmobs.config.numbers`) and the checks of ``outputs_dir``
+(:mod:`ssmobs.config.outputs_dir`).  Their names that callers take from here are imported
+below.
 """
 
 from __future__ import annotations
@@ -26,13 +29,15 @@ from .files import check_config_files as check_config_files
 from .files import parse_config_text as parse_config_text
 from .files import read_config_file as read_config_file
 from .maps import MAP_CELL_KEYS, cell_entries
+from .numbers import nonfinite_problems
+from .numbers import text_number_problems as text_number_problems
+from .outputs_dir import RESERVED_DIRS as RESERVED_DIRS
+from .outputs_dir import outputs_dir_problems
 from .scenario import entry_problems
 from .schema import (
     MAX_REPR,
     cut_text,
     load_schema,
-    nonfinite_problems,
-    scalars_from_command_line,
     schema_problems,
     short_repr,
     summarise_problems,
@@ -137,7 +142,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
         + _paper_output_problems(config)
         + _paper_ref_problems(config)
         + _mu0_sweep_problems(config)
-        + _outputs_dir_problems(config)
+        + outputs_dir_problems(config)
     )
 
 
@@ -231,34 +236,6 @@ def _mu0_sweep_problems(config: dict) -> list[str]:
         f"not scenario names, and a known model that no joint-MAP scenario uses adds no "
         f"rows; allowed: {sorted(MODELS)}"
     ]
-
-
-#: top-level folders of the working directory that hold the workflow, its cache or git's
-#: data: no outputs_dir lies in one of them
-RESERVED_DIRS = frozenset(
-    {".git", ".snakemake", ".venv", "benchmarks", "config", "docs", "envs", "profiles"}
-    | {"results", "site", "stan", "tests", "workflow"}
-)
-
-
-def _outputs_dir_problems(config: dict) -> list[str]:
-    """outputs_dir: a relative path that stays inside the working directory, outside the
-    folders of :data:`RESERVED_DIRS`."""
-    value = config["outputs_dir"]
-    if value.startswith("/") or ".." in value.split("/"):
-        return [
-            f"outputs_dir = {short_repr(value)}: must be a relative path inside the working "
-            f"directory; allowed: no leading '/' and no '..' part (e.g. paper_figures/mine)"
-        ]
-    parts = [p for p in value.split("/") if p not in ("", ".")]
-    if not parts or parts[0] in RESERVED_DIRS:
-        return [
-            f"outputs_dir = {short_repr(value)}: would write into "
-            f"{'the working directory itself' if not parts else repr(parts[0] + '/')}, which "
-            f"holds the workflow, its cache or git's data; allowed: a folder outside "
-            f"{', '.join(sorted(RESERVED_DIRS))} (e.g. paper_figures/mine)"
-        ]
-    return []
 
 
 def _keep_draws_problems(config: dict) -> list[str]:
@@ -451,9 +428,9 @@ def validate(
             f"expanded); a config has a few hundred"
         )
     schema = load_schema()
-    scalars_from_command_line(config, schema)
+    problems = text_number_problems(config, schema)
     explicit_exact = frozenset(_explicit_exact(config))
-    problems = nonfinite_problems(config) or schema_problems(config, schema)
+    problems = problems or nonfinite_problems(config) or schema_problems(config, schema)
     if not problems:
         problems = _own_model_problems(config)
     if not problems:

@@ -99,8 +99,9 @@ class StateSpaceModel:
     obs_dim: ClassVar[int]
     state_dim: ClassVar[int]
     param_names: ClassVar[tuple[str, ...]]
-    #: prior variant used by the paper for each parameter
-    default_prior: ClassVar[Mapping[str, str]]
+    #: prior of each parameter a config leaves out: a variant (the paper's choice) or an
+    #: interval (lower, upper), bounds possibly infinite (``(-math.inf, math.inf)``: flat)
+    default_prior: ClassVar[Mapping[str, PriorChoice]]
     #: prior variants that make sense for each parameter
     allowed_priors: ClassVar[Mapping[str, tuple[str, ...]]]
     #: parameters that enter as sqrt(1 - w^2) and so need |w| < 1
@@ -310,21 +311,39 @@ class StateSpaceModel:
             out.append(variant)
         return out
 
-    def _interval(self, name: str, value: object) -> tuple[float, float]:
+    @classmethod
+    def _interval(cls, name: str, value: object) -> tuple[float, float]:
         """(lower, upper) of an interval prior, or ValueError naming the parameter."""
         try:
             lo, hi = (float(v) for v in value)  # type: ignore[attr-defined]
         except (TypeError, ValueError):
             raise ValueError(
-                f"prior of parameter '{name}' of model '{self.slug}' must be a variant name or "
+                f"prior of parameter '{name}' of model '{cls.slug}' must be a variant name or "
                 f"an interval [lower, upper] of two numbers (.inf allowed), got {value!r}"
             ) from None
         if isinstance(value, str) or math.isnan(lo) or math.isnan(hi) or not lo < hi:
             raise ValueError(
-                f"prior interval of parameter '{name}' of model '{self.slug}' must have "
-                f"lower < upper, got {list(value)!r}"  # type: ignore[call-overload]
+                f"prior interval of parameter '{name}' of model '{cls.slug}' must have "
+                f"lower < upper, got {[lo, hi]!r}"
             )
         return lo, hi
+
+    @classmethod
+    def default_prior_problems(cls) -> list[str]:
+        """Problems of :attr:`default_prior`: each entry one of the parameter's
+        :attr:`allowed_priors` or an interval (lower, upper), lower < upper (.inf allowed)."""
+        problems = []
+        for name in cls.param_names:
+            default, allowed = cls.default_prior[name], cls.allowed_priors[name]
+            if isinstance(default, str) and default not in allowed:
+                what = f"{default!r} is not in allowed_priors[{name!r}] = {allowed!r}"
+                problems.append(f"default_prior[{name!r}] = {what} (or give an interval)")
+            elif not isinstance(default, str):
+                try:
+                    cls._interval(name, default)
+                except ValueError as err:
+                    problems.append(f"default_prior[{name!r}]: {err}")
+        return problems
 
     def check_true_values(
         self,
