@@ -359,3 +359,22 @@ def test_a_declared_mirror_image_is_checked_against_the_found_maps(monkeypatch):
     assert "leaves -2 log pi unchanged at random points" in first
     assert "declared image 2" in second and "changes -2 log pi" in second
     assert report.to_dict()["symmetry_warnings"] == [first, second]
+
+
+def test_a_map_sympy_cannot_show_is_not_used_and_is_a_warning(monkeypatch):
+    import ssmobs.models.symmetries as symmetries
+    from growth_model import Growth
+
+    class Unproven(Growth):
+        """The growth model, with SymPy made unable to show any map (fresh memo key)."""
+
+        def mirror_images(self, theta):
+            return []
+
+    monkeypatch.setattr(symmetries, "_symbolically_invariant", lambda cand, syms: False)
+    cm, _ = _patch_model(monkeypatch, Unproven())
+    report = cm.check_model("test_growth", stan=False)
+    assert report.to_dict()["symmetries"] == []
+    (warning,) = report.analysis.warnings
+    assert warning.startswith("x -> -x: leaves both terms unchanged at random points, but SymPy")
+    assert "not used" in warning

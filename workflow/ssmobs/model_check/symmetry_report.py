@@ -92,23 +92,31 @@ def symmetry_report(
 ) -> SymmetryReport:
     """The symmetries, the propriety under each distinct prior of ``cases``, and the warnings
     about ``mirror_images``."""
-    report = SymmetryReport(symmetries=model_symmetries(model).table())
+    found = model_symmetries(model)
+    report = SymmetryReport(symmetries=found.table())
+    report.warnings += [
+        f"{name}: leaves both terms unchanged at random points, but SymPy could not show it: "
+        f"not used (declare it in mirror_images if it is a symmetry)"
+        if "->" in name
+        else name
+        for name in found.unconfirmed
+    ]
     seen: set[str] = set()
     for case in cases:
         prior = _prior_text(model, case)
         if prior in seen:
             continue
         seen.add(prior)
-        found = posterior_propriety(model, model.prior_bounds(case.omega, case.prior))
+        answer = posterior_propriety(model, model.prior_bounds(case.omega, case.prior))
         report.propriety.append(
             {
                 "prior": prior,
-                "improper": list(found.improper),
-                "edge": list(found.edge),
-                "undetermined": list(found.undetermined),
-                "label": found.label(),
+                "improper": list(answer.improper),
+                "edge": list(answer.edge),
+                "undetermined": list(answer.undetermined),
+                "label": answer.label(),
             }
         )
     if cases:
-        report.warnings = mirror_image_warnings(model, cases[0], T, seed)
+        report.warnings += mirror_image_warnings(model, cases[0], T, seed)
     return report

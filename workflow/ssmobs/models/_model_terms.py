@@ -84,26 +84,36 @@ def term_values(func: Callable, cols: np.ndarray) -> np.ndarray:
 def random_points(
     model: StateSpaceModel, syms: ModelTerms, rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """n random (Omega, x_prev, x, z) where both terms are finite and real and the model
-    constraints hold: parameters of either sign, magnitudes in (0.1, 0.9) or (0.1, 3)."""
+    """Up to n random (Omega, x_prev, x, z) where both terms are finite and real and the model
+    constraints hold: parameters of either sign, magnitudes in (0.1, 0.9) or (0.1, 3); states
+    and data normal with standard deviation 1.5.  Drawn in rounds of 40 n candidates, at
+    most 10 rounds (fewer points where the model's domain is small)."""
     m, p, d = model.n_params, model.state_dim, model.obs_dim
-    size = 40 * n
-    mag = np.where(
-        rng.uniform(size=(size, 1)) < 0.5,
-        rng.uniform(0.1, 0.9, (size, m)),
-        rng.uniform(0.1, 3.0, (size, m)),
-    )
-    w = mag * rng.choice([-1.0, 1.0], size=(size, m))
-    xp = rng.normal(0.0, 1.5, (size, p))
-    x = rng.normal(0.0, 1.5, (size, p))
-    z = rng.normal(0.0, 1.5, (size, d))
-    ok = np.isfinite(term_values(syms.obs_f, np.hstack([w, x, z])))
-    ok &= np.isfinite(term_values(syms.trans_f, np.hstack([w, xp, x])))
     cons = model.support_constraints(syms.w)
-    if cons:
-        cf = sp.lambdify(syms.w, cons, modules="numpy")
-        with np.errstate(all="ignore"):
-            vals = [np.broadcast_to(np.asarray(c, dtype=float), (size,)) for c in cf(*w.T)]
-        ok &= np.all(np.stack(vals, axis=1) > 0, axis=1)
-    idx = np.flatnonzero(ok)[:n]
-    return w[idx], xp[idx], x[idx], z[idx]
+    cf = sp.lambdify(syms.w, cons, modules="numpy") if cons else None
+    kept: list[tuple[np.ndarray, ...]] = []
+    found = 0
+    for _ in range(10):
+        size = 40 * n
+        mag = np.where(
+            rng.uniform(size=(size, 1)) < 0.5,
+            rng.uniform(0.1, 0.9, (size, m)),
+            rng.uniform(0.1, 3.0, (size, m)),
+        )
+        w = mag * rng.choice([-1.0, 1.0], size=(size, m))
+        xp = rng.normal(0.0, 1.5, (size, p))
+        x = rng.normal(0.0, 1.5, (size, p))
+        z = rng.normal(0.0, 1.5, (size, d))
+        ok = np.isfinite(term_values(syms.obs_f, np.hstack([w, x, z])))
+        ok &= np.isfinite(term_values(syms.trans_f, np.hstack([w, xp, x])))
+        if cf is not None:
+            with np.errstate(all="ignore"):
+                vals = [np.broadcast_to(np.asarray(c, dtype=float), (size,)) for c in cf(*w.T)]
+            ok &= np.all(np.stack(vals, axis=1) > 0, axis=1)
+        idx = np.flatnonzero(ok)[: n - found]
+        kept.append((w[idx], xp[idx], x[idx], z[idx]))
+        found += idx.size
+        if found >= n:
+            break
+    w, xp, x, z = (np.concatenate(parts) for parts in zip(*kept))
+    return w, xp, x, z

@@ -375,8 +375,8 @@ def discrete_symmetries(
     """The accepted discrete maps, and the names of those only numerics found."""
     screen = random_points(model, syms, rng, SCREEN_POINTS)
     confirm = random_points(model, syms, rng, CONFIRM_POINTS)
-    if screen[0].shape[0] < SCREEN_POINTS // 2:
-        return [], []
+    if min(screen[0].shape[0], confirm[0].shape[0]) < SCREEN_POINTS // 2:
+        return [], ["no discrete map tested: too few random points where the terms are finite"]
 
     def base(pts: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
         w, xp, x, z = pts
