@@ -73,6 +73,15 @@ def sep_d1_p2_density(theta, z):
     return np.sum(obs + trans, axis=1)
 
 
+def sep_d2_p1_density(theta, z2):
+    w, x = _split(theta, 3, 1)
+    a, b, c = w[:, :1], w[:, 1:2], w[:, 2:]
+    xp, xt = x[:, :-1, 0], x[:, 1:, 0]
+    obs = (z2[..., 0] - a * xt) ** 2 / (1 - a**2) + np.log(1 - a**2)
+    obs += (z2[..., 1] - b * xt) ** 2 / (1 - b**2) + np.log(1 - b**2)
+    return np.sum(obs + (xt - c * xp) ** 2 / (1 - c**2) + np.log(1 - c**2), axis=1)
+
+
 def sep_like_density(obs_coef, trans_coef, m):
     """Sep (b x, a x_prev) and ranWalk (a x, x_prev) written out; -2 log pi."""
 
@@ -96,7 +105,7 @@ def _points(m, p, rng, n=20, w_scale=0.45):
 def _assert_invariant(model, density, m, p, d=1):
     rng = np.random.default_rng(7)
     theta = _points(m, p, rng)
-    z = rng.normal(0, 1.5, (theta.shape[0], T)) if d == 1 else None
+    z = rng.normal(0, 1.5, (theta.shape[0], T) if d == 1 else (theta.shape[0], T, d))
     base = density(theta, z)
     assert np.all(np.isfinite(base))
     found = model_symmetries(model)
@@ -243,5 +252,6 @@ def test_found_maps_of_shipped_models_agree_with_independent_code():
     ranwalk = sep_like_density(lambda w: w[:, :1], lambda w: np.ones_like(w[:, :1]), 1)
     _assert_invariant(get_model("sep"), sep, 2, 1)
     _assert_invariant(get_model("sep_ranwalk"), ranwalk, 1, 1)
+    _assert_invariant(get_model("sep_d2_p1"), sep_d2_p1_density, 3, 1, d=2)
     found = _assert_invariant(get_model("sep_d1_p2"), sep_d1_p2_density, 4, 2)
     assert len(found.discrete) == 7  # with the identity, the group of order 8
