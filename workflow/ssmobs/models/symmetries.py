@@ -18,7 +18,9 @@ with z left symbolic (``sympy.simplify`` of the difference is 0), after a numeri
 before a numeric confirmation at fresh random points.  A map under which only the sum over t
 is unchanged is not found.  A ridge is the null space of the linear conditions
 grad(-2 log pi) . v = 0 at random (Theta, z), each basis generator confirmed by following its
-curve.  docs/method/symmetries.md states the families and what the search cannot find.
+curve (:mod:`ssmobs.models._ridges`; the terms as both searches use them:
+:mod:`ssmobs.models._model_terms`).  docs/method/symmetries.md states the families and what
+the search cannot find.
 """
 
 from __future__ import annotations
@@ -111,8 +113,9 @@ def preserves_box(sym: DiscreteSymmetry, bounds: PriorBounds) -> bool:
 
 @dataclass(frozen=True)
 class ModelSymmetries:
-    """The symmetries found for one model; ``unconfirmed`` names candidates that passed the
-    numeric screen but not the symbolic test (not used anywhere)."""
+    """The symmetries found for one model; ``unconfirmed`` names the candidates that passed
+    the numeric screen but not the symbolic test (never used as symmetries; the model check
+    shows them as warnings)."""
 
     discrete: tuple[DiscreteSymmetry, ...]
     ridges: tuple[Ridge, ...]
