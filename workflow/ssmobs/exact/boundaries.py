@@ -273,7 +273,8 @@ def interior_valleys(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`valley_limits` for the improper interior points ``points`` (K, m) (NaN: none):
     toward each, the box stops at the valley between it and the mode ``u`` (the lower limit
-    where the point lies below the mode, else the upper), within ``limits`` = (lo, hi)
+    where the point lies below the mode, else the upper; at the spike's foot,
+    ``spike_distance`` from the point, where there is no valley), within ``limits`` = (lo, hi)
     (K, m) already set; the returned ratio (K,) is the mass of the spike on the mode's side
     of the point beyond the valley, down to ``spike_distance`` from it, relative to the
     basin's (0 where no point is cut; the spike's other side is not counted)."""
@@ -299,8 +300,10 @@ def interior_valleys(
         i = lpu.argmin(1)
         valley = cut[:, j] & (i > 0) & (lpu[:, 0] > lpu[rows, i])
         where = pts[rows, i, j]
-        lo_lim[:, j] = np.where(valley & below, np.maximum(lo_lim[:, j], where), lo_lim[:, j])
-        hi_lim[:, j] = np.where(valley & ~below, np.minimum(hi_lim[:, j], where), hi_lim[:, j])
+        # without a valley the box still never crosses the point: it stops at the spike's foot
+        stop = np.where(valley, where, start)
+        lo_lim[:, j] = np.where(cut[:, j] & below, np.maximum(lo_lim[:, j], stop), lo_lim[:, j])
+        hi_lim[:, j] = np.where(cut[:, j] & ~below, np.minimum(hi_lim[:, j], stop), hi_lim[:, j])
         with np.errstate(all="ignore"):
             sd = 1 / np.sqrt(-H[:, j, j])
             dist = np.abs(where - c)
