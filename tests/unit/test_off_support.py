@@ -48,3 +48,45 @@ def test_nan_is_not_computed_and_no_reason():
     assert off_support_reasons(table, model, bounds, 2) == ["", "", ""]
     assert unusable(float("nan"), (0.0, 1.0)) == ""
     assert unusable(1.0, (0.0, 1.0)) == ""  # the ends themselves are not beyond the support
+
+
+def test_gather_writes_the_marks_into_the_per_trajectory_table(tmp_path, monkeypatch):
+    """Rule gather_nuts' table (marginal_map.parquet) carries off_support; the summary
+    counts the marked rows."""
+    from ssmobs import io
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.design import trajectories as design
+    from ssmobs.nuts import record_cache
+    from ssmobs.stages.stan import run_gather_nuts
+
+    model = get_model("stoch_vol")
+    scenario = Scenario.from_config(
+        {"name": "sv", "model": "stoch_vol", "omega": {"phi": 0.9, "sigma": 0.5}, "x0": 0,
+         "T": 2, "K": 3, "prior": {"phi": "restricted", "sigma": "half_line"}}
+    )  # fmt: skip
+    traj = design.Trajectories(
+        model=model,
+        omega=scenario.omega,
+        x0=scenario.x0,
+        x=np.zeros((3, 2, 1)),
+        z=np.zeros((3, 2, 1)),
+        attrs={},
+    )
+    monkeypatch.setattr(design, "read_trajectories", lambda path: traj)
+    monkeypatch.setattr(record_cache, "check_batch_records", lambda *a, **k: None)
+    table = frame()
+    table.loc[1, "sigma_map"] = -1.6e307
+    io.write_parquet(tmp_path / "batch0.parquet", table)
+    info = run_gather_nuts(
+        "unused.nc",
+        [tmp_path / "batch0.parquet"],
+        scenario,
+        {},
+        tmp_path,
+        tmp_path / "marginal_map.parquet",
+        tmp_path / "summary.json",
+    )
+    back = io.read_parquet(tmp_path / "marginal_map.parquet", ["off_support"])
+    assert back["off_support"].tolist()[0] == "" and back["off_support"].tolist()[2] == ""
+    assert back["off_support"].tolist()[1].startswith("sigma_map -1.6e+307")
+    assert info["n_off_support"] == 1
