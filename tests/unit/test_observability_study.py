@@ -223,3 +223,24 @@ def test_the_projects_analysis_notes_the_edge_phi_to_zero_and_keeps_the_numbers(
     frame = study.study_table([scenario(20)], {"sv_T20": joint(2)}, {"sv_T20": stan}, {})
     assert "phi -> 0" in frame.loc[0, "edge"] and "improper" not in frame.columns
     assert frame.loc[0, "K_stan"] == 3 and frame.loc[0, "phi_mean_marginal"] == 0.85
+
+
+def test_the_study_figure_writes_improper_where_k_stan_is_not_shown(tmp_path, monkeypatch):
+    from ssmobs.reports import figures
+
+    seen: list[str] = []
+    monkeypatch.setattr(
+        figures,
+        "save_figure",
+        lambda fig, paths: seen.extend(t.get_text() for t in fig.axes[0].texts),
+    )
+    improper = analysis(stoch_vol=FakePropriety(improper=("x0 drops out at phi = 0",)))
+    stan = {"sv_T20": {"n_stan": 3, "ratio": 0.75, "K": 4}}
+    frame = study_table([scenario(20)], {"sv_T20": joint(2)}, stan, {}, propriety=improper)
+    study.figure_study(frame, "t", tmp_path / "f.png")
+    assert seen == ["improper"]
+    seen.clear()
+    study.figure_study(
+        study_table([scenario(20)], {"sv_T20": joint(2)}, stan, {}), "t", tmp_path / "g.png"
+    )
+    assert seen == []

@@ -182,7 +182,8 @@ def stan_caption(scenarios: Sequence[Scenario], stan_settings: Mapping[str, Any]
 
 
 def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> None:
-    """|K^max|/K and |K^Stan|/K against T, each with its 95 % interval as a band."""
+    """|K^max|/K and |K^Stan|/K against T, each with its 95 % interval as a band; "improper"
+    written where a scenario's |K^Stan|/K is not shown."""
     from .figures import _plt, save_figure
 
     plt = _plt()
@@ -203,6 +204,9 @@ def figure_study(frame: pd.DataFrame, title: str, path: str | os.PathLike) -> No
             alpha=0.15,
             lw=0,
         )
+    if "improper" in frame.columns:  # no |K^Stan|/K of an improper posterior: the word
+        for T in frame.loc[frame["improper"].fillna("").astype(bool), "T"]:
+            ax.text(T, 0.02, "improper", color="C1", fontsize=7, ha="center", rotation=90)
     ax.set_xlabel("T")
     ax.set_ylabel("fraction of the K trajectories")
     ax.set_ylim(-0.03, 1.03)
