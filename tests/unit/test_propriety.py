@@ -92,13 +92,24 @@ def test_x0_dropping_out_inside_the_prior_is_improper_and_at_its_end_an_edge():
     assert posterior_propriety(model, apart).improper == ()
 
 
-def test_a_drop_out_of_codimension_two_is_not_determined():
-    found = posterior_propriety(Growth(), Growth().prior_bounds({"a": 0.5, "b": 2.0}))
-    assert not found.is_improper and found.label() == "" and found.edge == ()
-    assert found.undetermined == (
+def test_a_drop_out_of_codimension_two_is_a_note_at_the_edge_and_undetermined_inside():
+    growth = Growth()
+    omega = {"a": 0.5, "b": 2.0}
+    at_edge = posterior_propriety(growth, growth.prior_bounds(omega))  # a on (0, 1)
+    assert not at_edge.is_improper and at_edge.label() == "" and at_edge.edge == ()
+    assert at_edge.undetermined == ()
+    assert at_edge.notes == (
+        "a = 0 and b = 0: x0 drops out of the likelihood at the edge of the prior box (a set "
+        "of codimension 2)",
+    )
+    inside = posterior_propriety(growth, growth.prior_bounds(omega, {"a": [-1, 1], "b": [-3, 3]}))
+    assert inside.notes == () and not inside.is_improper
+    assert inside.undetermined == (
         "x0 drops out of the likelihood where a = 0 and b = 0 (a set of codimension 2): "
         "whether the posterior is proper there is not determined",
     )
+    outside = posterior_propriety(growth, growth.prior_bounds(omega, {"b": [1, 3]}))
+    assert (outside.notes, outside.undetermined) == ((), ())
 
 
 def _ends(reasons):
@@ -139,6 +150,7 @@ def test_shipped_models_under_the_config_priors_give_the_documented_cases():
         edges, inside = _documented(sc["name"])
         assert _ends(found.edge) == edges, sc["name"]
         assert [r.split(",")[0] for r in found.improper] == inside, sc["name"]
+        assert found.undetermined == (), sc["name"]  # nothing is left undecided
         seen.add(sc["model"])
     assert seen >= {"same", "sep", "sep_d2_p1", "sep_d1_p2", "sep_ranwalk", "sep_mult"}
     # the tutorial's model: phi -> 0 at the end of (0, 1), 1/phi (your-own-model.md)

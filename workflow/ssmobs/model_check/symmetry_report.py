@@ -43,6 +43,7 @@ class SymmetryReport:
                 [f"improper: {r}" for r in row["improper"]]
                 + [f"edge: {r}" for r in row["edge"]]
                 + [f"not determined: {r}" for r in row["undetermined"]]
+                + [f"note: {r}" for r in row["notes"]]
             ) or ["nothing found"]
             out.append(f"  prior {row['prior']}:")
             out += [f"    {f}" for f in findings]
@@ -114,6 +115,7 @@ def symmetry_report(
                 "improper": list(answer.improper),
                 "edge": list(answer.edge),
                 "undetermined": list(answer.undetermined),
+                "notes": list(answer.notes),
                 "label": answer.label(),
             }
         )

@@ -20,7 +20,8 @@ posterior is proper only if the likelihood integrates.  Two findings make it imp
    states, the data and the functions of them).  A set {Omega_i = v} strictly inside the
    prior box makes the marginal posterior diverge there (improper); at an end of the prior
    interval it is the paper's documented edge (``edge``: numbers stay, a note is shown).
-   A set of two or more equations, or one SymPy cannot solve, is ``undetermined``.
+   A set of two or more equations on the boundary of the box is a ``note``; strictly inside
+   it, or where SymPy cannot solve, it is ``undetermined``.
 
 docs/method/symmetries.md and docs/method/improper-posteriors.md explain both rules and what
 they cannot find.
@@ -66,12 +67,14 @@ class ModelDropOuts:
 @dataclass(frozen=True)
 class Propriety:
     """Reasons the posterior is improper inside the prior support (``improper``), the same
-    drop-out at an end of the support (``edge``), and what could not be decided
-    (``undetermined``); all empty when nothing is found."""
+    drop-out at an end of the support (``edge``), what could not be decided
+    (``undetermined``), and drop-outs of codimension two or more on the boundary of the box
+    (``notes``, for the model check); all empty when nothing is found."""
 
     improper: tuple[str, ...]
     edge: tuple[str, ...]
     undetermined: tuple[str, ...] = field(default=())
+    notes: tuple[str, ...] = field(default=())
 
     @property
     def is_improper(self) -> bool:
@@ -259,7 +262,7 @@ def _interval_text(lo: float, hi: float) -> str:
 def _judge_dropout(
     model: StateSpaceModel, item: DropOut, bounds: PriorBounds
 ) -> tuple[str, str] | None:
-    """("improper" | "edge" | "undetermined", reason) of one drop-out set under ``bounds``,
+    """("improper" | "edge" | "undetermined" | "note", reason) of one drop-out set under ``bounds``,
     or None when it lies outside the prior box."""
     if not item.condition:
         return (
@@ -267,12 +270,7 @@ def _judge_dropout(
             f"{item.variable} never enters the likelihood and is flat on the line",
         )
     if len(item.condition) > 1:
-        return (
-            "undetermined",
-            f"{item.variable} drops out of the likelihood where {item.text} (a set of "
-            f"codimension {len(item.condition)}): whether the posterior is proper there is "
-            f"not determined",
-        )
+        return _judge_high_codimension(model, item, bounds)
     ((name, value),) = item.condition
     i = model.param_names.index(name)
     lo, hi = float(bounds.lower[i]), float(bounds.upper[i])
@@ -301,6 +299,39 @@ def _judge_dropout(
             f"{where}",
         )
     return None
+
+
+def _judge_high_codimension(
+    model: StateSpaceModel, item: DropOut, bounds: PriorBounds
+) -> tuple[str, str] | None:
+    """A drop-out set of two or more equations: outside the closed prior box, nothing; on
+    its boundary (some parameter at an end of its interval), a ``note`` (the model check
+    shows it; the tables do not: a corner like a = b = 0 is not one of the documented
+    improper ends); strictly
+    inside, or not decidable here, ``undetermined`` (whether the marginal is integrable
+    across a set of codimension two or more depends on how fast it diverges)."""
+    codim = len(item.condition)
+    values: list[tuple[float, float, float]] = []
+    for name, value in item.condition:
+        if value.free_symbols or not value.is_real:
+            values = []
+            break
+        i = model.param_names.index(name)
+        values.append((float(value), float(bounds.lower[i]), float(bounds.upper[i])))
+    if values:
+        if any(not lo <= v <= hi for v, lo, hi in values):
+            return None
+        if any(v in (lo, hi) for v, lo, hi in values):
+            return (
+                "note",
+                f"{item.text}: {item.variable} drops out of the likelihood at the edge of the "
+                f"prior box (a set of codimension {codim})",
+            )
+    return (
+        "undetermined",
+        f"{item.variable} drops out of the likelihood where {item.text} (a set of "
+        f"codimension {codim}): whether the posterior is proper there is not determined",
+    )
 
 
 def _relation_inside(
@@ -368,6 +399,7 @@ def posterior_propriety(model: StateSpaceModel, bounds: PriorBounds) -> Propriet
     improper: list[str] = []
     edge: list[str] = []
     undetermined: list[str] = []
+    notes: list[str] = []
     syms = model_symmetries(model)
     for sym in syms.discrete:
         if sym.infinite_order and preserves_box(sym, bounds):
@@ -393,11 +425,13 @@ def posterior_propriety(model: StateSpaceModel, bounds: PriorBounds) -> Propriet
         if judged is None:
             continue
         kind, reason = judged
-        {"improper": improper, "edge": edge, "undetermined": undetermined}[kind].append(reason)
+        found = {"improper": improper, "edge": edge, "undetermined": undetermined, "note": notes}
+        found[kind].append(reason)
     result = Propriety(
         improper=tuple(dict.fromkeys(improper)),
         edge=tuple(dict.fromkeys(edge)),
         undetermined=tuple(dict.fromkeys(undetermined)),
+        notes=tuple(dict.fromkeys(notes)),
     )
     _MEMO[key] = result
     return result
