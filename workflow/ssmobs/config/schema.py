@@ -3,9 +3,9 @@
 :func:`load_schema` reads ``workflow/schemas/config.schema.yaml``; :func:`schema_problems`
 checks a value against (part of) it, filling in its defaults, and words every problem as
 key, value and what is allowed; the number forms a config takes (:func:`plain_number`) and
-those that YAML 1.1 and 1.2 read differently (:func:`number_form`).  This module imports nothing of the package, so every other
-module (the cross-field checks of :mod:`ssmobs.config.validation`, :mod:`ssmobs.config.scenario`)
-can use it.
+those that YAML 1.1 and 1.2 read differently (:func:`number_form`).  This module imports
+nothing of the package, so every other module (the cross-field checks of
+:mod:`ssmobs.config.validation`, :mod:`ssmobs.config.scenario`) can use it.
 """
 
 from __future__ import annotations
