@@ -282,3 +282,19 @@ def test_an_undecided_propriety_is_shown_in_words_not_as_numbers():
         "may be improper (not decided): x0 may drop out where a = b, not solved"
     )
     assert math.isnan(wide.loc["s", "K_stan"])
+
+
+def test_convergence_sensitivity_counts_of_an_improper_posterior_are_not_shown():
+    from ssmobs.stages.outputs.paper_tables import mark_improper_counts
+
+    table = pd.DataFrame(
+        {"scenario": ["sep_b", "s"], "K": [20, 40], "K_stan_run": [13, 34], "omega_only": [14, 35]}
+    )
+    sep_b = {**same_a09(name="sep_b", model="sep", omega={"a": 0.9, "b": 0.9})}
+    sep_b["prior"] = {"a": "unrestricted", "b": "restricted"}
+    out = mark_improper_counts(table, {"sep_b": sep_b, "s": same_a09()}).set_index("scenario")
+    assert math.isnan(out.loc["sep_b", "K_stan_run"]) and math.isnan(out.loc["sep_b", "omega_only"])
+    assert out.loc["sep_b", "K"] == 20 and "a = 0" in out.loc["sep_b", "improper"]
+    assert out.loc["s", "K_stan_run"] == 34 and out.loc["s", "improper"] == ""
+    proper = mark_improper_counts(table.iloc[1:], {"s": same_a09()})
+    assert list(proper.columns) == list(table.columns)  # nothing to say: the table as it was

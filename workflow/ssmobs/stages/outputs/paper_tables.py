@@ -115,12 +115,15 @@ def run_convergence_sensitivity(
     convergence_cfg: dict,
     paths: list[PathLike],
     failure_paths: list[PathLike],
+    configs: dict[str, dict] | None = None,
 ) -> pandas.DataFrame:
     """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth
     rules, and how the runs that did not converge failed (``failure_paths``).
 
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
-    scenario names to their gather_nuts tables.
+    scenario names to their gather_nuts tables.  With ``configs`` (scenario name -> config
+    entry), a scenario whose posterior is improper shows no |K^Stan| count but the reason
+    in a column ``improper`` (:func:`mark_improper_counts`).
     """
     from ...nuts.convergence import ConvergenceSettings
     from ...nuts.convergence_sensitivity import failure_pattern_table, sensitivity_table
@@ -142,6 +145,8 @@ def run_convergence_sensitivity(
     )
     base = ConvergenceSettings(**convergence_cfg)
     table = sensitivity_table(frames, base)
+    if configs is not None:
+        table = mark_improper_counts(table, configs)
     write_table(
         table,
         paths,
@@ -152,3 +157,20 @@ def run_convergence_sensitivity(
         f"E-BFMI >= {base.ebfmi_min:g})",
     )
     return table
+
+
+def mark_improper_counts(table: pandas.DataFrame, configs: dict[str, dict]) -> pandas.DataFrame:
+    """The sensitivity table with the |K^Stan| counts of every scenario whose posterior is
+    improper left empty (``K``, the runs, stays) and the column
+    ``improper`` (where some scenario is)."""
+    from ...reports.propriety_notes import config_note
+
+    notes = {name: config_note(configs[name]).improper for name in table["scenario"]}
+    if not any(notes.values()):
+        return table
+    out = table.astype({c: float for c in table.columns if c not in ("scenario", "K")})
+    hidden = out["scenario"].map(notes).astype(bool).to_numpy()
+    counts = [c for c in out.columns if c not in ("scenario", "K")]
+    out.loc[hidden, counts] = float("nan")
+    out["improper"] = out["scenario"].map(notes)
+    return out
