@@ -250,6 +250,14 @@ def model_dropouts(model: StateSpaceModel) -> ModelDropOuts:
             for o in found
         )
     ]
+    # in a fixed, readable order: x0's components, then directions; parameters in order
+    minimal.sort(
+        key=lambda d: (
+            d.variable.startswith("a direction"),
+            d.variable,
+            [model.param_names.index(name) for name, _ in d.condition],
+        )
+    )
     result = ModelDropOuts(tuple(minimal), tuple(dict.fromkeys(undetermined)))
     _DROPOUT_MEMO[key] = result
     return result
