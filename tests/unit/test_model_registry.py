@@ -174,3 +174,20 @@ def test_the_preflight_names_a_broken_model_a_config_uses_in_one_line(tmp_path, 
         check_config_file(bad)
     assert str(err.value).startswith(f"config file {bad}: model module {tmp_path / 'broken.py'}")
     assert "\n" not in str(err.value)
+
+
+def test_default_prior_may_be_an_interval_with_infinite_bounds(tmp_path):
+    """A model file may write "flat on the whole line" as its default prior (issue 60)."""
+    text = GOOD.format(cls="Toy", slug="toy").replace(
+        '{"a": "restricted"}', '{"a": (-float("inf"), float("inf"))}'
+    )
+    write(tmp_path, "toy", text)
+    bounds = discover_models(tmp_path)["toy"].prior_bounds({"a": 0.5})
+    assert (bounds.lower[0], bounds.upper[0]) == (-float("inf"), float("inf"))
+
+
+def test_default_prior_interval_must_be_ordered(tmp_path):
+    text = GOOD.format(cls="Toy", slug="toy").replace('{"a": "restricted"}', '{"a": (1.0, 0.0)}')
+    write(tmp_path, "toy", text)
+    with pytest.raises(ModelDefinitionError, match=r"default_prior\['a'\].*lower < upper"):
+        discover_models(tmp_path)

@@ -107,18 +107,18 @@ def definition_problems(cls: type[StateSpaceModel], expected_slug: str) -> list[
                 f"{attr} must have exactly one entry per parameter {list(names)}, got {keys!r}"
             )
             return problems
+    allowed_ok = True
     for name in names:
-        default, allowed = cls.default_prior[name], cls.allowed_priors[name]
+        allowed = cls.allowed_priors[name]
         if isinstance(allowed, str) or not all(v in PRIOR_VARIANTS for v in allowed):
+            allowed_ok = False
             problems.append(
                 f"allowed_priors[{name!r}] = {allowed!r} must be a tuple of "
                 f"variants from {list(PRIOR_VARIANTS)}"
             )
-        elif default not in allowed:
-            problems.append(
-                f"default_prior[{name!r}] = {default!r} is not in "
-                f"allowed_priors[{name!r}] = {allowed!r}"
-            )
+    if allowed_ok:
+        # a variant from allowed_priors, or an interval (lower, upper) (.inf allowed)
+        problems += cls.default_prior_problems()
     for attr in ("unit_interval_params", "positive_params"):
         unknown = [n for n in getattr(cls, attr) if n not in names]
         if unknown:
