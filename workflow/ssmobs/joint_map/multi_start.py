@@ -21,11 +21,15 @@ checks (:func:`ssmobs.joint_map.driver.joint_map`, each start vectorised over k)
   z)``; the even starts (2, 4, ...) take the model's noise-free path from x_0 at that Omega
   (``simulate`` with eta = eps = 0), which follows the branch the dynamics choose rather
   than the data's (where it is not finite, or excluded, the data's construction instead);
-- *image starts*: where the model declares symmetries (``mirror_images``, e.g. x -> -x),
-  each distinct maximum found by the starts above is mapped by each symmetry and optimised
-  again from there.  The image of a maximum is a maximum of the same height, so a symmetry
-  never lets a trajectory count as having one maximum because no start happened to fall
-  on the mirror's side (each start's states lie on one branch).
+- *image starts* (:mod:`ssmobs.joint_map.images`): each distinct maximum found by the
+  starts above is mapped by every symmetry of the model, those it declares
+  (``mirror_images``, e.g. x -> -x) and the discrete ones found from its terms
+  (:func:`ssmobs.models.symmetries.model_symmetries`: sign changes, swaps of blocks,
+  translations by a period in both directions, reflections), and optimised again from
+  every admissible image (inside the support, -2 pi finite) that is neither the maximum
+  itself nor a maximum already found.  The image of a maximum is a maximum of the same
+  height, so a symmetry never lets a trajectory count as having one maximum because no
+  start happened to fall on the image's side (each start's states lie on one branch).
 
 The starts are the same for every trajectory (the image starts per k) and need no seed.
 
@@ -40,16 +44,27 @@ constant, = -(-2 pi) / 2), whether the paper's start reached the highest (its va
 ``ridge_value_tol * (1 + |-2 pi|)`` of the best, so exact ties count), and the gap in log
 posterior from the highest to the second (0 up to rounding for a maximum and its image).
 
-Verdict per trajectory (``maxima_verdict``): ``none`` (no maximum passes), ``several``,
-``unique`` (one distinct maximum, reached by every start that passes, and at least
-``unique_min_share`` of the ``n_starts`` starts pass) or ``undetermined`` (one distinct
-maximum, but fewer starts pass: one passing start does not show that the others would
-reach it).  K^max_unique: the trajectories with verdict ``unique``.  It is not a subset of
-K^max (which is the paper's start's result), since another start can pass where the
-paper's does not.  A start that ends on the boundary or fails a check adds no maximum (its
-count is reported), so K^max_unique can still hide a supremum at the edge of the support;
-``boundary_higher`` marks the trajectories where a start that ended on the boundary reached
-a higher log posterior than every maximum that passes.
+Verdict per trajectory (``maxima_verdict``): ``none`` (no maximum passes), ``several``
+(two or more pass, or one whose image under a symmetry of the model is another admissible
+point: ``symmetric_twin``, a maximum of the same height whether or not a run from it
+passed; with a translation infinitely many), ``unique`` (one maximum found from the n
+starts, the images under the model's symmetries included: reached by every start that
+passes, no twin, and at least ``unique_min_share`` of the ``n_starts`` starts pass) or
+``undetermined`` (one such maximum, but fewer starts pass: one passing start does not show
+that the others would reach it).  K^max_unique: the trajectories with verdict ``unique``.
+It is not a subset of K^max (which is the paper's start's result), since another start can
+pass where the paper's does not.  ``starts_per_maximum`` counts, per maximum, the n starts
+that reached it (0 for one only an image start reached).
+
+A start that ends on the boundary, runs off or fails a check adds no maximum (its count is
+reported), so K^max_unique can still hide a supremum above the interior maxima.  Two
+columns say where one was measured: ``boundary_higher``, a start that ended with status
+``boundary`` (on the boundary of the prior support) reached a higher log posterior than
+every maximum that passes; ``edge_supremum``, a start ended ``unbounded`` (-2 pi still
+fell in both continued segments as Theta ran off to infinity,
+:func:`ssmobs.joint_map.checks.runoff_check`) at a higher log posterior than every maximum
+that passes: the density rises towards an infinite end of the support (b -> inf on a
+half-line prior, a flat x_0).
 """
 
 from __future__ import annotations
@@ -64,8 +79,9 @@ import pandas as pd
 
 from ..binomial import clopper_pearson
 from ..models.base import PriorBounds, StateSpaceModel
-from ..models.log_posterior import compile_constraints, in_support, neg2_log_posterior
+from ..models.log_posterior import compile_constraints, neg2_log_posterior
 from .driver import JointMapResult, ProgressLike, initial_theta, joint_map
+from .images import image_runs, symmetric_twins
 from .settings import JointMapSettings
 
 #: the verdicts of a trajectory's maxima (module docstring)
@@ -162,11 +178,20 @@ class MultiStartResult:
     maxima_log_post : per k, the log posterior (pi up to the model's constant) of every
         distinct maximum that passes the checks, highest first.
     maxima_first_start : per k, the first start (index into ``runs``) reaching each of them.
+    starts_per_maximum : per k, how many of the S starts reached each maximum (0 for one
+        that only an image start reached), in the order of ``maxima_log_post``.
     paper_start_highest : (K,) the paper's start passed and reached the highest maximum.
-    boundary_higher : (K,) one of the S starts ended with status ``boundary`` (or
-        ``unbounded``: ran off) at a higher
-        log posterior than every maximum that passes (or than -inf if none passes): the
-        supremum lies at the edge of the support, above the interior maxima.
+    boundary_higher : (K,) one of the S starts ended with status ``boundary`` (on the
+        boundary of the prior support) at a higher log posterior than every maximum that
+        passes (or than -inf if none passes): the supremum lies on the boundary, above the
+        interior maxima.
+    edge_supremum : (K,) one of the S starts ended ``unbounded`` (still gaining as it ran
+        off to infinity, :func:`ssmobs.joint_map.checks.runoff_check`) at a higher log
+        posterior than every maximum that passes: the density rises towards an infinite end
+        of the support (a half-line or line prior, or x_0's), above the interior maxima.
+    symmetric_twin : (K,) a maximum that passes has an admissible image under a symmetry
+        of the model (:mod:`ssmobs.joint_map.images`) that is another point: a maximum of
+        the same height, whether or not a start reached it.
     unique_min_share : the share of the S starts that must pass for ``unique``.
     """
 
@@ -177,8 +202,11 @@ class MultiStartResult:
     n_starts_boundary: np.ndarray
     maxima_log_post: list[np.ndarray]
     maxima_first_start: list[np.ndarray]
+    starts_per_maximum: list[np.ndarray]
     paper_start_highest: np.ndarray
     boundary_higher: np.ndarray
+    edge_supremum: np.ndarray
+    symmetric_twin: np.ndarray
     unique_min_share: float = 0.5
 
     @property
@@ -195,7 +223,11 @@ class MultiStartResult:
     def verdict(self) -> np.ndarray:
         """(K,) one of :data:`VERDICTS` (module docstring)."""
         return maxima_verdict(
-            self.n_maxima, self.n_starts_ok, self.starts.shape[0], self.unique_min_share
+            self.n_maxima,
+            self.n_starts_ok,
+            self.starts.shape[0],
+            self.unique_min_share,
+            self.symmetric_twin,
         )
 
     def columns(self) -> pd.DataFrame:
@@ -211,24 +243,35 @@ class MultiStartResult:
                 "unique_max": verdict == "unique",
                 "paper_start_highest": self.paper_start_highest.astype(bool),
                 "boundary_higher": self.boundary_higher.astype(bool),
+                "edge_supremum": self.edge_supremum.astype(bool),
+                "symmetric_twin": self.symmetric_twin.astype(bool),
                 "log_post_best": [v[0] if v.size else np.nan for v in self.maxima_log_post],
                 "log_post_gap": self.log_post_gap,
                 "maxima_log_post": [v.astype(float) for v in self.maxima_log_post],
                 "maxima_first_start": [v.astype(np.int64) for v in self.maxima_first_start],
+                "starts_per_maximum": [v.astype(np.int64) for v in self.starts_per_maximum],
             }
         )
 
 
 def maxima_verdict(
-    n_maxima: np.ndarray, n_starts_ok: np.ndarray, n_starts: int, unique_min_share: float
+    n_maxima: np.ndarray,
+    n_starts_ok: np.ndarray,
+    n_starts: int,
+    unique_min_share: float,
+    symmetric_twin: np.ndarray | None = None,
 ) -> np.ndarray:
     """(K,) ``none``, ``several``, ``unique`` or ``undetermined`` (module docstring): one
-    maximum is ``unique`` only when at least ceil(share * n_starts) of the starts pass."""
+    maximum is ``unique`` only when at least ceil(share * n_starts) of the starts pass and
+    it has no ``symmetric_twin`` (an admissible image under a symmetry that is another
+    point: then ``several``)."""
     needed = max(1, math.ceil(unique_min_share * n_starts - 1e-12))
     n_maxima, n_ok = np.asarray(n_maxima), np.asarray(n_starts_ok)
+    twin = np.zeros(n_maxima.shape, dtype=bool) if symmetric_twin is None else symmetric_twin
+    one = (n_maxima == 1) & ~np.asarray(twin, dtype=bool)
     out = np.where(n_maxima == 0, "none", "several").astype(object)
-    out[(n_maxima == 1) & (n_ok >= needed)] = "unique"
-    out[(n_maxima == 1) & (n_ok < needed)] = "undetermined"
+    out[one & (n_ok >= needed)] = "unique"
+    out[one & (n_ok < needed)] = "undetermined"
     return out
 
 
@@ -240,6 +283,14 @@ def distinct_maxima(
     Returns the values -2 pi of the maxima (lowest, i.e. highest posterior, first), the
     first start reaching each, and whether start 0 reached the highest.
     """
+    values, first, _, paper_highest = cluster_maxima(runs, k, settings)
+    return values, first, paper_highest
+
+
+def cluster_maxima(
+    runs: list[JointMapResult], k: int, settings: JointMapSettings
+) -> tuple[np.ndarray, np.ndarray, list[list[int]], bool]:
+    """:func:`distinct_maxima` with the runs (indices into ``runs``) that reached each."""
     passed = [s for s, r in enumerate(runs) if r.status[k] == "ok"]
     order = sorted(passed, key=lambda s: (runs[s].neg2_log_post[k], s))
     values: list[float] = []
@@ -262,7 +313,7 @@ def distinct_maxima(
     if values and runs[0].status[k] == "ok":
         f0, best = float(runs[0].neg2_log_post[k]), values[0]
         paper_highest = f0 <= best + settings.ridge_value_tol * (1.0 + abs(best))
-    return np.asarray(values), np.asarray(first, dtype=np.int64), paper_highest
+    return np.asarray(values), np.asarray(first, dtype=np.int64), members, paper_highest
 
 
 def data_states_rule(model: StateSpaceModel) -> str:
@@ -306,67 +357,33 @@ def halton_start_rule(
     return None
 
 
-def _expand(result: JointMapResult, rows: np.ndarray, K: int) -> JointMapResult:
-    """A result of the trajectories ``rows`` spread to all K (status ``not-run`` elsewhere)."""
-    out = JointMapResult.unfilled(K, result.theta_names, "not-run", "image start not run")
-    for name in (
-        "theta_hat",
-        "neg2_log_post",
-        "local_variance",
-        "eig_ratio",
-        "grad_max",
-        "iterations",
-        "status",
-        "reason",
-    ):
-        getattr(out, name)[rows] = getattr(result, name)
-    return out
-
-
-def image_runs(
-    model: StateSpaceModel,
-    z: np.ndarray,
-    bounds: PriorBounds,
-    omega_true: np.ndarray,
-    x0_true: np.ndarray,
-    settings: JointMapSettings,
-    runs: list[JointMapResult],
-    first_start: list[np.ndarray],
-) -> list[JointMapResult]:
-    """Runs from the images (``model.mirror_images``) of every distinct maximum found: round
-    r starts, for every k with more than r maxima, from the images of its r-th maximum."""
-    K = z.shape[0]
-    m = model.n_params
-    out: list[JointMapResult] = []
-    rounds = max((f.size for f in first_start), default=0)
-    for r in range(rounds):
-        rows = np.array([k for k in range(K) if first_start[k].size > r], dtype=np.int64)
-        found = np.stack([runs[int(first_start[k][r])].theta_hat[k] for k in rows])
-        for image in model.mirror_images(found):
-            image = np.asarray(image, dtype=float)
-            with np.errstate(all="ignore"):
-                (value,) = neg2_log_posterior(model, image, z[rows], bounds)
-            usable = np.isfinite(value) & in_support(model, image[:, :m], bounds)
-            if not usable.any():
-                continue
-            sub = rows[usable]
-            res = joint_map(
-                model, z[sub], bounds, omega_true, x0_true, settings, theta_start=image[usable]
-            )
-            out.append(_expand(res, sub, K))
-    return out
-
-
 def _distinct_all(
-    runs: list[JointMapResult], K: int, settings: JointMapSettings
-) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]:
-    values, first, highest = [], [], np.zeros(K, dtype=bool)
+    runs: list[JointMapResult], K: int, S: int, settings: JointMapSettings
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Per k: log pi of the distinct maxima, the first run reaching each, how many of the
+    first S runs (the starts) reached each; and whether the paper's start reached the
+    highest."""
+    values, first, counts, highest = [], [], [], np.zeros(K, dtype=bool)
     for k in range(K):
-        f, s, h = distinct_maxima(runs, k, settings)
+        f, s, members, h = cluster_maxima(runs, k, settings)
         values.append(-0.5 * f)
         first.append(s)
+        counts.append(np.array([sum(i < S for i in g) for g in members], dtype=np.int64))
         highest[k] = h
-    return values, first, highest
+    return values, first, counts, highest
+
+
+def higher_than_maxima(
+    runs: list[JointMapResult], status: str, values: list[np.ndarray]
+) -> np.ndarray:
+    """(K,) one of ``runs`` ended with ``status`` at a higher log posterior than every
+    maximum in ``values`` (log pi per k, highest first; -inf where there is none)."""
+    edge = np.stack([np.where(r.status == status, r.neg2_log_post, np.inf) for r in runs]).min(
+        axis=0
+    )
+    best = np.array([-2.0 * v[0] if v.size else np.inf for v in values])
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(edge) & (edge < best)
 
 
 def multi_start_joint_map(
@@ -406,22 +423,15 @@ def multi_start_joint_map(
         runs.append(joint_map(model, z, bounds, point[:m], point[m:], spread, progress=progress))
     S = len(runs)
     K = runs[0].status.shape[0]
-    values, first, highest = _distinct_all(runs, K, settings)
+    values, first, counts, highest = _distinct_all(runs, K, S, settings)
+    twin = np.zeros(K, dtype=bool)
     if S > 1:
         extra = image_runs(model, z, bounds, omega, x0, settings, runs, first)
         if extra:
             runs.extend(extra)
-            values, first, highest = _distinct_all(runs, K, settings)
+            values, first, counts, highest = _distinct_all(runs, K, S, settings)
+        twin = symmetric_twins(model, z, bounds, runs, first, settings)
     status = np.stack([r.status for r in runs[:S]])
-    edge = np.stack(
-        [
-            np.where(np.isin(r.status, ("boundary", "unbounded")), r.neg2_log_post, np.inf)
-            for r in runs[:S]
-        ]
-    ).min(axis=0)
-    best = np.array([-2.0 * v[0] if v.size else np.inf for v in values])
-    with np.errstate(invalid="ignore"):
-        boundary_higher = np.isfinite(edge) & (edge < best)
     return MultiStartResult(
         starts=starts,
         runs=runs,
@@ -430,8 +440,11 @@ def multi_start_joint_map(
         n_starts_boundary=(status == "boundary").sum(axis=0),
         maxima_log_post=values,
         maxima_first_start=first,
+        starts_per_maximum=counts,
         paper_start_highest=highest,
-        boundary_higher=boundary_higher,
+        boundary_higher=higher_than_maxima(runs[:S], "boundary", values),
+        edge_supremum=higher_than_maxima(runs[:S], "unbounded", values),
+        symmetric_twin=twin,
         unique_min_share=settings.unique_min_share,
     )
 
@@ -443,7 +456,9 @@ def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> di
     maximum, too few starts passed), ``K_max_any`` (one or more maxima pass),
     ``K_max_several``, ``K_paper_start_highest``, ``K_max_unique_lo95`` / ``_hi95`` (exact
     binomial 95 % interval of |K^max_unique| / K), ``K_max_unique_boundary_higher`` (of
-    K^max_unique, those where a start on the boundary went higher), ``log_post_gap_median``
+    K^max_unique, those where a start on the boundary went higher), ``K_edge_supremum`` and
+    ``K_max_unique_edge_supremum`` (all, and of K^max_unique, those where a start that ran
+    off went higher), ``K_symmetric_twin`` (a maximum with a twin), ``log_post_gap_median``
     (over the trajectories with several maxima) and the settings ``n_starts``,
     ``distinct_tol``, ``unique_min_share``.
     """
@@ -455,6 +470,9 @@ def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> di
     lo, hi = clopper_pearson(unique, K)
     gaps = columns["log_post_gap"].to_numpy(dtype=float)
     several = n_max > 1
+    none = np.zeros(K, dtype=bool)  # tables written before these columns
+    edge = columns["edge_supremum"].to_numpy(bool) if "edge_supremum" in columns else none
+    twin = columns["symmetric_twin"].to_numpy(bool) if "symmetric_twin" in columns else none
     return {
         "n_starts": settings.n_starts,
         "distinct_tol": settings.distinct_tol,
@@ -469,5 +487,8 @@ def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> di
         "K_max_unique_boundary_higher": int(
             (unique_k & columns["boundary_higher"].to_numpy(dtype=bool)).sum()
         ),
+        "K_edge_supremum": int(edge.sum()),
+        "K_max_unique_edge_supremum": int((unique_k & edge).sum()),
+        "K_symmetric_twin": int(twin.sum()),
         "log_post_gap_median": float(np.median(gaps[several])) if several.any() else np.nan,
     }
