@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from ssmobs.exact import marginal as exact_module
-from ssmobs.exact.boundaries import interior_dropouts
+from ssmobs.exact.interior_singularities import interior_dropouts
 from ssmobs.models import get_model
 
 pytestmark = pytest.mark.unit

@@ -39,18 +39,19 @@ where the interior basin does not dominate.
 Interior singularities.  Where a prior support contains a point at which x_0 drops out of
 the likelihood (a coefficient that carries x_0 is 0 there, as a in Sep with an unrestricted
 prior, or two components become indistinguishable, as c = d in (Sep, d=1, p=2)), p(Omega |
-z) diverges at that point inside the support.  :func:`ssmobs.exact.boundaries.interior_dropouts`
-finds it on each bounded axis through the mode (the rank of the observability matrix of
-x_0), the slope toward it is measured as at the ends, and where it is improper the box stops
-at the valley between it and the mode: the marginal MAP and quantiles are those of the
-interior maximum's basin, never of the spike, and ``spike_ratio`` counts the spike's mass
-on the mode's side.
+z) diverges at that point inside the support.
+:func:`ssmobs.exact.interior_singularities.interior_dropouts` finds it on each bounded
+axis through the mode (the rank of the observability matrix of x_0), the slope toward it
+is measured as at the ends, and where it is improper the box stops at the valley between
+it and the mode: the marginal MAP and quantiles are those of the interior maximum's basin,
+never of the spike, and ``spike_ratio`` counts the spike's mass on the mode's side.
 
 The steps live in their own modules: the grid over Omega (steps 1-3) in
 :mod:`ssmobs.exact.omega_grid`, the state mixtures (step 4) in
 :mod:`ssmobs.exact.state_mixtures`, the boundary slopes and the valley limits in
-:mod:`ssmobs.exact.boundaries`, the settings in :mod:`ssmobs.exact.settings`; this module
-holds the driver and its result.
+:mod:`ssmobs.exact.boundaries`, the interior singularities in
+:mod:`ssmobs.exact.interior_singularities`, the settings in :mod:`ssmobs.exact.settings`;
+this module holds the driver and its result.
 """
 
 from __future__ import annotations
@@ -62,14 +63,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..models import PriorBounds, StateSpaceModel
-from .boundaries import (
-    boundary_slopes,
-    improper,
-    interior_dropouts,
-    interior_slopes,
-    interior_valleys,
-    valley_limits,
-)
+from .boundaries import boundary_slopes, improper, valley_limits
+from .interior_singularities import interior_dropouts, interior_slopes, interior_valleys
 from .omega_grid import (
     coarse_search,
     fine_grid,
@@ -120,8 +115,9 @@ class ExactResult:
         ``n_local_max``, ``box_truncated``, ``improper_lower_<p>``/``improper_upper_<p>``,
         ``slope_lower_<p>``/``slope_upper_<p>``, ``mode_<p>``, ``laplace_sd_<p>`` and
         ``<name>_map``/``_q5``/``_q95`` for every component of Theta.  Where x0 drops out
-        of the likelihood inside the support (:func:`ssmobs.exact.boundaries.interior_dropouts`)
-        for some trajectory, also ``interior_<p>`` (the point, NaN: none on that axis),
+        of the likelihood inside the support
+        (:func:`ssmobs.exact.interior_singularities.interior_dropouts`) for some
+        trajectory, also ``interior_<p>`` (the point, NaN: none on that axis),
         ``slope_interior_<p>`` and ``improper_interior_<p>`` (the marginal is not integrable
         there: the estimates are those of the interior maximum's basin)."""
         import pandas as pd
