@@ -17,7 +17,8 @@ The checks are applied in this order (the first that applies wins):
     ``boundary_tol``, or (for a converged run) a barrier multiplier mu / s_i above
     ``grad_tol`` (the barrier is what holds the point), or (for a run that did not
     converge) a slack below ``boundary_near_tol`` with -2 pi still decreasing towards that
-    constraint faster than ``grad_tol``.
+    constraint faster than ``grad_tol``; or a run that did not converge ends on the
+    boundary when followed (:func:`runoff_check`).
 ``not-positive-definite``
     the Hessian of -2 pi is not positive definite: its block Cholesky factorisation fails
     or its smallest eigenvalue is not above ``pd_tol``.
