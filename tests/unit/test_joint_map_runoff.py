@@ -98,3 +98,45 @@ def test_runoff_settings_are_checked():
         JointMapSettings(runoff_margin=0.5)
     with pytest.raises(ValueError, match="runoff_reach"):
         JointMapSettings(runoff_reach=float("inf"))
+
+
+@pytest.mark.parametrize(
+    ("gains", "growth", "expected"),
+    [
+        ((2.0, 2.0), 1.2, "unbounded"),  # gains above tol in both segments, outward
+        ((2.0, 2.0), 1.04, "gradient"),  # gains, but no magnitude grew by 10 % (1.04^2)
+        ((2.0, 0.5), 1.2, "gradient"),  # the second change between tol / 100 and tol
+        ((2.0, 0.001), 1.2, "ridge"),  # the second flat (below tol / 100) while moving
+    ],
+)
+def test_runoff_labels_keep_a_margin_between_a_gain_and_flat(monkeypatch, gains, growth, expected):
+    """runoff_check's decision on controlled continued segments (the solver, -2 pi and the
+    checks at their ends replaced): -2 pi falls by gains[i] * tol in segment i, where
+    tol = ridge_value_tol (1 + |-2 pi|), and every component grows by ``growth`` per segment."""
+    from ssmobs.joint_map import checks
+
+    model = get_model("same")
+    settings = JointMapSettings()
+    theta = np.array([[0.5, 1.0, 1.0, 1.0]])
+    f_hat = np.array([10.0])
+    tol = settings.ridge_value_tol * (1 + 10.0)
+    values = iter([10.0 - gains[0] * tol, 10.0 - (gains[0] + gains[1]) * tol])
+
+    def fake_minimize(model, z, start, barrier, cont, mu, divergence_limit=None):
+        assert cont.max_newton_iter == settings.runoff_iter
+        return start * growth, np.zeros(1), np.full(1, mu), np.array(["max-iter"], dtype=object)
+
+    def fake_checks(model, z, new, mu, stop, barrier, cont, follow_runoff=True):
+        assert not follow_runoff
+        return {"status": np.array(["gradient"], dtype=object), "reason": np.array(["slow"])}
+
+    monkeypatch.setattr(checks, "minimize_barrier", fake_minimize)
+    monkeypatch.setattr(checks, "neg2_log_posterior", lambda *a, **k: (np.array([next(values)]),))
+    monkeypatch.setattr(checks, "check_maxima", fake_checks)
+    monkeypatch.setattr(
+        checks, "_smallest_eigenpair", lambda *a: (np.ones(1), np.ones(1), np.zeros((1, 4)))
+    )
+    barrier = checks.LogBarrier(model, model.prior_bounds([0.9], "restricted"))
+    z = np.zeros((1, 3, 1))
+    status, reason = checks.runoff_check(model, z, theta, f_hat, barrier, settings)
+    assert status[0] == expected, reason[0]
