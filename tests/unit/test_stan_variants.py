@@ -13,6 +13,7 @@ from ssmobs.config.validation import ConfigError, validate
 from ssmobs.reports.stan_variants import (
     OURS,
     VariantTableError,
+    caption,
     read_spec,
     setup_label,
     spec_inputs,
@@ -99,7 +100,72 @@ def test_variants_line_up_under_their_rows_baseline(tmp_path):
     table = variant_by_row(lines)
     assert table.columns.tolist() == ["Stan set-up", "same_a07_T100"]
     assert table.iloc[1, 1] == "0.90 [0.68, 0.99] of 20"
-    assert table.iloc[-1].tolist() == ["paper", "0.808"]
+    assert table.iloc[-2].tolist() == ["paper", "0.808"]
+    # Same under its restricted prior: x0 drops out at the end a = 0, numbers kept
+    assert table.iloc[-1, 0] == "edge" and "a -> 0" in table.iloc[-1, 1]
+    assert "improper" not in lines.columns
+
+
+IMPROPER_ROW = {  # (Sep, d=2, p=1) with b and c on (-1, 1): x0 drops out at c = 0 inside
+    "name": "only_a",
+    "model": "sep_d2_p1",
+    "omega": {"a": 0.9, "b": 0.9, "c": 0.9},
+    "x0": 8,
+    "T": 50,
+    "K": 40,
+    "prior": {"a": "restricted", "b": "unrestricted", "c": "unrestricted"},
+    "stan_every": 2,
+    "paper_ref": "sep_d2_p1_a_T50",
+}
+
+
+def test_an_improper_rows_stan_numbers_are_not_shown(tmp_path):
+    """Issue 60: no |K^Stan| of a posterior that is improper under its prior, under any
+    set-up; the runs, the paper's value and the reason stay, a proper row keeps its cells."""
+    base = _study(tmp_path / "row", [IMPROPER_ROW, SCENARIO], {"only_a": 13, "base": 15})
+    study = _study(
+        tmp_path / "study", [{**IMPROPER_ROW, "name": "seeded", "stan_seed": 1}], {"seeded": 18}
+    )
+    baselines = [
+        {"folder": str(base), "scenario": "only_a"},
+        {"folder": str(base), "scenario": "base"},
+    ]
+    lines = variant_rows(baselines, [str(study)]).set_index("scenario")
+    assert lines.loc[["only_a", "seeded"], "K_stan"].isna().all()
+    assert lines.loc[["only_a", "seeded"], "K_stan_frac_hi95"].isna().all()
+    assert (lines.loc[["only_a", "seeded"], "runs"] == 20).all()
+    assert lines.loc["only_a", "improper"].startswith("improper: x0 drops out")
+    assert "c = 0" in lines.loc["seeded", "improper"]
+    assert lines.loc["base", "improper"] == "" and lines.loc["base", "K_stan"] == 15
+    table = variant_by_row(lines.reset_index()).set_index("Stan set-up")
+    assert table.loc[OURS, "sep_d2_p1_a_T50"] == "not shown: improper (20 runs)"
+    assert table.loc["one Stan seed (1) for all", "sep_d2_p1_a_T50"].startswith("not shown")
+    assert table.loc["paper", "sep_d2_p1_a_T50"] == "0.808"
+    assert table.loc["improper", "sep_d2_p1_a_T50"] == lines.loc["only_a", "improper"]
+    assert table.loc["improper", "same_a07_T100"] == ""
+    assert table.loc[OURS, "same_a07_T100"] == "0.75 [0.51, 0.91] of 20"
+    assert not any("0.65" in cell or "0.90" in cell for cell in table["sep_d2_p1_a_T50"])
+    assert "not shown: improper" in caption(lines.reset_index())
+    assert "not shown" not in caption(lines.drop(columns="improper").reset_index())
+
+
+def test_an_analysis_that_finds_nothing_shows_every_number(tmp_path):
+    """The check reads the analysis it is given: with one that finds nothing the same
+    folder shows its count, so the words above come from the analysis, not the row's name."""
+
+    class Proper:
+        improper: tuple[str, ...] = ()
+        edge: tuple[str, ...] = ()
+        is_improper = False
+
+        def label(self) -> str:
+            return ""
+
+    base = _study(tmp_path / "row", [IMPROPER_ROW], {"only_a": 13})
+    baselines = [{"folder": str(base), "scenario": "only_a"}]
+    lines = variant_rows(baselines, [], propriety=lambda model, bounds: Proper())
+    assert "improper" not in lines.columns
+    assert variant_by_row(lines).iloc[0, 1] == "0.65 [0.41, 0.85] of 20"
 
 
 @pytest.mark.parametrize(
@@ -148,6 +214,21 @@ def test_the_committed_table_is_what_the_committed_studies_give(monkeypatch, tmp
     write_variant_table(spec, fresh_csv, fresh_md)
     assert fresh_csv.read_bytes() == csv.read_bytes(), f"{csv} is stale: make variant-table"
     assert fresh_md.read_bytes() == md.read_bytes(), f"{md} is stale: make variant-table"
+
+
+def test_the_committed_table_withholds_the_improper_row(monkeypatch):
+    """(Sep, d=2, p=1) with only a restricted is improper (c = 0 inside (-1, 1)): the
+    committed table shows no |K^Stan|/K for it under any set-up, and the paper's 0.743."""
+    monkeypatch.chdir(REPO)
+    spec = read_spec(SPEC)
+    lines = variant_rows(spec["baselines"], spec["studies"])
+    only_a = lines[lines["row"] == "sep_d2_p1_a_T50"]
+    assert len(only_a) == 10 and only_a["K_stan"].isna().all()
+    assert only_a["improper"].str.contains("c = 0, inside the prior").all()
+    proper = lines[lines["row"] != "sep_d2_p1_a_T50"]
+    assert proper["K_stan"].notna().all() and (proper["improper"] == "").all()
+    md = Path(f"{spec['output']}.md").read_text()
+    assert md.count("not shown: improper") == 10 + 1  # the cells and the caption
 
 
 def test_every_row_has_its_baseline_first(monkeypatch):

@@ -7,6 +7,12 @@ scenario of the study folders with the same ``paper_ref`` is a variant of it. A 
 run on the same design trajectories as its baseline (same model, truth, T, K, prior, design
 seed and method, the same every-m-th subset) and under the same convergence checks; what
 differs is its Stan set-up, and that difference is its label (derived, never typed).
+
+A row whose posterior is improper under its prior (:mod:`ssmobs.reports.propriety_notes`:
+x0 drops out strictly inside the prior box) shows no |K^Stan| under any set-up: its cells
+say "not shown: improper", the table's line ``improper`` gives the reason, and a
+documented end-of-support finding (``edge``) keeps its numbers and is named in a line
+``edge``.
 """
 
 from __future__ import annotations
@@ -22,6 +28,13 @@ from ssmobs import io
 from ssmobs.binomial import format_fraction
 from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS
 from ssmobs.config.validation import ConfigError, read_config_file, validate
+from ssmobs.reports.propriety_notes import (
+    NOT_SHOWN_IMPROPER,
+    PosteriorNote,
+    ProprietyAnalysis,
+    add_note_columns,
+    config_note,
+)
 from ssmobs.reports.tables import write_table
 from ssmobs.stage_code import code_digest, digest, file_digest
 
@@ -36,6 +49,13 @@ CAPTION = (
     "95 % interval and the number of runs, per set-up (what it changes against the row's own "
     "set-up) and row, each row on the same design trajectories; the paper's |K^Stan|/K last"
 )
+#: what the caption adds when some row's posterior is improper
+CAPTION_IMPROPER = (
+    '. A row whose posterior is improper under its prior shows "not shown: improper" under '
+    "every set-up and the reason in the line improper"
+)
+#: the columns of a line that state a Stan result (left empty for an improper posterior)
+STAN_RESULTS = ("K_stan", "K_stan_frac", "K_stan_frac_lo95", "K_stan_frac_hi95")
 
 
 class VariantTableError(ValueError):
@@ -97,12 +117,19 @@ def _checked_same_runs(
 
 
 def variant_rows(
-    baselines: Sequence[Mapping[str, str]], studies: Sequence[str | os.PathLike]
+    baselines: Sequence[Mapping[str, str]],
+    studies: Sequence[str | os.PathLike],
+    *,
+    propriety: ProprietyAnalysis | None = None,
 ) -> pd.DataFrame:
     """One line per (row, set-up): |K^Stan| of the runs, its fraction with a 95 % interval,
-    the paper's fraction; the baselines first, then the studies' variants in file order."""
+    the paper's fraction; the baselines first, then the studies' variants in file order.
+    A scenario whose posterior is improper (``propriety``: the analysis, the project's when
+    None) has its Stan results (:data:`STAN_RESULTS`) empty and the reason in ``improper``;
+    ``runs`` and the paper's fraction stay."""
     loaded = {os.fspath(f): _study(f) for f in [b["folder"] for b in baselines] + list(studies)}
-    lines = []
+    lines: list[dict[str, Any]] = []
+    notes: list[PosteriorNote] = []
     for base_ref in baselines:
         base_config, _ = loaded[os.fspath(base_ref["folder"])]
         base = next(s for s in base_config["scenarios"] if s["name"] == base_ref["scenario"])
@@ -118,6 +145,7 @@ def variant_rows(
         for folder, sc in members:
             config, summary = loaded[folder]
             got = summary.loc[sc["name"]]
+            note = config_note(sc, propriety)
             lines.append(
                 {
                     "row": base["paper_ref"],
@@ -132,22 +160,46 @@ def variant_rows(
                     "K_stan_frac_paper": got["K_stan_frac_paper"],
                 }
             )
-    return pd.DataFrame(lines)
+            if note.is_improper:
+                lines[-1].update(dict.fromkeys(STAN_RESULTS, None))
+            notes.append(note)
+    add_note_columns(lines, notes)
+    frame = pd.DataFrame(lines)
+    if not frame.empty:
+        frame["K_stan"] = frame["K_stan"].astype("Int64")
+    return frame
+
+
+def _cell(line: Mapping[str, Any]) -> str:
+    """A (set-up, row) cell: the fraction with its interval and the runs, or the words."""
+    if line.get("improper"):
+        return f"{NOT_SHOWN_IMPROPER} ({line['runs']} runs)"
+    return f"{format_fraction(line['K_stan'], line['runs'])} of {line['runs']}"
 
 
 def variant_by_row(lines: pd.DataFrame) -> pd.DataFrame:
     """The table to read: a line per set-up, a column per row, cells "0.76 [0.69, 0.82]" (and
-    the number of runs), the paper's fractions in the last line."""
+    the number of runs), the paper's fractions after them; where some row has a finding of
+    the propriety analysis, the lines ``improper`` (the reason its cells are not shown) and
+    ``edge`` (an end-of-support finding, numbers kept) last."""
     rows = list(dict.fromkeys(lines["row"]))
     setups = list(dict.fromkeys([OURS, *lines["setup"]]))
-    cells = {
-        (line.setup, line.row): f"{format_fraction(line.K_stan, line.runs)} of {line.runs}"
-        for line in lines.itertuples()
-    }
+    cells = {(line["setup"], line["row"]): _cell(line) for line in lines.to_dict("records")}
     table = [{"Stan set-up": s, **{r: cells.get((s, r), "") for r in rows}} for s in setups]
     paper = lines.groupby("row", sort=False)["K_stan_frac_paper"].first()
     table.append({"Stan set-up": "paper", **{r: f"{paper[r]:.3f}" for r in rows}})
+    for column in ("improper", "edge"):
+        if column in lines.columns:
+            # every scenario of a row shares its model and prior, so its first line speaks
+            notes = lines.groupby("row", sort=False)[column].first()
+            table.append({"Stan set-up": column, **{r: notes[r] for r in rows}})
     return pd.DataFrame(table)
+
+
+def caption(lines: pd.DataFrame) -> str:
+    """The table's caption: :data:`CAPTION`, and what an improper row shows if there is one."""
+    improper = "improper" in lines.columns and lines["improper"].astype(bool).any()
+    return CAPTION + (CAPTION_IMPROPER if improper else "")
 
 
 def read_spec(path: str | os.PathLike) -> dict[str, Any]:
@@ -169,7 +221,7 @@ def write_variant_table(
     """The spec's table: the lines to ``csv``, the table to read (with its caption) to ``md``."""
     lines = variant_rows(spec["baselines"], spec["studies"])
     write_table(lines, [csv])
-    write_table(variant_by_row(lines), [md], caption=CAPTION)
+    write_table(variant_by_row(lines), [md], caption=caption(lines))
 
 
 def table_key(inputs: Sequence[str | os.PathLike]) -> str:
