@@ -246,3 +246,34 @@ def test_an_empty_program_cache_has_built_no_program(tmp_path, monkeypatch):
     programs = {m: (stan_file(m), None) for m in ("same", "sep")}
     assert hk.unbuilt_programs(programs) == ["same", "sep"]
     assert hk.unbuilt_programs({}) == []
+
+
+# -- outputs without their checksum record (issue 61) -----------------------------------------
+
+
+def test_an_output_without_its_checksum_record_is_unverified(tmp_path, monkeypatch):
+    """Found trusted before (issue 61): a joint MAP summary edited and its record deleted
+    gave a table with the edited |K^max|; results copied without results/checksums/ too."""
+    monkeypatch.chdir(tmp_path)
+    files = {name: Path("results") / "sc" / name for name in ("a.json", "b.json", "c.json")}
+    for path in files.values():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("{}\n")
+    record_checksums(files.values())
+    assert hk.unrecorded_files(files.values()) == []  # every job's outputs are recorded
+    store = Path("results/checksums")
+    (store / "results/sc/a.json.sha256").unlink()  # deleted
+    (store / "results/sc/b.json.sha256").write_text("garbage\n")  # cannot vouch
+    missing = Path("results/sc/never_made.json")  # no file: Snakemake makes it
+    found = hk.unrecorded_files([*files.values(), missing])
+    assert [p for p, _ in found] == [files["a.json"], files["b.json"]]
+    assert all("has no checksum record" in why for _, why in found)
+    # results copied without their records: every output is unverified
+    import shutil
+
+    shutil.rmtree(store)
+    assert [p for p, _ in hk.unrecorded_files(files.values())] == sorted(files.values())
+    # and made again, as a damaged one: removed, and a target where its keys are current
+    keyed = Path("results/sc/joint_map/0123456789ab/summary.json")
+    repairs = hk.damaged_output_repairs([(keyed, "why")], [], {"0123456789ab"})
+    assert repairs.changes == [(keyed, None)] and repairs.targets == [str(keyed)]

@@ -315,3 +315,22 @@ def test_rule_params_come_from_the_entries():
     inputs = paths.trajectory_inputs(sc.name, sc.K)
     assert inputs["checked"] == paths.check(sc.name)
     assert f"_K{sc.K}_" in inputs["disturbances"]
+
+
+@pytest.mark.parametrize("profile", ["smoke", "stoch_vol", "map"])
+def test_the_outputs_that_must_carry_their_record_are_rule_outputs(profile):
+    """What the Snakefile verifies before a run (issue 61): every cached output of the
+    config's stages, each one a rule's output (not a log), under the config's keys."""
+    paths = run_paths(profile)
+    cached = paths.cached_outputs()
+    assert cached == sorted(set(cached))
+    patterns = rule_patterns(paths)
+    assert [p for p in cached if not matches_a_rule(p, patterns) or p.endswith(".log")] == []
+    for name in paths.scenarios:
+        assert {paths.check(name), paths.trajectories(name)} <= set(cached)
+    for name in paths.joint_scenarios:
+        assert paths.joint_summary(name) in cached
+    for name in paths.stan_scenarios:
+        assert {paths.stan_summary(name), *paths.nuts_batches(name)} <= set(cached)
+    for name in paths.k_selections:
+        assert set(paths.k_selection_grids(name)) <= set(cached)

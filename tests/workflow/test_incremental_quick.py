@@ -192,6 +192,40 @@ def test_of_two_configs_started_together_one_runs_and_the_other_changes_nothing(
     assert list(work.glob("results/shared/k_selection_points/*/*/K16.json"))  # the first's
 
 
+@RARE_PATH
+def test_outputs_without_their_checksum_record_are_made_again_not_trusted(tmp_path):
+    """Found trusted before (issue 61): a joint MAP summary edited to |K^max| 3, its record
+    under results/checksums/ deleted, then ess_bulk_min changed: rc 0 and section4_summary
+    with K_max 3.  And results copied without results/checksums/ were trusted alike."""
+    from test_incremental import OUT
+
+    work = make_workdir(tmp_path / "w")
+    (work / CONFIG).write_text(yaml.safe_dump(BASE, sort_keys=False))
+    snakemake(work, "--cores", "2", "--configfile", CONFIG)
+    summary = next(work.glob("results/same_T4/joint_map/*/summary.json"))
+    made = summary.read_bytes()
+    assert b'"K_max": 4' in made
+    summary.write_bytes(made.replace(b'"K_max": 4', b'"K_max": 3'))
+    (work / "results" / "checksums" / f"{summary.relative_to(work)}.sha256").unlink()
+    edited = {**BASE, "convergence": {**BASE["convergence"], "ess_bulk_min": 60}}
+    (work / CONFIG).write_text(yaml.safe_dump(edited, sort_keys=False))
+    proc = snakemake(work, "--cores", "2", "--configfile", CONFIG)
+    assert "has no checksum record" in proc.stdout + proc.stderr
+    assert "joint_map" in rules_run(proc) and summary.read_bytes() == made
+    section4 = (work / OUT / "section4_summary.csv").read_text().splitlines()
+    column = section4[0].split(",").index("K_max")
+    assert section4[1].split(",")[column] == "4"
+    tables = {p.name: p.read_bytes() for p in (work / OUT).glob("*.csv")}
+    # a copy of the results without results/checksums/: everything made again, same bytes
+    copy = tmp_path / "copy"
+    shutil.copytree(work, copy, ignore=shutil.ignore_patterns(".snakemake"))
+    shutil.rmtree(copy / "results" / "checksums")
+    again = snakemake(copy, "--cores", "2", "--configfile", CONFIG)
+    assert {"joint_map", "gather_nuts", "paper_tables"} <= rules_run(again)
+    assert {p.name: p.read_bytes() for p in (copy / OUT).glob("*.csv")} == tables
+    assert rules_run(snakemake(copy, "--cores", "2", "--configfile", CONFIG)) == set()
+
+
 def variant_table_workdir(dest: Path) -> Path:
     """A workflow copy with the committed studies the variant table reads."""
     from ssmobs.reports.stan_variants import read_spec, spec_inputs

@@ -240,12 +240,9 @@ def repairs_before_the_dag():
     if not may_change_files_before_the_lock():
         return []
     stamps = {**STAMPS, **STAMPS_ON_REQUEST}
+    states = housekeeping.read_stamps(stamps)
     changes = housekeeping.stale_stamp_changes(
-        STAMPS,
-        STAMPS_ON_REQUEST,
-        housekeeping.read_stamps(stamps),
-        is_dry_run(),
-        stamped_outputs,
+        STAMPS, STAMPS_ON_REQUEST, states, is_dry_run(), stamped_outputs
     )
     found = housekeeping.damaged_trajectory_repairs(
         {path: checksum_problem(path) for path in PATHS.every_trajectories()}
@@ -263,8 +260,18 @@ def repairs_before_the_dag():
         for table in PATHS.nuts_batches(n)
     )
     changes += found.changes + batches.changes
+    # outputs without their checksum record are unverified: made again (a dry run says so)
+    current = [s for s, key in STAMPS.items() if (states[s].text or "").strip() == key]
+    cached = PATHS.cached_outputs() + [f for s in current for f in (s, *stamped_outputs(s))]
+    unverified = housekeeping.unrecorded_files(cached)
+    if is_dry_run():
+        for _, problem in unverified:
+            logger.warning(f"would be made again by a run, not reused: {problem}")
+        unverified = []
     outputs = housekeeping.damaged_output_repairs(
-        damaged_files(), [p for p, _ in changes], housekeeping.current_keys(KEYS.describe())
+        damaged_files() + unverified,
+        [p for p, _ in changes],
+        housekeeping.current_keys(KEYS.describe()),
     )
     for line in found.warnings + batches.warnings + outputs.warnings:
         logger.warning(line)

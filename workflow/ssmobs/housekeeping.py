@@ -9,7 +9,8 @@ reused (it takes stock of the files then):
 - damaged files: design trajectories that no longer match their checksum
   (:func:`damaged_trajectory_repairs`), NUTS batches whose records changed after them
   (:func:`damaged_batch_repairs`), and any output that no longer matches the checksum its
-  job recorded (:func:`damaged_output_repairs`);
+  job recorded or has lost that record (:func:`damaged_output_repairs`,
+  :func:`unrecorded_files`);
 
 all of them only while no other run holds the lock of the directory
 (:func:`ssmobs.config.run_lock.lock_decision`).  After a successful run of every target,
@@ -29,6 +30,8 @@ from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from .io import CHECKSUM_STORE, checksum_record
 
 #: a change to make before the DAG is built: remove the path (None) or move it there
 Change = tuple[Path, Path | None]
@@ -176,6 +179,26 @@ def damaged_output_repairs(
         if path.parts[0] == "results" and keys and all(k in current_keys for k in keys):
             repairs.targets.append(str(path))
     return repairs
+
+
+def unrecorded_files(
+    paths: Iterable[str | Path], store: Path = CHECKSUM_STORE
+) -> list[tuple[Path, str]]:
+    """Every existing file of ``paths`` (outputs later jobs read) without a readable checksum
+    record of its own in ``store`` (deleted, unreadable, or results copied without
+    ``results/checksums/``), with why: it is unverified, so made again, not trusted, as a
+    damaged one is (:func:`damaged_output_repairs`).  Reads files, decides nothing."""
+    found: list[tuple[Path, str]] = []
+    for path in sorted({Path(p) for p in paths}):
+        record = checksum_record(path, store)
+        try:
+            expected, _, where = record.read_text().rstrip("\n").partition("  ")
+        except (OSError, UnicodeDecodeError):
+            expected, where = "", ""
+        vouches = len(expected) == 64 and bool(where) and checksum_record(where, store) == record
+        if path.is_file() and not vouches:
+            found.append((path, f"{path} has no checksum record in {store}/ (unverified)"))
+    return found
 
 
 def current_keys(described: Iterable[str]) -> set[str]:

@@ -354,6 +354,38 @@ class RunPaths:
         """The table of every cell of one observability map."""
         return f"results/observability_map/{name}/{self.keys.map_table(name)}/cells.parquet"
 
+    # -- what must be verified before it is read --------------------------------------------
+
+    def cached_outputs(self) -> list[str]:
+        """Every file in ``results/`` that a job of this config writes under this config's
+        keys and later jobs read (sorted): each must carry the checksum record its job wrote
+        to be reused (:func:`ssmobs.io.unrecorded_files`).  The stamped tables and figures
+        are added by the Snakefile for the stamps that are current."""
+        out = []
+        for name, sc in self.scenario_objects.items():
+            out.append(self.check(name))
+            for K in {sc.K, sc.exact_trajectories}:
+                trajectories = self.trajectories(name, K)
+                out += [trajectories, f"{trajectories}.sha256"]
+                out.append(self.disturbances(sc.disturbance_dim, K, sc.method, sc.seed))
+        for name in self.joint_scenarios:
+            folder = self.joint_dir(name)
+            out += [f"{folder}/{f}" for f in ("joint_map.parquet", "theta_hat.nc", "summary.json")]
+        for name in self.stan_scenarios:
+            out += [self.check(name, stan=True), *self.nuts_batches(name)]
+            out += [self.stan_summary(name), self.stan_table(name)]
+        out += [self.program_marker(model) for model in self.stan_models]
+        for name in self.exact_scenarios:
+            sc = self.scenario_objects[name]
+            for K in {sc.K, sc.exact_trajectories}:
+                out += [self.exact_table(name, K), f"{self.exact_dir(name, K)}/summary.json"]
+        for name in self.k_selections:
+            out += self.k_selection_grids(name)
+        out += [self.map_cells_table(name) for name in self.maps]
+        if self.paper_outputs:
+            out.append(self.figure2_disturbances())
+        return sorted(set(out))
+
     # -- tables and figures ----------------------------------------------------------------
 
     @property
