@@ -286,9 +286,18 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
     summary = read_json(tmp_path / "summary.json")
     assert summary["n_starts"] == 3 == info["n_starts"]
     assert summary["K_max_unique"] == int(frame["unique_max"].sum())
-    assert {"n_maxima", "log_post_gap", "paper_start_highest", "boundary_higher"} <= set(
-        frame.columns
-    )
+    assert {
+        "n_maxima",
+        "log_post_gap",
+        "paper_start_highest",
+        "boundary_higher",
+        "edge_supremum",
+        "symmetric_twin",
+        "starts_per_maximum",
+    } <= set(frame.columns)
+    assert [int(sum(c)) for c in frame["starts_per_maximum"]] == frame["n_starts_ok"].tolist()
+    assert summary["K_symmetric_twin"] == 0  # the Multiplicative model has no symmetry found
+    assert summary["K_edge_supremum"] == int(frame["edge_supremum"].sum())
     # without the override, the block's n_starts = 1: the paper's table, no extra column
     single = Scenario.from_config(
         {k: v for k, v in entry.items() if k != "joint_map_n_starts"} | {"name": "one"}

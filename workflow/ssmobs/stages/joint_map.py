@@ -107,11 +107,14 @@ def run_joint_map(
     logger.info("scenario %s: |K^max| = %d of %d", scenario.name, info["K_max"], info["K"])
     if n_starts > 1:
         logger.info(
-            "scenario %s: |K^max_unique| = %d of %d (%d starts per trajectory)",
+            "scenario %s: |K^max_unique| = %d of %d (%d starts per trajectory; a maximum "
+            "with a twin under a symmetry: %d; a start that ran off above every maximum: %d)",
             scenario.name,
             info["K_max_unique"],
             info["K"],
             n_starts,
+            info["K_symmetric_twin"],
+            info["K_edge_supremum"],
         )
     io.write_parquet(table, frame)
     if theta is not None:
