@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -100,3 +101,80 @@ def test_a_subsets_k_stan_is_judged_over_its_stan_runs(tmp_path):
     row = paper_comparison(folder).iloc[0]
     assert row["K"] == 100
     assert row["standard_error"] == pytest.approx(math.sqrt(0.9 * 0.1 / 100))
+
+
+ONLY_A = {  # (Sep, d=2, p=1) with b and c on (-1, 1): x0 drops out at c = 0, inside the prior
+    "name": "s",
+    "model": "sep_d2_p1",
+    "omega": {"a": 0.9, "b": 0.9, "c": 0.9},
+    "x0": 8,
+    "T": 20,
+    "K": 100,
+    "prior": {"a": "restricted", "b": "unrestricted", "c": "unrestricted"},
+}
+
+
+def _provenance(folder, scenario: dict) -> None:
+    config = {"outputs_dir": "x", "scenarios": [scenario]}
+    (folder / "provenance.json").write_text(json.dumps({"config": config, "commit": "0" * 40}))
+
+
+def _tables_ii_iii() -> tuple[str, str]:
+    rows = [
+        {
+            "T": 20,
+            "scenario": "s",
+            "estimator": est,
+            "statistic": stat,
+            "a_ours": 0.9,
+            "a_paper": 0.91,
+            "a_rel_diff": 0.01,
+        }
+        for est in ("joint MAP", "marginal MAP")
+        for stat in ("mean", "variance", "MSE")
+    ]
+    table3 = "T,scenario,quantity,ours,paper,rel_diff,K_stan\n20,s,cover90_a,0.85,0.9,0.05,80\n"
+    return pd.DataFrame(rows).to_csv(index=False), table3
+
+
+def test_an_improper_posteriors_stan_numbers_are_not_compared(tmp_path):
+    """Issue 60: a folder whose scenario is improper under its prior (by the current
+    analysis of its provenance's config, whatever its tables hold) compares no |K^Stan|,
+    marginal MAP or coverage; the paper's values stay beside the reason, the joint MAP's
+    rows are compared as before."""
+    folder = _folder(tmp_path, *_tables_ii_iii())
+    _provenance(folder, ONLY_A)
+    out = paper_comparison(folder).set_index("quantity")
+    withheld = ["|K^Stan|/K", "marginal MAP mean of a", "marginal MAP MSE of a", "cover90_a"]
+    assert out.loc[withheld, ["ours", "rel_diff", "standard_error", "z"]].isna().all().all()
+    assert out.loc["|K^Stan|/K", "paper"] == 0.9
+    assert out.loc["cover90_a", "paper"] == 0.9
+    assert out.loc[withheld, "improper"].str.contains("c = 0, inside the prior").all()
+    assert (out.loc[withheld, "K"] == 100).all()  # the runs, not the converged 80
+    joint = out.loc["joint MAP mean of a"]
+    assert joint["ours"] == 0.9 and joint["improper"] == ""
+    assert joint["standard_error"] > 0  # compared as before
+
+
+def test_a_proper_scenario_in_the_provenance_is_compared(tmp_path):
+    folder = _folder(tmp_path)
+    _provenance(folder, {**ONLY_A, "prior": "restricted"})  # c -> 0 at an end: edge only
+    row = paper_comparison(folder).iloc[0]
+    assert row["ours"] == 0.8 and row["improper"] == ""
+    assert row["z"] == pytest.approx(-0.1 / 0.03)
+
+
+def test_a_tables_own_improper_column_withholds_as_well(tmp_path):
+    """A folder made by the current tables: |K^Stan| is empty and the reason is in the
+    summary's column improper; the comparison keeps the paper's value and reads no count."""
+    table2, table3 = _tables_ii_iii()
+    folder = _folder(tmp_path, table2, table3.replace(",80\n", ",\n"))
+    summary = pd.read_csv(folder / "section4_summary.csv")
+    summary = summary.assign(K_stan=math.nan, K_stan_frac=math.nan, K_stan_runs=50)
+    summary["improper"] = "improper: a reason"
+    summary.to_csv(folder / "section4_summary.csv", index=False)
+    out = paper_comparison(folder).set_index("quantity")
+    assert out.loc["|K^Stan|/K", "improper"] == "improper: a reason"
+    assert out.loc["|K^Stan|/K", "paper"] == 0.9 and math.isnan(out.loc["|K^Stan|/K", "ours"])
+    assert out.loc["cover90_a", "K"] == 50 and math.isnan(out.loc["cover90_a", "z"])
+    assert math.isnan(out.loc["marginal MAP variance of a", "ours"])

@@ -9,6 +9,14 @@ independent sample of the same size under normality (for the mean, variance and 
 estimator) or binomial (for a coverage or a fraction): a yardstick, not a test. Design
 disturbances vary less than a random sample (Sec. III.A), so the yardstick errs on the
 wide side; the paper's own Monte Carlo error is not included.
+
+A scenario whose posterior is improper under its prior
+(:mod:`ssmobs.reports.propriety_notes`) has no Stan number to compare: its |K^Stan|/K,
+marginal-MAP and coverage rows keep the paper's value, and ``ours``, ``rel_diff``,
+``standard_error`` and ``z`` are empty, the reason in ``improper`` ("" elsewhere).  The
+analysis is the current code's, run on the scenario entries of the folder's
+``provenance.json``, so a folder made before it still holding the numbers compares none of
+them; a table's own ``improper`` column counts as well.  The joint MAP's rows stay.
 """
 
 from __future__ import annotations
@@ -19,9 +27,22 @@ from pathlib import Path
 
 import pandas as pd
 
+from .. import io
+from .propriety_notes import ProprietyAnalysis, config_note
 from .tables import rel_diff
 
-COLUMNS = ["scenario", "T", "quantity", "K", "ours", "paper", "rel_diff", "standard_error", "z"]
+COLUMNS = [
+    "scenario",
+    "T",
+    "quantity",
+    "K",
+    "ours",
+    "paper",
+    "rel_diff",
+    "standard_error",
+    "z",
+    "improper",
+]
 
 
 def se_mean(variance: float, K: int) -> float:
@@ -60,16 +81,43 @@ def _row(
         "rel_diff": rel,
         "standard_error": se,
         "z": z,
+        "improper": "",
     }
 
 
-def _table_ii_rows(table2: pd.DataFrame, sizes: pd.DataFrame) -> list[dict]:
+def _withheld(scenario: str, T: int, quantity: str, runs: int, paper: float, why: str) -> dict:
+    """A Stan quantity of an improper posterior: the paper's value, nothing of ours; ``K``
+    counts the Stan runs (not the converged ones, which are a Stan result)."""
+    row = _row(scenario, T, quantity, runs, math.nan, paper, math.nan, math.nan)
+    row["improper"] = why
+    return row
+
+
+def _stan_runs(rec: dict) -> int:
+    """The Stan runs of a Section IV summary row (every stan_every-th of K, issue 20)."""
+    runs = rec.get("K_stan_runs")
+    return int(rec["K"] if runs is None or pd.isna(runs) else runs)
+
+
+def _table_ii_rows(
+    table2: pd.DataFrame, sizes: pd.DataFrame, improper: dict[str, str]
+) -> list[dict]:
     rows = []
     comps = [c[: -len("_paper")] for c in table2.columns if c.endswith("_paper")]
     for (scenario, estimator), block in table2.groupby(["scenario", "estimator"], sort=False):
-        K = int(sizes.loc[scenario, "K_max" if estimator == "joint MAP" else "K_stan"])
         by_stat = block.set_index("statistic")
         T = int(block["T"].iloc[0])
+        why = improper.get(scenario, "") if estimator != "joint MAP" else ""
+        if why:  # the marginal MAP of an improper posterior: the paper's values only
+            runs = _stan_runs(sizes.loc[scenario].to_dict())
+            for comp in comps:
+                for stat in ("mean", "variance", "MSE"):
+                    paper = by_stat.loc[stat, f"{comp}_paper"]
+                    if not pd.isna(paper):
+                        quantity = f"{estimator} {stat} of {comp}"
+                        rows.append(_withheld(scenario, T, quantity, runs, float(paper), why))
+            continue
+        K = int(sizes.loc[scenario, "K_max" if estimator == "joint MAP" else "K_stan"])
         for comp in comps:
             var = float(by_stat.loc["variance", f"{comp}_ours"])
             mse = float(by_stat.loc["MSE", f"{comp}_ours"])
@@ -97,10 +145,19 @@ def _table_ii_rows(table2: pd.DataFrame, sizes: pd.DataFrame) -> list[dict]:
     return rows
 
 
-def _table_iii_rows(table3: pd.DataFrame) -> list[dict]:
+def _table_iii_rows(
+    table3: pd.DataFrame, sizes: pd.DataFrame, improper: dict[str, str]
+) -> list[dict]:
     rows = []
     for rec in table3.to_dict("records"):
         if pd.isna(rec["paper"]):
+            continue
+        why = improper.get(rec["scenario"], "")
+        if why:  # every Table III value is a Stan result: K counts the Stan runs
+            runs = _stan_runs(sizes.loc[rec["scenario"]].to_dict())
+            rows.append(
+                _withheld(rec["scenario"], rec["T"], str(rec["quantity"]), runs, rec["paper"], why)
+            )
             continue
         K = int(rec["K_stan"])
         coverage = str(rec["quantity"]).startswith("cover90_") and "states" not in rec["quantity"]
@@ -121,22 +178,29 @@ def _table_iii_rows(table3: pd.DataFrame) -> list[dict]:
     return rows
 
 
-def _section_iv_rows(summary: pd.DataFrame) -> list[dict]:
+def _section_iv_rows(summary: pd.DataFrame, improper: dict[str, str]) -> list[dict]:
     rows = []
     for rec in summary.to_dict("records"):
         for frac in ("K_max_frac", "K_stan_frac"):
             paper = rec.get(f"{frac}_paper")
-            if paper is None or pd.isna(paper) or pd.isna(rec.get(frac)):
+            quantity = f"|{frac[:-5]}|/K".replace("K_max", "K^max").replace("K_stan", "K^Stan")
+            why = improper.get(rec["scenario"], "") if frac == "K_stan_frac" else ""
+            if paper is None or pd.isna(paper):
+                continue
+            if why:
+                runs = _stan_runs(rec)
+                rows.append(_withheld(rec["scenario"], rec["T"], quantity, runs, paper, why))
+                continue
+            if pd.isna(rec.get(frac)):
                 continue
             ours, paper = float(rec[frac]), float(paper)
             # |K^Stan| counts over the Stan runs (every stan_every-th of the K, issue 20)
-            runs = rec.get("K_stan_runs") if frac == "K_stan_frac" else None
-            trials = int(rec["K"] if runs is None or pd.isna(runs) else runs)
+            trials = _stan_runs(rec) if frac == "K_stan_frac" else int(rec["K"])
             rows.append(
                 _row(
                     rec["scenario"],
                     rec["T"],
-                    f"|{frac[:-5]}|/K".replace("K_max", "K^max").replace("K_stan", "K^Stan"),
+                    quantity,
                     trials,
                     ours,
                     paper,
@@ -147,19 +211,50 @@ def _section_iv_rows(summary: pd.DataFrame) -> list[dict]:
     return rows
 
 
-def paper_comparison(folder: str | os.PathLike) -> pd.DataFrame:
+def improper_scenarios(
+    folder: str | os.PathLike,
+    tables: list[pd.DataFrame],
+    propriety: ProprietyAnalysis | None = None,
+) -> dict[str, str]:
+    """scenario -> why its posterior is improper, for the folder's improper scenarios: the
+    analysis (``propriety``, the project's when None) of every scenario entry in the folder's
+    ``provenance.json`` where it has one, and the ``improper`` column of ``tables``."""
+    found: dict[str, str] = {}
+    for table in tables:
+        if "improper" in table.columns:
+            marked = table[table["improper"].fillna("").astype(str) != ""]
+            found.update(zip(marked["scenario"], marked["improper"], strict=True))
+    provenance = Path(folder) / "provenance.json"
+    if provenance.exists():
+        from ..config.validation import validate
+
+        config = validate(io.read_json(provenance, required=["config"])["config"])
+        for entry in config["scenarios"]:
+            note = config_note(entry, propriety)
+            if note.is_improper:
+                found[entry["name"]] = note.improper
+    return found
+
+
+def paper_comparison(
+    folder: str | os.PathLike, *, propriety: ProprietyAnalysis | None = None
+) -> pd.DataFrame:
     """Every value of the folder's tables that the paper states, with its standard error
-    and z (module docstring); rows of Section IV first, then Tables II and III."""
+    and z (module docstring); rows of Section IV first, then Tables II and III.  Where a
+    scenario's posterior is improper (:func:`improper_scenarios`), its Stan quantities show
+    the paper's value only and the reason in ``improper``."""
     folder = Path(folder)
     summary = pd.read_csv(folder / "section4_summary.csv")
-    rows = _section_iv_rows(summary)
-    sizes = summary.set_index("scenario")
     table2 = _read_if_any(folder / "table2_joint_vs_marginal.csv")
-    if table2 is not None:
-        rows += _table_ii_rows(table2[table2["scenario"].isin(sizes.index)], sizes)
     table3 = _read_if_any(folder / "table3_coverage.csv")
+    tables = [t for t in (summary, table2, table3) if t is not None]
+    improper = improper_scenarios(folder, tables, propriety)
+    rows = _section_iv_rows(summary, improper)
+    sizes = summary.set_index("scenario")
+    if table2 is not None:
+        rows += _table_ii_rows(table2[table2["scenario"].isin(sizes.index)], sizes, improper)
     if table3 is not None:
-        rows += _table_iii_rows(table3)
+        rows += _table_iii_rows(table3, sizes, improper)
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
