@@ -5,12 +5,14 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from ssmobs import provenance
 
 pytestmark = pytest.mark.unit
 
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = "outputs_dir: out\nstan: {backend: pystan}\nscenarios: []\n"
 
 
@@ -101,3 +103,37 @@ def test_uncommitted_changes_name_the_files_outside_the_runs_outputs(tmp_path, m
     record = provenance.provenance("c.yaml", 0.0, 1.0, "cmd", outputs_dir="out")
     assert record["uncommitted_changes"] is True
     assert record["uncommitted_files"] == ["other/table.csv"]
+
+
+def test_provenance_says_which_gradient_path_made_the_draws(monkeypatch):
+    """``stan.gradients`` as set, else the schema's default, and per sampling model the path
+    its program took (a model without ``stan/<model>.stan`` is always analytic); the paper
+    profile samples with the analytic path (issue 63)."""
+    from ssmobs.config.schema import load_schema
+    from ssmobs.config.validation import read_config_file
+
+    default = load_schema()["properties"]["stan"]["properties"]["gradients"]["default"]
+    scenarios = [
+        {"name": "a", "model": "same"},
+        {"name": "b", "model": "sep", "stan": False},
+        {"name": "c", "model": "my_own_model"},
+    ]
+    assert provenance.gradient_paths({"scenarios": scenarios}) == {
+        "gradients": default,
+        "gradients_by_model": {"my_own_model": "analytic", "same": default},
+    }
+    analytic = {"stan": {"gradients": "analytic"}, "scenarios": scenarios}
+    autodiff = {"stan": {"gradients": "autodiff"}, "scenarios": scenarios}
+    assert provenance.gradient_paths(analytic)["gradients_by_model"]["same"] == "analytic"
+    assert provenance.gradient_paths(autodiff)["gradients_by_model"] == {
+        "my_own_model": "analytic",
+        "same": "autodiff",
+    }
+    paper = provenance.gradient_paths(read_config_file(REPO / "config" / "paper.yaml"))
+    assert paper["gradients"] == "analytic"
+    assert set(paper["gradients_by_model"].values()) == {"analytic"}
+    assert len(paper["gradients_by_model"]) == 6
+    monkeypatch.setattr(provenance, "numerics", lambda: {})
+    record = provenance.provenance(REPO / "config" / "paper.yaml", 0.0, 1.0, "make paper")
+    assert record["stan"]["gradients"] == "analytic"
+    assert record["stan"]["gradients_by_model"] == paper["gradients_by_model"]

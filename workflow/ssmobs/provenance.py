@@ -1,5 +1,5 @@
 """Provenance of a committed reproduction: when, from which commit, on what machine, with
-which Stan backend, how long, and with which config.
+which Stan backend and gradient path (``stan.gradients``), how long, and with which config.
 
 ``python -m ssmobs.provenance --config C --outputs-dir D -- COMMAND ...`` runs the command
 (the make targets pass their Snakemake call) and, when it succeeds, writes
@@ -89,15 +89,31 @@ def numerics() -> dict[str, Any]:
     return dict(json.loads(out.stdout))
 
 
-def backend_info(config: dict[str, Any]) -> dict[str, str]:
+def gradient_paths(config: dict[str, Any]) -> dict[str, Any]:
+    """How NUTS got its gradients: the config key ``stan.gradients`` (the schema's default
+    where the file does not set it) and, per model of a scenario that samples, the path its
+    program took (``analytic`` for a model without ``stan/<model>.stan`` whatever the key:
+    :func:`ssmobs.stages.stan.stan_program`)."""
+    from .config.schema import load_schema
+    from .stan_backends import has_stan_file
+
+    default = load_schema()["properties"]["stan"]["properties"]["gradients"]["default"]
+    gradients = (config.get("stan") or {}).get("gradients", default)
+    by_model = {
+        str(entry["model"]): gradients if has_stan_file(str(entry["model"])) else "analytic"
+        for entry in config.get("scenarios") or []
+        if isinstance(entry, dict) and "model" in entry and entry.get("stan", True) is not False
+    }
+    return {"gradients": gradients, "gradients_by_model": dict(sorted(by_model.items()))}
+
+
+def backend_info(config: dict[str, Any]) -> dict[str, Any]:
     """The concrete Stan backend the config resolves to, its Stan version and the path of
-    NUTS's gradients (``autodiff`` or ``analytic``)."""
+    NUTS's gradients (``autodiff`` or ``analytic``, :func:`gradient_paths`)."""
     from .stan_backends import get_backend, resolve_backend
 
-    name = resolve_backend(config.get("stan", {}).get("backend", "auto"))
-    # how NUTS got its gradients (config key stan.gradients; ssmobs.nuts.analytic_gradients)
-    gradients = config.get("stan", {}).get("gradients", "autodiff")
-    return {**get_backend(name).identity(), "gradients": gradients}
+    name = resolve_backend((config.get("stan") or {}).get("backend", "auto"))
+    return {**get_backend(name).identity(), **gradient_paths(config)}
 
 
 def results_empty(results: str | os.PathLike = "results") -> bool:
