@@ -226,6 +226,29 @@ def test_outputs_without_their_checksum_record_are_made_again_not_trusted(tmp_pa
     assert rules_run(snakemake(copy, "--cores", "2", "--configfile", CONFIG)) == set()
 
 
+def test_a_model_importing_by_a_name_that_is_no_literal_stops_in_one_line(tmp_path):
+    """Issue 61: a model's helper loaded by ``importlib.import_module(name)`` cannot be
+    keyed; the run stops before any job, naming the module and line."""
+    work = make_workdir(tmp_path / "w")
+    (work / "workflow/ssmobs/models/dyn61.py").write_text(
+        "import importlib\n\nNAME = 'json'\nhelper = importlib.import_module(NAME)\n"
+        "from .same import Same\n\n\nclass Dyn61(Same):\n    slug = 'dyn61'\n"
+    )
+    scenario = {**BASE["scenarios"][0], "model": "dyn61", "stan": False}
+    scenario.pop("paper_ref", None)
+    conf = {
+        **BASE,
+        "scenarios": [scenario],
+        "paper_outputs": {"tables_2_3": [], "figure3": [], "figure4": None},
+    }
+    (work / CONFIG).write_text(yaml.safe_dump(conf, sort_keys=False))
+    proc = snakemake(work, "-n", "--cores", "1", "--configfile", CONFIG, check=False)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert "module ssmobs.models.dyn61" in text and "line 4)" in text, text[-2000:]
+    assert "Traceback" not in text and not (work / "results").exists()
+
+
 def variant_table_workdir(dest: Path) -> Path:
     """A workflow copy with the committed studies the variant table reads."""
     from ssmobs.reports.stan_variants import read_spec, spec_inputs
