@@ -27,9 +27,9 @@ from ssmobs.stan_backends import (
     resolve_backend,
     stan_file,
 )
-from ssmobs.stan_backends.cache import BUILD_RECORD
+from ssmobs.stan_backends.cache import publish_entry
 from ssmobs.stan_backends.native import NativeBackend
-from ssmobs.stan_backends.native_build import EXE_NAME
+from ssmobs.stan_backends.native_build import PROGRAM_ARTEFACTS
 from ssmobs.stan_backends.native_run import LogDensities, columns_to_draws
 from test_backends import _data  # the same small data sets as the other backend tests
 
@@ -145,9 +145,11 @@ def test_cache_keyed_by_program_not_environment(native, tmp_path, monkeypatch):
         path: Path, code: str, cache_dir: Path, parts: dict, user_header: Path | None = None
     ) -> None:
         built.append(cache_dir)
-        cache_dir.mkdir(parents=True)
-        for name in (BUILD_RECORD, EXE_NAME):
-            (cache_dir / name).write_text("{}")
+        work = cache_dir.parent / "work"
+        work.mkdir(parents=True)
+        for name in PROGRAM_ARTEFACTS:
+            (work / name).write_text("{}")
+        publish_entry(work, cache_dir, {}, PROGRAM_ARTEFACTS)
 
     monkeypatch.setattr("ssmobs.stan_backends.native.build_program", record_build)
     other = NativeBackend().compile(copy)

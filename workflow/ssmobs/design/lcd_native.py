@@ -32,7 +32,11 @@ and the flags, under a lock and in a temporary directory renamed into place, as 
 driver (:mod:`ssmobs.stan_backends.native_build`).  Without a compiler (and no entry in the
 cache) :func:`kernel` raises :class:`LcdKernelUnavailable` with one line saying so: there
 is no silent fallback to NumPy, whose results differ in the last bits and so would put
-other sets under the same cache key.
+other sets under the same cache key.  The library carries a checksum ``liblcd.so.sha256``
+(:func:`ssmobs.io.write_checksum`) written at build time, before the rename, and is
+verified before it is loaded: a library that does not match (replaced, truncated, a byte
+flipped) or has none (an entry of an older layout) is rebuilt, never loaded, and where it
+cannot be rebuilt :class:`LcdKernelUnavailable` names it in one line.
 """
 
 from __future__ import annotations
@@ -199,9 +203,10 @@ def _publish(entry: Path, flags: tuple[str, ...]) -> None:
             "command": cmd,
             "compiler_version": (version.stdout.splitlines() or [""])[0],
         }
+        io.write_checksum(work / LIB_NAME)
         (work / BUILD_RECORD).write_text(json.dumps(record, indent=1))
         work.chmod(0o777 & ~_umask())
-        if entry.exists():  # unfinished (no build record)
+        if entry.exists():  # unfinished (no build record) or damaged
             shutil.rmtree(entry)
         os.replace(work, entry)
         LOG.info(
@@ -272,19 +277,42 @@ def kernel_of(name: str) -> ctypes.CDLL:
     exclusive lock, published by a rename."""
     flags = BUILDS[name]
     entry = cache_root() / "lcd" / f"kernel-{build_key(flags)}"
-    done = (entry / LIB_NAME).is_file() and (entry / BUILD_RECORD).is_file()
-    if not done:
+    damage = entry_problem(entry)
+    if damage is not None or not (entry / BUILD_RECORD).is_file():
+        if damage is not None:
+            LOG.warning("%s: rebuilding it", damage)
         try:
             entry.parent.mkdir(parents=True, exist_ok=True)
             with io.file_lock(entry.parent / f".{entry.name}.lock"):
-                if not ((entry / LIB_NAME).is_file() and (entry / BUILD_RECORD).is_file()):
+                if entry_problem(entry) is not None or not (entry / BUILD_RECORD).is_file():
                     _publish(entry, flags)
-        except OSError as err:
+        except (OSError, LcdKernelUnavailable) as err:
+            if damage is not None:
+                raise LcdKernelUnavailable(
+                    f"{damage}; it is not loaded, and it cannot be rebuilt: {err}"
+                ) from None
+            if isinstance(err, LcdKernelUnavailable):
+                raise
             raise LcdKernelUnavailable(
                 f"cannot write the LCD design kernel into the cache {entry.parent} ({err}); "
                 "point SSMOBS_CACHE at a writable directory"
             ) from None
+        problem = entry_problem(entry)
+        if problem is not None:
+            raise LcdKernelUnavailable(f"{problem} right after its build; it is not loaded")
     return _declare(ctypes.CDLL(str(entry / LIB_NAME)))
+
+
+def entry_problem(entry: Path) -> str | None:
+    """Why the kernel entry ``entry`` cannot be loaded (unfinished, the library missing or
+    not matching its checksum), or None; None also when there is no entry (it is built)."""
+    if not entry.exists():
+        return None
+    if not (entry / BUILD_RECORD).is_file():
+        return f"{entry} is unfinished (no {BUILD_RECORD})"
+    if not (entry / LIB_NAME).is_file():
+        return f"{entry / LIB_NAME} is missing"
+    return io.checksum_problem(entry / LIB_NAME)
 
 
 def load(path: Path) -> ctypes.CDLL:

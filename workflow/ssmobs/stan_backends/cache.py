@@ -12,6 +12,16 @@ finished: a killed build leaves only a temporary directory, swept by a later bui
 cache is meant to be shared: entries get the mode the umask allows (not ``mkdtemp``'s
 0700), and a cache that cannot be written raises :class:`~.base.BackendError` naming the
 directory (:func:`cache_writes`); a read-only cache that already holds the entries works.
+
+Every compiled file of an entry (an executable, the libraries beside it, an object file it
+is linked from) gets a checksum ``<file>.sha256`` (:func:`ssmobs.io.write_checksum`) written
+at build time, before the rename, and is verified before each use (:func:`entry_problem`,
+:func:`verified`): a file that does not match its checksum (replaced, truncated, one byte
+flipped) or has none (an entry of an older layout) is rebuilt, never run, and where it
+cannot be rebuilt (a read-only cache, no compiler) refused in one line naming it
+(:func:`unusable_entry`).  A file is hashed once per process; before each later use a
+``stat`` (inode, size, modification and change times) says whether it is still the file
+that was hashed.
 """
 
 from __future__ import annotations
@@ -25,11 +35,11 @@ import os
 import shutil
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from ..io import file_lock
+from ..io import checksum_path, checksum_problem, file_lock, write_checksum
 from .base import BackendError
 
 LOG = logging.getLogger("ssmobs.stan")
@@ -84,9 +94,89 @@ def cache_writes(directory: Path) -> Iterator[None]:
         ) from err
 
 
+#: file -> its ``stat`` fingerprint when this process last found it matching its checksum
+_VERIFIED: dict[Path, tuple[int, ...]] = {}
+
+
+def _fingerprint(path: Path) -> tuple[int, ...]:
+    """What changes when a file or its checksum file is replaced, truncated, written to or
+    removed, whatever times one sets afterwards: device, inode, size, modification and
+    change times (ns) of both."""
+    out: tuple[int, ...] = ()
+    for item in (path, checksum_path(path)):
+        st = item.stat()
+        out += (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    return out
+
+
+def file_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be used as built (missing, no checksum, a mismatch), or None.
+    Hashes the file only when its ``stat`` differs from the last check in this process."""
+    try:
+        before = _fingerprint(path)
+    except OSError:
+        _VERIFIED.pop(path, None)
+        return f"{path} is missing" if not path.is_file() else checksum_problem(path)
+    if _VERIFIED.get(path) == before:
+        return None
+    problem = checksum_problem(path)
+    if problem is None:
+        _VERIFIED[path] = before
+    else:
+        _VERIFIED.pop(path, None)
+    return problem
+
+
+def entry_problem(cache_dir: Path, *files: str) -> str | None:
+    """Why ``cache_dir`` is not a finished, intact entry (no build record, a file of
+    ``files`` missing or not matching its checksum), or None."""
+    if not (cache_dir / BUILD_RECORD).is_file():
+        return f"{cache_dir} is unfinished (no {BUILD_RECORD})" if cache_dir.exists() else None
+    for name in files:
+        problem = file_problem(cache_dir / name)
+        if problem is not None:
+            return problem
+    return None
+
+
 def entry_complete(cache_dir: Path, *files: str) -> bool:
-    """True when ``cache_dir`` is a finished entry: it has the build record and ``files``."""
-    return all((cache_dir / name).is_file() for name in (BUILD_RECORD, *files))
+    """True when ``cache_dir`` is a finished entry whose ``files`` match their checksums."""
+    return (cache_dir / BUILD_RECORD).is_file() and entry_problem(cache_dir, *files) is None
+
+
+def verified(path: Path) -> bool:
+    """Whether the compiled file ``path`` still matches the checksum written when it was
+    built (a ``stat`` when it was hashed before in this process)."""
+    return file_problem(path) is None
+
+
+def unusable_entry(problem: str | None, err: BaseException) -> BackendError:
+    """One line for a damaged entry that cannot be rebuilt (``err``: why not)."""
+    first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    return BackendError(f"{problem}; it is not used, and it cannot be rebuilt: {first}")
+
+
+def ensure_entry(cache_dir: Path, files: tuple[str, ...], build: Callable[[], None]) -> None:
+    """Make ``cache_dir`` a finished entry whose ``files`` match their checksums: nothing
+    when it is one; else, under the build lock, ``build()`` (which publishes the entry).
+    An entry that exists but is damaged and cannot be rebuilt raises
+    :func:`unusable_entry`; it is never used."""
+    if entry_complete(cache_dir, *files):
+        return
+    damage = entry_problem(cache_dir, *files)
+    if damage is not None:
+        LOG.warning("%s: rebuilding it", damage)
+    try:
+        with build_lock(cache_dir):
+            if not entry_complete(cache_dir, *files):
+                build()
+    except (BackendError, RuntimeError, OSError) as err:
+        if damage is not None:
+            raise unusable_entry(damage, err) from err
+        raise
+    problem = entry_problem(cache_dir, *files)
+    if problem is not None:  # the build published something that does not verify
+        raise BackendError(f"{problem} right after its build")
 
 
 @contextlib.contextmanager
@@ -108,13 +198,19 @@ def new_build_dir(cache_dir: Path) -> Path:
         return Path(tempfile.mkdtemp(prefix=owned_tempdir_name(prefix), dir=cache_dir.parent))
 
 
-def publish_entry(work: Path, cache_dir: Path, record: dict[str, Any]) -> None:
-    """Write the build record into ``work``, give it the umask's mode and rename it to
-    ``cache_dir`` (replacing an unfinished directory of that name)."""
+def publish_entry(
+    work: Path, cache_dir: Path, record: dict[str, Any], artefacts: tuple[str, ...] = ()
+) -> None:
+    """Write the checksums of the compiled files ``artefacts`` and the build record into
+    ``work``, give it the umask's mode and rename it to ``cache_dir`` (replacing an
+    unfinished or damaged directory of that name; a process running a file of the old one
+    keeps its copy)."""
     with cache_writes(cache_dir.parent):
+        for name in artefacts:
+            write_checksum(work / name)
         (work / BUILD_RECORD).write_text(json.dumps(record, indent=1, default=str))
         work.chmod(shared_mode())
-        if cache_dir.exists():  # an unfinished entry (no build record), e.g. an old layout
+        if cache_dir.exists():  # an unfinished or damaged entry, e.g. of an old layout
             shutil.rmtree(cache_dir)
         os.replace(work, cache_dir)
 

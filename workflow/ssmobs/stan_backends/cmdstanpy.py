@@ -9,6 +9,8 @@ Compiling
     once, under an exclusive lock, in a temporary sibling directory renamed into place when
     the executable and the build record are complete: an entry under its final name is
     always finished (a half-written executable of a killed build is never taken for one).
+    The executable carries a checksum written at build time and verified before each use
+    (:mod:`.cache`): a replaced or damaged one is rebuilt, never run.
     The repository's ``stan/`` stays free of executables.
 
 Sampling
@@ -53,15 +55,15 @@ from .base import (
     quiet_loggers,
 )
 from .cache import (
-    build_lock,
     cache_root,
     content_key,
-    entry_complete,
+    ensure_entry,
     new_build_dir,
     owned_tempdir_name,
     publish_entry,
     sweep_stale,
     tail,
+    verified,
 )
 
 LOG = logging.getLogger("ssmobs.stan")
@@ -179,8 +181,9 @@ class CmdStanPyBackend:
             else {"user_header": hashlib.sha256(header_text.encode()).hexdigest()}
         )
         key = (str(path), sha + str(header_key))
-        if key in self._markers:
-            return self._markers[key]
+        known = self._markers.get(key)
+        if known is not None and verified(Path(known["exe_file"])):
+            return known
         ident = cmdstan_identity(cmdstanpy.cmdstan_path())
         version_tag = ident["cmdstan_version"]
         slug = path.stem
@@ -188,45 +191,44 @@ class CmdStanPyBackend:
         cache_dir = cache_root() / "cmdstan" / f"{slug}-{entry_key}"
         exe_name = slug + (".exe" if os.name == "nt" else "")
         exe = cache_dir / exe_name
-        if not entry_complete(cache_dir, exe_name):
-            with build_lock(cache_dir):
-                if not entry_complete(cache_dir, exe_name):
-                    LOG.info(
-                        "compiling %s with CmdStan %s into %s", path.name, version_tag, cache_dir
-                    )
-                    t0 = time.perf_counter()
-                    work = new_build_dir(cache_dir)
-                    try:
-                        copy = work / f"{slug}.stan"
-                        copy.write_text(code)
-                        # user_header only with a header: the autodiff call is the one
-                        # of every cmdstanpy version
-                        header_arg: dict[str, Any] = {}
-                        if header_text is not None:
-                            header_file = work / f"{slug}.hpp"
-                            header_file.write_text(header_text)
-                            header_arg["user_header"] = str(header_file)
-                        try:
-                            with quiet_loggers(forward=("cmdstanpy",)):
-                                model = cmdstanpy.CmdStanModel(stan_file=str(copy), **header_arg)
-                        except Exception as err:
-                            raise RuntimeError(f"compiling {path} failed: {err}") from err
-                        if model.exe_file is None or not Path(model.exe_file).is_file():
-                            raise RuntimeError(f"compiling {path} gave no executable")
-                        built = Path(model.exe_file)
-                        if built != work / exe_name:
-                            shutil.move(str(built), work / exe_name)
-                        record = {
-                            "program": sha,
-                            **ident,
-                            **header_key,
-                            "stan_file": str(path),
-                            "cmdstanpy_version": cmdstanpy.__version__,
-                        }
-                        publish_entry(work, cache_dir, record)
-                    finally:
-                        shutil.rmtree(work, ignore_errors=True)
-                    LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+
+        def build() -> None:
+            LOG.info("compiling %s with CmdStan %s into %s", path.name, version_tag, cache_dir)
+            t0 = time.perf_counter()
+            work = new_build_dir(cache_dir)
+            try:
+                copy = work / f"{slug}.stan"
+                copy.write_text(code)
+                # user_header only with a header: the autodiff call is the one
+                # of every cmdstanpy version
+                header_arg: dict[str, Any] = {}
+                if header_text is not None:
+                    header_file = work / f"{slug}.hpp"
+                    header_file.write_text(header_text)
+                    header_arg["user_header"] = str(header_file)
+                try:
+                    with quiet_loggers(forward=("cmdstanpy",)):
+                        model = cmdstanpy.CmdStanModel(stan_file=str(copy), **header_arg)
+                except Exception as err:
+                    raise RuntimeError(f"compiling {path} failed: {err}") from err
+                if model.exe_file is None or not Path(model.exe_file).is_file():
+                    raise RuntimeError(f"compiling {path} gave no executable")
+                built = Path(model.exe_file)
+                if built != work / exe_name:
+                    shutil.move(str(built), work / exe_name)
+                record = {
+                    "program": sha,
+                    **ident,
+                    **header_key,
+                    "stan_file": str(path),
+                    "cmdstanpy_version": cmdstanpy.__version__,
+                }
+                publish_entry(work, cache_dir, record, (exe_name,))
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+            LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
+
+        ensure_entry(cache_dir, (exe_name,), build)
         marker = {
             "backend": self.name,
             "stan_file": str(path),

@@ -40,15 +40,16 @@ from .base import (
 )
 from .cache import (
     BUILD_RECORD,
-    build_lock,
     cache_root,
     content_key,
+    ensure_entry,
     entry_complete,
     owned_tempdir_name,
     sweep_stale,
     tail,
+    verified,
 )
-from .native_build import EXE_NAME, build_key, build_program, stan_version
+from .native_build import EXE_NAME, PROGRAM_ARTEFACTS, build_key, build_program, stan_version
 from .native_run import (
     EXIT_DATA_REJECTED,
     EXIT_INPUT_UNREADABLE,
@@ -94,7 +95,10 @@ class NativeBackend:
 
         Marker keys: ``backend``, ``stan_file``, ``program_sha256``, ``stan_version``,
         ``compiler`` (the version line recorded at build time), ``cache_dir``,
-        ``exe_file``.  Finding a built program runs no compiler.  RuntimeError with stanc's
+        ``exe_file``.  Finding a built program runs no compiler.  Every call (each run
+        calls it) verifies the executable and its libraries against their checksums
+        (:mod:`.cache`): a damaged entry is rebuilt, or refused in one line where it cannot
+        be.  RuntimeError with stanc's
         or the compiler's message when the program does not build; BackendError when the
         cache cannot be written or the build cannot run (no compiler).  ``user_header``: a
         C++ header defining the program's external functions (keyed with the program).
@@ -104,15 +108,19 @@ class NativeBackend:
         header = None if user_header is None else Path(user_header).resolve()
         header_text = None if header is None else header.read_text()
         memo = (str(path), code + "\n" + (header_text or ""))
-        if memo in self._markers:
-            return self._markers[memo]
+        known = self._markers.get(memo)
+        if known is not None and all(
+            verified(Path(known["cache_dir"]) / name) for name in PROGRAM_ARTEFACTS
+        ):
+            return known
         parts = build_key(code, header_text)
         cache_dir = self._cache_dir(path, parts)
         exe = cache_dir / EXE_NAME
-        if not entry_complete(cache_dir, EXE_NAME):
-            with build_lock(cache_dir):
-                if not entry_complete(cache_dir, EXE_NAME):
-                    build_program(path, code, cache_dir, parts, header)
+        ensure_entry(
+            cache_dir,
+            PROGRAM_ARTEFACTS,
+            lambda: build_program(path, code, cache_dir, parts, header),
+        )
         try:
             record = json.loads((cache_dir / BUILD_RECORD).read_text())
         except (OSError, ValueError):
@@ -142,7 +150,7 @@ class NativeBackend:
         path = Path(stan_file).resolve()
         header = None if user_header is None else Path(user_header).read_text()
         parts = build_key(program_code(path), header)
-        return entry_complete(self._cache_dir(path, parts), EXE_NAME)
+        return entry_complete(self._cache_dir(path, parts), *PROGRAM_ARTEFACTS)
 
     @contextlib.contextmanager
     def _run_dir(self, data: Mapping[str, Any]) -> Iterator[Path]:

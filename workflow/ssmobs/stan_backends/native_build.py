@@ -21,6 +21,26 @@ Cached programs are self-contained
     least as new as the building compiler's, libgcc_s, libm).  Looking a program up runs
     ``stanc --version`` from the wheel but never the C++ compiler, so a node without g++
     uses programs built elsewhere (see :func:`build_key`).
+
+Checksums
+    The executable, the libraries beside it and the driver's object file carry checksums
+    written at build time and verified before each use (:mod:`.cache`): a damaged or
+    replaced file is rebuilt, never run or linked.
+
+A precompiled header (opt-in)
+    With ``SSMOBS_STAN_PCH=1`` in the environment (:data:`PCH_ENV`) a program's object file
+    is compiled with a precompiled ``stan/model/model_header.hpp`` (:func:`precompiled_header`,
+    built once per compiler and flags into ``<cache_root>/native/pch-<key>/``, 770 MiB): 13.5
+    instead of 21.7 CPU-s for the analytic Same program (docs/performance.md), and the same
+    executable byte for byte (GCC's precompiled header is the parsed text of the same header;
+    tests/stan/test_precompiled_header.py compares them), so the setting is not in any key and
+    is recorded in ``build.json`` only.  A header the compiler refuses (``-Winvalid-pch``) is
+    read as text instead.
+
+The same bytes from every build
+    stanc runs in the build directory on relative names and names the program's file in
+    messages, and GCC maps the source directories to fixed names (:func:`path_maps`): an
+    executable's bytes depend on neither the temporary directory nor the environment's path.
 """
 
 from __future__ import annotations
@@ -36,10 +56,9 @@ from pathlib import Path
 
 from .base import BackendError, log_captured
 from .cache import (
-    build_lock,
     cache_root,
     content_key,
-    entry_complete,
+    ensure_entry,
     new_build_dir,
     publish_entry,
     shared_mode,
@@ -82,6 +101,15 @@ RUNTIME_LIBS: tuple[str, ...] = ("libtbb.so.2",)
 EXE_NAME = "driver"
 #: the driver's object file in its own cache entry (:func:`driver_object`)
 DRIVER_OBJECT = "driver.o"
+#: the compiled files of a program's entry, each with its checksum
+PROGRAM_ARTEFACTS: tuple[str, ...] = (EXE_NAME, *RUNTIME_LIBS)
+#: environment variable that turns the precompiled Stan header on (``1``) or off (``0``,
+#: unset: the default); read by the build only, see the module docstring
+PCH_ENV = "SSMOBS_STAN_PCH"
+#: the header a precompiled header entry holds (it includes Stan's model header), and its
+#: compiled form beside it, where GCC looks for it
+PCH_HEADER = "stan_model_header.hpp"
+PCH_FILE = PCH_HEADER + ".gch"
 
 
 @lru_cache(maxsize=1)
@@ -153,7 +181,8 @@ def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
 
     Program text, driver source, Stan version (``stanc --version`` of the wheel, which is
     present wherever this package runs), httpstan version, compiler and linker flags and
-    the entry's layout.  Deliberately *not* the C++ compiler, neither its version nor its
+    the entry's layout (and that its messages name the program's file).  Deliberately *not*
+    the C++ compiler, neither its version nor its
     path: the version can only be had by running the compiler and the path only by
     finding it on PATH, and a lookup must work where there is no compiler (a cluster node
     using programs built on the login node), which a key the node cannot compute would
@@ -187,7 +216,11 @@ def build_key(code: str, user_header: str | None = None) -> dict[str, str]:
         "stan": stan_version(),
         "httpstan": httpstan_version(),
         "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + LDFLAGS),
+        "path_maps": PATH_MAPS_KEY,
         "runtime_libs": ",".join(RUNTIME_LIBS),
+        # the executable's messages name the program's file (stanc --filename-in-msg);
+        # entries built before named their temporary build directory
+        "messages": "--filename-in-msg, stanc run in the build directory",
     }
 
 
@@ -208,14 +241,36 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     return out
 
 
+#: what the compiled files' messages (``__FILE__`` in Eigen's and Stan's checks) call the
+#: directories the sources lie in (:func:`path_maps`); keyed, as the bytes follow it
+PATH_MAPS_KEY = "-fmacro-prefix-map: httpstan/include ssmobs/native_include ssmobs/native_driver ."
+
+
+def path_maps(*build_dirs: Path) -> list[str]:
+    """GCC's ``-fmacro-prefix-map`` for httpstan's headers, ours and the driver's source
+    (without ``build_dirs``), or for ``build_dirs`` (a program's temporary build directory,
+    its user header's) as ``.``: the bytes of a build then depend neither on the
+    environment's path nor on where it was built, so two builds of one program are the
+    same file."""
+    fixed = [
+        (httpstan_dir() / "include", "httpstan/include"),
+        (SHADOW_INCLUDE_DIR, "ssmobs/native_include"),
+        (DRIVER_SOURCE.parent, "ssmobs/native_driver"),
+    ]
+    maps = [(d, ".") for d in build_dirs] if build_dirs else fixed
+    return [f"-fmacro-prefix-map={src}={dst}" for src, dst in maps]
+
+
 def compile_flags() -> list[str]:
     """The C++ compiler's flags for the driver and the programs: our headers that stand in
-    for Stan's (:data:`SHADOW_INCLUDE_DIR`) first on the include path, then httpstan's."""
+    for Stan's (:data:`SHADOW_INCLUDE_DIR`) first on the include path, then httpstan's, and
+    the directories' names in messages (:func:`path_maps`)."""
     return [
         *CXXFLAGS,
         *("-D" + d for d in DEFINES),
         f"-I{SHADOW_INCLUDE_DIR}",
         f"-I{httpstan_dir() / 'include'}",
+        *path_maps(),
     ]
 
 
@@ -228,6 +283,7 @@ def driver_key() -> dict[str, str]:
         "stan": stan_version(),
         "httpstan": httpstan_version(),
         "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES)),
+        "path_maps": PATH_MAPS_KEY,
     }
 
 
@@ -236,22 +292,71 @@ def driver_object() -> Path:
     every program's executable links it."""
     parts = driver_key()
     cache_dir = cache_root() / "native" / f"driver-{content_key(parts)}"
-    if not entry_complete(cache_dir, DRIVER_OBJECT):
-        with build_lock(cache_dir):
-            if not entry_complete(cache_dir, DRIVER_OBJECT):
-                work = new_build_dir(cache_dir)
-                try:
-                    t0 = time.perf_counter()
-                    LOG.info("compiling the native driver once into %s", cache_dir)
-                    cmd = [compiler(), *compile_flags(), "-c", str(DRIVER_SOURCE)]
-                    cmd += ["-o", str(work / DRIVER_OBJECT)]
-                    cxx_version = compiler_version()
-                    log_captured("compiler for driver.cpp", run_compiler(cmd, "driver.cpp").stderr)
-                    publish_entry(work, cache_dir, {**parts, "compiler_version": cxx_version})
-                    LOG.info("compiled the native driver in %.1f s", time.perf_counter() - t0)
-                finally:
-                    shutil.rmtree(work, ignore_errors=True)
+
+    def build() -> None:
+        work = new_build_dir(cache_dir)
+        try:
+            t0 = time.perf_counter()
+            LOG.info("compiling the native driver once into %s", cache_dir)
+            cmd = [compiler(), *compile_flags(), "-c", str(DRIVER_SOURCE)]
+            cmd += ["-o", str(work / DRIVER_OBJECT)]
+            cxx_version = compiler_version()
+            log_captured("compiler for driver.cpp", run_compiler(cmd, "driver.cpp").stderr)
+            record = {**parts, "compiler_version": cxx_version}
+            publish_entry(work, cache_dir, record, (DRIVER_OBJECT,))
+            LOG.info("compiled the native driver in %.1f s", time.perf_counter() - t0)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+
+    ensure_entry(cache_dir, (DRIVER_OBJECT,), build)
     return cache_dir / DRIVER_OBJECT
+
+
+def precompiled_header_wanted() -> bool:
+    """Whether :data:`PCH_ENV` asks for the precompiled header (``1``; ``0`` or unset: no).
+    ValueError (one line) for any other value."""
+    value = os.environ.get(PCH_ENV, "0").strip() or "0"
+    if value not in ("0", "1"):
+        raise ValueError(f"{PCH_ENV} must be 0 or 1 (the precompiled Stan header); got {value!r}")
+    return value == "1"
+
+
+def precompiled_header(extra_flags: tuple[str, ...] = ()) -> Path:
+    """The precompiled ``stan/model/model_header.hpp`` for the programs' flags plus
+    ``extra_flags`` (cached, keyed by the flags, the headers standing in for Stan's, the Stan
+    and httpstan versions and the compiler's version line, since a ``.gch`` is valid for one
+    compiler only); returns the header to pass with ``-include`` (its ``.gch`` beside it)."""
+    cxx_version = compiler_version()
+    flags = [*compile_flags(), *extra_flags]
+    parts = {
+        **shadow_key(),
+        "stan": stan_version(),
+        "httpstan": httpstan_version(),
+        "flags": " ".join(CXXFLAGS + tuple("-D" + d for d in DEFINES) + extra_flags),
+        "path_maps": PATH_MAPS_KEY,
+        "compiler_version": cxx_version,
+    }
+    cache_dir = cache_root() / "native" / f"pch-{content_key(parts)}"
+
+    def build() -> None:
+        work = new_build_dir(cache_dir)
+        try:
+            t0 = time.perf_counter()
+            LOG.info("precompiling Stan's model header once into %s", cache_dir)
+            (work / PCH_HEADER).write_text("#include <stan/model/model_header.hpp>\n")
+            cmd = [compiler(), *flags, "-x", "c++-header", str(work / PCH_HEADER)]
+            cmd += ["-o", str(work / PCH_FILE)]
+            log_captured(
+                "compiler for the precompiled header", run_compiler(cmd, PCH_HEADER).stderr
+            )
+            record = {**parts, "compiler_path": shutil.which(compiler()), "command": cmd}
+            publish_entry(work, cache_dir, record, (PCH_HEADER, PCH_FILE))
+            LOG.info("precompiled Stan's model header in %.1f s", time.perf_counter() - t0)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+
+    ensure_entry(cache_dir, (PCH_HEADER, PCH_FILE), build)
+    return cache_dir / PCH_HEADER
 
 
 def check_self_contained(exe: Path) -> None:
@@ -297,24 +402,36 @@ def build_program(
                 str(hdir / "stanc"),
                 "--name",
                 model_name,
+                # messages name the program's file, and stanc runs in the build directory
+                # on relative names (it writes its command line into the C++), so that two
+                # builds of one program give the same bytes wherever they are built
+                "--filename-in-msg",
+                path.name,
                 *(["--allow-undefined"] if user_header is not None else []),
                 "--o",
-                str(work / "model.hpp"),
-                str(work / "program.stan"),
+                "model.hpp",
+                "program.stan",
             ],
             capture_output=True,
             text=True,
+            cwd=work,
         )
         if stanc.returncode != 0:
-            msg = (stanc.stderr or stanc.stdout).replace(str(work / "program.stan"), str(path))
+            msg = (stanc.stderr or stanc.stdout).replace(path.name, str(path))
             raise RuntimeError(f"stanc rejected {path}:\n{msg.strip()}")
         log_captured(f"stanc warnings for {path.name}", stanc.stderr)
         cxx_version = compiler_version()  # BackendError when there is no compiler
         driver_o = driver_object()
         exe = work / EXE_NAME
-        model_cmd = [compiler(), *compile_flags(), "-x", "c++", "-c"]
+        extra = USER_HEADER_FLAGS if user_header is not None else ()
+        dirs = (work,) if user_header is None else (work, user_header.parent)
+        model_cmd = [compiler(), *compile_flags(), *path_maps(*dirs), *extra]
+        model_cmd += ["-x", "c++", "-c"]
+        pch = precompiled_header(extra) if precompiled_header_wanted() else None
+        if pch is not None:  # the first include, so that GCC takes the .gch
+            model_cmd += ["-Winvalid-pch", "-include", str(pch)]
         if user_header is not None:
-            model_cmd += [*USER_HEADER_FLAGS, "-include", str(user_header)]
+            model_cmd += ["-include", str(user_header)]
         model_cmd += [str(work / "model.hpp"), "-o", str(work / "model.o")]
         log_captured(f"compiler for {path.name}", run_compiler(model_cmd, str(path)).stderr)
         link_cmd = [compiler(), str(driver_o), str(work / "model.o"), "-o", str(exe)]
@@ -334,8 +451,10 @@ def build_program(
                 "compiler_version": cxx_version,
                 "compiler_path": shutil.which(compiler()),
                 "stan_file": str(path),
+                "precompiled_header": None if pch is None else str(pch),
                 "command": [model_cmd, link_cmd],
             },
+            PROGRAM_ARTEFACTS,
         )
         LOG.info("compiled %s in %.1f s", path.name, time.perf_counter() - t0)
     finally:
