@@ -320,6 +320,13 @@ def fake_lcd(built_kernel, tmp_path, monkeypatch) -> list[Path]:
         return directory / lcd_native.LIB_NAME, ["g++", *flags]
 
     monkeypatch.setattr(lcd_native, "build", build)
+    real_cdll = lcd_native.ctypes.CDLL
+
+    def checked_cdll(name: str, *args: object, **kwargs: object) -> object:
+        assert io.checksum_problem(name) is None, f"loaded a damaged library {name}"
+        return real_cdll(name, *args, **kwargs)
+
+    monkeypatch.setattr(lcd_native.ctypes, "CDLL", checked_cdll)
     lcd_native.kernel_of.cache_clear()
     yield builds
     lcd_native.kernel_of.cache_clear()
