@@ -25,7 +25,8 @@ from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
 from ssmobs.binomial import format_fraction
-from ssmobs.reports.paper_comparison import paper_comparison
+from ssmobs.reports.paper_comparison import improper_scenarios, paper_comparison
+from ssmobs.reports.propriety_notes import NOT_SHOWN_IMPROPER
 
 COMPARISON = re.compile(r"<!-- paper-comparison: (?P<folder>[\w./-]+) -->")
 ROWS = re.compile(r"<!-- section4-rows: (?P<folder>[\w./-]+) -->")
@@ -36,36 +37,72 @@ def _fmt(value: float) -> str:
     return "" if value is None or not math.isfinite(value) else f"{value:.4g}"
 
 
+def _cell(text: str) -> str:
+    """``text`` in a Markdown table cell: its bars (|K^Stan|/K) escaped, not column breaks."""
+    return text.replace("|", "\\|")
+
+
+def _reasons(reasons: dict[str, str]) -> str:
+    """ "`scenario` (<reason>); ..." for the scenarios whose Stan numbers are withheld."""
+    return "; ".join(f"`{scenario}` ({why})" for scenario, why in sorted(reasons.items()))
+
+
+#: why a table withholds a Stan number (:mod:`ssmobs.reports.propriety_notes`)
+WHY_WITHHELD = "a Stan number of a posterior that may be improper under its prior estimates nothing"
+
+
+def _withheld_sentence(withheld: pd.DataFrame, every: bool) -> str:
+    """Which values of ours the comparison does not show, and why (|K^Stan|, marginal MAP
+    and coverage rows of scenarios whose posterior is improper or undecided)."""
+    n = len(withheld)
+    which = "Every value of ours here is" if every else f"{n} value{'s' * (n > 1)} of ours"
+    which += "" if every else (" are" if n > 1 else " is")
+    why = _reasons(dict(zip(withheld["scenario"], withheld["improper"], strict=True)))
+    tail = " The paper's values stay beside them." if every else ""
+    return f"{which} withheld (`{NOT_SHOWN_IMPROPER}`), as {WHY_WITHHELD}: {why}.{tail}"
+
+
+def _judged_sentence(judged: pd.DataFrame) -> str:
+    """The value farthest from the paper's in standard errors, among those that have one."""
+    if judged.empty:
+        return "No value here has a Monte Carlo standard error to judge it by."
+    worst = judged.loc[judged["z"].abs().idxmax()]
+    apart = (
+        f"{worst['quantity']} at T = {worst['T']}: {abs(worst['z']):.1f} standard errors "
+        f"from the paper's (RD {worst['rel_diff']:.3g})"
+    )
+    if len(judged) == 1:
+        return f"One value has a standard error, {apart}."
+    return (
+        f"Of the {len(judged)} values with a standard error, the farthest is {apart}; "
+        f"{int((judged['z'].abs() <= 2).sum())} are within two standard errors."
+    )
+
+
 def render_comparison(folder: Path) -> str:
-    """The comparison of ``folder`` as a Markdown table with one sentence above it."""
+    """The comparison of ``folder`` as a Markdown table, with the sentences above it: the
+    value farthest from the paper's, and which values are withheld as improper and why (an
+    improper scenario's "ours" cell says :data:`NOT_SHOWN_IMPROPER`)."""
     frame = paper_comparison(folder)
     if frame.empty:
         return "*The paper states none of this folder's values.*"
+    improper = frame["improper"].fillna("").astype(str) != ""
     lines = [
         "| T | quantity | K | ours | paper | RD | standard error | z |",
         "|--:|:--|--:|--:|--:|--:|--:|--:|",
     ]
-    for r in frame.to_dict("records"):
+    for r, withheld in zip(frame.to_dict("records"), improper, strict=True):
+        ours = NOT_SHOWN_IMPROPER if withheld else _fmt(r["ours"])
         lines.append(
-            f"| {r['T']} | {r['quantity']} | {r['K']} | {_fmt(r['ours'])} | {_fmt(r['paper'])} "
+            f"| {r['T']} | {_cell(r['quantity'])} | {r['K']} | {ours} | {_fmt(r['paper'])} "
             f"| {_fmt(r['rel_diff'])} | {_fmt(r['standard_error'])} | {_fmt(r['z'])} |"
         )
-    judged = frame.dropna(subset=["z"])
-    if judged.empty:
-        head = "No value here has a Monte Carlo standard error to judge it by."
+    if improper.all():
+        head = _withheld_sentence(frame, every=True)
     else:
-        worst = judged.loc[judged["z"].abs().idxmax()]
-        apart = (
-            f"{worst['quantity']} at T = {worst['T']}: {abs(worst['z']):.1f} standard errors "
-            f"from the paper's (RD {worst['rel_diff']:.3g})"
-        )
-        if len(judged) == 1:
-            head = f"One value has a standard error, {apart}."
-        else:
-            head = (
-                f"Of the {len(judged)} values with a standard error, the farthest is {apart}; "
-                f"{int((judged['z'].abs() <= 2).sum())} are within two standard errors."
-            )
+        head = _judged_sentence(frame[~improper].dropna(subset=["z"]))
+        if improper.any():
+            head += " " + _withheld_sentence(frame[improper], every=False)
     return head + "\n\n" + "\n".join(lines)
 
 
@@ -88,17 +125,27 @@ def render_optional_table(root: Path, path: str) -> str:
 def render_rows(folder: Path) -> str:
     """One line per committed row folder under ``folder`` (each a run of one config of
     ``config/section4_rows/``): |K^max|/K over all K, |K^Stan|/K over the Stan runs, with
-    their 95 % intervals, beside the paper's, and how the row was made."""
+    their 95 % intervals, beside the paper's, and how the row was made.  A row whose
+    posterior is improper under its prior (the current analysis of the scenarios in the
+    folder's ``provenance.json``, or the summary's own ``improper`` column:
+    :func:`~ssmobs.reports.paper_comparison.improper_scenarios`) shows
+    :data:`NOT_SHOWN_IMPROPER` for |K^Stan|/K, whatever its commit wrote, and the reason
+    below the table."""
     lines = [
         "| row | T | K | Stan runs | K^max/K | paper | K^Stan/K | paper | made |",
         "|:--|--:|--:|--:|:--|:--|:--|:--|:--|",
     ]
+    withheld: dict[str, str] = {}
     for summary in sorted(folder.glob("*/section4_summary.csv")):
         prov = json.loads((summary.parent / "provenance.json").read_text())
         made = f"`{prov['commit'][:12]}`, {prov['date_utc'][:10]}"
-        for r in pd.read_csv(summary).to_dict("records"):
+        frame = pd.read_csv(summary)
+        improper = improper_scenarios(summary.parent, [frame])
+        for r in frame.to_dict("records"):
             runs = r.get("K_stan_runs", r["K"])
-
+            why = improper.get(r["scenario"], "")
+            if why:
+                withheld[r["scenario"]] = why
             cells = [
                 r["scenario"],
                 r["T"],
@@ -106,7 +153,7 @@ def render_rows(folder: Path) -> str:
                 runs,
                 format_fraction(r["K_max"], r["K"]),
                 format_fraction(r["K_max_paper"], r["K_paper"]),
-                format_fraction(r["K_stan"], runs),
+                NOT_SHOWN_IMPROPER if why else format_fraction(r["K_stan"], runs),
                 format_fraction(r["K_stan_paper"], r["K_paper"]),
                 made,
             ]
@@ -116,6 +163,14 @@ def render_rows(folder: Path) -> str:
             "*No row is committed yet: `make section4-rows` (or one row with `make section4 "
             "SECTION4_CONFIG=config/section4_rows/<row>.yaml`) makes them.*"
         )
+    if withheld:
+        lines += [
+            "",
+            f"*|K^Stan|/K is withheld (`{NOT_SHOWN_IMPROPER}`) where the current analysis of "
+            f"the scenario in the folder's provenance finds the posterior improper, as "
+            f"{WHY_WITHHELD}; the folder keeps the number its commit wrote: "
+            f"{_reasons(withheld)}.*",
+        ]
     return "\n".join(lines)
 
 
