@@ -42,6 +42,15 @@ def _uncommitted(prov: dict[str, Any], shown: int = 3) -> str:
     return f" (with uncommitted changes to {names}{more})"
 
 
+def gradients(prov: dict[str, Any]) -> str:
+    """NUTS's gradient path (config key ``stan.gradients``): as recorded, else as the recorded
+    config sets it, else ``autodiff`` (the schema's default, and the only path before the key)."""
+    recorded = prov.get("stan", {}).get("gradients")
+    if recorded is None:
+        recorded = ((prov.get("config") or {}).get("stan") or {}).get("gradients", "autodiff")
+    return f"`{recorded}`"
+
+
 def render(prov: dict[str, Any]) -> str:
     """The provenance as a short Markdown list."""
     machine = prov.get("machine", {})
@@ -53,7 +62,7 @@ def render(prov: dict[str, Any]) -> str:
         + f", finished {prov['date_utc'][:16].replace('T', ' ')} UTC",
         f"- **machine**: {machine.get('cpus')} CPUs ({machine.get('cpu_model')}), "
         f"{machine.get('memory_gib')} GiB, Python {machine.get('python')}; Stan backend "
-        f"{stan.get('backend')} ({stan.get('stan_version')})",
+        f"{stan.get('backend')} ({stan.get('stan_version')}), gradients {gradients(prov)}",
         f"- **wall time** {_minutes(prov.get('wall_seconds'))}, **CPU time** "
         f"{_minutes(prov.get('cpu_seconds'))}"
         + (

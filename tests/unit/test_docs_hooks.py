@@ -138,3 +138,27 @@ def test_site_shows_no_k_stan_of_the_committed_improper_rows(hook) -> None:
         assert _row_of(text, scenario)[6] == NOT_SHOWN_IMPROPER
         assert f"`{scenario}` (improper: " in text
     assert _row_of(text, "sep_ab_T75")[6] != NOT_SHOWN_IMPROPER  # both restricted: proper
+
+
+@pytest.fixture(scope="module")
+def provenance_hook():
+    pytest.importorskip("mkdocs")
+    path = REPO / "docs" / "hooks" / "provenance.py"
+    spec = importlib.util.spec_from_file_location("docs_provenance_hook", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize(
+    ("prov", "shown"),
+    [
+        ({"stan": {"gradients": "analytic"}}, "`analytic`"),
+        ({"stan": {}, "config": {"stan": {"gradients": "analytic"}}}, "`analytic`"),
+        ({"stan": {}, "config": {}}, "`autodiff`"),  # made before the key was recorded
+    ],
+)
+def test_provenance_names_the_gradient_path(provenance_hook, prov, shown):
+    """Each committed folder's page says which gradient path made its draws (issue 63)."""
+    assert provenance_hook.gradients(prov) == shown
