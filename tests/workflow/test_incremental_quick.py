@@ -480,9 +480,11 @@ def test_fifty_large_scenarios_give_a_short_message_from_snakemake_too(tmp_path)
     assert proc.returncode != 0
     assert len(text.splitlines()) <= 20, text
     assert (
-        "(101 problems of 3 kinds; every one: .venv/bin/python -m ssmobs.config.preflight" in text
+        "(102 problems of 4 kinds; every one: .venv/bin/python -m ssmobs.config.preflight" in text
     )
     assert "50 scenarios alike, the first: scenario 'big_00': a design_disturbances job" in text
+    # the fourth kind: the joint MAP's time budget (limits.joint_map_cpu_hours, issue 61)
+    assert "more than limits.joint_map_cpu_hours" in text
 
 
 def test_the_model_check_runs_after_the_build_of_its_program(tmp_path):
