@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 from ssmobs.model_check.analytic import analytic_problems
-from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.check import check_model
 from ssmobs.models import MODELS, get_model
+from ssmobs.models.check_cases import default_cases
 from ssmobs.nuts.analytic_program import AnalyticProgram, write_analytic_program
 from ssmobs.stan_backends import stan_file
 from ssmobs.stan_backends.base import SamplerSettings
@@ -168,7 +168,7 @@ def test_nuts_stage_runs_the_analytic_program_and_keys_its_records(tmp_path):
     from ssmobs.nuts.batch import NutsBatch, run_trajectories
     from ssmobs.nuts.convergence import ConvergenceSettings
     from ssmobs.nuts.record_cache import program_hash
-    from ssmobs.stages.stan import stan_program
+    from ssmobs.nuts.stan_program import stan_program
 
     model = get_model("same")
     program, header = stan_program("same", "analytic")

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ssmobs.model_check.cases import CheckCase, sample_theta
 from ssmobs.model_check.check import check_model
 from ssmobs.model_check.stan import stan_density, stan_point, stan_problems
 from ssmobs.models import MODELS, get_model
+from ssmobs.models.check_cases import CheckCase, sample_theta
 from ssmobs.stan_backends import has_stan_file, stan_file
 
 pytestmark = pytest.mark.stan
@@ -69,7 +69,7 @@ def test_prior_bound_stan_does_not_share(tmp_path):
 def test_interval_prior_of_the_config_is_checked_against_stan(tmp_path):
     """Issue 47: a config's interval [0.1, 5] for sigma is compared with Stan's bounds: the
     program that declares only the lower bound accepts sigma beyond 5."""
-    from ssmobs.model_check.cases import prior_variant_cases
+    from ssmobs.models.check_cases import prior_variant_cases
 
     model = get_model("stoch_vol")
     case = CheckCase({"phi": 0.9, "sigma": 0.5}, [0.0], {"sigma": [0.1, 5.0]})

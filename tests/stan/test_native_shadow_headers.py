@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ssmobs.stages.stan import stan_program
+from ssmobs.nuts.stan_program import stan_program
 from ssmobs.stan_backends import SAMPLER_COLUMNS, SamplerSettings, native_build, stan_file
 from ssmobs.stan_backends.cache import BUILD_RECORD
 from ssmobs.stan_backends.native import NativeBackend

@@ -12,9 +12,9 @@ import sys
 
 import numpy as np
 import pytest
-from ssmobs.model_check.cases import default_cases
 from ssmobs.model_check.stan_source import stan_block
 from ssmobs.models import MODELS, get_model
+from ssmobs.models.check_cases import default_cases
 from ssmobs.models.log_posterior import neg2_log_posterior
 from ssmobs.nuts.analytic_gradients import header_code, switch_name
 from ssmobs.nuts.analytic_program import (

@@ -12,6 +12,7 @@ from ssmobs.config.scenario import Scenario
 from ssmobs.design.disturbances import design_disturbances
 from ssmobs.design.trajectories import make_trajectories
 from ssmobs.joint_map.driver import joint_map
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 
@@ -58,7 +59,9 @@ def test_joint_map_estimate_bounds_the_measured_peak(slug, omega, x0):
     bounds = model.prior_bounds(traj.omega, "restricted")
     used = peak_bytes(
         lambda: joint_map(
-            model, traj.z, bounds, traj.omega, traj.x0, JointMapSettings(max_newton_iter=2)
+            JointMapProblem(
+                model, traj.z, bounds, traj.omega, traj.x0, JointMapSettings(max_newton_iter=2)
+            )
         )
     )
     assert used <= budget.joint_map_bytes(model, T, K)
@@ -79,7 +82,9 @@ def test_joint_map_time_estimate_bounds_the_measured_cpu():
     bounds = model.prior_bounds(omega)
     start = time.process_time()
     multi_start_joint_map(
-        model, z, bounds, np.asarray(omega), np.asarray(x0), JointMapSettings(n_starts=2)
+        JointMapProblem(
+            model, z, bounds, np.asarray(omega), np.asarray(x0), JointMapSettings(n_starts=2)
+        )
     )
     used = time.process_time() - start
     assert used <= K * 2 * budget.joint_map_start_seconds(model, T)

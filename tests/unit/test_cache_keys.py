@@ -73,7 +73,11 @@ def _write(root: Path, files: dict[str, str]) -> Path:
 @pytest.mark.parametrize(
     ("stage", "runs", "does_not_run"),
     [
-        ("design", {"stages/design.py", "design/disturbances.py"}, {"design/trajectories.py"}),
+        (
+            "design",
+            {"stages/design.py", "design/disturbance_sets.py", "design/disturbances.py"},
+            {"design/trajectories.py"},
+        ),
         (
             "trajectories",
             {"stages/design.py", "design/trajectories.py"},
@@ -81,7 +85,12 @@ def _write(root: Path, files: dict[str, str]) -> Path:
         ),
         (
             "joint_map",
-            {"stages/joint_map.py", "joint_map/driver.py", "design/trajectories.py"},
+            {
+                "stages/joint_map.py",
+                "joint_map/driver.py",
+                "joint_map/multi_start_summary.py",
+                "design/trajectories.py",
+            },
             {
                 "stages/outputs/figures.py",
                 "stages/k_selection/grid.py",
@@ -93,11 +102,15 @@ def _write(root: Path, files: dict[str, str]) -> Path:
             "k_selection",
             {
                 "stages/k_selection/grid.py",
-                "stages/design.py",
-                "stages/joint_map.py",
+                "design/disturbance_sets.py",
+                "joint_map/driver.py",
+                "joint_map/problem.py",
                 "k_selection.py",
             },
-            {
+            {  # one start: the multi-start's code is not the grid's
+                "joint_map/multi_start.py",
+                "stages/design.py",
+                "stages/joint_map.py",
                 "stages/k_selection/choice.py",
                 "stages/outputs/mu0_sweep.py",
                 "reports/tables.py",
@@ -106,7 +119,7 @@ def _write(root: Path, files: dict[str, str]) -> Path:
         ),
         (
             "program",
-            {"stages/stan.py", "stan_backends/__init__.py"},
+            {"stages/stan.py", "nuts/stan_program.py", "stan_backends/__init__.py"},
             {
                 "nuts/batch.py",
                 "nuts/record_cache.py",
@@ -343,7 +356,10 @@ FROM_TRAJECTORIES = {"trajectories", "joint_map", "nuts_records", "nuts_batches"
         ("ssmobs/joint_map/driver.py", {"joint_map", "k_selection", "outputs"}),
         ("ssmobs/log.py", set()),
         ("ssmobs/stages/design.py", {"design", "k_selection"} | FROM_TRAJECTORIES),
-        ("ssmobs/stages/joint_map.py", {"joint_map", "k_selection", "outputs"}),
+        # the joint-MAP stage's glue: no other stage runs it (stages import no stage)
+        ("ssmobs/stages/joint_map.py", {"joint_map"}),
+        ("ssmobs/joint_map/problem.py", {"joint_map", "k_selection", "outputs"}),
+        ("ssmobs/design/disturbance_sets.py", {"design", "k_selection"} | FROM_TRAJECTORIES),
         ("ssmobs/stages/k_selection/grid.py", {"k_selection"}),
         ("ssmobs/stages/k_selection/choice.py", {"outputs"}),
         ("ssmobs/stages/stan.py", {"program", "nuts_records", "nuts_batches", "gather"}),
@@ -806,8 +822,8 @@ def test_the_model_check_reads_the_same_cases_from_its_inputs_as_from_the_scenar
     """The rule passes :meth:`CacheKeys.check_inputs` only: the cases the check builds from
     it are those it would build from the whole scenario entry, so what is keyed is what is
     read."""
-    from ssmobs.model_check.cases import cases_from_scenarios, prior_variant_cases
     from ssmobs.models import get_model
+    from ssmobs.models.check_cases import cases_from_scenarios, prior_variant_cases
 
     conf = smoke()
     sc = conf["scenarios"][0]
@@ -829,9 +845,8 @@ def test_a_generated_programs_keys_do_not_follow_the_gradient_switch(tmp_path, m
     """Issue 60: a model without ``stan/<model>.stan`` runs the same generated program
     whatever ``stan.gradients`` says, so switching it reruns none of its Stan jobs; a model
     with its own program has another program under ``analytic``."""
-    import ssmobs.nuts.analytic_program as analytic_program
-    import ssmobs.stan_backends as backends
-    from ssmobs.stages.stan import stan_program
+    import ssmobs.nuts.stan_program as program_choice
+    from ssmobs.nuts.stan_program import stan_program
 
     made = []
 
@@ -842,8 +857,8 @@ def test_a_generated_programs_keys_do_not_follow_the_gradient_switch(tmp_path, m
         made.append((model.slug, path))
         return Program
 
-    monkeypatch.setattr(analytic_program, "write_analytic_program", write)
-    monkeypatch.setattr(backends, "has_stan_file", lambda slug: False)
+    monkeypatch.setattr(program_choice, "write_analytic_program", write)
+    monkeypatch.setattr(program_choice, "has_stan_file", lambda slug: False)
     assert stan_program("same", "autodiff") == stan_program("same", "analytic")
     assert made == [("same", None), ("same", None)]  # the one generated program, both ways
 

@@ -7,16 +7,16 @@ import re
 import numpy as np
 import pytest
 from factories import same_a09
-from ssmobs.model_check.cases import (
+from ssmobs.model_check.stan_source import declared_names, stan_block, stan_source_problems
+from ssmobs.models import MODELS, get_model
+from ssmobs.models.base import StateSpaceModel
+from ssmobs.models.check_cases import (
     CheckCase,
     cases_from_scenarios,
     default_cases,
     default_values,
 )
-from ssmobs.model_check.python import python_problems, simulate_problems
-from ssmobs.model_check.stan_source import declared_names, stan_block, stan_source_problems
-from ssmobs.models import MODELS, get_model
-from ssmobs.models.base import StateSpaceModel
+from ssmobs.models.self_check import python_problems, simulate_problems
 from ssmobs.models.sep_d2_p1 import SepD2P1
 from ssmobs.models.stoch_vol import StochVol
 from ssmobs.stan_backends import stan_file

@@ -10,6 +10,7 @@ from ssmobs.config.scenario import Scenario
 from ssmobs.design.trajectories import make_trajectories, write_trajectories
 from ssmobs.joint_map.barrier import LogBarrier, initial_mu_values
 from ssmobs.joint_map.driver import initial_theta, joint_map
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 
@@ -50,16 +51,18 @@ def test_gradient_balance_mu0_equals_the_hand_computed_ratio_for_sep():
 def test_mu0_rule_changes_the_start_and_is_reported():
     model, _, x, z = design("sep", [0.9, 0.9], [8.0], T=40, K=6, seed=2)
     bounds = model.prior_bounds([0.9, 0.9])
-    res = joint_map(model, z, bounds, [0.9, 0.9], [8.0])
+    res = joint_map(JointMapProblem(model, z, bounds, [0.9, 0.9], [8.0]))
     frame = res.to_frame(model, 40)
     assert np.all(frame["mu0"] > 0) and frame["mu0"].nunique() == 6  # one per trajectory
     low = joint_map(
-        model,
-        z,
-        bounds,
-        [0.9, 0.9],
-        [8.0],
-        JointMapSettings(mu0_rule="per_step", mu0=0.1, mu0_per_step=0.0),
+        JointMapProblem(
+            model,
+            z,
+            bounds,
+            [0.9, 0.9],
+            [8.0],
+            JointMapSettings(mu0_rule="per_step", mu0=0.1, mu0_per_step=0.0),
+        )
     )
     assert np.all(low.mu_start == 0.1)
     # a start far below T lets the first Newton steps fall into the singular edge b -> 1
@@ -105,12 +108,14 @@ def test_mu0_sweep_table_is_made_by_the_stage(tmp_path):
     assert (tmp_path / "sweep.md").read_text().count("lo95") == 1
     # the row "2 T" is the former default rule, recomputed here by hand
     direct = joint_map(
-        model,
-        traj.z,
-        model.prior_bounds([0.9, 0.9], "restricted"),
-        [0.9, 0.9],
-        [8.0],
-        JointMapSettings(mu0_rule="per_step"),
+        JointMapProblem(
+            model,
+            traj.z,
+            model.prior_bounds([0.9, 0.9], "restricted"),
+            [0.9, 0.9],
+            [8.0],
+            JointMapSettings(mu0_rule="per_step"),
+        )
     )
     assert np.isclose(frame[col].iloc[2], (direct.status == "ok").mean())
     text = (tmp_path / "sweep.md").read_text()

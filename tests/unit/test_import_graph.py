@@ -89,10 +89,7 @@ def test_the_ground_floor_imports_nothing_of_the_package():
     assert graph["ssmobs.config.schema"] == set()
     assert graph["ssmobs.config.files"] == {"ssmobs.config.schema"}
     assert "ssmobs.observability_map" not in graph  # the map's stage is in ssmobs.stages
-    assert not graph["ssmobs.config.validation"] & {
-        "ssmobs.stages.observability_map",
-        "ssmobs.stages",
-    }
+    assert not any(_layer(t) == "stages" for t in graph["ssmobs.config.validation"])
     for backend in ("native", "cmdstanpy", "pystan"):  # the package imports them, not back
         assert "ssmobs.stan_backends" not in graph[f"ssmobs.stan_backends.{backend}"]
 
@@ -126,22 +123,30 @@ SHARED = {
     "openblas_threads",
     "seeds",
 }
-#: subpackage -> the subpackages and top-level modules it may import (beside the shared
-#: top-level modules); the
-#: layers, lowest first: models, stan_backends; nuts, joint_map, exact, model_check; config;
-#: design; reports; stages.  A package's ``__main__`` (its command line) is no layer: it may
-#: import anything and nothing imports it.
-ALLOWED = {
+#: every subpackage and every other top-level module -> the subpackages and top-level modules
+#: it may import beside the shared ones.  The layers, lowest first: models, stan_backends;
+#: nuts, joint_map, exact, k_selection, stage_code, housekeeping; config; model_check (its
+#: command line reads a config), design, provenance, cache_keys; run_paths, reports; stages
+#: (the glue).  A package's ``__main__`` (its command line) follows its package's row, and
+#: nothing imports it.
+ALLOWED: dict[str, set[str]] = {
     "models": set(),
     "stan_backends": set(),
     "nuts": {"models", "stan_backends"},
     "joint_map": {"models"},
     "exact": {"models"},
-    "model_check": {"models", "stan_backends", "nuts"},
-    # config: a model without a Stan program is refused when no program can be generated
-    # for it (nuts.analytic_program.generation_problem)
-    "config": {"models", "stan_backends", "model_check", "nuts"},
+    "k_selection": {"models"},
+    "stage_code": set(),
+    "housekeeping": {"stan_backends"},
+    # a model without a Stan program is refused when no program can be generated for it
+    # (nuts.analytic_program.generation_problem); a user's model is checked against itself
+    # (models.self_check)
+    "config": {"models", "stan_backends", "nuts"},
+    "model_check": {"models", "stan_backends", "nuts", "config"},
     "design": {"models", "config"},
+    "provenance": {"config", "stan_backends"},
+    "cache_keys": {"config", "nuts", "stan_backends", "stage_code"},
+    "run_paths": {"config", "nuts", "cache_keys"},
     "reports": {"models", "config", "joint_map", "nuts", "cache_keys", "stage_code"},
     "stages": {
         "models",
@@ -149,6 +154,7 @@ ALLOWED = {
         "nuts",
         "joint_map",
         "exact",
+        "k_selection",
         "config",
         "design",
         "reports",
@@ -157,65 +163,99 @@ ALLOWED = {
 
 
 def _layer(module: str) -> str:
-    """The subpackage a module lies in, or its own name for a top-level module."""
+    """The subpackage a module lies in, or its own name for a top-level module ("" for the
+    package's ``__init__``)."""
     parts = module.split(".")[1:]
     return parts[0] if parts else ""
 
 
+def _is_package(module: str, package_dir: Path) -> bool:
+    return (package_dir.joinpath(*module.split(".")[1:]) / "__init__.py").is_file()
+
+
 def direction_problems(graph: dict[str, set[str]], package_dir: Path) -> list[str]:
-    """Every import that goes against :data:`ALLOWED` or :data:`SHARED`: a subpackage that
-    imports a subpackage it may not, or a top-level module other than the shared ones; a
-    shared module that imports anything but the shared modules and the models.  The stages
-    (the glue) may import any top-level module."""
-    subpackages = {p.parent.name for p in package_dir.glob("*/__init__.py")}
+    """Every import against :data:`ALLOWED` and :data:`SHARED`, with no exception: a layer
+    (subpackage or top-level module) that imports a layer its row does not name, a shared
+    module that imports anything but the shared modules and the models, a module of a layer
+    without a row, an import of a command line (``__main__``), and a stage module that
+    imports another stage (only the ``__init__`` of its packages, which run no stage)."""
     problems = []
     for module, targets in sorted(graph.items()):
         source = _layer(module)
-        if module.endswith(".__main__") or not source:
+        if not source:
+            continue  # the package's __init__ (a version string)
+        if source not in ALLOWED and source not in SHARED:
+            problems.append(f"{module} lies in no layer of ALLOWED or SHARED")
             continue
         for target in sorted(targets):
             layer = _layer(target)
             if target.endswith(".__main__"):
                 problems.append(f"{module} imports the command line {target}")
-            elif not layer or layer == source:
+            elif layer == source:
+                if source == "stages" and not _is_package(target, package_dir):
+                    problems.append(f"stage {module} imports the stage {target}")
+            elif not layer:
                 continue
             elif source in SHARED:
                 if layer not in SHARED and layer != "models":
                     problems.append(f"shared module {module} imports {target}")
-            elif source in subpackages:
-                allowed = ALLOWED.get(source, set())
-                if layer in subpackages and layer not in allowed:
-                    problems.append(f"{module} ({source}) imports {target} ({layer})")
-                elif layer not in subpackages | SHARED | allowed and source != "stages":
-                    problems.append(f"{module} ({source}) imports top-level {target}")
+            elif layer not in SHARED and layer not in ALLOWED[source]:
+                problems.append(f"{module} ({source}) imports {target} ({layer})")
     return problems
 
 
-def test_the_subpackages_import_in_the_allowed_directions():
-    graph = import_graph(PACKAGE_DIR)
+def test_every_layer_has_a_row_and_the_rows_have_an_order():
+    top_level = {p.stem for p in PACKAGE_DIR.glob("*.py") if p.stem != "__init__"}
     subpackages = {p.parent.name for p in PACKAGE_DIR.glob("*/__init__.py")}
-    assert subpackages == set(ALLOWED), "every subpackage has its allowed imports"
+    assert set(ALLOWED) | SHARED == subpackages | top_level
+    assert not set(ALLOWED) & SHARED
+    assert {"cache_keys", "run_paths", "stage_code", "provenance", "housekeeping"} <= set(ALLOWED)
+    order: list[str] = []  # a layer after everything it may import: no circle of layers
+    left = dict(ALLOWED)
+    while left:
+        ready = sorted(n for n, deps in left.items() if deps <= set(order))
+        assert ready, f"the rows of ALLOWED form a circle among {sorted(left)}"
+        order += ready
+        for n in ready:
+            del left[n]
+
+
+def test_the_layers_import_in_the_allowed_directions():
+    graph = import_graph(PACKAGE_DIR)
     assert direction_problems(graph, PACKAGE_DIR) == []
-    # the one import that would close a circle between two subpackages is in a command line
+    # the command line of the model check reads a config; the config does not import it
     assert "ssmobs.config.validation" in graph["ssmobs.model_check.__main__"]
-    assert "ssmobs.model_check.python" in graph["ssmobs.config.validation"]
+    assert "ssmobs.models.self_check" in graph["ssmobs.config.validation"]
+    assert not any(t.startswith("ssmobs.model_check") for t in graph["ssmobs.config.validation"])
 
 
 def test_an_import_against_the_direction_is_found(tmp_path: Path):
     package = tmp_path / "ssmobs"
-    for sub in ("models", "nuts", "stages"):
+    for sub in ("models", "nuts", "stages", "stages/outputs", "model_check"):
         (package / sub).mkdir(parents=True)
         (package / sub / "__init__.py").write_text("")
     (package / "__init__.py").write_text("")
     (package / "io.py").write_text("from .models import base\n")
     (package / "models" / "base.py").write_text("")
+    (package / "model_check" / "__main__.py").write_text("from ..nuts import run\n")
     (package / "nuts" / "run.py").write_text("def f():\n    from ..stages import glue\n")
     (package / "stages" / "glue.py").write_text("from ..nuts import run\nfrom .. import io\n")
+    (package / "stages" / "outputs" / "table.py").write_text(
+        "from .. import glue\nfrom ..outputs import __init__\n"
+    )
+    (package / "stages" / "other.py").write_text("from ..model_check import __main__\n")
     (package / "tables.py").write_text("from .nuts import run\n")
     (package / "seeds.py").write_text("from . import tables\n")
+    (package / "cache_keys.py").write_text("from .stages import glue\n")
     problems = direction_problems(import_graph(package), package)
     assert problems == [
+        "ssmobs.cache_keys (cache_keys) imports ssmobs.stages (stages)",
+        "ssmobs.cache_keys (cache_keys) imports ssmobs.stages.glue (stages)",
         "ssmobs.nuts.run (nuts) imports ssmobs.stages (stages)",
         "ssmobs.nuts.run (nuts) imports ssmobs.stages.glue (stages)",
         "shared module ssmobs.seeds imports ssmobs.tables",
+        "ssmobs.stages.other (stages) imports ssmobs.model_check (model_check)",
+        "ssmobs.stages.other imports the command line ssmobs.model_check.__main__",
+        "stage ssmobs.stages.outputs.table imports the stage ssmobs.stages.glue",
+        "ssmobs.tables lies in no layer of ALLOWED or SHARED",
     ]

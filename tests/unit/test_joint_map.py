@@ -12,6 +12,7 @@ from scipy.optimize import minimize
 from ssmobs.joint_map.barrier import LogBarrier
 from ssmobs.joint_map.checks import STATUSES, ridge_check
 from ssmobs.joint_map.driver import initial_theta, joint_map, joint_map_summary
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.models.base import PriorBounds, StateSpaceModel
@@ -34,7 +35,7 @@ def design(slug, omega, x0, T, K, seed=0):
 def same_t20():
     model, x, z = design("same", [0.9], [8.0], T=20, K=12, seed=1)
     bounds = model.prior_bounds([0.9])
-    return model, z, bounds, joint_map(model, z, bounds, [0.9], [8.0])
+    return model, z, bounds, joint_map(JointMapProblem(model, z, bounds, [0.9], [8.0]))
 
 
 def test_same_all_ok_and_checks_hold(same_t20):
@@ -92,7 +93,7 @@ def test_local_maxima_match_scipy_bfgs(slug, omega, x0, T):
     started next to our optimum converges to the same point, to 1e-6."""
     model, x, z = design(slug, omega, x0, T=T, K=6, seed=5)
     bounds = model.prior_bounds(omega)
-    res = joint_map(model, z, bounds, omega, x0)
+    res = joint_map(JointMapProblem(model, z, bounds, omega, x0))
     ok = np.flatnonzero(res.status == "ok")
     assert ok.size >= 2
     for k in ok[:2]:
@@ -114,7 +115,9 @@ def test_ranwalk_t4_ridge_is_never_ok():
     """(Sep, d=p=1, ranWalk), T = 4: a ridge of variable height (Fig. 4), |K^max| = 0."""
     model, x, z = design("sep_ranwalk", [0.9], [8.0], T=4, K=20, seed=2)
     res = joint_map(
-        model, z, model.prior_bounds([0.9]), [0.9], [8.0], JointMapSettings(max_newton_iter=60)
+        JointMapProblem(
+            model, z, model.prior_bounds([0.9]), [0.9], [8.0], JointMapSettings(max_newton_iter=60)
+        )
     )
     assert not (res.status == "ok").any()
     assert set(res.status) <= set(STATUSES) - {"ok", "failed"}
@@ -155,7 +158,7 @@ def test_constant_height_ridge_is_detected():
     rng = np.random.default_rng(3)
     x, z = model.design_trajectories([1.0, 0.8], [8.0], rng.standard_normal((2 * T, K)), T)
     bounds = PriorBounds(np.array([0.2, 0.2]), np.array([5.0, 5.0]), ("x", "x"))
-    res = joint_map(model, z, bounds, [1.0, 0.8], [8.0])
+    res = joint_map(JointMapProblem(model, z, bounds, [1.0, 0.8], [8.0]))
     assert not (res.status == "ok").any()
     assert set(res.status) <= {"ridge", "not-positive-definite"}
     assert np.all(res.eig_ratio < 1e-5)
@@ -187,7 +190,9 @@ def test_constant_height_ridge_is_detected():
 def test_small_ratio_at_a_unique_maximum_stays_ok(same_t20):
     """Forcing the ridge re-optimisation (r0 = 0.9): the optimum does not move -> ok."""
     model, z, bounds, res = same_t20
-    forced = joint_map(model, z[:4], bounds, [0.9], [8.0], JointMapSettings(eig_ratio_min=0.9))
+    forced = joint_map(
+        JointMapProblem(model, z[:4], bounds, [0.9], [8.0], JointMapSettings(eig_ratio_min=0.9))
+    )
     assert (forced.status == "ok").all()
     assert all("re-optimisation returned" in r for r in forced.reason)
     assert np.allclose(forced.theta_hat, res.theta_hat[:4])
@@ -207,7 +212,9 @@ def test_ridge_status_when_the_reoptimisation_moves(same_t20, monkeypatch):
         return np.ones(n, dtype=bool), np.full(n, 0.5), np.full(n, 0.25)
 
     monkeypatch.setattr(checks, "ridge_check", fake)
-    out = joint_map(model, z[:3], bounds, [0.9], [8.0], JointMapSettings(eig_ratio_min=0.9))
+    out = joint_map(
+        JointMapProblem(model, z[:3], bounds, [0.9], [8.0], JointMapSettings(eig_ratio_min=0.9))
+    )
     assert calls == [3]
     assert (out.status == "ridge").all()
     assert all("moved 0.5" in r and "changed by 0.25" in r for r in out.reason)
@@ -219,7 +226,7 @@ def test_maximum_on_the_prior_boundary():
     """Same with a prior cut at a < 0.5 while the data say a ~ 0.9: maximum on the boundary."""
     model, x, z = design("same", [0.9], [8.0], T=20, K=4, seed=4)
     bounds = PriorBounds(np.array([0.0]), np.array([0.5]), ("restricted",))
-    res = joint_map(model, z, bounds, [0.3], [8.0])
+    res = joint_map(JointMapProblem(model, z, bounds, [0.3], [8.0]))
     assert (res.status == "boundary").all()
     assert np.all(res.theta_hat[:, 0] > 0.499)
     assert all("boundary" in r or "barrier" in r for r in res.reason)
@@ -230,19 +237,21 @@ def test_sep_singular_edge_is_boundary():
     find an interior local maximum end at that edge and are classified boundary."""
     model, x, z = design("sep", [0.9, 0.9], [8.0], T=40, K=10, seed=2)
     bounds = model.prior_bounds([0.9, 0.9])
-    res = joint_map(model, z, bounds, [0.9, 0.9], [8.0])
+    res = joint_map(JointMapProblem(model, z, bounds, [0.9, 0.9], [8.0]))
     assert set(res.status) <= {"ok", "boundary"}
     edge = res.status == "boundary"
     assert edge.sum() >= 5
     assert np.all(res.theta_hat[edge, :2].max(axis=1) > 0.9999)
     # stopped before reaching boundary_tol: the descent towards the edge identifies it
     res2 = joint_map(
-        model,
-        z,
-        bounds,
-        [0.9, 0.9],
-        [8.0],
-        JointMapSettings(boundary_tol=1e-12, boundary_stop_tol=1e-12, max_newton_iter=30),
+        JointMapProblem(
+            model,
+            z,
+            bounds,
+            [0.9, 0.9],
+            [8.0],
+            JointMapSettings(boundary_tol=1e-12, boundary_stop_tol=1e-12, max_newton_iter=30),
+        )
     )
     assert any("still decreases towards the boundary" in r for r in res2.reason)
     assert not (res2.status[edge] == "ok").any()
@@ -251,7 +260,7 @@ def test_sep_singular_edge_is_boundary():
 def test_non_finite_data_is_recorded_not_raised():
     model, x, z = design("same", [0.9], [8.0], T=10, K=3, seed=6)
     z[1, 4, 0] = np.nan
-    res = joint_map(model, z, model.prior_bounds([0.9]), [0.9], [8.0])
+    res = joint_map(JointMapProblem(model, z, model.prior_bounds([0.9]), [0.9], [8.0]))
     assert res.status[1] == "failed" and "non-finite" in res.reason[1]
     assert res.status[0] == "ok" and res.status[2] == "ok"
     assert res.to_frame(model, 10).loc[1, "reason"] != ""
@@ -267,7 +276,8 @@ def test_chunking_does_not_change_results_and_progress_counts(same_t20):
             Counter.done += n
 
     chunked = joint_map(
-        model, z, bounds, [0.9], [8.0], JointMapSettings(chunk_size=5), progress=Counter()
+        JointMapProblem(model, z, bounds, [0.9], [8.0], JointMapSettings(chunk_size=5)),
+        progress=Counter(),
     )
     assert Counter.done == z.shape[0]
     assert np.allclose(chunked.theta_hat, res.theta_hat, rtol=1e-12, atol=1e-12)
@@ -296,7 +306,7 @@ def test_halvings_in_one_evaluation_give_the_same_bits_with_fewer_evaluations(mo
     for values in (0, barrier.LINE_SEARCH_VALUES):  # 0: one halving per evaluation
         monkeypatch.setattr(barrier, "LINE_SEARCH_VALUES", values)
         evaluations.clear()
-        results[values] = joint_map(model, z, bounds, [0.9], [8.0])
+        results[values] = joint_map(JointMapProblem(model, z, bounds, [0.9], [8.0]))
         counts[values] = len(evaluations)
     one, many = results[0], results[barrier.LINE_SEARCH_VALUES]
     for name in ("theta_hat", "neg2_log_post", "grad_max", "local_variance", "eig_ratio"):
@@ -314,7 +324,9 @@ def test_d2_p1_and_d1_p2_run():
     ]:
         model, x, z = design(slug, omega, x0, T=10, K=3, seed=7)
         res = joint_map(
-            model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(max_newton_iter=50)
+            JointMapProblem(
+                model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(max_newton_iter=50)
+            )
         )
         assert res.theta_hat.shape == (3, model.n_theta(10))
         assert set(res.status) <= set(STATUSES)
@@ -327,7 +339,7 @@ def test_d2_p1_and_d1_p2_run():
 def test_start_outside_support_raises():
     model, x, z = design("same", [0.9], [8.0], T=5, K=2)
     with pytest.raises(ValueError, match="not strictly inside"):
-        joint_map(model, z, model.prior_bounds([0.9]), [-0.5], [8.0])
+        joint_map(JointMapProblem(model, z, model.prior_bounds([0.9]), [-0.5], [8.0]))
 
 
 # --------------------------------------------------------------------------- frame and summary

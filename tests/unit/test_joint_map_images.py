@@ -13,7 +13,9 @@ from cubic_sensor_model import CubicSensor
 from phase_model import PhaseTracking
 from ssmobs.joint_map import images
 from ssmobs.joint_map.images import admissible_images, has_distinct_image, symmetry_images
-from ssmobs.joint_map.multi_start import maxima_verdict, multi_start_joint_map, multi_start_summary
+from ssmobs.joint_map.multi_start import maxima_verdict, multi_start_joint_map
+from ssmobs.joint_map.multi_start_summary import multi_start_summary
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.models.symmetries import ModelSymmetries
@@ -104,7 +106,9 @@ def test_two_components_swap_found_without_declaring_it():
     omega, x0 = np.array([0.9, 0.3]), np.array([2.0, -1.0])
     z = trajectories(model, omega, x0, T=30, K=8, seed=3)
     settings = JointMapSettings(n_starts=3)
-    multi = multi_start_joint_map(model, z, model.prior_bounds(omega), omega, x0, settings)
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, model.prior_bounds(omega), omega, x0, settings)
+    )
     cols = multi.columns()
     found = multi.n_maxima >= 1
     assert found.sum() >= 6
@@ -128,7 +132,9 @@ def test_phase_tracking_translation_twins_and_the_edge_supremum():
     omega, x0 = np.array([0.5, 1.0]), np.array([0.0])
     z = trajectories(model, omega, x0, T=20, K=4, seed=0)
     settings = JointMapSettings(n_starts=4)
-    multi = multi_start_joint_map(model, z, model.prior_bounds(omega), omega, x0, settings)
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, model.prior_bounds(omega), omega, x0, settings)
+    )
     cols = multi.columns()
     assert "unique" not in set(cols["maxima_verdict"])
     assert cols["symmetric_twin"][multi.n_maxima >= 1].all()
@@ -148,7 +154,9 @@ def test_cubic_sensor_runs_off_to_an_edge_supremum_not_a_boundary():
     omega, x0 = np.array([0.5, 0.8]), np.array([1.0])
     z = trajectories(model, omega, x0, T=8, K=4, seed=2)
     bounds = model.prior_bounds(omega, {"b": "half_line"})
-    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=3))
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(n_starts=3))
+    )
     cols = multi.columns()
     assert (cols["n_maxima"] == 0).all()
     assert cols["edge_supremum"].all() and not cols["boundary_higher"].any()

@@ -12,6 +12,7 @@ from cubic_sensor_model import CubicSensor
 from ricker_model import Ricker
 from ssmobs.joint_map.checks import STATUSES, runoff_direction
 from ssmobs.joint_map.driver import joint_map
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 
@@ -32,7 +33,9 @@ def test_cubic_sensor_has_no_maximum_and_says_it_runs_off(limit):
     omega, x0 = np.array([0.5, 0.8]), np.array([1.0])
     z = trajectories(model, omega, x0, T=20, K=12, seed=0)
     bounds = model.prior_bounds(omega, {"b": "half_line"})
-    res = joint_map(model, z, bounds, omega, x0, JointMapSettings(divergence_limit=limit))
+    res = joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(divergence_limit=limit))
+    )
     assert Counter(res.status) == {"unbounded": 12}
     assert all("b -> +inf" in r for r in res.reason)
     assert "unbounded" in STATUSES
@@ -44,7 +47,9 @@ def test_ricker_with_unknown_detection_rate_is_a_ridge():
     model = Ricker()
     omega, x0 = np.array([1.0, 0.1, 1.0]), np.array([2.0])
     z = trajectories(model, omega, x0, T=50, K=10, seed=0)
-    res = joint_map(model, z, model.prior_bounds(omega), omega, x0, JointMapSettings())
+    res = joint_map(
+        JointMapProblem(model, z, model.prior_bounds(omega), omega, x0, JointMapSettings())
+    )
     assert Counter(res.status) == {"ridge": 10}
     assert all("flat direction" in r or "ridge" in r for r in res.reason)
 
@@ -55,8 +60,10 @@ def test_a_run_that_only_needed_more_iterations_stays_gradient():
     model = get_model("same")
     z = trajectories(model, [0.9], [8.0], T=10, K=6, seed=4)
     bounds = model.prior_bounds([0.9], "restricted")
-    full = joint_map(model, z, bounds, [0.9], [8.0])
-    short = joint_map(model, z, bounds, [0.9], [8.0], JointMapSettings(max_newton_iter=3))
+    full = joint_map(JointMapProblem(model, z, bounds, [0.9], [8.0]))
+    short = joint_map(
+        JointMapProblem(model, z, bounds, [0.9], [8.0], JointMapSettings(max_newton_iter=3))
+    )
     assert full.ok.all()
     slow = short.status == "gradient"
     assert slow.sum() >= 4
@@ -85,7 +92,9 @@ def test_a_ridge_that_passes_the_divergence_limit_is_a_ridge_wherever_the_limit_
     omega, x0 = np.array([1.0, 0.1, 1.0]), np.array([2.0])
     z = trajectories(model, omega, x0, T=50, K=20, seed=1)
     res = joint_map(
-        model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(divergence_limit=limit)
+        JointMapProblem(
+            model, z, model.prior_bounds(omega), omega, x0, JointMapSettings(divergence_limit=limit)
+        )
     )
     assert Counter(res.status) == {"ridge": 20}
     passed = [k for k in range(20) if "passed divergence_limit" in res.reason[k]]

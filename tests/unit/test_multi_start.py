@@ -21,10 +21,11 @@ from ssmobs.joint_map.multi_start import (
     distinct_maxima,
     halton,
     multi_start_joint_map,
-    multi_start_summary,
     start_box,
     start_points,
 )
+from ssmobs.joint_map.multi_start_summary import multi_start_summary
+from ssmobs.joint_map.problem import JointMapProblem
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.models import get_model
 from ssmobs.reports.tables import section_iv, section_iv_compact
@@ -142,9 +143,9 @@ def same_case():
 
 def test_one_start_is_the_paper_joint_map_exactly(same_case):
     model, z, bounds = same_case
-    single = joint_map(model, z, bounds, [0.9], [8.0])
+    single = joint_map(JointMapProblem(model, z, bounds, [0.9], [8.0]))
     multi = multi_start_joint_map(
-        model, z, bounds, np.array([0.9]), np.array([8.0]), JointMapSettings()
+        JointMapProblem(model, z, bounds, np.array([0.9]), np.array([8.0]), JointMapSettings())
     )
     assert len(multi.runs) == 1
     for field in dataclasses.fields(JointMapResult):
@@ -157,7 +158,9 @@ def test_same_has_one_maximum_per_trajectory_from_every_start(same_case):
     """(Same, a = 0.9, T = 10): the starts that pass all reach the paper's maximum."""
     model, z, bounds = same_case
     multi = multi_start_joint_map(
-        model, z, bounds, np.array([0.9]), np.array([8.0]), JointMapSettings(n_starts=6)
+        JointMapProblem(
+            model, z, bounds, np.array([0.9]), np.array([8.0]), JointMapSettings(n_starts=6)
+        )
     )
     ok0 = multi.runs[0].ok
     assert ok0.sum() >= 8
@@ -173,7 +176,9 @@ def test_growth_model_has_no_unique_maximum_every_maximum_has_its_mirror():
     omega, x0 = np.array([0.5, 25.0]), np.array([5.0])
     z = trajectories(model, omega, x0, T=20, K=24, seed=0)
     bounds = model.prior_bounds(omega)
-    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=8))
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(n_starts=8))
+    )
     cols = multi.columns()
     k_max = int(multi.runs[0].ok.sum())
     assert k_max >= 16  # one start: most trajectories look observable
@@ -226,7 +231,9 @@ def test_multiplicative_wrong_sign_maxima_show_up_as_extra_maxima():
     omega, x0 = np.array([0.9]), np.array([8.0])
     z = trajectories(model, omega, x0, T=20, K=10, seed=5)
     bounds = model.prior_bounds(omega, "half_line")
-    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=6))
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(n_starts=6))
+    )
     ok0 = multi.runs[0].ok
     assert ok0.sum() >= 8
     assert np.all(multi.n_maxima[ok0] >= 2)
@@ -248,7 +255,9 @@ def test_sep_edge_of_the_support_is_reported_not_counted():
     omega, x0 = np.array([0.9, 0.9]), np.array([8.0])
     z = trajectories(model, omega, x0, T=75, K=30, seed=0)
     bounds = model.prior_bounds(omega, "restricted")
-    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=4))
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(n_starts=4))
+    )
     none = multi.n_maxima == 0
     assert none.sum() >= 5
     assert np.all(multi.n_starts_boundary[none] == 4)  # every start ended on the boundary
@@ -346,7 +355,9 @@ def test_no_start_lands_on_a_point_the_model_excludes():
     lo, hi = start_box(bounds, omega, x0, 3.0)
     raw = lo + halton(3, 3) * (hi - lo)
     assert raw[0, 0] == 0.0  # the plain sequence would start at b = 0
-    multi = multi_start_joint_map(model, z, bounds, omega, x0, JointMapSettings(n_starts=5))
+    multi = multi_start_joint_map(
+        JointMapProblem(model, z, bounds, omega, x0, JointMapSettings(n_starts=5))
+    )
     assert np.all(multi.starts[:, 0] != 0.0)
     assert len(np.unique(multi.starts, axis=0)) == 5
     assert all(np.all(r.status != "failed") for r in multi.runs[:5])

@@ -202,10 +202,12 @@ def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
     with one start it equals |K^max|; from 4 starts (the base's joint_map_n_starts) it is
     the count over 4 starts, and |K^max| stays the paper's start's (issue 36)."""
     from ssmobs.config.scenario import Scenario
+    from ssmobs.design.disturbance_sets import disturbance_set
     from ssmobs.design.trajectories import make_trajectories
     from ssmobs.joint_map.driver import JointMapSettings
-    from ssmobs.joint_map.multi_start import multi_start_joint_map, multi_start_summary
-    from ssmobs.stages.design import disturbance_set
+    from ssmobs.joint_map.multi_start import multi_start_joint_map
+    from ssmobs.joint_map.multi_start_summary import multi_start_summary
+    from ssmobs.joint_map.problem import JointMapProblem
 
     rows = {}
     for n in (1, 4):
@@ -219,7 +221,9 @@ def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
         traj = make_trajectories(sc, matrix, provenance=attrs)
         settings = JointMapSettings.from_mapping({**conf["joint_map"], "n_starts": n})
         bounds = sc.model.prior_bounds(sc.omega, sc.prior)
-        multi = multi_start_joint_map(sc.model, traj.z, bounds, sc.omega, sc.x0, settings)
+        multi = multi_start_joint_map(
+            JointMapProblem(sc.model, traj.z, bounds, sc.omega, sc.x0, settings)
+        )
         expected = multi_start_summary(multi.columns(), settings)
         assert rows[n]["n_starts"] == n
         assert rows[n]["K_max_unique"] == expected["K_max_unique"]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from ssmobs.config.validation import read_config_file
-from ssmobs.stages.stan import stan_program
+from ssmobs.nuts.stan_program import stan_program
 
 pytestmark = pytest.mark.unit
 

@@ -127,15 +127,14 @@ def test_a_scenarios_stan_settings_override_the_block():
 
 def test_stan_every_picks_every_mth_trajectory_and_its_batches():
     from ssmobs.config.validation import ConfigError
-    from ssmobs.stages.stan import batches
 
     entry = {**ENTRY, "model": "same", "omega": {"a": 0.9}, "x0": 8, "K": 10}
     plain = Scenario.from_config(entry)
     assert plain.stan_trajectories == range(10)
     sc = Scenario.from_config({**entry, "stan_every": 3})
     assert list(sc.stan_trajectories) == [0, 3, 6, 9]
-    assert [list(b) for b in batches(sc.stan_trajectories, 3)] == [[0, 3, 6], [9]]
-    assert [list(b) for b in batches(plain.stan_trajectories, 4)] == [
+    assert [list(b) for b in sc.stan_batches(3)] == [[0, 3, 6], [9]]
+    assert [list(b) for b in plain.stan_batches(4)] == [
         [0, 1, 2, 3],
         [4, 5, 6, 7],
         [8, 9],

@@ -30,7 +30,7 @@ BLOCKS: dict[str, tuple[type, dict[str, str]]] = {
         SamplerSettings,
         {
             "backend": "which backend samples (stan_backends.resolve_backend)",
-            "gradients": "which program samples (stages.stan.stan_program)",
+            "gradients": "which program samples (nuts.stan_program.stan_program)",
             "batch_size": "trajectories per Snakemake job (groups the records)",
             "keep_draws": "which draws are written (groups the records)",
         },

@@ -72,11 +72,11 @@ SAMPLER_FIELDS = (
 
 def check_case(sc: Mapping[str, Any]) -> dict[str, Any]:
     """What the model check reads of scenario entry ``sc``
-    (:func:`ssmobs.model_check.cases.cases_from_scenarios`): its model, true values and
+    (:func:`ssmobs.models.check_cases.cases_from_scenarios`): its model, true values and
     start, and its prior where that is an interval prior (a parameter with its own
     ``[lower, upper]``), which is checked as configured; a named prior variant is no input,
     as every variant of the model is checked whichever the scenario picks
-    (:func:`ssmobs.model_check.cases.prior_variant_cases`)."""
+    (:func:`ssmobs.models.check_cases.prior_variant_cases`)."""
     case = _pick(sc, ("model", "omega", "x0"))
     prior = sc.get("prior")
     if isinstance(prior, Mapping) and any(not isinstance(v, str) for v in prior.values()):
@@ -149,7 +149,7 @@ class CacheKeys:
 
     def stan_program(self, model: str) -> str:
         """The model's Stan program with its ``#include`` files; for a model without one,
-        what its generated program is made of (:func:`ssmobs.stages.stan.stan_program`):
+        what its generated program is made of (:func:`ssmobs.nuts.stan_program.stan_program`):
         the model's code, the generator's format and SymPy's version (the generator's own
         code is in the stages' code keys)."""
         path = self.repo / "stan" / f"{model}.stan"
@@ -272,7 +272,7 @@ class CacheKeys:
         """``{"gradients": "analytic"}`` when NUTS runs ``model`` with the generated analytic
         gradients (config key ``stan.gradients``), else nothing, so the keys of autodiff
         runs stay.  A model without ``stan/<model>.stan`` runs its generated program, the
-        same whatever the setting (:func:`ssmobs.stages.stan.stan_program`): nothing."""
+        same whatever the setting (:func:`ssmobs.nuts.stan_program.stan_program`): nothing."""
         mode = self.config["stan"].get("gradients", "autodiff")
         return {} if mode == "autodiff" or not self.has_stan_file(model) else {"gradients": mode}
 

@@ -316,7 +316,7 @@ def outputs_dir_unset_warning(config_files: list[str], out: str) -> str:
 
 def unbuilt_programs(programs: Mapping[str, tuple[Path, Path | None]]) -> list[str]:
     """The models of ``programs`` (model -> its Stan program and C++ header, hand-written or
-    generated: :func:`ssmobs.stages.stan.stan_program`) that the native backend has not
+    generated: :func:`ssmobs.nuts.stan_program.stan_program`) that the native backend has not
     built yet in the program cache (asks the cache, decides nothing; the model check always
     uses it)."""
     from .stan_backends.native import NativeBackend

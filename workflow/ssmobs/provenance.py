@@ -93,7 +93,7 @@ def gradient_paths(config: dict[str, Any]) -> dict[str, Any]:
     """How NUTS got its gradients: the config key ``stan.gradients`` (the schema's default
     where the file does not set it) and, per model of a scenario that samples, the path its
     program took (``analytic`` for a model without ``stan/<model>.stan`` whatever the key:
-    :func:`ssmobs.stages.stan.stan_program`)."""
+    :func:`ssmobs.nuts.stan_program.stan_program`)."""
     from .config.schema import load_schema
     from .stan_backends import has_stan_file
 

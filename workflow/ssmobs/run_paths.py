@@ -132,9 +132,9 @@ class RunPaths:
     @functools.cached_property
     def stan_programs(self) -> dict[str, tuple[Any, Any]]:
         """Model -> the Stan program NUTS runs and its C++ header or None (hand-written, else
-        generated: :func:`ssmobs.stages.stan.stan_program`), for every model of
+        generated: :func:`ssmobs.nuts.stan_program.stan_program`), for every model of
         :attr:`stan_models`; looked up (and generated) once per run."""
-        from .stages.stan import stan_program
+        from .nuts.stan_program import stan_program
 
         gradients = self.config["stan"]["gradients"]
         return {m: stan_program(m, gradients) for m in self.stan_models}
@@ -274,9 +274,7 @@ class RunPaths:
 
     def nuts_batches(self, name: str) -> list[str]:
         """Every batch table of a scenario's NUTS stage, in batch order."""
-        from .stages.stan import batches
-
-        ranges = batches(self.scenario_objects[name].stan_trajectories, self.batch_size(name))
+        ranges = self.scenario_objects[name].stan_batches(self.batch_size(name))
         return [f"{self.batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
     def gather_dir(self, name: str) -> str:

@@ -32,8 +32,8 @@ KEY_LENGTH = 12
 #: module's top level and inside those functions and the module's functions they call only,
 #: so that e.g. compiling a program does not run the gathered summary's code.
 STAGE_MODULES: dict[str, tuple[str, ...]] = {
-    # the sets k_selection_grid makes (disturbance_set) lie beside the design's own
-    "design": ("stages/design.py:run_design_disturbances,disturbance_set",),
+    # the sets k_selection_grid makes (ssmobs.design.disturbance_sets) lie beside the design's
+    "design": ("stages/design.py:run_design_disturbances",),
     "trajectories": ("stages/design.py:run_design_trajectories",),
     # the command line too: it was part of the check's module
     "check_model": ("model_check/check.py", "model_check/__main__.py"),

@@ -13,7 +13,8 @@ observability maps (:mod:`~ssmobs.config.maps`), the entry check before Snakemak
 generated reference and profile tables (:mod:`~ssmobs.config.reference`,
 :mod:`~ssmobs.config.profiles`).
 
-May import: the shared top-level modules, :mod:`ssmobs.models`, :mod:`ssmobs.stan_backends`,
-:mod:`ssmobs.model_check` (a user's model is checked when its config is validated) and
-:mod:`ssmobs.nuts` (whether a Stan program can be generated for a model without one).
+May import: the shared top-level modules, :mod:`ssmobs.models` (a user's model is checked
+against itself when its config is validated: :mod:`ssmobs.models.self_check`),
+:mod:`ssmobs.stan_backends` and :mod:`ssmobs.nuts` (whether a Stan program can be generated
+for a model without one).
 """

@@ -194,6 +194,12 @@ class Scenario:
         """The trajectories k of the Stan stage: every ``stan_every``-th of the K."""
         return range(0, self.K, self.stan_every)
 
+    def stan_batches(self, batch_size: int) -> list[range]:
+        """The trajectories k of each Stan job: consecutive runs of ``batch_size`` of
+        :attr:`stan_trajectories`; a pure function of both."""
+        ks = self.stan_trajectories
+        return [ks[i : i + batch_size] for i in range(0, len(ks), batch_size)]
+
     def stan_config(self, stan_cfg: Mapping[str, Any]) -> dict[str, Any]:
         """The config's stan block with this scenario's ``stan_settings`` over it
         (:func:`stan_settings`)."""

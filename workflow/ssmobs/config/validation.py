@@ -22,8 +22,8 @@ from typing import Any
 
 import yaml
 
-from ..model_check.cases import x0_values
 from ..models import MODELS, StateSpaceModel
+from ..models.check_cases import x0_values
 from .files import MAX_CONFIG_VALUES, count_values
 from .files import check_config_files as check_config_files
 from .files import parse_config_text as parse_config_text
@@ -83,7 +83,7 @@ def _scenario_problems(config: dict, explicit_exact: frozenset[int] = frozenset(
             from ..stan_backends import has_stan_file
 
             # without stan/<model>.stan the workflow generates the program (analytic
-            # gradients; ssmobs.stages.stan.stan_program): not for support constraints
+            # gradients; ssmobs.nuts.stan_program.stan_program): not for support constraints
             # nor for PyStan, which takes no external C++
             if not has_stan_file(sc["model"]):
                 from ..nuts.analytic_program import generation_problem
@@ -353,7 +353,7 @@ def _own_model_problems(config: dict) -> list[str]:
 def _own_python_check(model: StateSpaceModel) -> str:
     """The first problem of the model check's Python stage at its default cases (the
     message ``python -m ssmobs.model_check <slug>`` prints), or ""."""
-    from ..model_check.python import python_stage_problems
+    from ..models.self_check import python_stage_problems
 
     found = python_stage_problems(model)
     return found[0] if found else ""

@@ -146,8 +146,8 @@ def interior_valleys(
     H: np.ndarray,
     points: np.ndarray,
     slopes: np.ndarray,
-    limits: tuple[np.ndarray, np.ndarray],
     *,
+    limits: tuple[np.ndarray, np.ndarray],
     settings: ExactSettings,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`valley_limits` for the improper interior points ``points`` (K, m) (NaN: none):

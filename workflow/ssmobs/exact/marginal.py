@@ -232,7 +232,7 @@ def exact_marginal(
             H,
             inner,
             slopes_inner,
-            (lim_lo, lim_hi),
+            limits=(lim_lo, lim_hi),
             settings=settings,
         )
         spike_ratio = np.maximum(spike_ratio, inner_ratio)

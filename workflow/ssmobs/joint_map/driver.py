@@ -27,9 +27,10 @@ import numpy as np
 import pandas as pd
 
 from ..estimator_moments import moment_entries, stat_key
-from ..models.base import PriorBounds, StateSpaceModel
+from ..models.base import StateSpaceModel
 from .barrier import LogBarrier, initial_mu_values, minimize_barrier
 from .checks import STATUSES, check_maxima
+from .problem import JointMapProblem
 from .settings import JointMapSettings
 
 
@@ -176,12 +177,7 @@ def initial_theta(
 
 
 def joint_map(
-    model: StateSpaceModel,
-    z: np.ndarray,
-    bounds: PriorBounds,
-    omega_true: np.ndarray,
-    x0_true: np.ndarray,
-    settings: JointMapSettings | None = None,
+    problem: JointMapProblem,
     progress: ProgressLike | None = None,
     theta_start: np.ndarray | None = None,
 ) -> JointMapResult:
@@ -189,11 +185,9 @@ def joint_map(
 
     Parameters
     ----------
-    model : the state space model.
-    z : (K, T, d) design observation trajectories z~(k).
-    bounds : support of the flat prior on Omega (from ``model.prior_bounds``).
-    omega_true, x0_true : true values; they are the start of every optimisation.
-    settings : thresholds and tuning (:class:`JointMapSettings`; defaults = paper values).
+    problem : the model, the (K, T, d) design observations z~(k), the support of the flat
+        prior on Omega (from ``model.prior_bounds``), the true values (the start of every
+        optimisation) and the settings (:class:`JointMapProblem`).
     progress : optional object with ``update(n)`` (e.g. :class:`ssmobs.log.Progress`),
         called after each batch with the number of trajectories finished.
     theta_start : optional (K, |Theta|) start of every trajectory's optimisation instead of
@@ -206,15 +200,15 @@ def joint_map(
     JointMapResult with per-k arrays; ``status == "ok"`` marks K^max.  A numerical failure
     of one trajectory never raises: it is recorded as ``failed`` with a reason.
     """
-    settings = settings or JointMapSettings()
-    z = np.asarray(z, dtype=float)
+    model, bounds, settings = problem.model, problem.bounds, problem.settings
+    z = np.asarray(problem.z, dtype=float)
     if z.ndim != 3 or z.shape[2] != model.obs_dim:
         raise ValueError(
             f"z must have shape (K, T, {model.obs_dim}) for model '{model.slug}', got {z.shape}"
         )
     K, T, _ = z.shape
-    omega = np.asarray(omega_true, dtype=float)
-    x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
+    omega = np.asarray(problem.omega_true, dtype=float)
+    x0 = np.atleast_1d(np.asarray(problem.x0_true, dtype=float))
     if omega.shape != (model.n_params,):
         raise ValueError(
             f"omega_true must have {model.n_params} value(s) in the order "
@@ -302,3 +296,14 @@ def joint_map_summary(
         out.update(moment_entries(c, est, true))
         out[stat_key(c, "lvar_mean")] = float(lv.mean()) if k_max else float("nan")
     return out
+
+
+def joint_map_of(
+    problem: JointMapProblem, progress: ProgressLike | None = None
+) -> tuple[JointMapResult, pd.DataFrame, dict[str, Any]]:
+    """Joint MAP of every trajectory from the paper's start: the result, its per-k table
+    and its summary over K^max (:func:`joint_map_summary`)."""
+    result = joint_map(problem, progress=progress)
+    frame = result.to_frame(problem.model, problem.T)
+    summary = joint_map_summary(frame, problem.model, problem.omega_true, problem.x0_true)
+    return result, frame, summary

@@ -31,6 +31,7 @@ from ..models.base import PriorBounds, StateSpaceModel
 from ..models.log_posterior import in_support, neg2_log_posterior
 from ..models.symmetries import model_symmetries
 from .driver import JointMapResult, joint_map
+from .problem import JointMapProblem
 from .settings import JointMapSettings
 
 
@@ -124,19 +125,13 @@ def maxima_by_round(
 
 
 def image_runs(
-    model: StateSpaceModel,
-    z: np.ndarray,
-    bounds: PriorBounds,
-    omega_true: np.ndarray,
-    x0_true: np.ndarray,
-    settings: JointMapSettings,
-    runs: list[JointMapResult],
-    first_start: list[np.ndarray],
+    problem: JointMapProblem, runs: list[JointMapResult], first_start: list[np.ndarray]
 ) -> list[JointMapResult]:
     """Runs from the admissible images (:func:`admissible_images`: ``model.mirror_images``
     and the model's found discrete symmetries) of every distinct
     maximum found: round r starts, for every k with more than r maxima, from the images of
     its r-th maximum (each distinct image once, and none that is a maximum already found)."""
+    model, z, bounds, settings = problem.model, problem.z, problem.bounds, problem.settings
     K = z.shape[0]
     out: list[JointMapResult] = []
     rounds = list(maxima_by_round(runs, first_start))
@@ -151,9 +146,7 @@ def image_runs(
             if not usable.any():
                 continue
             sub = rows[usable]
-            res = joint_map(
-                model, z[sub], bounds, omega_true, x0_true, settings, theta_start=image[usable]
-            )
+            res = joint_map(problem.replace(z=z[sub]), theta_start=image[usable])
             out.append(_expand(res, sub, K))
     return out
 

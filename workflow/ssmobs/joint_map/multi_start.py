@@ -77,11 +77,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..binomial import clopper_pearson
 from ..models.base import PriorBounds, StateSpaceModel
 from ..models.log_posterior import compile_constraints, neg2_log_posterior
 from .driver import JointMapResult, ProgressLike, initial_theta, joint_map
 from .images import image_runs, symmetric_twins
+from .problem import JointMapProblem
 from .settings import JointMapSettings
 
 #: the verdicts of a trajectory's maxima (module docstring)
@@ -387,13 +387,7 @@ def higher_than_maxima(
 
 
 def multi_start_joint_map(
-    model: StateSpaceModel,
-    z: np.ndarray,
-    bounds: PriorBounds,
-    omega_true: np.ndarray,
-    x0_true: np.ndarray,
-    settings: JointMapSettings,
-    progress: ProgressLike | None = None,
+    problem: JointMapProblem, progress: ProgressLike | None = None
 ) -> MultiStartResult:
     """Joint MAP of every trajectory from ``settings.n_starts`` starts and the images of
     the maxima they find (module docstring).
@@ -402,9 +396,11 @@ def multi_start_joint_map(
     start nothing else runs); the others use the state start rule of
     :func:`halton_start_rule`.
     """
-    omega = np.asarray(omega_true, dtype=float)
-    x0 = np.atleast_1d(np.asarray(x0_true, dtype=float))
-    z = np.asarray(z, dtype=float)
+    model, bounds, settings = problem.model, problem.bounds, problem.settings
+    omega = np.asarray(problem.omega_true, dtype=float)
+    x0 = np.atleast_1d(np.asarray(problem.x0_true, dtype=float))
+    z = np.asarray(problem.z, dtype=float)
+    problem = problem.replace(z=z, omega_true=omega, x0_true=x0)
     m = model.n_params
 
     def admissible(point: np.ndarray, index: int) -> bool:
@@ -413,20 +409,21 @@ def multi_start_joint_map(
     starts = start_points(
         model, bounds, omega, x0, settings.n_starts, settings.start_box_span, admissible
     )
-    runs = [joint_map(model, z, bounds, omega, x0, settings, progress=progress)]
+    runs = [joint_map(problem, progress=progress)]
     rules = [settings.start_states]
     for index, point in enumerate(starts[1:], start=1):
         rule = halton_start_rule(model, z, bounds, point, index)
         assert rule is not None  # start_points kept admissible points only
         rules.append(rule)
         spread = dataclasses.replace(settings, start_states=rule)
-        runs.append(joint_map(model, z, bounds, point[:m], point[m:], spread, progress=progress))
+        start = problem.replace(omega_true=point[:m], x0_true=point[m:], settings=spread)
+        runs.append(joint_map(start, progress=progress))
     S = len(runs)
     K = runs[0].status.shape[0]
     values, first, counts, highest = _distinct_all(runs, K, S, settings)
     twin = np.zeros(K, dtype=bool)
     if S > 1:
-        extra = image_runs(model, z, bounds, omega, x0, settings, runs, first)
+        extra = image_runs(problem, runs, first)
         if extra:
             runs.extend(extra)
             values, first, counts, highest = _distinct_all(runs, K, S, settings)
@@ -447,48 +444,3 @@ def multi_start_joint_map(
         symmetric_twin=twin,
         unique_min_share=settings.unique_min_share,
     )
-
-
-def multi_start_summary(columns: pd.DataFrame, settings: JointMapSettings) -> dict[str, object]:
-    """Scenario summary of the multi-start columns (:meth:`MultiStartResult.columns`).
-
-    ``K_max_unique`` (= |K^max_unique|, verdict ``unique``), ``K_max_undetermined`` (one
-    maximum, too few starts passed), ``K_max_any`` (one or more maxima pass),
-    ``K_max_several``, ``K_paper_start_highest``, ``K_max_unique_lo95`` / ``_hi95`` (exact
-    binomial 95 % interval of |K^max_unique| / K), ``K_max_unique_boundary_higher`` (of
-    K^max_unique, those where a start on the boundary went higher), ``K_edge_supremum`` and
-    ``K_max_unique_edge_supremum`` (all, and of K^max_unique, those where a start that ran
-    off went higher), ``K_symmetric_twin`` (a maximum with a twin), ``log_post_gap_median``
-    (over the trajectories with several maxima) and the settings ``n_starts``,
-    ``distinct_tol``, ``unique_min_share``.
-    """
-    K = int(len(columns))
-    n_max = columns["n_maxima"].to_numpy()
-    verdict = columns["maxima_verdict"].to_numpy(dtype=object)
-    unique_k = verdict == "unique"
-    unique = int(unique_k.sum())
-    lo, hi = clopper_pearson(unique, K)
-    gaps = columns["log_post_gap"].to_numpy(dtype=float)
-    several = n_max > 1
-    none = np.zeros(K, dtype=bool)  # tables written before these columns
-    edge = columns["edge_supremum"].to_numpy(bool) if "edge_supremum" in columns else none
-    twin = columns["symmetric_twin"].to_numpy(bool) if "symmetric_twin" in columns else none
-    return {
-        "n_starts": settings.n_starts,
-        "distinct_tol": settings.distinct_tol,
-        "unique_min_share": settings.unique_min_share,
-        "K_max_unique": unique,
-        "K_max_unique_lo95": lo,
-        "K_max_unique_hi95": hi,
-        "K_max_undetermined": int((verdict == "undetermined").sum()),
-        "K_max_any": int((n_max >= 1).sum()),
-        "K_max_several": int(several.sum()),
-        "K_paper_start_highest": int(columns["paper_start_highest"].sum()),
-        "K_max_unique_boundary_higher": int(
-            (unique_k & columns["boundary_higher"].to_numpy(dtype=bool)).sum()
-        ),
-        "K_edge_supremum": int(edge.sum()),
-        "K_max_unique_edge_supremum": int((unique_k & edge).sum()),
-        "K_symmetric_twin": int(twin.sum()),
-        "log_post_gap_median": float(np.median(gaps[several])) if several.any() else np.nan,
-    }

@@ -15,7 +15,7 @@ import sys
 from collections.abc import Sequence
 
 from ..models import get_model
-from .cases import cases_from_scenarios, default_cases
+from ..models.check_cases import cases_from_scenarios, default_cases
 from .check import check_model
 from .stan import CHECK_BACKENDS
 

@@ -25,9 +25,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..models import StateSpaceModel
+from ..models.check_cases import CheckCase, sample_theta
 from ..nuts.analytic_gradients import switch_name
 from ..nuts.analytic_program import AnalyticProgram, write_analytic_program
-from .cases import CheckCase, sample_theta
 from .stan import stan_point
 
 if TYPE_CHECKING:

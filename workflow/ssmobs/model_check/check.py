@@ -35,8 +35,8 @@ on that program, and in step 4 its gradient against the Python model's (it has n
 autodiff twin); a model whose support constraints no generated program can express stops
 with one line.
 
-Each step lives in its own module: the cases in :mod:`ssmobs.model_check.cases`, step 1 in
-:mod:`ssmobs.model_check.python` (the symmetry report in
+Each step lives in its own module: the cases in :mod:`ssmobs.models.check_cases`, step 1 in
+:mod:`ssmobs.models.self_check` (the symmetry report in
 :mod:`ssmobs.model_check.symmetry_report`), step 2 in
 :mod:`ssmobs.model_check.stan_source`, step 3 in :mod:`ssmobs.model_check.stan`; this module
 runs them in turn and reports.
@@ -57,14 +57,14 @@ from typing import Any
 
 from ..log import LOGGER_NAME
 from ..models import StateSpaceModel, get_model
-from .cases import (
+from ..models.check_cases import (
     CheckCase,
     ModelCheckError,
     cases_from_scenarios,
     default_cases,
     prior_variant_cases,
 )
-from .python import CHECK_T, model_check_seed, python_stage_problems
+from ..models.self_check import CHECK_T, model_check_seed, python_stage_problems
 from .stan import stan_problems
 from .stan_source import stan_source_problems
 from .symmetry_report import SymmetryReport, symmetry_report
@@ -131,6 +131,7 @@ def _analysis(model: StateSpaceModel, cases: list[CheckCase], T: int, seed: int)
 def check_model(
     slug: str,
     cases: Sequence[CheckCase] | None = None,
+    *,
     stan: bool = True,
     stan_path: str | Path | None = None,
     T: int = CHECK_T,

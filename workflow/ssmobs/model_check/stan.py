@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from ..models import StateSpaceModel
+from ..models.check_cases import CheckCase, sample_theta
 from ..models.log_posterior import in_support, log_posterior
 from ..stan_backends.base import program_code
-from .cases import CheckCase, sample_theta
 from .stan_source import expected_parameters
 
 

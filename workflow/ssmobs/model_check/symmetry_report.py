@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 
 from ..models import StateSpaceModel
+from ..models.check_cases import CheckCase, sample_theta
 from ..models.log_posterior import neg2_log_posterior
 from ..models.propriety import posterior_propriety
 from ..models.symmetries import model_symmetries
-from .cases import CheckCase, sample_theta
 
 #: random points at which a declared mirror image is compared with the found maps' images
 MIRROR_POINTS = 5

@@ -7,7 +7,8 @@ is imported at the first lookup in :data:`MODELS` and checked by
 :func:`definition_problems`; a module that breaks the contract stops the lookup with one
 :class:`ModelDefinitionError` naming the file and what is wrong, at the first lookup
 (before any work is done).  Modules whose name starts with ``_`` and the package's own
-modules (``base``, ``log_posterior``, ``symmetries``, ``propriety``) are not models.
+modules (``base``, ``log_posterior``, ``symmetries``, ``propriety``, and the model's check of
+itself: ``check_cases``, ``self_check``) are not models.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ from .base import PRIOR_VARIANTS, ModelDefinitionError, PriorBounds, StateSpaceM
 MODELS_DIR = Path(__file__).resolve().parent
 
 #: modules of this package that are not models
-INTERNAL_MODULES: frozenset[str] = frozenset({"base", "log_posterior", "symmetries", "propriety"})
+INTERNAL_MODULES: frozenset[str] = frozenset(
+    {"base", "log_posterior", "symmetries", "propriety", "check_cases", "self_check"}
+)
 
 #: class attributes every model sets (see :class:`StateSpaceModel`)
 REQUIRED_ATTRIBUTES: tuple[str, ...] = (

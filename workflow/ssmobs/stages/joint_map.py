@@ -1,13 +1,13 @@
-"""Glue of the joint-MAP stage (Sec. III.B; rule joint_map in ``workflow/rules/joint_map.smk``).
-
-:func:`joint_map_of` is also what the choice of K (:mod:`ssmobs.stages.k_selection`) and the
-table of barrier starts (:func:`ssmobs.stages.outputs.mu0_sweep.run_joint_map_mu0_sweep`) run.
+"""Glue of the joint-MAP stage (Sec. III.B; rule joint_map in ``workflow/rules/joint_map.smk``):
+the scenario's :class:`~ssmobs.joint_map.problem.JointMapProblem` from one start
+(:func:`~ssmobs.joint_map.driver.joint_map_of`) or several
+(:func:`~ssmobs.joint_map.multi_start_summary.multi_start_of`).
 """
 
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,62 +16,9 @@ from ..log import Progress
 from . import PathLike
 
 if TYPE_CHECKING:
-    import pandas
-
     from ..config.scenario import Scenario
-    from ..design.trajectories import Trajectories
-    from ..joint_map.driver import JointMapResult
-    from ..models.base import PriorBounds
 
 logger = logging.getLogger("ssmobs")
-
-
-def joint_map_of(
-    traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
-) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
-    """Joint MAP of every trajectory, its per-k table, its summary and the prior bounds."""
-    from ..joint_map.driver import joint_map, joint_map_summary
-    from ..joint_map.settings import JointMapSettings
-
-    model = traj.model
-    bounds = model.prior_bounds(traj.omega, prior)
-    result = joint_map(
-        model,
-        traj.z,
-        bounds,
-        traj.omega,
-        traj.x0,
-        JointMapSettings.from_mapping(settings),
-        progress=progress,
-    )
-    frame = result.to_frame(model, traj.T)
-    return result, frame, joint_map_summary(frame, model, traj.omega, traj.x0), bounds
-
-
-def multi_start_of(
-    traj: Trajectories, prior: Any, settings: dict, progress: Progress | None = None
-) -> tuple[JointMapResult, pandas.DataFrame, dict, PriorBounds]:
-    """:func:`joint_map_of` from ``settings["n_starts"]`` starts
-    (:mod:`ssmobs.joint_map.multi_start`):
-    the paper's start's result, its table with the per-k columns of the distinct maxima
-    beside, and its summary with |K^max_unique| and the other multi-start counts."""
-    from ..joint_map.driver import joint_map_summary
-    from ..joint_map.multi_start import multi_start_joint_map, multi_start_summary
-    from ..joint_map.settings import JointMapSettings
-
-    model = traj.model
-    bounds = model.prior_bounds(traj.omega, prior)
-    parsed = JointMapSettings.from_mapping(settings)
-    multi = multi_start_joint_map(
-        model, traj.z, bounds, traj.omega, traj.x0, parsed, progress=progress
-    )
-    result = multi.runs[0]
-    columns = multi.columns()
-    frame = result.to_frame(model, traj.T)
-    frame = frame.join(columns)
-    info = joint_map_summary(frame, model, traj.omega, traj.x0)
-    info.update(multi_start_summary(columns, parsed))
-    return result, frame, info, bounds
 
 
 def run_joint_map(
@@ -84,23 +31,25 @@ def run_joint_map(
 ) -> dict:
     """Rule joint_map: joint MAP + checks for every design trajectory of a scenario."""
     from ..design.trajectories import read_trajectories
+    from ..joint_map.driver import joint_map_of
+    from ..joint_map.multi_start_summary import multi_start_of
+    from ..joint_map.problem import JointMapProblem
 
     traj = read_trajectories(trajectories)
     model = traj.model
     settings = scenario.joint_map_config(settings)
     n_starts = int(settings.get("n_starts", 1))
     progress = Progress(f"joint MAP {scenario.name}", traj.K * n_starts, logger)
-    if n_starts > 1:
-        result, frame, info, bounds = multi_start_of(traj, scenario.prior, settings, progress)
-    else:
-        result, frame, info, bounds = joint_map_of(traj, scenario.prior, settings, progress)
+    problem = JointMapProblem.of_trajectories(traj, scenario.prior, settings)
+    run = multi_start_of if n_starts > 1 else joint_map_of
+    result, frame, info = run(problem, progress)
     info.update(
         scenario=scenario.name,
         model=model.slug,
         T=traj.T,
         method=scenario.method,
         seed=scenario.seed,
-        prior=list(bounds.variants),
+        prior=list(problem.bounds.variants),
         start_states=settings["start_states"],
         mu0_median=float(np.nanmedian(frame["mu0"])),
     )

@@ -60,11 +60,12 @@ def cell_summary(
     """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
     model linear in the states) exact marginal; the row of the map's table (module
     docstring), without the map's own columns."""
+    from ..design.disturbance_sets import disturbance_set
     from ..design.trajectories import make_trajectories
     from ..exact.marginal import exact_marginal
     from ..exact.settings import ExactSettings
-    from .design import disturbance_set
-    from .joint_map import multi_start_of
+    from ..joint_map.multi_start_summary import multi_start_of
+    from ..joint_map.problem import JointMapProblem
 
     model = scenario.model
     matrix, attrs = disturbance_set(
@@ -78,7 +79,8 @@ def cell_summary(
     traj = make_trajectories(scenario, matrix, provenance=attrs)
     settings = scenario.joint_map_config(joint_settings)
     # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
-    _, frame, info, bounds = multi_start_of(traj, scenario.prior, settings)
+    problem = JointMapProblem.of_trajectories(traj, scenario.prior, settings)
+    _, frame, info = multi_start_of(problem)
     K = scenario.K
     row: dict[str, Any] = {"K_max": int(info["K_max"])}
     row["K_max_frac"] = row["K_max"] / K
@@ -93,7 +95,9 @@ def cell_summary(
         row[f"lvar_median_{name}"] = _median(frame.loc[ok, f"lvar_{name}"].to_numpy(float))
     row["exact"] = exact_settings is not None and model.linear_in_states
     if exact_settings is not None and model.linear_in_states:
-        result = exact_marginal(model, traj.z, bounds, ExactSettings.from_mapping(exact_settings))
+        result = exact_marginal(
+            model, traj.z, problem.bounds, ExactSettings.from_mapping(exact_settings)
+        )
         ex = result.to_frame(model)
         unique = int((ex["maxima"] == "unique").sum())
         used = ex["converged"].to_numpy(bool)

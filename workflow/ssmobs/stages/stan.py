@@ -25,13 +25,6 @@ if TYPE_CHECKING:
 logger = logging.getLogger("ssmobs")
 
 
-def batches(trajectories: range, batch_size: int) -> list[range]:
-    """The trajectories k of each Stan job: consecutive runs of ``batch_size`` of the
-    scenario's Stan trajectories (:attr:`ssmobs.config.scenario.Scenario.stan_trajectories`); a pure
-    function of both."""
-    return [trajectories[i : i + batch_size] for i in range(0, len(trajectories), batch_size)]
-
-
 def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
     """The NUTS settings of config block ``stan`` (``threads``: parallel chain processes)."""
     from ..stan_backends.base import SamplerSettings
@@ -47,33 +40,6 @@ def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
     )
 
 
-def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
-    """The Stan program NUTS runs for ``model`` and its C++ header (config key
-    ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
-    program whose model block calls the log density and gradient generated from the model's
-    terms (:mod:`ssmobs.nuts.analytic_gradients`), its own statements kept beside for the
-    model check (:func:`~ssmobs.nuts.analytic_program.analytic_stan_code`), in the cache.  A
-    model without ``stan/<model>.stan`` gets a whole generated program (always analytic:
-    parameters and bounds from the model,
-    :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
-    ValueError (one line) for a model whose support constraints it cannot express."""
-    from ..stan_backends import has_stan_file, stan_file
-
-    if gradients not in ("autodiff", "analytic"):
-        raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
-    from ..models import get_model
-    from ..nuts.analytic_program import write_analytic_program
-
-    if not has_stan_file(model):
-        generated = write_analytic_program(get_model(model), None)
-        return generated.stan_file, generated.header
-    path = stan_file(model)
-    if gradients == "autodiff":
-        return path, None
-    generated = write_analytic_program(get_model(model), path)
-    return generated.stan_file, generated.header
-
-
 def header_kwargs(header: Path | None) -> dict[str, Path]:
     """``user_header=header`` for a backend call, nothing without one (PyStan takes none)."""
     return {} if header is None else {"user_header": header}
@@ -82,8 +48,9 @@ def header_kwargs(header: Path | None) -> dict[str, Path]:
 def run_build_stan_model(
     model: str, backend: str, out: PathLike, gradients: str = "autodiff"
 ) -> dict:
-    """Rule build_stan_model: compile the model's program (:func:`stan_program`) once;
-    write the backend's marker."""
+    """Rule build_stan_model: compile the model's program
+    (:func:`~ssmobs.nuts.stan_program.stan_program`) once; write the backend's marker."""
+    from ..nuts.stan_program import stan_program
     from ..stan_backends import get_backend
 
     program, header = stan_program(model, gradients)
@@ -108,6 +75,7 @@ def nuts_batch(
     joint_map``)."""
     from ..nuts.batch import NutsBatch
     from ..nuts.convergence import ConvergenceSettings
+    from ..nuts.stan_program import stan_program
 
     model = traj.model
     program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
@@ -163,7 +131,7 @@ def run_sample_batch(
     backend_name = io.read_json(marker, required=["backend"])["backend"]
     if traj.K != scenario.K:
         raise ValueError(f"scenario {scenario.name}: K = {scenario.K}, trajectories K = {traj.K}")
-    ks = list(batches(scenario.stan_trajectories, scenario.batch_size(stan_cfg))[batch])
+    ks = list(scenario.stan_batches(scenario.batch_size(stan_cfg))[batch])
     stan_cfg = scenario.stan_config(stan_cfg)  # the scenario's own NUTS settings over the block
     # the shared folders' files of this batch: no other job writes them
     io.sweep_temporaries(

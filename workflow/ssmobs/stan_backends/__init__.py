@@ -101,7 +101,7 @@ def get_backend(name: str = "auto") -> StanBackend:
 
 def has_stan_file(slug: str) -> bool:
     """The repository holds a hand-written program ``stan/<slug>.stan`` for the model (else
-    the workflow generates one: :func:`ssmobs.stages.stan.stan_program`)."""
+    the workflow generates one: :func:`ssmobs.nuts.stan_program.stan_program`)."""
     return "/" not in slug and "\\" not in slug and (STAN_DIR / f"{slug}.stan").is_file()
 
 

@@ -38,17 +38,19 @@ def run_k_selection_point(
     """One point of rule k_selection_grid: the joint-MAP summary of one K_i (Sec. IV.A).
 
     ``disturbances`` and ``provenance``: the (q x K) design set and its file's attributes,
-    as :func:`ssmobs.stages.design.disturbance_set` returns them.  ``seed`` is the run's
+    as :func:`ssmobs.design.disturbance_sets.disturbance_set` returns them.  ``seed`` is the run's
     seed; the set itself was drawn with :func:`ssmobs.k_selection.set_seed` (seed, K, sets).
     """
     from ...design.trajectories import make_trajectories
+    from ...joint_map.driver import joint_map_of
+    from ...joint_map.problem import JointMapProblem
     from ...k_selection import set_seed
-    from ..joint_map import joint_map_of
 
     sc = scenario.replace(K=K, method=method, seed=set_seed(seed, K, sets))
     traj = make_trajectories(sc, disturbances, provenance=provenance)
     # the scenario's start of the states, the paper's one start (as the key holds them)
-    _, _, info, _ = joint_map_of(traj, sc.prior, sc.joint_map_config(settings, single_start=True))
+    settings = sc.joint_map_config(settings, single_start=True)
+    _, _, info = joint_map_of(JointMapProblem.of_trajectories(traj, sc.prior, settings))
     # no scenario name: a point is keyed by what it computes, the grid names the scenario
     info.update(K_i=K, method=method, seed=seed, sets=sets, set_seed=sc.seed)
     io.write_checked_json(out, info)
@@ -73,9 +75,9 @@ def run_k_selection_grid(
     Each point is cached on its own in ``points_dir/K<K_i>.json`` as soon as it is done (a
     rerun after a kill computes only the missing ones; grids of other k_selection entries on
     the same scenario find it too, and a file lock keeps two jobs from computing it at once),
-    each set in ``design_dir`` (:func:`ssmobs.stages.design.disturbance_set`)."""
+    each set in ``design_dir`` (:func:`ssmobs.design.disturbance_sets.disturbance_set`)."""
+    from ...design.disturbance_sets import disturbance_set
     from ...k_selection import set_seed
-    from ..design import disturbance_set
 
     progress = Progress(f"choice of K {scenario.name} {method} {sets} seed {seed}", len(K_grid))
     rows = []

@@ -25,7 +25,8 @@ def mu0_sweep_rows(
 ) -> list[dict]:
     """|K^max|/K of one scenario's joint MAP for mu_0 = f * T (f in ``mu0_per_T``) and for the
     gradient-balance rule (:func:`ssmobs.joint_map.barrier.initial_mu_values`)."""
-    from ..joint_map import joint_map_of
+    from ...joint_map.driver import joint_map_of
+    from ...joint_map.problem import JointMapProblem
 
     rows = []
     variants: list[tuple[str, dict[str, Any]]] = [
@@ -36,7 +37,8 @@ def mu0_sweep_rows(
         for f in mu0_per_T
     ]
     for label, extra in variants:
-        result, _, info, _ = joint_map_of(traj, prior, {**settings, **extra})
+        problem = JointMapProblem.of_trajectories(traj, prior, {**settings, **extra})
+        result, _, info = joint_map_of(problem)
         assert result.mu_start is not None  # joint_map sets every trajectory's start
         rows.append(
             {

@@ -1,6 +1,7 @@
-"""The Python side of the model check (:mod:`ssmobs.model_check.check`, step 1): the simulator's
-shapes and values, the symbolic derivatives against finite differences, and the simulated
-disturbances recovered by the log-density terms.
+"""A model's Python module checked against itself (step 1 of :mod:`ssmobs.model_check.check`,
+also run by the config's validation of a user's model): the simulator's shapes and values,
+the symbolic derivatives against finite differences, and the simulated disturbances
+recovered by the log-density terms.
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from ..models import StateSpaceModel
-from ..models.log_posterior import neg2_log_posterior
-from .cases import CheckCase, default_cases, sample_theta
+from .base import StateSpaceModel
+from .check_cases import CheckCase, default_cases, sample_theta
+from .log_posterior import neg2_log_posterior
 
 #: the horizon of the model check's trajectories (short: the checks are of the formulas)
 CHECK_T = 6

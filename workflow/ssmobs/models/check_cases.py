@@ -1,5 +1,6 @@
-"""The cases of the model check (:mod:`ssmobs.model_check.check`): true values and priors at which
-the Python model and the Stan program are compared, and random points inside their support.
+"""The cases of the model check (:mod:`ssmobs.models.self_check`,
+:mod:`ssmobs.model_check.check`): true values and priors at which the Python model and the
+Stan program are compared, and random points inside their support.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from ..models import PriorBounds, StateSpaceModel
-from ..models.log_posterior import in_support
+from .base import PriorBounds, StateSpaceModel
+from .log_posterior import in_support
 
 
 class ModelCheckError(ValueError):

@@ -1,0 +1,34 @@
+"""Which Stan program NUTS runs for a model (Sec. III.C): the hand-written
+``stan/<model>.stan``, or the program with the generated analytic gradients
+(:mod:`ssmobs.nuts.analytic_program`), written into the cache where it is generated.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..models import get_model
+from ..stan_backends import has_stan_file, stan_file
+from .analytic_program import write_analytic_program
+
+
+def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
+    """The Stan program NUTS runs for ``model`` and its C++ header (config key
+    ``stan.gradients``): ``stan/<model>.stan`` itself for ``autodiff``; for ``analytic`` the
+    program whose model block calls the log density and gradient generated from the model's
+    terms (:mod:`ssmobs.nuts.analytic_gradients`), its own statements kept beside for the
+    model check (:func:`~ssmobs.nuts.analytic_program.analytic_stan_code`), in the cache.  A
+    model without ``stan/<model>.stan`` gets a whole generated program (always analytic:
+    parameters and bounds from the model,
+    :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
+    ValueError (one line) for a model whose support constraints it cannot express."""
+    if gradients not in ("autodiff", "analytic"):
+        raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
+    if not has_stan_file(model):
+        generated = write_analytic_program(get_model(model), None)
+        return generated.stan_file, generated.header
+    path = stan_file(model)
+    if gradients == "autodiff":
+        return path, None
+    generated = write_analytic_program(get_model(model), path)
+    return generated.stan_file, generated.header
