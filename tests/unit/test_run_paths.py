@@ -334,3 +334,24 @@ def test_the_outputs_that_must_carry_their_record_are_rule_outputs(profile):
         assert {paths.stan_summary(name), *paths.nuts_batches(name)} <= set(cached)
     for name in paths.k_selections:
         assert set(paths.k_selection_grids(name)) <= set(cached)
+
+
+def test_run_paths_write_no_generated_program(tmp_path, monkeypatch):
+    """Issue 62: RunPaths computes paths only; a generated program is written by its build
+    job (nuts.stan_program.stan_program), not while a run is planned; until then it counts
+    as unbuilt."""
+    from ssmobs import housekeeping
+    from ssmobs.nuts.stan_program import stan_program
+
+    monkeypatch.setenv("SSMOBS_CACHE", str(tmp_path / "cache"))
+    config = validate(yaml.safe_load((REPO / "config" / "smoke.yaml").read_text()))
+    config["stan"]["gradients"] = "analytic"
+    paths = RunPaths.from_config(config, CacheKeys(config, "native", repo=REPO), "native")
+    assert paths.stan_gradients == "analytic"
+    planned = paths.stan_programs
+    assert planned and all(header is not None for _, header in planned.values())
+    assert not (tmp_path / "cache").exists()  # nothing written
+    assert housekeeping.unbuilt_programs(planned) == sorted(planned)
+    model = sorted(planned)[0]
+    assert stan_program(model, "analytic") == planned[model]  # the build job writes there
+    assert all(f is not None and f.is_file() for f in planned[model])

@@ -83,11 +83,6 @@ def test_a_job_start_without_the_fixed_kernels_stops_before_the_sweep(tmp_path):
     assert leftover.exists()
 
 
-#: scripts that still read the config: their rule (workflow/rules/stan.smk) must pass the
-#: setting as a param first (issue 62)
-READ_THE_CONFIG = {"build_stan_model"}
-
-
 def test_scripts_read_their_params_not_the_config():
     """What a script reads is what its rule passes (and its key holds): a script reading
     ``snakemake.config`` reads settings its stage's key may leave out (issue 62)."""
@@ -100,4 +95,4 @@ def test_scripts_read_their_params_not_the_config():
         and isinstance(node.value, ast.Name)
         and node.value.id == "snakemake"
     }
-    assert reading == READ_THE_CONFIG
+    assert reading == set()

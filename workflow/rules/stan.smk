@@ -17,6 +17,7 @@ rule build_stan_model:
         runtime=30,
     params:
         backend=lambda wc: wc.backend,
+        gradients=PATHS.stan_gradients,
     script:
         "../scripts/build_stan_model.py"
 

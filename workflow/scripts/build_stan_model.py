@@ -8,5 +8,5 @@ run_build_stan_model(
     snakemake.wildcards.model,
     snakemake.params.backend,
     snakemake.output[0],
-    snakemake.config["stan"]["gradients"],
+    snakemake.params.gradients,
 )

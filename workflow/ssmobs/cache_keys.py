@@ -33,7 +33,7 @@ from typing import Any
 
 from . import kernels
 from .code_hashing import syntax_digest
-from .config.blocks import joint_map_settings, stan_settings
+from .config.blocks import joint_map_settings, stan_gradients, stan_settings
 from .stage_code import (
     NATIVE_DRIVER,
     NATIVE_SHADOW_HEADERS,
@@ -210,12 +210,12 @@ class CacheKeys:
         gradient path its program takes (``autodiff`` for a generated program, which is
         analytic whatever the setting and checked the same way)."""
         sc = self.scenarios[name]
-        mode = self.config["stan"].get("gradients", "autodiff")
+        own = stan and self.has_stan_file(sc["model"])
         return {
             "model": sc["model"],
             "scenarios": [check_case(sc)],
             "stan": stan,
-            "gradients": mode if stan and self.has_stan_file(sc["model"]) else "autodiff",
+            "gradients": stan_gradients(self.config["stan"]) if own else "autodiff",
         }
 
     def check_model(self, name: str, stan: bool = False) -> str:
@@ -273,7 +273,7 @@ class CacheKeys:
         gradients (config key ``stan.gradients``), else nothing, so the keys of autodiff
         runs stay.  A model without ``stan/<model>.stan`` runs its generated program, the
         same whatever the setting (:func:`ssmobs.nuts.stan_program.stan_program`): nothing."""
-        mode = self.config["stan"].get("gradients", "autodiff")
+        mode = stan_gradients(self.config["stan"])
         return {} if mode == "autodiff" or not self.has_stan_file(model) else {"gradients": mode}
 
     def program(self, model: str) -> str:

@@ -316,13 +316,19 @@ def outputs_dir_unset_warning(config_files: list[str], out: str) -> str:
 
 def unbuilt_programs(programs: Mapping[str, tuple[Path, Path | None]]) -> list[str]:
     """The models of ``programs`` (model -> its Stan program and C++ header, hand-written or
-    generated: :func:`ssmobs.nuts.stan_program.stan_program`) that the native backend has not
-    built yet in the program cache (asks the cache, decides nothing; the model check always
-    uses it)."""
+    generated: :func:`ssmobs.nuts.stan_program.planned_stan_program`) that the native
+    backend has not built yet in the program cache, a generated program not yet written
+    among them (asks the cache, decides nothing; the model check always uses it)."""
     from .stan_backends.native import NativeBackend
 
     native = NativeBackend()
-    return [m for m, (program, header) in programs.items() if not native.is_built(program, header)]
+    return [
+        m
+        for m, (program, header) in programs.items()
+        if not program.is_file()  # a generated program its build job has not written yet
+        or (header is not None and not header.is_file())
+        or not native.is_built(program, header)
+    ]
 
 
 def missing_compiler_problem(unbuilt: list[str], compiler: str) -> str:

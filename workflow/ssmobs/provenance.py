@@ -94,13 +94,13 @@ def gradient_paths(config: dict[str, Any]) -> dict[str, Any]:
     where the file does not set it) and, per model of a scenario that samples, the path its
     program took (``analytic`` for a model without ``stan/<model>.stan`` whatever the key:
     :func:`ssmobs.nuts.stan_program.stan_program`)."""
-    from .config.schema import load_schema
+    from .config.blocks import gradient_path, stan_gradients
     from .stan_backends import has_stan_file
 
-    default = load_schema()["properties"]["stan"]["properties"]["gradients"]["default"]
-    gradients = (config.get("stan") or {}).get("gradients", default)
+    block = config.get("stan") or {}
+    gradients = stan_gradients(block)
     by_model = {
-        str(entry["model"]): gradients if has_stan_file(str(entry["model"])) else "analytic"
+        str(entry["model"]): gradient_path(block, has_stan_file(str(entry["model"])))
         for entry in config.get("scenarios") or []
         if isinstance(entry, dict) and "model" in entry and entry.get("stan", True) is not False
     }

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .cache_keys import CacheKeys
+from .config.blocks import stan_gradients
 from .config.scenario import Scenario
 from .config.validation import asks_for_paper_outputs
 
@@ -132,12 +133,18 @@ class RunPaths:
     @functools.cached_property
     def stan_programs(self) -> dict[str, tuple[Any, Any]]:
         """Model -> the Stan program NUTS runs and its C++ header or None (hand-written, else
-        generated: :func:`ssmobs.nuts.stan_program.stan_program`), for every model of
-        :attr:`stan_models`; looked up (and generated) once per run."""
-        from .nuts.stan_program import stan_program
+        generated: :func:`ssmobs.nuts.stan_program.planned_stan_program`), for every model of
+        :attr:`stan_models`; where they lie, nothing written (the build job writes a
+        generated program)."""
+        from .nuts.stan_program import planned_stan_program
 
-        gradients = self.config["stan"]["gradients"]
-        return {m: stan_program(m, gradients) for m in self.stan_models}
+        return {m: planned_stan_program(m, self.stan_gradients) for m in self.stan_models}
+
+    @property
+    def stan_gradients(self) -> str:
+        """The config key ``stan.gradients`` (:func:`ssmobs.config.blocks.stan_gradients`),
+        for the rule that builds a program."""
+        return stan_gradients(self.config["stan"])
 
     @property
     def mu0_scenarios(self) -> list[str]:

@@ -1,6 +1,7 @@
 """The settings blocks of a scenario: the config's block with the scenario's own values over
 it, merged once here for the stages that compute with them and the cache keys that hold
-them (:mod:`ssmobs.cache_keys`).  Imports nothing, so a key's code stays this module.
+them (:mod:`ssmobs.cache_keys`), and the one reader of the gradient path
+(:func:`stan_gradients`).  Imports nothing, so a key's code stays this module.
 """
 
 from __future__ import annotations
@@ -30,3 +31,24 @@ def stan_settings(entry: Mapping[str, Any], block: Mapping[str, Any]) -> dict[st
     the entry's own ``stan_settings`` over it.  The one merge of the block: the stage
     samples with it and the cache keys hold it."""
     return {**block, **(entry.get("stan_settings") or {})}
+
+
+#: the values of the config key ``stan.gradients``
+GRADIENT_PATHS: tuple[str, ...] = ("autodiff", "analytic")
+
+
+def stan_gradients(block: Mapping[str, Any]) -> str:
+    """The config key ``stan.gradients`` of a ``stan`` block (``autodiff`` where it is not
+    set, the schema's default): how NUTS gets the gradient of a model with its own
+    ``stan/<model>.stan``.  The one reader of the key; ValueError for another value."""
+    gradients = block.get("gradients", "autodiff")
+    if gradients not in GRADIENT_PATHS:
+        raise ValueError(f"stan.gradients: {gradients!r}; allowed: {', '.join(GRADIENT_PATHS)}")
+    return str(gradients)
+
+
+def gradient_path(block: Mapping[str, Any], own_program: bool) -> str:
+    """The gradient path NUTS takes for a model: :func:`stan_gradients` for a model with its
+    own Stan program (``own_program``), ``analytic`` for the program generated for a model
+    without one, whatever the key."""
+    return stan_gradients(block) if own_program else "analytic"

@@ -24,6 +24,7 @@ import yaml
 
 from ..models import MODELS, StateSpaceModel
 from ..models.check_cases import x0_values
+from .blocks import stan_gradients
 from .files import MAX_CONFIG_VALUES, count_values
 from .files import check_config_files as check_config_files
 from .files import parse_config_text as parse_config_text
@@ -376,7 +377,7 @@ def asks_for_paper_outputs(config: Mapping[str, Any]) -> bool:
 
 def _backend_problems(config: dict) -> list[str]:
     backend = config["stan"]["backend"]
-    if backend == "pystan" and config["stan"].get("gradients", "autodiff") == "analytic":
+    if backend == "pystan" and stan_gradients(config["stan"]) == "analytic":
         return [
             "stan.gradients = 'analytic': the pystan backend takes no external C++ "
             "(it keeps Stan's autodiff); allowed with pystan: 'autodiff', or choose "

@@ -269,15 +269,12 @@ class AnalyticProgram:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def write_analytic_program(
+def _program_texts(
     model: StateSpaceModel,
     stan_file: str | os.PathLike | None,
-    root: str | os.PathLike | None = None,
-) -> AnalyticProgram:
-    """Generate the analytic program of ``model`` from its Stan program ``stan_file`` (None:
-    a whole program, :func:`generated_stan_code`) into ``<root>/<slug>-<digest>/`` (default
-    root: the cache's ``analytic/``), written once and atomically; the same inputs give the
-    same directory and bytes."""
+    root: str | os.PathLike | None,
+) -> tuple[AnalyticProgram, str, str]:
+    """The analytic program's files (content-keyed folder) and their texts."""
     from ..stan_backends.base import program_code
     from ..stan_backends.cache import cache_root
 
@@ -294,10 +291,33 @@ def write_analytic_program(
         stan_file=folder / f"{model.slug}_analytic.stan",
         header=folder / f"{model.slug}_analytic.hpp",
     )
+    return program, code, header
+
+
+def analytic_program_files(
+    model: StateSpaceModel,
+    stan_file: str | os.PathLike | None,
+    root: str | os.PathLike | None = None,
+) -> AnalyticProgram:
+    """Where :func:`write_analytic_program` writes the program of ``model``; writes nothing
+    (a file that is not there yet has not been generated)."""
+    return _program_texts(model, stan_file, root)[0]
+
+
+def write_analytic_program(
+    model: StateSpaceModel,
+    stan_file: str | os.PathLike | None,
+    root: str | os.PathLike | None = None,
+) -> AnalyticProgram:
+    """Generate the analytic program of ``model`` from its Stan program ``stan_file`` (None:
+    a whole program, :func:`generated_stan_code`) into ``<root>/<slug>-<digest>/`` (default
+    root: the cache's ``analytic/``), written once and atomically; the same inputs give the
+    same directory and bytes."""
+    program, code, header = _program_texts(model, stan_file, root)
     for path, text in ((program.stan_file, code), (program.header, header)):
         if path.is_file() and path.read_text() == text:
             continue
-        folder.mkdir(parents=True, exist_ok=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         tmp.write_text(text)
         os.replace(tmp, path)

@@ -1,6 +1,8 @@
 """Which Stan program NUTS runs for a model (Sec. III.C): the hand-written
 ``stan/<model>.stan``, or the program with the generated analytic gradients
-(:mod:`ssmobs.nuts.analytic_program`), written into the cache where it is generated.
+(:mod:`ssmobs.nuts.analytic_program`).  :func:`stan_program` writes a generated program into
+the cache (the build job and the NUTS jobs); :func:`planned_stan_program` only says where it
+lies (the planning of a run, which writes nothing).
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from pathlib import Path
 
 from ..models import get_model
 from ..stan_backends import has_stan_file, stan_file
-from .analytic_program import write_analytic_program
+from .analytic_program import analytic_program_files, write_analytic_program
 
 
 def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
@@ -22,13 +24,24 @@ def stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | 
     parameters and bounds from the model,
     :func:`~ssmobs.nuts.analytic_program.generated_stan_code`);
     ValueError (one line) for a model whose support constraints it cannot express."""
-    if gradients not in ("autodiff", "analytic"):
+    return _program(model, gradients, write=True)
+
+
+def planned_stan_program(model: str, gradients: str = "autodiff") -> tuple[Path, Path | None]:
+    """:func:`stan_program`'s answer without writing a generated program (its files may not
+    be there yet)."""
+    return _program(model, gradients, write=False)
+
+
+def _program(model: str, gradients: str, *, write: bool) -> tuple[Path, Path | None]:
+    if gradients not in ("autodiff", "analytic"):  # a value from config.blocks.stan_gradients
         raise ValueError(f"stan.gradients: {gradients!r}; allowed: autodiff, analytic")
+    make = write_analytic_program if write else analytic_program_files
     if not has_stan_file(model):
-        generated = write_analytic_program(get_model(model), None)
+        generated = make(get_model(model), None)
         return generated.stan_file, generated.header
     path = stan_file(model)
     if gradients == "autodiff":
         return path, None
-    generated = write_analytic_program(get_model(model), path)
+    generated = make(get_model(model), path)
     return generated.stan_file, generated.header

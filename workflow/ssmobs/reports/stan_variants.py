@@ -27,6 +27,7 @@ import pandas as pd
 from ssmobs import io
 from ssmobs.binomial import format_fraction
 from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS
+from ssmobs.config.blocks import stan_settings
 from ssmobs.config.validation import ConfigError, read_config_file, validate
 from ssmobs.reports.propriety_notes import (
     NOT_SHOWN_IMPROPER,
@@ -72,7 +73,7 @@ def _study(folder: str | os.PathLike) -> tuple[dict[str, Any], pd.DataFrame]:
 
 def stan_setup(config: Mapping[str, Any], scenario: Mapping[str, Any]) -> dict[str, Any]:
     """The Stan set-up one scenario's runs used (SETUP_KEYS)."""
-    stan = {**config["stan"], **scenario.get("stan_settings", {})}
+    stan = stan_settings(scenario, config["stan"])  # the one merge (config.blocks)
     setup = {key: stan[key] for key in SETUP_KEYS if key in stan}
     setup["stan_init"] = scenario.get("stan_init", "random")
     setup["stan_seed"] = scenario.get("stan_seed")

@@ -73,12 +73,13 @@ def nuts_batch(
     ``stan_cfg`` (the scenario's own merged over the config block: :meth:`Scenario.stan_config`)
     and ``convergence_cfg``; ``init_theta``: the joint MAP of every k (``stan_init:
     joint_map``)."""
+    from ..config.blocks import stan_gradients
     from ..nuts.batch import NutsBatch
     from ..nuts.convergence import ConvergenceSettings
     from ..nuts.stan_program import stan_program
 
     model = traj.model
-    program, header = stan_program(model.slug, stan_cfg.get("gradients", "autodiff"))
+    program, header = stan_program(model.slug, stan_gradients(stan_cfg))
     return NutsBatch(
         model=model,
         stan_file=program,
