@@ -15,16 +15,14 @@ from ssmobs.config.validation import validate
 from ssmobs.nuts.record_cache import program_hash
 from ssmobs.stage_code import (
     MODEL_REGISTRY,
-    NATIVE_SHADOW_HEADERS,
     NEUTRAL_MODULES,
     PACKAGE_DIR,
-    STAGE_MODULES,
-    STAGE_SCRIPTS,
     code_digest,
     digest,
     file_digest,
     module_closure,
 )
+from ssmobs.stage_table import NATIVE_SHADOW_HEADERS, STAGES
 from ssmobs.stan_backends.base import program_code
 
 pytestmark = pytest.mark.unit
@@ -163,7 +161,7 @@ def _write(root: Path, files: dict[str, str]) -> Path:
     ],
 )
 def test_each_stage_closure_holds_the_code_it_runs_and_none_it_does_not(stage, runs, does_not_run):
-    closure = set(module_closure(STAGE_MODULES[stage]))
+    closure = set(module_closure(STAGES[stage].code))
     assert runs <= closure
     assert not does_not_run & closure
     assert not set(NEUTRAL_MODULES) & closure
@@ -183,13 +181,13 @@ def _script_imports(script: str) -> list[tuple[str, list[str]]]:
     return out
 
 
-@pytest.mark.parametrize("stage", sorted(STAGE_SCRIPTS))
+@pytest.mark.parametrize("stage", sorted(STAGES))
 def test_what_a_stage_script_calls_is_in_its_stage_key(stage):
     """Every package module a stage's script imports is hashed into the stage's key, and a
     function it imports from a stage module is one the stage's entry follows."""
-    closure = set(module_closure(STAGE_MODULES[stage]))
-    entries = dict(e.partition(":")[::2] for e in STAGE_MODULES[stage])
-    for script in STAGE_SCRIPTS[stage]:
+    closure = set(module_closure(STAGES[stage].code))
+    entries = dict(e.partition(":")[::2] for e in STAGES[stage].code)
+    for script in STAGES[stage].scripts:
         for module, names in _script_imports(script):
             if module in NEUTRAL_MODULES:
                 continue
@@ -677,8 +675,8 @@ def test_a_model_without_package_imports_is_keyed_by_its_module_alone():
     registry = set(module_closure((MODEL_REGISTRY,)))
     assert "models/base.py" in registry
     for stage in ("trajectories", "check_model", "nuts_records", "k_selection", "map_cells"):
-        assert registry <= set(module_closure(STAGE_MODULES[stage])), stage
-    assert registry <= set(module_closure(STAGE_MODULES["outputs"]))  # Figure 2's model
+        assert registry <= set(module_closure(STAGES[stage].code)), stage
+    assert registry <= set(module_closure(STAGES["outputs"].code))  # Figure 2's model
 
 
 def test_a_stan_programs_includes_key_it(tmp_path):

@@ -125,10 +125,11 @@ SHARED = {
 }
 #: every subpackage and every other top-level module -> the subpackages and top-level modules
 #: it may import beside the shared ones.  The layers, lowest first: models, stan_backends;
-#: nuts, joint_map, exact, k_selection, stage_code, housekeeping; config; model_check (its
-#: command line reads a config), design, provenance, cache_keys; run_paths, reports; stages
-#: (the glue).  A package's ``__main__`` (its command line) follows its package's row, and
-#: nothing imports it.
+#: nuts, joint_map, exact, k_selection, housekeeping; config; stage_table (the table of
+#: stages and their inputs builders), stage_code; model_check (its command line reads a
+#: config), design, provenance, cache_keys; run_paths, reports; stages (the glue).  A
+#: package's ``__main__`` (its command line) follows its package's row, and nothing imports
+#: it.
 ALLOWED: dict[str, set[str]] = {
     "models": set(),
     "stan_backends": set(),
@@ -136,7 +137,8 @@ ALLOWED: dict[str, set[str]] = {
     "joint_map": {"models"},
     "exact": {"models"},
     "k_selection": {"models"},
-    "stage_code": set(),
+    "stage_table": {"config"},
+    "stage_code": {"stage_table"},
     "housekeeping": {"stan_backends"},
     # a model without a Stan program is refused when no program can be generated for it
     # (nuts.analytic_program.generation_problem); a user's model is checked against itself
@@ -145,8 +147,8 @@ ALLOWED: dict[str, set[str]] = {
     "model_check": {"models", "stan_backends", "nuts", "config"},
     "design": {"models", "config"},
     "provenance": {"config", "stan_backends"},
-    "cache_keys": {"config", "nuts", "stan_backends", "stage_code"},
-    "run_paths": {"config", "nuts", "cache_keys"},
+    "cache_keys": {"config", "nuts", "stan_backends", "stage_code", "stage_table"},
+    "run_paths": {"config", "nuts", "cache_keys", "stage_table"},
     "reports": {"models", "config", "joint_map", "nuts", "cache_keys", "stage_code"},
     "stages": {
         "models",

@@ -9,6 +9,7 @@ maximum.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -270,6 +271,8 @@ def test_sep_edge_of_the_support_is_reported_not_counted():
 
 # --------------------------------------------------------------------------- stage and tables
 def test_stage_writes_the_columns_and_the_summary(tmp_path):
+    from ssmobs.config.scenario import entry_problems
+    from ssmobs.config.stage_inputs import joint_map_inputs
     from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.io import read_json, read_parquet
     from ssmobs.stages.joint_map import run_joint_map
@@ -288,11 +291,18 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
     assert sc.joint_map_n_starts == 3
     rng = np.random.default_rng(2)
     write_trajectories(tmp_path / "t.nc", make_trajectories(sc, rng.standard_normal((24, 4))))
-    info = run_joint_map(
-        tmp_path / "t.nc", sc, {}, tmp_path / "jm.parquet", tmp_path / "summary.json"
-    )
+    config = {"joint_map": {}}
+    full = dict(entry)
+    assert entry_problems(full) == []  # fills in the schema's defaults
+
+    def paths(stem: str) -> dict[str, Path]:
+        names = ("table", "theta", "summary")
+        return {n: tmp_path / f"{stem}.{e}" for n, e in zip(names, ("parquet", "nc", "json"))}
+
+    inputs = joint_map_inputs(full, config, trajectories=str(tmp_path / "t.nc"))
+    info = run_joint_map(inputs, paths("jm"))
     frame = read_parquet(tmp_path / "jm.parquet")
-    summary = read_json(tmp_path / "summary.json")
+    summary = read_json(tmp_path / "jm.json")
     assert summary["n_starts"] == 3 == info["n_starts"]
     assert summary["K_max_unique"] == int(frame["unique_max"].sum())
     assert {
@@ -312,7 +322,8 @@ def test_stage_writes_the_columns_and_the_summary(tmp_path):
         {k: v for k, v in entry.items() if k != "joint_map_n_starts"} | {"name": "one"}
     )
     assert single.joint_map_n_starts is None
-    run_joint_map(tmp_path / "t.nc", single, {}, tmp_path / "one.parquet", tmp_path / "one.json")
+    one = {k: v for k, v in full.items() if k != "joint_map_n_starts"} | {"name": "one"}
+    run_joint_map(joint_map_inputs(one, config, trajectories=str(tmp_path / "t.nc")), paths("one"))
     assert "n_maxima" not in read_parquet(tmp_path / "one.parquet").columns
     assert "K_max_unique" not in read_json(tmp_path / "one.json")
 

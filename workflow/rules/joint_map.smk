@@ -5,7 +5,9 @@
 rule joint_map:
     """Joint MAP by a primal barrier method and the checks of Sec. III.B for every trajectory."""
     input:
-        lambda wc: keyed_input("joint_map", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)),
+        lambda wc: keyed_input(
+            "joint_map", wc.scenario, wc.key, PATHS.inputs("joint_map", wc.scenario).trajectories
+        ),
     output:
         table="results/{scenario}/joint_map/{key}/joint_map.parquet",
         theta="results/{scenario}/joint_map/{key}/theta_hat.nc",
@@ -21,8 +23,8 @@ rule joint_map:
         mem_mb=4000,
         runtime=60,
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-        settings=config["joint_map"],
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: PATHS.inputs("joint_map", wc.scenario),
     script:
         "../scripts/joint_map.py"
 

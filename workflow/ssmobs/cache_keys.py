@@ -8,7 +8,7 @@ a SHA-256 over everything that determines them (the rule of the cache):
 - the keys of the stage's inputs (so a change upstream moves every output downstream),
 - the code: the model's module with every module it imports outside the pinned
   environment (the package's, the project tree's, a user's own), its Stan program, and
-  the source of the package modules the stage runs (:data:`ssmobs.stage_code.STAGE_MODULES`:
+  the source of the package modules the stage runs (:data:`ssmobs.stage_table.STAGES`:
   its glue in :mod:`ssmobs.stages`, closed over its imports inside the package by
   :func:`ssmobs.stage_code.module_closure`), so an edit of a log-density term
   or of a stage's numerics gives new keys and a recomputation, never an old result; an
@@ -34,9 +34,8 @@ from typing import Any
 from . import kernels
 from .code_hashing import syntax_digest
 from .config.blocks import joint_map_settings, stan_gradients, stan_settings
+from .config.stage_inputs import inputs_payload
 from .stage_code import (
-    NATIVE_DRIVER,
-    NATIVE_SHADOW_HEADERS,
     PACKAGE_DIR,
     REPO_DIR,
     code_digest,
@@ -45,6 +44,7 @@ from .stage_code import (
     model_closure,
     outside_code,
 )
+from .stage_table import NATIVE_DRIVER, NATIVE_SHADOW_HEADERS, STAGES
 from .stan_backends.base import program_digest, sampler_key
 
 
@@ -55,8 +55,6 @@ def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
 
 #: the scenario fields that determine its design trajectories
 TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
-#: ... its joint MAP (beside the trajectories and its joint-MAP settings)
-JOINT_MAP_FIELDS = ("prior",)
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)
@@ -258,15 +256,27 @@ class CacheKeys:
         }
         return self._key("trajectories", name, payload, K=K)
 
-    def joint_map(self, name: str) -> str:
-        sc = self.scenarios[name]
-        payload = {
-            "trajectories": self.trajectories(name),
-            "scenario": _pick(sc, JOINT_MAP_FIELDS),
-            "settings": joint_map_settings(sc, self.config["joint_map"]),
-            "code": self.code("joint_map"),
+    @functools.cache  # noqa: B019
+    def inputs(self, stage: str, name: str) -> Any:
+        """The frozen inputs object of ``stage`` for scenario ``name``: its builder in
+        :data:`~ssmobs.stage_table.STAGES` given the scenario's entry, the config and the
+        paths of the keyed outputs it reads (which carry their keys)."""
+        entry = STAGES[stage]
+        assert entry.inputs is not None, f"stage {stage} has no inputs object yet"
+        reads = {
+            kw: STAGES[up].paths(name, getattr(self, up)(name))[output]
+            for kw, (up, output) in entry.reads.items()
         }
-        return self._key("joint_map", name, payload)
+        return entry.inputs(self.scenarios[name], self.config, **reads)
+
+    def stage_key(self, stage: str, name: str) -> str:
+        """The key of a stage with an inputs object: its content and the stage's code."""
+        payload = {"inputs": inputs_payload(self.inputs(stage, name)), "code": self.code(stage)}
+        return self._key(stage, name, payload)
+
+    def joint_map(self, name: str) -> str:
+        """The joint MAP's key (:class:`~ssmobs.config.stage_inputs.JointMapInputs`)."""
+        return self.stage_key("joint_map", name)
 
     def gradients(self, model: str) -> dict[str, str]:
         """``{"gradients": "analytic"}`` when NUTS runs ``model`` with the generated analytic

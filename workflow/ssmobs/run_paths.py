@@ -26,6 +26,7 @@ from .cache_keys import CacheKeys
 from .config.blocks import stan_gradients
 from .config.scenario import Scenario
 from .config.validation import asks_for_paper_outputs
+from .stage_table import STAGES
 
 #: the folder of the cached cells of every observability map (by their own keys, shared by
 #: maps and profiles)
@@ -188,10 +189,20 @@ class RunPaths:
         f2 = self.config["figure2"]
         return self.disturbances(2, f2["K"], "design", f2["seed"])
 
+    def stage_paths(self, stage: str, name: str) -> dict[str, str]:
+        """The outputs of a stage with an inputs object for a scenario (name -> path), in
+        its keyed folder (:data:`ssmobs.stage_table.STAGES`)."""
+        return STAGES[stage].paths(name, getattr(self.keys, stage)(name))
+
+    def inputs(self, stage: str, name: str) -> Any:
+        """What ``stage`` reads for scenario ``name``: the rule's only param, its key's
+        content (:meth:`ssmobs.cache_keys.CacheKeys.inputs`)."""
+        return self.keys.inputs(stage, name)
+
     def trajectories(self, name: str, K: int | None = None) -> str:
         """The design trajectories of a scenario at K (its own K by default)."""
         key = self.keys.trajectories(name, K)
-        return f"results/{name}/design_trajectories/{key}/trajectories.nc"
+        return STAGES["trajectories"].paths(name, key)["trajectories"]
 
     def every_trajectories(self) -> list[str]:
         """The design trajectories of every scenario, at its K and at its exact stage's K."""
@@ -208,22 +219,18 @@ class RunPaths:
 
     # -- joint MAP (Sec. III.B) ------------------------------------------------------------
 
-    def joint_dir(self, name: str) -> str:
-        """The folder of a scenario's joint MAP stage."""
-        return f"results/{name}/joint_map/{self.keys.joint_map(name)}"
-
     def joint_summary(self, name: str) -> str:
         """The summary of a scenario's joint MAP stage (|K^max| and the checks)."""
-        return f"{self.joint_dir(name)}/summary.json"
+        return self.stage_paths("joint_map", name)["summary"]
 
     def joint_table(self, name: str) -> str:
         """The joint MAP of every trajectory of a scenario, one row each."""
-        return f"{self.joint_dir(name)}/joint_map.parquet"
+        return self.stage_paths("joint_map", name)["table"]
 
     def stan_init_inputs(self, name: str) -> dict[str, str]:
         """The joint MAP of every trajectory when the scenario's chains start there."""
         if self.scenarios[name]["stan_init"] == "joint_map":
-            return {"joint_map": f"{self.joint_dir(name)}/theta_hat.nc"}
+            return {"joint_map": self.stage_paths("joint_map", name)["theta"]}
         return {}
 
     # -- NUTS (Sec. III.C) -----------------------------------------------------------------
@@ -374,8 +381,7 @@ class RunPaths:
                 out += [trajectories, f"{trajectories}.sha256"]
                 out.append(self.disturbances(sc.disturbance_dim, K, sc.method, sc.seed))
         for name in self.joint_scenarios:
-            folder = self.joint_dir(name)
-            out += [f"{folder}/{f}" for f in ("joint_map.parquet", "theta_hat.nc", "summary.json")]
+            out += list(self.stage_paths("joint_map", name).values())
         for name in self.stan_scenarios:
             out += [self.check(name, stan=True), *self.nuts_batches(name)]
             out += [self.stan_summary(name), self.stan_table(name)]

@@ -1,9 +1,9 @@
 """The code each stage of the workflow runs, as hashed into its cache keys
-(:mod:`ssmobs.cache_keys`): the stage's entry points (:data:`STAGE_MODULES`), closed over
-their imports inside the package (:func:`module_closure`, without the modules that never
-change a number: :data:`NEUTRAL_MODULES`), its files outside the import graph
-(:data:`STAGE_EXTRA_FILES`) and its rule scripts (:data:`STAGE_SCRIPTS`); a model's own
-modules (:func:`model_closure`) and what they import outside the package
+(:mod:`ssmobs.cache_keys`): the stage's code entries in the table of stages
+(:data:`ssmobs.stage_table.STAGES`), closed over their imports inside the package
+(:func:`module_closure`, without the modules that never change a number:
+:data:`NEUTRAL_MODULES`), its files outside the import graph and its rule scripts; a model's
+own modules (:func:`model_closure`) and what they import outside the package
 (:func:`outside_code`); and the digests of payloads and files.
 """
 
@@ -18,96 +18,13 @@ from typing import Any
 
 from . import io
 from .code_hashing import environment_dirs, import_closure, outside_modules, syntax_digest
+from .stage_table import PACKAGE_DIR, STAGES
 
-#: the package's own directory (``workflow/ssmobs``)
-PACKAGE_DIR = Path(__file__).resolve().parent
 #: the repository (or workflow copy) this package belongs to
 REPO_DIR = PACKAGE_DIR.parents[1]
 #: hex digits of a key
 KEY_LENGTH = 12
 
-#: the code each stage runs, as entries of :func:`module_closure`: a package module (its
-#: imports followed anywhere in the file), or ``"stages/<stage>.py:f,g"`` for the functions
-#: ``f``, ``g`` of a stage module (:mod:`ssmobs.stages`), whose imports are followed at the
-#: module's top level and inside those functions and the module's functions they call only,
-#: so that e.g. compiling a program does not run the gathered summary's code.
-STAGE_MODULES: dict[str, tuple[str, ...]] = {
-    # the sets k_selection_grid makes (ssmobs.design.disturbance_sets) lie beside the design's
-    "design": ("stages/design.py:run_design_disturbances",),
-    "trajectories": ("stages/design.py:run_design_trajectories",),
-    # the command line too: it was part of the check's module
-    "check_model": ("model_check/check.py", "model_check/__main__.py"),
-    "joint_map": ("stages/joint_map.py:run_joint_map",),
-    "k_selection": ("stages/k_selection/grid.py:run_k_selection_grid",),
-    "program": ("stages/stan.py:run_build_stan_model",),
-    "nuts_records": ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
-    "nuts_batches": ("stages/stan.py:run_sample_batch",),
-    "gather": ("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"),
-    "exact": ("stages/exact.py",),
-    # the cells of an observability map: what computes a cell, not the map's table or figure
-    "map_cells": ("stages/observability_map.py:run_map_cells",),
-    # the variant x row table of Section IV, read from committed reproductions
-    "variant_table": ("reports/stan_variants.py",),
-    # every stamped table and figure; observability_study's and observability_map's scripts
-    # call their modules themselves
-    "outputs": (
-        "stages/outputs/paper_tables.py",
-        "stages/outputs/figures.py",
-        "stages/outputs/mu0_sweep.py",
-        "stages/k_selection/choice.py",
-        "reports/observability_study.py",
-        "stages/observability_map.py:write_map,figure_map",
-    ),
-}
-#: the native backend's C++ driver (samples, and evaluates the log density for the check)
-NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
-#: our headers the driver and every native program compile with in place of Stan's: every
-#: header below ``stan_backends/native_build.py``'s SHADOW_INCLUDE_DIR (a test checks the two
-#: agree)
-NATIVE_SHADOW_HEADERS = tuple(
-    sorted(
-        p.relative_to(PACKAGE_DIR).as_posix()
-        for p in (PACKAGE_DIR / "stan_backends" / "native_include").rglob("*.hpp")
-    )
-)
-#: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
-LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
-#: files outside the package's import graph that a stage's results depend on
-STAGE_EXTRA_FILES: dict[str, tuple[str, ...]] = {
-    "design": (LCD_KERNEL,),
-    "program": (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
-    "nuts_records": (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
-}
-#: the rule scripts of each stage (``workflow/scripts/``): thin, but they call the stage
-OUTPUT_SCRIPTS = (
-    "paper_tables",
-    "convergence_sensitivity",
-    "joint_map_mu0_sweep",
-    "select_k",
-    "table_k_selection",
-    "observability_study",
-    "observability_map",
-    "figure_design_points",
-    "figure_joint_vs_marginal",
-    "figure_profile_posterior",
-    "figure_observability",
-    "figure_exact_vs_stan",
-)
-STAGE_SCRIPTS: dict[str, tuple[str, ...]] = {
-    "design": ("design_disturbances",),
-    "trajectories": ("design_trajectories",),
-    "check_model": ("check_model",),
-    "joint_map": ("joint_map",),
-    "k_selection": ("k_selection_grid",),
-    "program": ("build_stan_model",),
-    "nuts_records": ("sample_nuts",),
-    "nuts_batches": ("sample_nuts",),
-    "gather": ("gather_nuts",),
-    "exact": ("exact_marginal",),
-    "map_cells": ("observability_map_cells",),
-    "variant_table": ("stan_variant_table",),
-    "outputs": OUTPUT_SCRIPTS,
-}
 #: modules that only log, plan or describe and never change a number or a file's content
 NEUTRAL_MODULES: frozenset[str] = frozenset(
     {
@@ -138,8 +55,9 @@ def file_digest(path: str | Path) -> str:
 @functools.cache
 def module_closure(entries: tuple[str, ...], package_dir: Path = PACKAGE_DIR) -> tuple[str, ...]:
     """The modules that ``entries`` (``"module.py"`` or ``"stages/x.py:f,g"``, see
-    :data:`STAGE_MODULES`) run: the entries, every package module they import, directly or
-    not, and the ``__init__.py`` of their packages (sorted relative paths), without
+    :attr:`ssmobs.stage_table.Stage.code`) run: the entries, every package module they
+    import, directly or not, and the ``__init__.py`` of their packages (sorted relative
+    paths), without
     :data:`NEUTRAL_MODULES` (:func:`ssmobs.code_hashing.import_closure`)."""
     return import_closure(entries, package_dir, NEUTRAL_MODULES)
 
@@ -200,10 +118,10 @@ def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
     :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its
     extra files and its rule scripts.  The rule files (``workflow/rules/*.smk``) are not
     hashed: what they decide (paths, params) is keyed."""
-    files = set(module_closure(STAGE_MODULES[stage], package_dir))
-    files |= set(STAGE_EXTRA_FILES.get(stage, ()))
+    entry = STAGES[stage]
+    files = set(module_closure(entry.code, package_dir)) | set(entry.extra_files)
     out = {f: file_digest(package_dir / f) for f in sorted(files)}
-    for script in STAGE_SCRIPTS[stage]:
+    for script in entry.scripts:
         path = package_dir.parent / "scripts" / f"{script}.py"
         out[f"scripts/{script}.py"] = file_digest(path)
     return out

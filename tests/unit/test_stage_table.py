@@ -1,0 +1,124 @@
+"""The table of stages (ssmobs.stage_table, issue 62): every entry names code and scripts
+that exist; a stage with an inputs object is keyed by exactly what it reads: its rule passes
+the inputs as the only param, its script passes nothing else, its entry takes
+``(inputs, paths)``, its outputs are the table's, and changing any field of the inputs moves
+the key."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+from ssmobs.cache_keys import CacheKeys
+from ssmobs.config.stage_inputs import inputs_payload
+from ssmobs.config.validation import validate
+from ssmobs.stage_table import PACKAGE_DIR, STAGES
+
+pytestmark = pytest.mark.unit
+
+REPO = PACKAGE_DIR.parents[1]
+#: the stages with an inputs object
+WITH_INPUTS = sorted(n for n, s in STAGES.items() if s.inputs is not None)
+
+
+def smoke_keys() -> CacheKeys:
+    config = validate(yaml.safe_load((REPO / "config" / "smoke.yaml").read_text()))
+    return CacheKeys(config, "native", repo=REPO)
+
+
+def _entry(stage: str):
+    module, _, functions = STAGES[stage].code[0].partition(":")
+    name = "ssmobs." + module.removesuffix(".py").replace("/", ".")
+    return __import__(name, fromlist=["_"]), functions.split(",")[0]
+
+
+def _rule(stage: str) -> str:
+    """The text of the rule whose script is the stage's (one rule per script)."""
+    script = STAGES[stage].scripts[0]
+    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+        for block in re.split(r"\n(?=rule \w+:)", smk.read_text()):
+            if f'"../scripts/{script}.py"' in block:
+                return block
+    raise AssertionError(f"no rule runs scripts/{script}.py")
+
+
+def test_every_entry_names_code_and_scripts_that_exist():
+    assert "joint_map" in WITH_INPUTS
+    for name, stage in STAGES.items():
+        for entry in stage.code:
+            assert (PACKAGE_DIR / entry.partition(":")[0]).is_file(), (name, entry)
+        for script in stage.scripts:
+            assert (REPO / "workflow" / "scripts" / f"{script}.py").is_file(), (name, script)
+        for file in stage.extra_files:
+            assert (PACKAGE_DIR / file).is_file(), (name, file)
+        assert (stage.folder is None) == (not stage.outputs), name
+
+
+@pytest.mark.parametrize("stage", WITH_INPUTS)
+def test_the_stage_reads_its_inputs_and_nothing_else(stage):
+    module, function = _entry(stage)
+    assert function == f"run_{stage}"
+    assert list(inspect.signature(getattr(module, function)).parameters) == ["inputs", "paths"]
+    rule = _rule(stage)
+    params = rule.split("params:")[1].split("script:")[0]
+    assert re.findall(r"^\s+(\w+)=", params, flags=re.M) == ["inputs"]
+    assert f'PATHS.inputs("{stage}", wc.scenario)' in params
+    outputs = dict(
+        re.findall(r'^\s+(\w+)="([^"]+)"', rule.split("output:")[1].split("log:")[0], re.M)
+    )
+    assert outputs == STAGES[stage].paths("{scenario}", "{key}")
+    # the script passes the params' inputs and the outputs, and reads no other param
+    script = REPO / "workflow" / "scripts" / f"{STAGES[stage].scripts[0]}.py"
+    read = {
+        node.attr
+        for node in ast.walk(ast.parse(script.read_text()))
+        if isinstance(node, ast.Attribute)
+        and isinstance(node.value, ast.Attribute)
+        and node.value.attr == "params"
+    }
+    assert read == {"inputs"}
+
+
+def _changed(value):
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, (int, float)):
+        return value + 1
+    if isinstance(value, str):
+        return value + "x"
+    if isinstance(value, tuple):
+        return (*value, ("extra", 1))
+    return "changed"
+
+
+@pytest.mark.parametrize("stage", WITH_INPUTS)
+def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
+    keys = smoke_keys()
+    name = next(n for n, sc in keys.scenarios.items() if sc.get(stage, True))
+    inputs = keys.inputs(stage, name)
+    base = keys.stage_key(stage, name)
+    assert keys.stage_key(stage, name) == base  # the same inputs, the same key
+    fields = [f.name for f in dataclasses.fields(inputs)]
+    assert fields and set(inputs_payload(inputs)) == {"stage_inputs", *fields}
+    for field in fields:
+        other = dataclasses.replace(inputs, **{field: _changed(getattr(inputs, field))})
+        monkeypatch.setattr(keys, "inputs", lambda s, n, other=other: other)
+        assert keys.stage_key(stage, name) != base, field
+    monkeypatch.undo()
+    assert keys.stage_key(stage, name) == base
+
+
+def test_the_joint_map_inputs_hold_what_the_stage_read_before():
+    """The scenario fields and the merged block the joint MAP's key held before its inputs
+    object (prior, the joint_map block with the scenario's start), and its trajectories."""
+    keys = smoke_keys()
+    name = next(iter(keys.scenarios))
+    inputs = keys.inputs("joint_map", name)
+    assert Path(inputs.trajectories).parent.name == keys.trajectories(name)
+    assert inputs.settings_config["start_states"] == keys.scenarios[name]["joint_map_start"]
+    assert inputs.prior_config == keys.scenarios[name].get("prior")

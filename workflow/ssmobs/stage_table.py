@@ -1,0 +1,137 @@
+"""The one table of the workflow's stages (issue 62): for each stage the code it runs, its
+rule scripts and the files outside the import graph it depends on (read by the code
+closures, :mod:`ssmobs.stage_code`), and for a stage converted to an inputs object its
+keyed folder, its outputs and the builder of what it reads (read by the cache keys,
+:mod:`ssmobs.cache_keys`, and by :class:`~ssmobs.run_paths.RunPaths`).
+
+Adding a stage is one :class:`Stage` here, one module ``stages/<stage>.py`` with
+``run_<stage>(inputs, paths)``, one builder in :mod:`ssmobs.config.stage_inputs`, one rule
+and one script (``docs/reference/layout.md`` shows it worked through).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .config.stage_inputs import joint_map_inputs
+
+#: the package's own directory (``workflow/ssmobs``)
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage: its code (entries of :func:`ssmobs.stage_code.module_closure`: a package
+    module, or ``"stages/<stage>.py:f,g"`` for some functions of a stage module, whose
+    imports are followed at the module's top level and inside those functions only), its
+    rule scripts (``workflow/scripts/<script>.py``) and extra files; where it has an inputs
+    object: its builder (a validated scenario entry, the config and the keyed paths it reads
+    -> the frozen inputs), its keyed folder (``{scenario}`` and ``{key}`` filled in) and its
+    outputs there (name -> file), and the outputs of other stages it reads (passed to the
+    builder by keyword)."""
+
+    code: tuple[str, ...]
+    scripts: tuple[str, ...]
+    extra_files: tuple[str, ...] = ()
+    inputs: Callable[..., Any] | None = None
+    folder: str | None = None
+    outputs: Mapping[str, str] = field(default_factory=dict)
+    #: the builder's keyword -> (stage, output) of the same scenario it reads
+    reads: Mapping[str, tuple[str, str]] = field(default_factory=dict)
+
+    def paths(self, scenario: str, key: str) -> dict[str, str]:
+        """The outputs of this stage for a scenario and its key (name -> path)."""
+        assert self.folder is not None, "a stage without a keyed folder"
+        folder = self.folder.format(scenario=scenario, key=key)
+        return {name: f"{folder}/{file}" for name, file in self.outputs.items()}
+
+
+#: the native backend's C++ driver (samples, and evaluates the log density for the check)
+NATIVE_DRIVER = "stan_backends/native_driver/driver.cpp"
+#: our headers the driver and every native program compile with in place of Stan's: every
+#: header below ``stan_backends/native_build.py``'s SHADOW_INCLUDE_DIR (a test checks the two
+#: agree)
+NATIVE_SHADOW_HEADERS = tuple(
+    sorted(
+        p.relative_to(PACKAGE_DIR).as_posix()
+        for p in (PACKAGE_DIR / "stan_backends" / "native_include").rglob("*.hpp")
+    )
+)
+#: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
+LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
+#: the rule scripts of the stamped tables and figures
+OUTPUT_SCRIPTS = (
+    "paper_tables",
+    "convergence_sensitivity",
+    "joint_map_mu0_sweep",
+    "select_k",
+    "table_k_selection",
+    "observability_study",
+    "observability_map",
+    "figure_design_points",
+    "figure_joint_vs_marginal",
+    "figure_profile_posterior",
+    "figure_observability",
+    "figure_exact_vs_stan",
+)
+
+STAGES: dict[str, Stage] = {
+    # the sets k_selection_grid makes (ssmobs.design.disturbance_sets) lie beside the design's
+    "design": Stage(
+        ("stages/design.py:run_design_disturbances",), ("design_disturbances",), (LCD_KERNEL,)
+    ),
+    "trajectories": Stage(
+        ("stages/design.py:run_design_trajectories",),
+        ("design_trajectories",),
+        folder="results/{scenario}/design_trajectories/{key}",
+        outputs={"trajectories": "trajectories.nc"},
+    ),
+    # the command line too: it was part of the check's module
+    "check_model": Stage(("model_check/check.py", "model_check/__main__.py"), ("check_model",)),
+    "joint_map": Stage(
+        ("stages/joint_map.py:run_joint_map",),
+        ("joint_map",),
+        inputs=joint_map_inputs,
+        reads={"trajectories": ("trajectories", "trajectories")},
+        folder="results/{scenario}/joint_map/{key}",
+        outputs={"table": "joint_map.parquet", "theta": "theta_hat.nc", "summary": "summary.json"},
+    ),
+    "k_selection": Stage(
+        ("stages/k_selection/grid.py:run_k_selection_grid",), ("k_selection_grid",)
+    ),
+    "program": Stage(
+        ("stages/stan.py:run_build_stan_model",),
+        ("build_stan_model",),
+        (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+    ),
+    "nuts_records": Stage(
+        ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
+        ("sample_nuts",),
+        (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+    ),
+    "nuts_batches": Stage(("stages/stan.py:run_sample_batch",), ("sample_nuts",)),
+    "gather": Stage(("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"), ("gather_nuts",)),
+    "exact": Stage(("stages/exact.py",), ("exact_marginal",)),
+    # the cells of an observability map: what computes a cell, not the map's table or figure
+    "map_cells": Stage(
+        ("stages/observability_map.py:run_map_cells",), ("observability_map_cells",)
+    ),
+    # the variant x row table of Section IV, read from committed reproductions
+    "variant_table": Stage(("reports/stan_variants.py",), ("stan_variant_table",)),
+    # every stamped table and figure; observability_study's and observability_map's scripts
+    # call their modules themselves
+    "outputs": Stage(
+        (
+            "stages/outputs/paper_tables.py",
+            "stages/outputs/figures.py",
+            "stages/outputs/mu0_sweep.py",
+            "stages/k_selection/choice.py",
+            "reports/observability_study.py",
+            "stages/observability_map.py:write_map,figure_map",
+        ),
+        OUTPUT_SCRIPTS,
+    ),
+}
