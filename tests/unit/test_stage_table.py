@@ -32,9 +32,9 @@ def smoke_keys() -> CacheKeys:
 
 
 def _entry(stage: str):
-    module, _, functions = STAGES[stage].code[0].partition(":")
+    module = STAGES[stage].code[0].partition(":")[0]
     name = "ssmobs." + module.removesuffix(".py").replace("/", ".")
-    return __import__(name, fromlist=["_"]), functions.split(",")[0]
+    return __import__(name, fromlist=["_"]), STAGES[stage].entry
 
 
 def _rule(stage: str) -> str:

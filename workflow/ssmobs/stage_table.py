@@ -29,14 +29,17 @@ class Stage:
     imports are followed at the module's top level and inside those functions only), its
     rule scripts (``workflow/scripts/<script>.py``) and extra files; where it has an inputs
     object: its builder (a validated scenario entry, the config and the keyed paths it reads
-    -> the frozen inputs), its keyed folder (``{scenario}`` and ``{key}`` filled in) and its
-    outputs there (name -> file), and the outputs of other stages it reads (passed to the
-    builder by keyword)."""
+    -> the frozen inputs), its entry function, its keyed folder (``{scenario}`` and
+    ``{key}`` filled in), its outputs there (name -> file) and the outputs of other stages
+    it reads (passed to the builder by keyword)."""
 
     code: tuple[str, ...]
     scripts: tuple[str, ...]
     extra_files: tuple[str, ...] = ()
     inputs: Callable[..., Any] | None = None
+    #: the function of the first code entry's module the rule runs, ``run_<stage>(inputs,
+    #: paths)``
+    entry: str | None = None
     folder: str | None = None
     outputs: Mapping[str, str] = field(default_factory=dict)
     #: the builder's keyword -> (stage, output) of the same scenario it reads
@@ -92,16 +95,15 @@ STAGES: dict[str, Stage] = {
     # the command line too: it was part of the check's module
     "check_model": Stage(("model_check/check.py", "model_check/__main__.py"), ("check_model",)),
     "joint_map": Stage(
-        ("stages/joint_map.py:run_joint_map",),
+        ("stages/joint_map.py",),
         ("joint_map",),
         inputs=joint_map_inputs,
+        entry="run_joint_map",
         reads={"trajectories": ("trajectories", "trajectories")},
         folder="results/{scenario}/joint_map/{key}",
         outputs={"table": "joint_map.parquet", "theta": "theta_hat.nc", "summary": "summary.json"},
     ),
-    "k_selection": Stage(
-        ("stages/k_selection/grid.py:run_k_selection_grid",), ("k_selection_grid",)
-    ),
+    "k_selection": Stage(("stages/k_selection/grid.py",), ("k_selection_grid",)),
     "program": Stage(
         ("stages/stan.py:run_build_stan_model",),
         ("build_stan_model",),
