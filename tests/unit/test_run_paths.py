@@ -275,7 +275,7 @@ def test_every_key_is_computed_up_front_and_map_cells_are_returned(smoke):
         assert computed("check_model_stan", name, smoke.check(name, stan=True))
     for name, sc in smoke.scenario_objects.items():
         assert computed("joint_map", name, smoke.joint_summary(name))
-        assert computed("exact", name, smoke.exact_dir(name, sc.exact_trajectories))
+        assert computed("exact", name, smoke.exact_table(name, sc.exact_trajectories))
     for name in smoke.k_selections:
         assert computed("k_selection_grid", name, smoke.ksel_grids_dir(name))
     assert fresh.every_trajectories() == [

@@ -48,7 +48,7 @@ def _rule(stage: str) -> str:
 
 
 def test_every_entry_names_code_and_scripts_that_exist():
-    assert "joint_map" in WITH_INPUTS
+    assert {"joint_map", "exact"} <= set(WITH_INPUTS)
     for name, stage in STAGES.items():
         for entry in stage.code:
             assert (PACKAGE_DIR / entry.partition(":")[0]).is_file(), (name, entry)
@@ -62,12 +62,12 @@ def test_every_entry_names_code_and_scripts_that_exist():
 @pytest.mark.parametrize("stage", WITH_INPUTS)
 def test_the_stage_reads_its_inputs_and_nothing_else(stage):
     module, function = _entry(stage)
-    assert function == f"run_{stage}"
+    assert function.startswith("run_")
     assert list(inspect.signature(getattr(module, function)).parameters) == ["inputs", "paths"]
     rule = _rule(stage)
     params = rule.split("params:")[1].split("script:")[0]
     assert re.findall(r"^\s+(\w+)=", params, flags=re.M) == ["inputs"]
-    assert f'PATHS.inputs("{stage}", wc.scenario)' in params
+    assert re.search(rf'PATHS\.inputs\(\s*"{stage}", wc\.scenario', params)
     outputs = dict(
         re.findall(r'^\s+(\w+)="([^"]+)"', rule.split("output:")[1].split("log:")[0], re.M)
     )
@@ -100,17 +100,18 @@ def _changed(value):
 def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
     keys = smoke_keys()
     name = next(n for n, sc in keys.scenarios.items() if sc.get(stage, True))
-    inputs = keys.inputs(stage, name)
-    base = keys.stage_key(stage, name)
-    assert keys.stage_key(stage, name) == base  # the same inputs, the same key
+    at = {"K": int(keys.scenarios[name]["K"])} if "K" in STAGES[stage].per else {}
+    inputs = keys.inputs(stage, name, **at)
+    base = keys.stage_key(stage, name, **at)
+    assert keys.stage_key(stage, name, **at) == base  # the same inputs, the same key
     fields = [f.name for f in dataclasses.fields(inputs)]
     assert fields and set(inputs_payload(inputs)) == {"stage_inputs", *fields}
     for field in fields:
         other = dataclasses.replace(inputs, **{field: _changed(getattr(inputs, field))})
-        monkeypatch.setattr(keys, "inputs", lambda s, n, other=other: other)
-        assert keys.stage_key(stage, name) != base, field
+        monkeypatch.setattr(keys, "inputs", lambda s, n, other=other, **at: other)
+        assert keys.stage_key(stage, name, **at) != base, field
     monkeypatch.undo()
-    assert keys.stage_key(stage, name) == base
+    assert keys.stage_key(stage, name, **at) == base
 
 
 def test_the_joint_map_inputs_hold_what_the_stage_read_before():
@@ -122,3 +123,13 @@ def test_the_joint_map_inputs_hold_what_the_stage_read_before():
     assert Path(inputs.trajectories).parent.name == keys.trajectories(name)
     assert inputs.settings_config["start_states"] == keys.scenarios[name]["joint_map_start"]
     assert inputs.prior_config == keys.scenarios[name].get("prior")
+
+
+def test_the_exact_inputs_are_keyed_per_K():
+    keys = smoke_keys()
+    name = next(iter(keys.scenarios))
+    small, large = keys.inputs("exact", name, K=4), keys.inputs("exact", name, K=8)
+    assert Path(small.trajectories).parent.name == keys.trajectories(name, 4)
+    assert small != large and keys.exact(name, 4) != keys.exact(name, 8)
+    assert keys.lookup("exact", name, keys.exact(name, 8)) == {"K": 8}
+    assert small.settings_config == keys.config["exact_marginal"]

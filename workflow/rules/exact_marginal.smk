@@ -5,9 +5,9 @@
 rule exact_marginal:
     """Exact marginal MAP, 5 %/95 % quantiles and Definition 3 per trajectory, and the summary."""
     input:
-        trajectories=lambda wc: PATHS.trajectories(
-            wc.scenario, expect_key("exact", wc.scenario, wc.key)["K"]
-        ),
+        trajectories=lambda wc: PATHS.inputs(
+            "exact", wc.scenario, K=expect_key("exact", wc.scenario, wc.key)["K"]
+        ).trajectories,
     output:
         table="results/{scenario}/exact_marginal/{key}/marginal_map.parquet",
         summary="results/{scenario}/exact_marginal/{key}/summary.json",
@@ -22,7 +22,9 @@ rule exact_marginal:
         mem_mb=4000,
         runtime=60,
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-        settings=config["exact_marginal"],
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: PATHS.inputs(
+            "exact", wc.scenario, K=expect_key("exact", wc.scenario, wc.key)["K"]
+        ),
     script:
         "../scripts/exact_marginal.py"

@@ -257,22 +257,26 @@ class CacheKeys:
         return self._key("trajectories", name, payload, K=K)
 
     @functools.cache  # noqa: B019
-    def inputs(self, stage: str, name: str) -> Any:
-        """The frozen inputs object of ``stage`` for scenario ``name``: its builder in
-        :data:`~ssmobs.stage_table.STAGES` given the scenario's entry, the config and the
-        paths of the keyed outputs it reads (which carry their keys)."""
+    def inputs(self, stage: str, name: str, **at: int) -> Any:
+        """The frozen inputs object of ``stage`` for scenario ``name`` (``at``: K, for a
+        stage keyed per K): its builder in :data:`~ssmobs.stage_table.STAGES` given the
+        scenario's entry, the config and the paths of the keyed outputs it reads at the
+        same K (which carry their keys)."""
         entry = STAGES[stage]
         assert entry.inputs is not None, f"stage {stage} has no inputs object yet"
         reads = {
-            kw: STAGES[up].paths(name, getattr(self, up)(name))[output]
+            kw: STAGES[up].paths(name, getattr(self, up)(name, **at))[output]
             for kw, (up, output) in entry.reads.items()
         }
         return entry.inputs(self.scenarios[name], self.config, **reads)
 
-    def stage_key(self, stage: str, name: str) -> str:
+    def stage_key(self, stage: str, name: str, **at: int) -> str:
         """The key of a stage with an inputs object: its content and the stage's code."""
-        payload = {"inputs": inputs_payload(self.inputs(stage, name)), "code": self.code(stage)}
-        return self._key(stage, name, payload)
+        payload = {
+            "inputs": inputs_payload(self.inputs(stage, name, **at)),
+            "code": self.code(stage),
+        }
+        return self._key(stage, name, payload, **at)
 
     def joint_map(self, name: str) -> str:
         """The joint MAP's key (:class:`~ssmobs.config.stage_inputs.JointMapInputs`)."""
@@ -343,14 +347,9 @@ class CacheKeys:
         return self._key("gather", name, payload)
 
     def exact(self, name: str, K: int) -> str:
-        sc = self.scenarios[name]
-        payload = {
-            "trajectories": self.trajectories(name, K),
-            "prior": sc.get("prior"),
-            "settings": self.config["exact_marginal"],
-            "code": self.code("exact"),
-        }
-        return self._key("exact", name, payload, K=int(K))
+        """The exact stage's key at K trajectories
+        (:class:`~ssmobs.config.stage_inputs.ExactInputs`)."""
+        return self.stage_key("exact", name, K=int(K))
 
     def k_selection_points(self, ksel: str) -> str:
         """Each point V_{K_i} of one k_selection entry (Sec. IV.A), cached one file per K_i:

@@ -189,15 +189,16 @@ class RunPaths:
         f2 = self.config["figure2"]
         return self.disturbances(2, f2["K"], "design", f2["seed"])
 
-    def stage_paths(self, stage: str, name: str) -> dict[str, str]:
+    def stage_paths(self, stage: str, name: str, **at: int) -> dict[str, str]:
         """The outputs of a stage with an inputs object for a scenario (name -> path), in
-        its keyed folder (:data:`ssmobs.stage_table.STAGES`)."""
-        return STAGES[stage].paths(name, getattr(self.keys, stage)(name))
+        its keyed folder (:data:`ssmobs.stage_table.STAGES`); ``at``: K, for a stage keyed
+        per K."""
+        return STAGES[stage].paths(name, getattr(self.keys, stage)(name, **at))
 
-    def inputs(self, stage: str, name: str) -> Any:
+    def inputs(self, stage: str, name: str, **at: int) -> Any:
         """What ``stage`` reads for scenario ``name``: the rule's only param, its key's
         content (:meth:`ssmobs.cache_keys.CacheKeys.inputs`)."""
-        return self.keys.inputs(stage, name)
+        return self.keys.inputs(stage, name, **at)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
         """The design trajectories of a scenario at K (its own K by default)."""
@@ -305,18 +306,14 @@ class RunPaths:
 
     # -- exact marginal --------------------------------------------------------------------
 
-    def exact_dir(self, name: str, K: int) -> str:
-        """The folder of a scenario's exact marginal at K trajectories."""
-        return f"results/{name}/exact_marginal/{self.keys.exact(name, K)}"
-
     def exact_table(self, name: str, K: int) -> str:
         """The exact marginal MAP of every trajectory of a scenario at K."""
-        return f"{self.exact_dir(name, K)}/marginal_map.parquet"
+        return self.stage_paths("exact", name, K=K)["table"]
 
     def exact_summary(self, name: str) -> str:
         """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
         K = self.scenario_objects[name].exact_trajectories
-        return f"{self.exact_dir(name, K)}/summary.json"
+        return self.stage_paths("exact", name, K=K)["summary"]
 
     def exact_vs_stan_inputs(self, name: str) -> dict[str, str]:
         """The NUTS and exact marginal MAP tables of a scenario at its K (its figure)."""
@@ -389,7 +386,7 @@ class RunPaths:
         for name in self.exact_scenarios:
             sc = self.scenario_objects[name]
             for K in {sc.K, sc.exact_trajectories}:
-                out += [self.exact_table(name, K), f"{self.exact_dir(name, K)}/summary.json"]
+                out += list(self.stage_paths("exact", name, K=K).values())
         for name in self.k_selections:
             out += self.k_selection_grids(name)
         out += [self.map_cells_table(name) for name in self.maps]

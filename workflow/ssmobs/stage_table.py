@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config.stage_inputs import joint_map_inputs
+from .config.stage_inputs import exact_inputs, joint_map_inputs
 
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -42,8 +42,11 @@ class Stage:
     entry: str | None = None
     folder: str | None = None
     outputs: Mapping[str, str] = field(default_factory=dict)
-    #: the builder's keyword -> (stage, output) of the same scenario it reads
+    #: the builder's keyword -> (stage, output) of the same scenario it reads (at the same
+    #: K where the stage is keyed per K)
     reads: Mapping[str, tuple[str, str]] = field(default_factory=dict)
+    #: what the stage is keyed by beside the scenario (``("K",)``: once per K it runs at)
+    per: tuple[str, ...] = ()
 
     def paths(self, scenario: str, key: str) -> dict[str, str]:
         """The outputs of this stage for a scenario and its key (name -> path)."""
@@ -116,7 +119,17 @@ STAGES: dict[str, Stage] = {
     ),
     "nuts_batches": Stage(("stages/stan.py:run_sample_batch",), ("sample_nuts",)),
     "gather": Stage(("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"), ("gather_nuts",)),
-    "exact": Stage(("stages/exact.py",), ("exact_marginal",)),
+    # at K trajectories: the scenario's K and its exact_K
+    "exact": Stage(
+        ("stages/exact.py",),
+        ("exact_marginal",),
+        inputs=exact_inputs,
+        entry="run_exact_marginal",
+        reads={"trajectories": ("trajectories", "trajectories")},
+        per=("K",),
+        folder="results/{scenario}/exact_marginal/{key}",
+        outputs={"table": "marginal_map.parquet", "summary": "summary.json"},
+    ),
     # the cells of an observability map: what computes a cell, not the map's table or figure
     "map_cells": Stage(
         ("stages/observability_map.py:run_map_cells",), ("observability_map_cells",)

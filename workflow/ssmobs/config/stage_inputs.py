@@ -28,6 +28,13 @@ def _frozen(value: Any) -> Any:
     return value
 
 
+def _prior_config(prior: Any) -> Any:
+    """A frozen prior back as the config gives it (a mapping of variants or intervals)."""
+    if isinstance(prior, tuple):
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in prior}
+    return prior
+
+
 def inputs_payload(inputs: Any) -> dict[str, Any]:
     """The content of an inputs object (its fields as plain data): what its key holds."""
     return {"stage_inputs": type(inputs).__name__, **dataclasses.asdict(inputs)}
@@ -54,9 +61,7 @@ class JointMapInputs:
     @property
     def prior_config(self) -> Any:
         """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
-        if isinstance(self.prior, tuple):
-            return {k: list(v) if isinstance(v, tuple) else v for k, v in self.prior}
-        return self.prior
+        return _prior_config(self.prior)
 
     @property
     def settings_config(self) -> dict[str, Any]:
@@ -77,4 +82,41 @@ def joint_map_inputs(
         seed=int(entry["seed"]),
         prior=_frozen(entry.get("prior")),
         settings=_frozen(joint_map_settings(entry, config["joint_map"])),
+    )
+
+
+@dataclass(frozen=True)
+class ExactInputs:
+    """Everything rule exact_marginal reads (issue 11): a scenario's design trajectories at
+    K (their keyed path), the scenario's name, its prior and the config block
+    ``exact_marginal``."""
+
+    trajectories: str
+    scenario: str
+    #: the prior as the config gives it (a variant name, or per-parameter pairs)
+    prior: Any
+    #: the ``exact_marginal`` block as sorted (key, value) pairs
+    settings: tuple[tuple[str, Any], ...]
+
+    @property
+    def prior_config(self) -> Any:
+        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
+        return _prior_config(self.prior)
+
+    @property
+    def settings_config(self) -> dict[str, Any]:
+        """The ``exact_marginal`` block as the config gives it (its lists as lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.settings}
+
+
+def exact_inputs(
+    entry: Mapping[str, Any], config: Mapping[str, Any], *, trajectories: str
+) -> ExactInputs:
+    """The inputs of rule exact_marginal for the scenario ``entry`` (at the K of
+    ``trajectories``)."""
+    return ExactInputs(
+        trajectories=trajectories,
+        scenario=str(entry["name"]),
+        prior=_frozen(entry.get("prior")),
+        settings=_frozen(config["exact_marginal"]),
     )

@@ -15,7 +15,7 @@ from .. import io
 from . import PathLike
 
 if TYPE_CHECKING:
-    from ..config.scenario import Scenario
+    from ..config.stage_inputs import ExactInputs
     from ..models.base import StateSpaceModel
 
 logger = logging.getLogger("ssmobs")
@@ -56,36 +56,33 @@ def exact_summary(
     return info
 
 
-def run_exact_marginal(
-    trajectories: PathLike,
-    scenario: Scenario,
-    settings: Mapping[str, Any],
-    table: PathLike,
-    summary: PathLike,
-) -> dict:
-    """Rule exact_marginal: exact marginal posteriors of every design trajectory (the
-    config block ``exact_marginal`` as ``settings``)."""
+def run_exact_marginal(inputs: ExactInputs, paths: Mapping[str, PathLike]) -> dict:
+    """Rule exact_marginal: exact marginal posteriors of every design trajectory, from its
+    :class:`~ssmobs.config.stage_inputs.ExactInputs` alone; ``paths``: the outputs ``table``
+    and ``summary``, as in :data:`ssmobs.stage_table.STAGES`."""
     import time
 
     from ..design.trajectories import read_trajectories
     from ..exact.marginal import exact_marginal
     from ..exact.settings import ExactSettings
 
-    traj = read_trajectories(trajectories)
+    traj = read_trajectories(inputs.trajectories)
     model = traj.model
+    name = inputs.scenario
     if not model.linear_in_states:
         raise ValueError(
-            f"scenario {scenario.name}: model '{model.slug}' is not linear "
+            f"scenario {name}: model '{model.slug}' is not linear "
             f"in the states; the exact stage does not apply"
         )
-    bounds = model.prior_bounds(traj.omega, scenario.prior)
+    bounds = model.prior_bounds(traj.omega, inputs.prior_config)
     start = time.perf_counter()
-    result = exact_marginal(model, traj.z, bounds, ExactSettings.from_mapping(settings))
+    settings = ExactSettings.from_mapping(inputs.settings_config)
+    result = exact_marginal(model, traj.z, bounds, settings)
     seconds = time.perf_counter() - start
     frame = result.to_frame(model)
     info = exact_summary(frame, model, traj.omega, traj.x0, traj.x)
     info.update(
-        scenario=scenario.name,
+        scenario=name,
         model=model.slug,
         T=traj.T,
         grid=result.info,
@@ -93,11 +90,11 @@ def run_exact_marginal(
     )
     logger.info(
         "scenario %s (exact): %d of %d with a unique interior maximum, %.1f s",
-        scenario.name,
+        name,
         info["n_exact"],
         traj.K,
         seconds,
     )
-    io.write_parquet(table, frame)
-    io.write_json(summary, info)
+    io.write_parquet(paths["table"], frame)
+    io.write_json(paths["summary"], info)
     return info
