@@ -64,6 +64,16 @@ def test_the_stage_reads_its_inputs_and_nothing_else(stage):
     module, function = _entry(stage)
     assert function.startswith("run_")
     assert list(inspect.signature(getattr(module, function)).parameters) == ["inputs", "paths"]
+    # the entry reads no scenario object and no config: only its inputs
+    body = ast.parse(inspect.getsource(getattr(module, function)))
+    names = {n.id for n in ast.walk(body) if isinstance(n, ast.Name)}
+    names |= {
+        n.attr
+        for n in ast.walk(body)
+        if isinstance(n, ast.Attribute)
+        and not (isinstance(n.value, ast.Name) and n.value.id == "inputs")
+    }
+    assert not names & {"Scenario", "scenario", "config", "snakemake"}, names
     rule = _rule(stage)
     params = rule.split("params:")[1].split("script:")[0]
     assert re.findall(r"^\s+(\w+)=", params, flags=re.M) == ["inputs"]
