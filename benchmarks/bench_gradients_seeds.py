@@ -29,7 +29,8 @@ def main() -> None:
 
     from ssmobs.config.scenario import Scenario
     from ssmobs.config.validation import read_config_file, validate
-    from ssmobs.stages.stan import sampler_settings, stan_program
+    from ssmobs.nuts.stan_program import stan_program
+    from ssmobs.stages.stan import sampler_settings
     from ssmobs.stan_backends.native import NativeBackend
 
     config = validate(read_config_file(REPO / "config" / "config.yaml"))

@@ -87,13 +87,16 @@ def trajectories(slug, omega, x0, T, K, seed=0):
 
 def time_ours(model, z, omega, x0, repeat=1):
     from ssmobs.joint_map.driver import joint_map
+    from ssmobs.joint_map.problem import JointMapProblem
 
     bounds = model.prior_bounds(omega)
-    joint_map(model, z[:4], bounds, omega, x0)  # compile the symbolic derivatives once
+    joint_map(
+        JointMapProblem(model, z[:4], bounds, omega, x0)
+    )  # compile the symbolic derivatives once
     best, res = np.inf, None
     for _ in range(repeat):
         t0 = time.perf_counter()
-        res = joint_map(model, z, bounds, omega, x0)
+        res = joint_map(JointMapProblem(model, z, bounds, omega, x0))
         best = min(best, time.perf_counter() - t0)
     return best, res
 

@@ -62,8 +62,9 @@ def main() -> int:
     from ssmobs.design.disturbances import design_disturbances
     from ssmobs.design.trajectories import make_trajectories
     from ssmobs.joint_map import barrier
+    from ssmobs.joint_map.driver import joint_map_of
+    from ssmobs.joint_map.problem import JointMapProblem
     from ssmobs.k_selection import set_seed
-    from ssmobs.stages.joint_map import joint_map_of
 
     config = load_config_file(REPO / "config" / "config.yaml")
     scenarios = {s["name"]: s for s in config["scenarios"]}
@@ -97,7 +98,9 @@ def main() -> int:
                 barrier.LINE_SEARCH_VALUES = values
                 evaluations.clear()
                 t0 = time.process_time()
-                _, frame, _, _ = joint_map_of(traj, sc.prior, settings)
+                _, frame, _ = joint_map_of(
+                    JointMapProblem.of_trajectories(traj, sc.prior, settings)
+                )
                 cpu[way].append(time.process_time() - t0)
                 count[way], frames[way] = len(evaluations), frame
         same = list(frames["before"].columns) == list(frames["after"].columns) and all(

@@ -109,8 +109,8 @@ def main() -> int:
     (work / "libtbb.so.2").symlink_to(hdir / "lib" / "libtbb.so.2")
 
     import numpy as np
-    from ssmobs.model_check.cases import default_cases, sample_theta
     from ssmobs.models import get_model
+    from ssmobs.models.check_cases import default_cases, sample_theta
     from ssmobs.stan_backends.native_run import write_json_file
 
     model = get_model(args.model)

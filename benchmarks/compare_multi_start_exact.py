@@ -49,6 +49,7 @@ CASES = [
 def compare(slug, omega, x0, T, prior, K, n_starts):
     from ssmobs.exact.marginal import exact_marginal
     from ssmobs.joint_map.multi_start import multi_start_joint_map
+    from ssmobs.joint_map.problem import JointMapProblem
     from ssmobs.joint_map.settings import JointMapSettings
     from ssmobs.models import get_model
 
@@ -59,12 +60,14 @@ def compare(slug, omega, x0, T, prior, K, n_starts):
     bounds = model.prior_bounds(omega, prior)
     start = time.process_time()
     multi = multi_start_joint_map(
-        model,
-        z,
-        bounds,
-        np.asarray(omega, float),
-        np.asarray(x0, float),
-        JointMapSettings(n_starts=n_starts),
+        JointMapProblem(
+            model,
+            z,
+            bounds,
+            np.asarray(omega, float),
+            np.asarray(x0, float),
+            JointMapSettings(n_starts=n_starts),
+        )
     )
     cpu_multi = time.process_time() - start
     start = time.process_time()

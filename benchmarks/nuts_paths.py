@@ -35,7 +35,7 @@ def simulate(sc: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
 def compiled_programs(native: Any, slug: str) -> dict[str, tuple[Any, Any]]:
     """Path -> (Stan program, user header or None) of model ``slug``, compiled (cached)
     before any clock starts."""
-    from ssmobs.stages.stan import stan_program
+    from ssmobs.nuts.stan_program import stan_program
 
     programs = {g: stan_program(slug, g) for g in PATHS}
     for prog, header in programs.values():
