@@ -11,13 +11,10 @@ trajectories) and the two per-time-step terms of the log posterior (2):
     -2 pi(Theta | z) = sum_t obs_term(Omega, x_t; z_t) + sum_t trans_term(Omega, x_{t-1}, x_t)
                        - 2 log p(Omega) + const,
 
-with Theta = (Omega, x_0, x_1, ..., x_T).  The priors p_0(x_0) is flat (Sec. IV) and the
-priors on Omega are uniform on intervals (Eq. (3), Eq. (14)), so inside the prior support
-they only add a constant; their support enters as bounds.
-
-The per-step terms are written once, symbolically (SymPy), and differentiated
-symbolically; :mod:`ssmobs.models.log_posterior` assembles the value, the gradient and the
-Hessian in Theta for a whole batch of trajectories from them.
+with Theta = (Omega, x_0, x_1, ..., x_T).  The prior of x_0 is flat (Sec. IV), those of Omega
+uniform on intervals (Eq. (3), (14)): their support enters as bounds.  The per-step terms are
+written once in SymPy; :mod:`ssmobs.models.log_posterior` assembles value, gradient and
+Hessian for a batch of trajectories from them.
 """
 
 from __future__ import annotations
