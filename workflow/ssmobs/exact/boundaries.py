@@ -65,6 +65,33 @@ def boundary_slopes(
     return lower, upper
 
 
+def spike_ratio(
+    lp_valley: np.ndarray,
+    lp_mode: np.ndarray,
+    dist: np.ndarray,
+    slope: np.ndarray,
+    delta: float,
+    sd: np.ndarray,
+    valley: np.ndarray,
+) -> np.ndarray:
+    """Mass of a spike beyond a valley relative to the mode's basin, per trajectory: the
+    density at the valley (log ``lp_valley``, at ``dist`` from the singular point) continued
+    as a power law of exponent ``slope`` down to ``delta`` from the point, against a Gaussian
+    basin of standard deviation ``sd`` at the mode (log ``lp_mode``); inf where no valley."""
+    with np.errstate(all="ignore"):
+        y0 = delta / dist
+        integral = np.where(
+            np.abs(slope + 1) < 1e-2, np.log(1 / y0), (1 - y0 ** (slope + 1)) / (slope + 1)
+        )
+        log_r = (
+            lp_valley
+            + np.log(dist * np.maximum(integral, 0))
+            - lp_mode
+            - np.log(math.sqrt(2 * math.pi) * sd)
+        )
+        return np.where(valley, np.exp(np.minimum(log_r, 700)), np.inf)
+
+
 def valley_limits(
     model: StateSpaceModel,
     axes: OmegaAxes,
@@ -120,19 +147,8 @@ def valley_limits(
             bound = bounds.lower[j] if side == 0 else bounds.upper[j]
             dist = np.abs(om_v - (0.0 if np.isinf(bound) else bound))
             slope = slopes[side][:, j]
-            with np.errstate(all="ignore"):
-                y0 = delta / dist
-                integral = np.where(
-                    np.abs(slope + 1) < 1e-2, np.log(1 / y0), (1 - y0 ** (slope + 1)) / (slope + 1)
-                )
-                om_mode = axes.omega(u)[:, j]
-                sd_om = sd_u * np.where(axes.log_scale[j], np.abs(om_mode), 1.0)
-                log_r = (
-                    lp[rows, i]
-                    + np.log(dist * np.maximum(integral, 0))
-                    - lp[:, -1]
-                    - np.log(math.sqrt(2 * math.pi) * sd_om)
-                )
-                r = np.where(valley, np.exp(np.minimum(log_r, 700)), np.inf)
+            om_mode = axes.omega(u)[:, j]
+            sd_om = sd_u * np.where(axes.log_scale[j], np.abs(om_mode), 1.0)
+            r = spike_ratio(lp[rows, i], lp[:, -1], dist, slope, delta, sd_om, valley)
             ratio = np.where(cut_j, np.maximum(ratio, np.nan_to_num(r, nan=np.inf)), ratio)
     return lo_lim, hi_lim, ratio

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..models import PriorBounds, StateSpaceModel
-from .boundaries import improper
+from .boundaries import improper, spike_ratio
 from .omega_grid import OmegaAxes, log_density_u, log_posterior_omega
 from .settings import ExactSettings
 
@@ -185,18 +185,7 @@ def interior_valleys(
         hi_lim[:, j] = np.where(cut[:, j] & ~below, np.minimum(hi_lim[:, j], stop), hi_lim[:, j])
         with np.errstate(all="ignore"):
             sd = 1 / np.sqrt(-H[:, j, j])
-            dist = np.abs(where - c)
-            slope = slopes[:, j]
-            y0 = delta / dist
-            integral = np.where(
-                np.abs(slope + 1) < 1e-2, np.log(1 / y0), (1 - y0 ** (slope + 1)) / (slope + 1)
-            )
-            log_r = (
-                lp[rows, i]
-                + np.log(dist * np.maximum(integral, 0))
-                - lp[:, -1]
-                - np.log(math.sqrt(2 * math.pi) * sd)
-            )
-            r = np.where(valley, np.exp(np.minimum(log_r, 700)), np.inf)
+        dist = np.abs(where - c)
+        r = spike_ratio(lp[rows, i], lp[:, -1], dist, slopes[:, j], delta, sd, valley)
         ratio = np.where(cut[:, j], np.maximum(ratio, np.nan_to_num(r, nan=np.inf)), ratio)
     return lo_lim, hi_lim, ratio
