@@ -312,9 +312,9 @@ def test_rule_params_come_from_the_entries():
     model = paths.stan_models[0]
     assert paths.checked_program(model) == [paths.program_marker(model)]
     sc = paths.scenario_objects[paths.stan_scenarios[0]]
-    inputs = paths.trajectory_inputs(sc.name, sc.K)
-    assert inputs["checked"] == paths.check(sc.name)
-    assert f"_K{sc.K}_" in inputs["disturbances"]
+    read = paths.design_set(sc.name, sc.K)
+    assert read == paths.disturbances(sc.disturbance_dim, sc.K, sc.method, sc.seed)
+    assert f"_K{sc.K}_" in read and read.startswith(paths.design_dir + "/")
 
 
 @pytest.mark.parametrize("profile", ["smoke", "stoch_vol", "map"])

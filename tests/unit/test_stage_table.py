@@ -17,6 +17,7 @@ import yaml
 from ssmobs.cache_keys import CacheKeys
 from ssmobs.config.stage_inputs import inputs_payload
 from ssmobs.config.validation import validate
+from ssmobs.models import MODELS
 from ssmobs.stage_table import PACKAGE_DIR, STAGES
 
 pytestmark = pytest.mark.unit
@@ -48,7 +49,7 @@ def _rule(stage: str) -> str:
 
 
 def test_every_entry_names_code_and_scripts_that_exist():
-    assert {"joint_map", "exact"} <= set(WITH_INPUTS)
+    assert {"trajectories", "joint_map", "exact"} <= set(WITH_INPUTS)
     for name, stage in STAGES.items():
         for entry in stage.code:
             assert (PACKAGE_DIR / entry.partition(":")[0]).is_file(), (name, entry)
@@ -117,7 +118,10 @@ def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
     fields = [f.name for f in dataclasses.fields(inputs)]
     assert fields and set(inputs_payload(inputs)) == {"stage_inputs", *fields}
     for field in fields:
-        other = dataclasses.replace(inputs, **{field: _changed(getattr(inputs, field))})
+        value = getattr(inputs, field)
+        # a model is a module of the package: another one (its code is keyed too)
+        new = next(m for m in sorted(MODELS) if m != value) if field == "model" else _changed(value)
+        other = dataclasses.replace(inputs, **{field: new})
         monkeypatch.setattr(keys, "inputs", lambda s, n, other=other, **at: other)
         assert keys.stage_key(stage, name, **at) != base, field
     monkeypatch.undo()
@@ -133,6 +137,20 @@ def test_the_joint_map_inputs_hold_what_the_stage_read_before():
     assert Path(inputs.trajectories).parent.name == keys.trajectories(name)
     assert inputs.settings_config["start_states"] == keys.scenarios[name]["joint_map_start"]
     assert inputs.prior_config == keys.scenarios[name].get("prior")
+
+
+def test_the_trajectories_inputs_are_keyed_per_K_and_by_the_model_code():
+    keys = smoke_keys()
+    name = next(iter(keys.scenarios))
+    sc = keys.scenarios[name]
+    own = keys.inputs("trajectories", name, K=int(sc["K"]))
+    assert keys.trajectories(name) == keys.trajectories(name, int(sc["K"]))
+    other = keys.inputs("trajectories", name, K=int(sc["K"]) + 1)
+    assert own.design_set(6) != other.design_set(6) and own.K + 1 == other.K
+    assert f"/{keys.design}/" in own.design_set(6) and own.x0_config == sc["x0"]
+    assert keys.lookup("trajectories", name, keys.trajectories(name)) == {"K": int(sc["K"])}
+    payload = keys.describe()[f"trajectories:{name}:{keys.trajectories(name)}"]
+    assert payload["model_code"] == keys.model_code(sc["model"])
 
 
 def test_the_exact_inputs_are_keyed_per_K():

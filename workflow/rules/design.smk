@@ -25,11 +25,11 @@ rule design_trajectories:
     """Design state and observation trajectories x~(k), z~(k) of one scenario (Eq. (1)), at
     its K or at the exact stage's K (the key says which)."""
     input:
-        unpack(
-            lambda wc: PATHS.trajectory_inputs(
-                wc.scenario, expect_key("trajectories", wc.scenario, wc.key)["K"]
-            )
+        # the design set the stage reads (TrajectoriesInputs.design_set)
+        disturbances=lambda wc: PATHS.design_set(
+            wc.scenario, expect_key("trajectories", wc.scenario, wc.key)["K"]
         ),
+        checked=lambda wc: PATHS.check(wc.scenario),
     output:
         trajectories="results/{scenario}/design_trajectories/{key}/trajectories.nc",
         checksum="results/{scenario}/design_trajectories/{key}/trajectories.nc.sha256",
@@ -41,9 +41,9 @@ rule design_trajectories:
         mem_mb=2000,
         runtime=10,
     params:
-        scenario=lambda wc: {
-            **SCENARIOS[wc.scenario],
-            "K": expect_key("trajectories", wc.scenario, wc.key)["K"],
-        },
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: PATHS.inputs(
+            "trajectories", wc.scenario, K=expect_key("trajectories", wc.scenario, wc.key)["K"]
+        ),
     script:
         "../scripts/design_trajectories.py"

@@ -53,8 +53,6 @@ def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
     return {n: entry.get(n) for n in names}
 
 
-#: the scenario fields that determine its design trajectories
-TRAJECTORY_FIELDS = ("model", "omega", "x0", "T", "method", "seed")
 #: ... its NUTS records (beside the trajectories); the name enters Stan's seed
 NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
 #: the NUTS settings that determine a record (batch_size and keep_draws only group them)
@@ -245,16 +243,10 @@ class CacheKeys:
         return self._key("check_model_stan" if stan else "check_model", name, payload)
 
     def trajectories(self, name: str, K: int | None = None) -> str:
-        sc = self.scenarios[name]
-        K = int(sc["K"] if K is None else K)
-        payload = {
-            "scenario": _pick(sc, TRAJECTORY_FIELDS),
-            "K": K,
-            "design": self.design,
-            "model_code": self.model_code(sc["model"]),
-            "code": self.code("trajectories"),
-        }
-        return self._key("trajectories", name, payload, K=K)
+        """The design trajectories' key at K (the scenario's own K by default;
+        :class:`~ssmobs.config.stage_inputs.TrajectoriesInputs`)."""
+        K = int(self.scenarios[name]["K"] if K is None else K)
+        return self.stage_key("trajectories", name, K=K)
 
     @functools.cache  # noqa: B019
     def inputs(self, stage: str, name: str, **at: int) -> Any:
@@ -264,18 +256,21 @@ class CacheKeys:
         same K (which carry their keys)."""
         entry = STAGES[stage]
         assert entry.inputs is not None, f"stage {stage} has no inputs object yet"
-        reads = {
+        reads: dict[str, Any] = {
             kw: STAGES[up].paths(name, getattr(self, up)(name, **at))[output]
             for kw, (up, output) in entry.reads.items()
         }
+        reads.update({shared: getattr(self, shared) for shared in entry.shared})
+        reads.update({per: at[per] for per in entry.builder_per})
         return entry.inputs(self.scenarios[name], self.config, **reads)
 
     def stage_key(self, stage: str, name: str, **at: int) -> str:
-        """The key of a stage with an inputs object: its content and the stage's code."""
-        payload = {
-            "inputs": inputs_payload(self.inputs(stage, name, **at)),
-            "code": self.code(stage),
-        }
+        """The key of a stage with an inputs object: its content and the stage's code (and
+        the model's, where the stage runs the model)."""
+        inputs = self.inputs(stage, name, **at)
+        payload = {"inputs": inputs_payload(inputs), "code": self.code(stage)}
+        if STAGES[stage].runs_model:
+            payload["model_code"] = self.model_code(inputs.model)
         return self._key(stage, name, payload, **at)
 
     def joint_map(self, name: str) -> str:

@@ -25,6 +25,7 @@ from typing import Any
 from .cache_keys import CacheKeys
 from .config.blocks import stan_gradients
 from .config.scenario import Scenario
+from .config.stage_inputs import DESIGN_DIR, design_set_path
 from .config.validation import asks_for_paper_outputs
 from .stage_table import STAGES
 
@@ -178,11 +179,17 @@ class RunPaths:
     @property
     def design_dir(self) -> str:
         """The design sets of this config's design settings and code."""
-        return f"results/shared/design_disturbances/{self.keys.design}"
+        return DESIGN_DIR.format(key=self.keys.design)
 
     def disturbances(self, q: int, K: int, method: str, seed: int) -> str:
         """K design disturbances of N(0, I_q) made by ``method`` from ``seed``."""
-        return f"{self.design_dir}/q{q}_K{K}_{method}_seed{seed}.nc"
+        return design_set_path(self.keys.design, q, K, method, seed)
+
+    def design_set(self, name: str, K: int) -> str:
+        """The design set the design trajectories of scenario ``name`` at K read
+        (:meth:`~ssmobs.config.stage_inputs.TrajectoriesInputs.design_set`)."""
+        sc = self.scenario_objects[name]
+        return self.inputs("trajectories", name, K=int(K)).design_set(sc.disturbance_dim)
 
     def figure2_disturbances(self) -> str:
         """The design set that Figure 2 draws (config block figure2)."""
@@ -202,8 +209,8 @@ class RunPaths:
 
     def trajectories(self, name: str, K: int | None = None) -> str:
         """The design trajectories of a scenario at K (its own K by default)."""
-        key = self.keys.trajectories(name, K)
-        return STAGES["trajectories"].paths(name, key)["trajectories"]
+        K = self.scenario_objects[name].K if K is None else K
+        return self.stage_paths("trajectories", name, K=int(K))["trajectories"]
 
     def every_trajectories(self) -> list[str]:
         """The design trajectories of every scenario, at its K and at its exact stage's K."""
@@ -246,15 +253,6 @@ class RunPaths:
         the one compile (no check job compiles, none waits on another's build lock).  A plain
         input: a rebuilt program reruns its check, as it reruns the sampling."""
         return [self.program_marker(model)] if self.backend == "native" else []
-
-    def trajectory_inputs(self, name: str, K: int) -> dict[str, str]:
-        """The design disturbances and the model check behind the design trajectories of
-        scenario ``name`` at K."""
-        sc = self.scenario_objects[name]
-        return {
-            "disturbances": self.disturbances(sc.disturbance_dim, K, sc.method, sc.seed),
-            "checked": self.check(name),
-        }
 
     def select_k_params(self, name: str) -> dict[str, Any]:
         """What the choice of K of k_selection entry ``name`` reads: the entry and its

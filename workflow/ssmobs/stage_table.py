@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config.stage_inputs import exact_inputs, joint_map_inputs
+from .config.stage_inputs import exact_inputs, joint_map_inputs, trajectories_inputs
 
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -47,6 +47,13 @@ class Stage:
     reads: Mapping[str, tuple[str, str]] = field(default_factory=dict)
     #: what the stage is keyed by beside the scenario (``("K",)``: once per K it runs at)
     per: tuple[str, ...] = ()
+    #: of ``per``, what the builder takes by keyword (where no output it reads carries it)
+    builder_per: tuple[str, ...] = ()
+    #: the keys of shared stages it reads (:class:`~ssmobs.cache_keys.CacheKeys` attributes,
+    #: e.g. ``design``), passed to the builder by keyword
+    shared: tuple[str, ...] = ()
+    #: whether the stage runs the scenario's model, so its key holds the model's code
+    runs_model: bool = False
 
     def paths(self, scenario: str, key: str) -> dict[str, str]:
         """The outputs of this stage for a scenario and its key (name -> path)."""
@@ -89,11 +96,18 @@ STAGES: dict[str, Stage] = {
     "design": Stage(
         ("stages/design.py:run_design_disturbances",), ("design_disturbances",), (LCD_KERNEL,)
     ),
+    # at K trajectories: the scenario's K and its exact_K
     "trajectories": Stage(
         ("stages/design.py:run_design_trajectories",),
         ("design_trajectories",),
+        inputs=trajectories_inputs,
+        entry="run_design_trajectories",
+        per=("K",),
+        builder_per=("K",),
+        shared=("design",),
+        runs_model=True,
         folder="results/{scenario}/design_trajectories/{key}",
-        outputs={"trajectories": "trajectories.nc"},
+        outputs={"trajectories": "trajectories.nc", "checksum": "trajectories.nc.sha256"},
     ),
     # the command line too: it was part of the check's module
     "check_model": Stage(("model_check/check.py", "model_check/__main__.py"), ("check_model",)),

@@ -35,9 +35,84 @@ def _prior_config(prior: Any) -> Any:
     return prior
 
 
+def _plain(value: Any) -> Any:
+    """A frozen value back as plain config data: (name, value) pairs as a mapping, other
+    tuples as lists."""
+    if isinstance(value, tuple):
+        if value and all(
+            isinstance(v, tuple) and len(v) == 2 and isinstance(v[0], str) for v in value
+        ):
+            return {k: _plain(v) for k, v in value}
+        return [_plain(v) for v in value]
+    return value
+
+
+#: the folder of the design sets of one design key (rule design_disturbances)
+DESIGN_DIR = "results/shared/design_disturbances/{key}"
+#: one design set there
+DESIGN_SET = DESIGN_DIR + "/q{q}_K{K}_{method}_seed{seed}.nc"
+
+
+def design_set_path(design: str, q: int, K: int, method: str, seed: int) -> str:
+    """The design set of q x K disturbances by ``method`` from ``seed`` under design key
+    ``design``."""
+    return DESIGN_SET.format(key=design, q=q, K=K, method=method, seed=seed)
+
+
 def inputs_payload(inputs: Any) -> dict[str, Any]:
     """The content of an inputs object (its fields as plain data): what its key holds."""
     return {"stage_inputs": type(inputs).__name__, **dataclasses.asdict(inputs)}
+
+
+@dataclass(frozen=True)
+class TrajectoriesInputs:
+    """Everything rule design_trajectories reads (Sec. III.A, Eq. (1)): the design sets' key
+    (which with q, K, method and seed names the design set read, :meth:`design_set`), the
+    scenario's name, model, true values, T, K, method and seed (written into the file)."""
+
+    design: str
+    scenario: str
+    model: str
+    #: the true parameters and initial state as the config gives them (frozen)
+    omega: Any
+    x0: Any
+    T: int
+    K: int
+    method: str
+    seed: int
+
+    @property
+    def omega_config(self) -> Any:
+        """The true parameters as the config gives them (a mapping or a list)."""
+        return _plain(self.omega)
+
+    @property
+    def x0_config(self) -> Any:
+        """The true initial state as the config gives it (a number or a list)."""
+        return _plain(self.x0)
+
+    def design_set(self, q: int) -> str:
+        """The design set of K disturbances of dimension ``q`` = (d + p) T the stage reads
+        (the model gives d and p)."""
+        return design_set_path(self.design, q, self.K, self.method, self.seed)
+
+
+def trajectories_inputs(
+    entry: Mapping[str, Any], config: Mapping[str, Any], *, design: str, K: int
+) -> TrajectoriesInputs:
+    """The inputs of rule design_trajectories for the scenario ``entry`` at K trajectories,
+    under the design sets of key ``design``."""
+    return TrajectoriesInputs(
+        design=design,
+        scenario=str(entry["name"]),
+        model=str(entry["model"]),
+        omega=_frozen(entry["omega"]),
+        x0=_frozen(entry["x0"]),
+        T=int(entry["T"]),
+        K=int(K),
+        method=str(entry["method"]),
+        seed=int(entry["seed"]),
+    )
 
 
 @dataclass(frozen=True)

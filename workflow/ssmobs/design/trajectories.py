@@ -41,17 +41,44 @@ def make_trajectories(
     scenario: Scenario, matrix: np.ndarray, provenance: dict | None = None
 ) -> Trajectories:
     """Turn a (q x K) disturbance matrix into the scenario's design trajectories (Sec. III.A)."""
-    model = scenario.model
-    x, z = model.design_trajectories(scenario.omega, scenario.x0, matrix, scenario.T)
+    return trajectories_of(
+        scenario.model,
+        scenario.omega,
+        scenario.x0,
+        scenario.T,
+        matrix,
+        name=scenario.name,
+        method=scenario.method,
+        seed=scenario.seed,
+        provenance=provenance,
+    )
+
+
+def trajectories_of(
+    model: StateSpaceModel,
+    omega: np.ndarray,
+    x0: np.ndarray,
+    T: int,
+    matrix: np.ndarray,
+    *,
+    name: str,
+    method: str,
+    seed: int,
+    provenance: dict | None = None,
+) -> Trajectories:
+    """The design trajectories (Eq. (1)) of ``model`` at true values ``omega``, ``x0`` over
+    ``T`` steps from a (q x K) disturbance matrix; ``name``, ``method`` and ``seed`` (the
+    scenario's, and its design set's) are written into the attributes."""
+    x, z = model.design_trajectories(omega, x0, matrix, T)
     attrs = {
-        "scenario": scenario.name,
+        "scenario": name,
         "model": model.slug,
-        "T": scenario.T,
+        "T": T,
         "K": int(matrix.shape[1]),
-        "method": scenario.method,
-        "seed": scenario.seed,
-        "omega": json.dumps(dict(zip(model.param_names, scenario.omega.tolist()))),
-        "x0": json.dumps(scenario.x0.tolist()),
+        "method": method,
+        "seed": seed,
+        "omega": json.dumps(dict(zip(model.param_names, np.asarray(omega).tolist()))),
+        "x0": json.dumps(np.asarray(x0).tolist()),
         # no prior: the trajectories do not depend on it (rule of the cache: a file holds
         # only what its key determines, so a new prior reuses them byte for byte)
     }
@@ -63,9 +90,7 @@ def make_trajectories(
                 if isinstance(v, (int, float, str))
             }
         )
-    return Trajectories(
-        model=model, omega=np.array(scenario.omega), x0=np.array(scenario.x0), x=x, z=z, attrs=attrs
-    )
+    return Trajectories(model=model, omega=np.array(omega), x0=np.array(x0), x=x, z=z, attrs=attrs)
 
 
 def write_trajectories(path: str | os.PathLike, traj: Trajectories) -> None:

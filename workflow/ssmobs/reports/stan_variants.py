@@ -26,7 +26,7 @@ import pandas as pd
 
 from ssmobs import io
 from ssmobs.binomial import format_fraction
-from ssmobs.cache_keys import SAMPLER_FIELDS, TRAJECTORY_FIELDS
+from ssmobs.cache_keys import SAMPLER_FIELDS
 from ssmobs.config.blocks import stan_settings
 from ssmobs.config.validation import ConfigError, read_config_file, validate
 from ssmobs.reports.propriety_notes import (
@@ -40,7 +40,7 @@ from ssmobs.reports.tables import write_table
 from ssmobs.stage_code import code_digest, digest, file_digest
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
-TRAJECTORY_KEYS = (*TRAJECTORY_FIELDS, "K", "prior", "stan_every")
+TRAJECTORY_KEYS = ("model", "omega", "x0", "T", "method", "seed", "K", "prior", "stan_every")
 # the Stan set-up: the config's stan block (scenario's stan_settings override), the gradient
 # path (issue 49), inits, seed
 SETUP_KEYS = (*SAMPLER_FIELDS, "gradients", "stan_init", "stan_seed")
