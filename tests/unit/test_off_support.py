@@ -55,6 +55,7 @@ def test_gather_writes_the_marks_into_the_per_trajectory_table(tmp_path, monkeyp
     counts the marked rows."""
     from ssmobs import io
     from ssmobs.config.scenario import Scenario
+    from ssmobs.config.stage_inputs import GatherInputs
     from ssmobs.design import trajectories as design
     from ssmobs.nuts import record_cache
     from ssmobs.stages.stan import run_gather_nuts
@@ -77,15 +78,19 @@ def test_gather_writes_the_marks_into_the_per_trajectory_table(tmp_path, monkeyp
     table = frame()
     table.loc[1, "sigma_map"] = -1.6e307
     io.write_parquet(tmp_path / "batch0.parquet", table)
-    info = run_gather_nuts(
-        "unused.nc",
-        [tmp_path / "batch0.parquet"],
-        scenario,
-        {},
-        tmp_path,
-        tmp_path / "marginal_map.parquet",
-        tmp_path / "summary.json",
+    inputs = GatherInputs(
+        trajectories="unused.nc",
+        batches=(str(tmp_path / "batch0.parquet"),),
+        records=str(tmp_path),
+        scenario="sv",
+        K=3,
+        stan_every=1,
+        prior=(("phi", "restricted"), ("sigma", "half_line")),
+        stan_init="random",
+        convergence=(),
     )
+    paths = {"table": tmp_path / "marginal_map.parquet", "summary": tmp_path / "summary.json"}
+    info = run_gather_nuts(inputs, paths)
     back = io.read_parquet(tmp_path / "marginal_map.parquet", ["off_support"])
     assert back["off_support"].tolist()[0] == "" and back["off_support"].tolist()[2] == ""
     assert back["off_support"].tolist()[1].startswith("sigma_map -1.6e+307")

@@ -60,9 +60,9 @@ rule gather_nuts:
     marginal-MAP mean/var/MSE, coverage, bias."""
     input:
         trajectories=lambda wc: keyed_input(
-            "gather", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)
+            "gather", wc.scenario, wc.key, PATHS.gather_inputs(wc.scenario).trajectories
         ),
-        batches=lambda wc: PATHS.nuts_batches(wc.scenario),
+        batches=lambda wc: PATHS.gather_inputs(wc.scenario).batches,
     output:
         table="results/{scenario}/gather_nuts/{key}/marginal_map.parquet",
         summary="results/{scenario}/gather_nuts/{key}/summary.json",
@@ -71,8 +71,9 @@ rule gather_nuts:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-        convergence=config["convergence"],
-        records=lambda wc: PATHS.records_dir(wc.scenario),
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: PATHS.inputs(
+            "gather", wc.scenario, batch_size=PATHS.batch_size(wc.scenario)
+        ),
     script:
         "../scripts/gather_nuts.py"

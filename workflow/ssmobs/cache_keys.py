@@ -80,6 +80,11 @@ def check_case(sc: Mapping[str, Any]) -> dict[str, Any]:
     return case
 
 
+def _at(stage: str, at: Mapping[str, int]) -> dict[str, int]:
+    """Of ``at``, what ``stage`` is keyed by (an upstream stage keyed per K, or not)."""
+    return {k: v for k, v in at.items() if k in STAGES[stage].per}
+
+
 class UnknownKeyError(KeyError):
     """A keyed path was asked for whose key the current config does not produce."""
 
@@ -257,7 +262,7 @@ class CacheKeys:
         entry = STAGES[stage]
         assert entry.inputs is not None, f"stage {stage} has no inputs object yet"
         reads: dict[str, Any] = {
-            kw: STAGES[up].paths(name, getattr(self, up)(name, **at))[output]
+            kw: STAGES[up].read_path(name, getattr(self, up)(name, **_at(up, at)), output)
             for kw, (up, output) in entry.reads.items()
         }
         reads.update({shared: getattr(self, shared) for shared in entry.shared})
@@ -335,11 +340,9 @@ class CacheKeys:
         return self._key("nuts_batches", name, payload)
 
     def gather(self, name: str, batch_size: int) -> str:
-        payload = {
-            "batches": self.nuts_batches(name, batch_size),
-            "code": self.code("gather"),
-        }
-        return self._key("gather", name, payload)
+        """The gathered NUTS results' key for batches of ``batch_size``
+        (:class:`~ssmobs.config.stage_inputs.GatherInputs`)."""
+        return self.stage_key("gather", name, batch_size=int(batch_size))
 
     def exact(self, name: str, K: int) -> str:
         """The exact stage's key at K trajectories

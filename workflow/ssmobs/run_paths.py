@@ -274,7 +274,7 @@ class RunPaths:
 
     def records_dir(self, name: str) -> str:
         """The per-trajectory NUTS records of a scenario (resumable, shared by batchings)."""
-        return f"results/{name}/sample_nuts/records/{self.keys.nuts_records(name)}"
+        return STAGES["nuts_records"].folder_of(name, self.keys.nuts_records(name))
 
     def draws_dir(self, name: str) -> str:
         """The kept draws of a scenario's NUTS runs (stan.keep_draws)."""
@@ -283,24 +283,28 @@ class RunPaths:
     def batch_dir(self, name: str) -> str:
         """The batch tables of a scenario's NUTS stage."""
         key = self.keys.nuts_batches(name, self.batch_size(name))
-        return f"results/{name}/sample_nuts/{key}"
+        return STAGES["nuts_batches"].folder_of(name, key)
 
     def nuts_batches(self, name: str) -> list[str]:
         """Every batch table of a scenario's NUTS stage, in batch order."""
         ranges = self.scenario_objects[name].stan_batches(self.batch_size(name))
         return [f"{self.batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
-    def gather_dir(self, name: str) -> str:
-        """The folder of a scenario's gathered NUTS results."""
-        return f"results/{name}/gather_nuts/{self.keys.gather(name, self.batch_size(name))}"
+    def gather_inputs(self, name: str) -> Any:
+        """What rule gather_nuts reads for scenario ``name`` at its batch size."""
+        return self.inputs("gather", name, batch_size=self.batch_size(name))
+
+    def gather_paths(self, name: str) -> dict[str, str]:
+        """The gathered NUTS results of a scenario (name -> path)."""
+        return self.stage_paths("gather", name, batch_size=self.batch_size(name))
 
     def stan_summary(self, name: str) -> str:
         """The summary of a scenario's NUTS stage (|K^Stan| and the convergence checks)."""
-        return f"{self.gather_dir(name)}/summary.json"
+        return self.gather_paths(name)["summary"]
 
     def stan_table(self, name: str) -> str:
         """The marginal MAP of every trajectory of a scenario's NUTS stage."""
-        return f"{self.gather_dir(name)}/marginal_map.parquet"
+        return self.gather_paths(name)["table"]
 
     # -- exact marginal --------------------------------------------------------------------
 

@@ -16,7 +16,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config.stage_inputs import exact_inputs, joint_map_inputs, trajectories_inputs
+from .config.stage_inputs import (
+    exact_inputs,
+    gather_inputs,
+    joint_map_inputs,
+    trajectories_inputs,
+)
 
 #: the package's own directory (``workflow/ssmobs``)
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -42,8 +47,8 @@ class Stage:
     entry: str | None = None
     folder: str | None = None
     outputs: Mapping[str, str] = field(default_factory=dict)
-    #: the builder's keyword -> (stage, output) of the same scenario it reads (at the same
-    #: K where the stage is keyed per K)
+    #: the builder's keyword -> (stage, output) of the same scenario it reads (``""``: the
+    #: stage's folder; at the same K, or batch size, where both are keyed by it)
     reads: Mapping[str, tuple[str, str]] = field(default_factory=dict)
     #: what the stage is keyed by beside the scenario (``("K",)``: once per K it runs at)
     per: tuple[str, ...] = ()
@@ -55,11 +60,20 @@ class Stage:
     #: whether the stage runs the scenario's model, so its key holds the model's code
     runs_model: bool = False
 
+    def folder_of(self, scenario: str, key: str) -> str:
+        """This stage's keyed folder for a scenario and its key."""
+        assert self.folder is not None, "a stage without a keyed folder"
+        return self.folder.format(scenario=scenario, key=key)
+
     def paths(self, scenario: str, key: str) -> dict[str, str]:
         """The outputs of this stage for a scenario and its key (name -> path)."""
-        assert self.folder is not None, "a stage without a keyed folder"
-        folder = self.folder.format(scenario=scenario, key=key)
+        folder = self.folder_of(scenario, key)
         return {name: f"{folder}/{file}" for name, file in self.outputs.items()}
+
+    def read_path(self, scenario: str, key: str, output: str) -> str:
+        """What another stage reads of this one: its output ``output``, or its keyed folder
+        where ``output`` is ``""`` (a stage whose files are not fixed outputs)."""
+        return self.folder_of(scenario, key) if output == "" else self.paths(scenario, key)[output]
 
 
 #: the native backend's C++ driver (samples, and evaluates the log density for the check)
@@ -126,13 +140,35 @@ STAGES: dict[str, Stage] = {
         ("build_stan_model",),
         (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
     ),
+    # the records of every trajectory, one file each (resumable, shared by batchings)
     "nuts_records": Stage(
         ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
         ("sample_nuts",),
         (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+        folder="results/{scenario}/sample_nuts/records/{key}",
     ),
-    "nuts_batches": Stage(("stages/stan.py:run_sample_batch",), ("sample_nuts",)),
-    "gather": Stage(("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"), ("gather_nuts",)),
+    # the batch tables of one batch size, batch{b}.parquet
+    "nuts_batches": Stage(
+        ("stages/stan.py:run_sample_batch",),
+        ("sample_nuts",),
+        folder="results/{scenario}/sample_nuts/{key}",
+        per=("batch_size",),
+    ),
+    "gather": Stage(
+        ("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"),
+        ("gather_nuts",),
+        inputs=gather_inputs,
+        entry="run_gather_nuts",
+        reads={
+            "trajectories": ("trajectories", "trajectories"),
+            "batches": ("nuts_batches", ""),
+            "records": ("nuts_records", ""),
+        },
+        per=("batch_size",),
+        builder_per=("batch_size",),
+        folder="results/{scenario}/gather_nuts/{key}",
+        outputs={"table": "marginal_map.parquet", "summary": "summary.json"},
+    ),
     # at K trajectories: the scenario's K and its exact_K
     "exact": Stage(
         ("stages/exact.py",),

@@ -195,3 +195,65 @@ def exact_inputs(
         prior=_frozen(entry.get("prior")),
         settings=_frozen(config["exact_marginal"]),
     )
+
+
+@dataclass(frozen=True)
+class GatherInputs:
+    """Everything rule gather_nuts reads (Sec. III.C): the scenario's design trajectories,
+    its batch tables and its NUTS records' folder (keyed paths), the scenario's name, K and
+    ``stan_every`` (the trajectories the batches must cover), its prior (the support the
+    marginal MAPs are checked against), its ``stan_init`` (written into the summary) and the
+    config block ``convergence`` (the thresholds each batch is checked with)."""
+
+    trajectories: str
+    batches: tuple[str, ...]
+    records: str
+    scenario: str
+    K: int
+    stan_every: int
+    #: the prior as the config gives it (a variant name, or per-parameter pairs)
+    prior: Any
+    stan_init: str
+    #: the ``convergence`` block as sorted (key, value) pairs
+    convergence: tuple[tuple[str, Any], ...]
+
+    @property
+    def prior_config(self) -> Any:
+        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
+        return _prior_config(self.prior)
+
+    @property
+    def convergence_config(self) -> dict[str, Any]:
+        """The ``convergence`` block as the config gives it."""
+        return {k: _plain(v) for k, v in self.convergence}
+
+    @property
+    def stan_trajectories(self) -> range:
+        """The trajectories k of the Stan stage: every ``stan_every``-th of the K."""
+        return range(0, self.K, self.stan_every)
+
+
+def gather_inputs(
+    entry: Mapping[str, Any],
+    config: Mapping[str, Any],
+    *,
+    trajectories: str,
+    batches: str,
+    records: str,
+    batch_size: int,
+) -> GatherInputs:
+    """The inputs of rule gather_nuts for the scenario ``entry`` whose batch tables of
+    ``batch_size`` trajectories lie in the folder ``batches``."""
+    K, every = int(entry["K"]), int(entry.get("stan_every", 1))
+    n_batches = -(-len(range(0, K, every)) // int(batch_size))
+    return GatherInputs(
+        trajectories=trajectories,
+        batches=tuple(f"{batches}/batch{b}.parquet" for b in range(n_batches)),
+        records=records,
+        scenario=str(entry["name"]),
+        K=K,
+        stan_every=every,
+        prior=_frozen(entry.get("prior")),
+        stan_init=str(entry["stan_init"]),
+        convergence=_frozen(config["convergence"]),
+    )

@@ -7,6 +7,7 @@ The checks that a batch table still matches its records are in :mod:`ssmobs.nuts
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from ..config.scenario import Scenario
+    from ..config.stage_inputs import GatherInputs
     from ..design.trajectories import Trajectories
     from ..nuts.batch import NutsBatch
     from ..stan_backends.base import SamplerSettings
@@ -164,16 +166,10 @@ def _theta_hat(path: PathLike, K: int) -> Any:
     return theta
 
 
-def run_gather_nuts(
-    trajectories: PathLike,
-    batch_tables: list[PathLike],
-    scenario: Scenario,
-    convergence_cfg: dict,
-    records_dir: PathLike,
-    table: PathLike,
-    summary: PathLike,
-) -> dict:
-    """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary.
+def run_gather_nuts(inputs: GatherInputs, paths: Mapping[str, PathLike]) -> dict:
+    """Rule gather_nuts: one table of all trajectories and the scenario's Stan summary, from
+    its :class:`~ssmobs.config.stage_inputs.GatherInputs` alone; ``paths``: the outputs
+    ``table`` and ``summary``, as in :data:`ssmobs.stage_table.STAGES`.
 
     The table marks in ``off_support`` every marginal MAP or quantile off its prior support
     or from draws that ran off (:func:`ssmobs.nuts.off_support.mark_off_support`; the summary
@@ -190,28 +186,28 @@ def run_gather_nuts(
     from ..nuts.record_cache import check_batch_records
     from ..nuts.stan_metrics import stan_summary
 
-    traj = read_trajectories(trajectories)
+    traj = read_trajectories(inputs.trajectories)
+    name, convergence = inputs.scenario, inputs.convergence_config
+    batch_tables = inputs.batches
     frames = [io.read_parquet(p, required_columns=["k", "converged"]) for p in batch_tables]
     for path, batch_frame in zip(batch_tables, frames):
-        check_batch_records(path, batch_frame, traj.model, traj.T, records_dir, convergence_cfg)
+        check_batch_records(path, batch_frame, traj.model, traj.T, inputs.records, convergence)
     frame = pd.concat(frames, ignore_index=True)
     frame = frame.sort_values("k", kind="stable").reset_index(drop=True)
-    expected = scenario.stan_trajectories
+    expected = inputs.stan_trajectories
     if frame["k"].tolist() != list(expected):
         raise io.CorruptFileError(
-            f"batch tables of scenario {scenario.name} do not cover "
+            f"batch tables of scenario {name} do not cover "
             f"k = {expected.start}, {expected.start + expected.step}, ..., "
             f"{expected[-1] if len(expected) else '-'} exactly once"
         )
     # every marginal MAP or quantile off the prior support or run off, marked in the file
-    bounds = traj.model.prior_bounds(traj.omega, scenario.prior)
+    bounds = traj.model.prior_bounds(traj.omega, inputs.prior_config)
     frame = mark_off_support(frame, traj.model, bounds, traj.T)
     info = stan_summary(frame, traj.model, traj.omega, traj.x0, traj.x)
     info["n_off_support"] = int((frame["off_support"] != "").sum())
-    info.update(
-        scenario=scenario.name, model=traj.model.slug, T=traj.T, stan_init=scenario.stan_init
-    )
-    logger.info("scenario %s: |K^Stan| = %s of %d", scenario.name, info["n_stan"], len(frame))
-    io.write_parquet(table, frame)
-    io.write_json(summary, info)
+    info.update(scenario=name, model=traj.model.slug, T=traj.T, stan_init=inputs.stan_init)
+    logger.info("scenario %s: |K^Stan| = %s of %d", name, info["n_stan"], len(frame))
+    io.write_parquet(paths["table"], frame)
+    io.write_json(paths["summary"], info)
     return info
