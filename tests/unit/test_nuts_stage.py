@@ -582,6 +582,7 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
     all batches share; the next job of that batch removes its own, not other batches'."""
     import ssmobs.nuts.batch
     from ssmobs.config.scenario import Scenario
+    from ssmobs.config.stage_inputs import nuts_batches_inputs
     from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.stages.stan import run_sample_batch
 
@@ -609,18 +610,20 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
         "adapt_delta": 0.8,
         "max_treedepth": 10,
     }
+    entry = {**same_a09(T=3), "name": sc.name, "K": 4, "seed": sc.seed, "stan_init": "random"}
+    inputs = nuts_batches_inputs(
+        entry,
+        {"stan": stan_cfg, "convergence": {}},
+        trajectories=str(tmp_path / "t.nc"),
+        program_marker=str(tmp_path / "marker.json"),
+        joint_map="unused",
+        records=str(records),
+        batch_size=2,
+    )
+    inputs = dataclasses.replace(inputs, draws=str(draws))
+    assert inputs.batch_of("batch1.parquet") == (2, 3)
     with pytest.raises(_Sampled):
-        run_sample_batch(
-            tmp_path / "t.nc",
-            tmp_path / "marker.json",
-            sc,
-            stan_cfg,
-            {},
-            1,
-            records_dir=records,
-            draws_dir=draws,
-            out=tmp_path / "batch1.parquet",
-        )
+        run_sample_batch(inputs, {"table": tmp_path / "batch1.parquet"})
     assert not any(p.exists() for p in ours)
     assert other.exists()
 

@@ -181,3 +181,24 @@ def test_the_gather_inputs_read_every_batch_table_and_the_records():
     assert len(keys.inputs("gather", name, batch_size=1).batches) == len(
         paths.scenario_objects[name].stan_trajectories
     )
+
+
+def test_the_nuts_inputs_name_the_batches_rule_sample_nuts_writes():
+    """Each batch table of a scenario's batch size with its trajectories, the records' and
+    the draws' folders and the program marker, as RunPaths gives them to the other rules."""
+    from ssmobs.run_paths import RunPaths
+
+    keys = smoke_keys()
+    paths = RunPaths.from_config(keys.config, keys, "native")
+    for name in paths.stan_scenarios:
+        sc = paths.scenario_objects[name]
+        inputs = paths.nuts_inputs(name)
+        tables = [f"{paths.batch_dir(name)}/{file}" for file, _ in inputs.tables]
+        assert tables == paths.nuts_batches(name)
+        ks = [tuple(r) for r in sc.stan_batches(paths.batch_size(name))]
+        assert [inputs.batch_of(file) for file, _ in inputs.tables] == ks
+        assert (inputs.records, inputs.draws) == (paths.records_dir(name), paths.draws_dir(name))
+        assert inputs.program == paths.program_marker(sc.model.slug)
+        assert (inputs.joint_map is None) == (sc.stan_init != "joint_map")
+    name = paths.stan_scenarios[0]
+    assert keys.nuts_batches(name, 4) != keys.nuts_batches(name, 2)

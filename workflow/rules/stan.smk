@@ -27,12 +27,12 @@ rule sample_nuts:
     input:
         unpack(lambda wc: PATHS.stan_init_inputs(wc.scenario)),
         trajectories=lambda wc: keyed_input(
-            "nuts_batches", wc.scenario, wc.key, PATHS.trajectories(wc.scenario)
+            "nuts_batches", wc.scenario, wc.key, PATHS.nuts_inputs(wc.scenario).trajectories
         ),
-        marker=lambda wc: PATHS.program_marker(SCENARIOS[wc.scenario]["model"]),
+        marker=lambda wc: PATHS.nuts_inputs(wc.scenario).program,
         checked=lambda wc: PATHS.check(wc.scenario, stan=True),
     output:
-        "results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
+        table="results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
     log:
         "results/{scenario}/sample_nuts/{key}/batch{batch}.log",
     benchmark:
@@ -41,16 +41,16 @@ rule sample_nuts:
         "nuts"
     conda:
         "../../envs/ssmobs.yaml"
+    # the sampler's worker processes: NutsBatchesInputs.threads (config.stage_inputs)
     threads: 1
     resources:
         mem_mb=3000,
         runtime=lambda wc: 10 + 2 * PATHS.batch_size(wc.scenario),
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
-        stan=config["stan"],
-        convergence=config["convergence"],
-        records=lambda wc: PATHS.records_dir(wc.scenario),
-        draws=lambda wc: PATHS.draws_dir(wc.scenario),
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: PATHS.inputs(
+            "nuts_batches", wc.scenario, batch_size=PATHS.batch_size(wc.scenario)
+        ),
     script:
         "../scripts/sample_nuts.py"
 

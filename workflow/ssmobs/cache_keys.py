@@ -113,9 +113,12 @@ class CacheKeys:
         repo: Path = REPO_DIR,
         package_dir: Path = PACKAGE_DIR,
         check_backend: str = "native",
+        backend_name: str | None = None,
     ) -> None:
         self.config = config
         self.backend = backend
+        #: the concrete backend's name (``native``, ...; by default ``backend`` itself)
+        self.backend_name = backend if backend_name is None else backend_name
         self.check_backend = check_backend
         self.repo = Path(repo)
         self.package_dir = Path(package_dir)
@@ -130,7 +133,7 @@ class CacheKeys:
         :func:`stan_identity`, and the native driver's for the model check."""
         native = stan_identity("native")
         sampling = native if backend == "native" else stan_identity(backend)
-        return cls(config, sampling, check_backend=native, **kw)
+        return cls(config, sampling, check_backend=native, backend_name=backend, **kw)
 
     # ------------------------------------------------------------------ helpers
     @functools.cache  # noqa: B019 - one object per parse of the workflow
@@ -265,7 +268,9 @@ class CacheKeys:
             kw: STAGES[up].read_path(name, getattr(self, up)(name, **_at(up, at)), output)
             for kw, (up, output) in entry.reads.items()
         }
-        reads.update({shared: getattr(self, shared) for shared in entry.shared})
+        for shared in entry.shared:
+            value = getattr(self, shared)
+            reads[shared] = value(name) if callable(value) else value
         reads.update({per: at[per] for per in entry.builder_per})
         return entry.inputs(self.scenarios[name], self.config, **reads)
 
@@ -289,6 +294,12 @@ class CacheKeys:
         same whatever the setting (:func:`ssmobs.nuts.stan_program.stan_program`): nothing."""
         mode = stan_gradients(self.config["stan"])
         return {} if mode == "autodiff" or not self.has_stan_file(model) else {"gradients": mode}
+
+    def program_marker(self, name: str) -> str:
+        """The marker of scenario ``name``'s compiled program (rule build_stan_model's
+        output) for this run's backend (:attr:`backend_name`)."""
+        model = self.scenarios[name]["model"]
+        return f"results/shared/stan/{self.backend_name}/{model}/{self.program(model)}.json"
 
     def program(self, model: str) -> str:
         """The compiled-program marker of ``model`` for the configured backend and its Stan
@@ -327,17 +338,9 @@ class CacheKeys:
         return self._key("nuts_records", name, payload)
 
     def nuts_batches(self, name: str, batch_size: int) -> str:
-        every = int(self.scenarios[name].get("stan_every", 1))
-        payload = {
-            "records": self.nuts_records(name),
-            "batch_size": int(batch_size),
-            # absent for every trajectory, so that the keys of earlier runs stay valid
-            **({"stan_every": every} if every != 1 else {}),
-            "keep_draws": sorted(self.config["stan"]["keep_draws"]),
-            "convergence": self.config["convergence"],
-            "code": self.code("nuts_batches"),
-        }
-        return self._key("nuts_batches", name, payload)
+        """The NUTS batch tables' key for batches of ``batch_size``
+        (:class:`~ssmobs.config.stage_inputs.NutsBatchesInputs`)."""
+        return self.stage_key("nuts_batches", name, batch_size=int(batch_size))
 
     def gather(self, name: str, batch_size: int) -> str:
         """The gathered NUTS results' key for batches of ``batch_size``

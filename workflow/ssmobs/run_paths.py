@@ -290,6 +290,10 @@ class RunPaths:
         ranges = self.scenario_objects[name].stan_batches(self.batch_size(name))
         return [f"{self.batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
+    def nuts_inputs(self, name: str) -> Any:
+        """What rule sample_nuts reads for scenario ``name`` at its batch size."""
+        return self.inputs("nuts_batches", name, batch_size=self.batch_size(name))
+
     def gather_inputs(self, name: str) -> Any:
         """What rule gather_nuts reads for scenario ``name`` at its batch size."""
         return self.inputs("gather", name, batch_size=self.batch_size(name))

@@ -20,6 +20,7 @@ from .config.stage_inputs import (
     exact_inputs,
     gather_inputs,
     joint_map_inputs,
+    nuts_batches_inputs,
     trajectories_inputs,
 )
 
@@ -54,8 +55,9 @@ class Stage:
     per: tuple[str, ...] = ()
     #: of ``per``, what the builder takes by keyword (where no output it reads carries it)
     builder_per: tuple[str, ...] = ()
-    #: the keys of shared stages it reads (:class:`~ssmobs.cache_keys.CacheKeys` attributes,
-    #: e.g. ``design``), passed to the builder by keyword
+    #: the keys or paths of shared stages it reads (:class:`~ssmobs.cache_keys.CacheKeys`
+    #: attributes: ``design``, the design sets' key; ``program_marker``, called with the
+    #: scenario's name), passed to the builder by keyword
     shared: tuple[str, ...] = ()
     #: whether the stage runs the scenario's model, so its key holds the model's code
     runs_model: bool = False
@@ -151,8 +153,18 @@ STAGES: dict[str, Stage] = {
     "nuts_batches": Stage(
         ("stages/stan.py:run_sample_batch",),
         ("sample_nuts",),
-        folder="results/{scenario}/sample_nuts/{key}",
+        inputs=nuts_batches_inputs,
+        entry="run_sample_batch",
+        reads={
+            "trajectories": ("trajectories", "trajectories"),
+            "joint_map": ("joint_map", "theta"),
+            "records": ("nuts_records", ""),
+        },
         per=("batch_size",),
+        builder_per=("batch_size",),
+        shared=("program_marker",),
+        folder="results/{scenario}/sample_nuts/{key}",
+        outputs={"table": "batch{batch}.parquet"},
     ),
     "gather": Stage(
         ("stages/stan.py:run_gather_nuts", "nuts/record_cache.py"),

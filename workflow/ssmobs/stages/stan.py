@@ -18,8 +18,7 @@ from . import PathLike
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..config.scenario import Scenario
-    from ..config.stage_inputs import GatherInputs
+    from ..config.stage_inputs import GatherInputs, NutsBatchesInputs
     from ..design.trajectories import Trajectories
     from ..nuts.batch import NutsBatch
     from ..stan_backends.base import SamplerSettings
@@ -62,62 +61,48 @@ def run_build_stan_model(
 
 
 def nuts_batch(
-    scenario: Scenario,
+    inputs: NutsBatchesInputs,
     traj: Trajectories,
-    stan_cfg: dict,
-    convergence_cfg: dict,
-    threads: int = 1,
     init_theta: np.ndarray | None = None,
 ) -> NutsBatch:
-    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`): its design
-    trajectories, true values, prior bounds, seeds and chains' start, its Stan program (the
-    analytic one where ``stan_cfg`` asks for it) and the NUTS settings and thresholds of
-    ``stan_cfg`` (the scenario's own merged over the config block: :meth:`Scenario.stan_config`)
-    and ``convergence_cfg``; ``init_theta``: the joint MAP of every k (``stan_init:
-    joint_map``)."""
+    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`) from its
+    :class:`~ssmobs.config.stage_inputs.NutsBatchesInputs`: its design trajectories, true
+    values, prior bounds, seeds and chains' start, its Stan program (the analytic one where
+    the stan block asks for it), the NUTS settings and the thresholds; ``init_theta``: the
+    joint MAP of every k (``stan_init: joint_map``)."""
     from ..config.blocks import stan_gradients
     from ..nuts.batch import NutsBatch
     from ..nuts.convergence import ConvergenceSettings
     from ..nuts.stan_program import stan_program
 
     model = traj.model
+    stan_cfg = inputs.stan_config
     program, header = stan_program(model.slug, stan_gradients(stan_cfg))
     return NutsBatch(
         model=model,
         stan_file=program,
         z=traj.z,
         x_true=traj.x,
-        bounds=model.prior_bounds(traj.omega, scenario.prior),
+        bounds=model.prior_bounds(traj.omega, inputs.prior_config),
         omega_true=traj.omega,
         x0_true=traj.x0,
-        scenario=scenario.name,
-        seed=scenario.seed,
-        sampler=sampler_settings(stan_cfg, threads),
-        convergence=ConvergenceSettings(**convergence_cfg),
-        init=scenario.stan_init,
-        stan_seed=scenario.stan_seed,
+        scenario=inputs.scenario,
+        seed=inputs.seed,
+        sampler=sampler_settings(stan_cfg, inputs.threads),
+        convergence=ConvergenceSettings(**inputs.convergence_config),
+        init=inputs.stan_init,
+        stan_seed=inputs.stan_seed,
         init_theta=init_theta,
         user_header=header,
     )
 
 
-def run_sample_batch(
-    trajectories: PathLike,
-    marker: PathLike,
-    scenario: Scenario,
-    stan_cfg: dict,
-    convergence_cfg: dict,
-    batch: int,
-    *,
-    records_dir: PathLike,
-    draws_dir: PathLike,
-    out: PathLike,
-    threads: int = 1,
-    joint_map_theta: PathLike | None = None,
-) -> None:
-    """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories;
-    ``joint_map_theta``: the joint MAP of every k (rule joint_map's ``theta_hat.nc``), where
-    the scenario's chains start (``stan_init: joint_map``).
+def run_sample_batch(inputs: NutsBatchesInputs, paths: Mapping[str, PathLike]) -> None:
+    """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories, from
+    its :class:`~ssmobs.config.stage_inputs.NutsBatchesInputs` alone; ``paths``: the output
+    ``table``, whose file name names the batch (as in :data:`ssmobs.stage_table.STAGES`).
+    Where the chains start at the joint MAP, ``inputs.joint_map`` is rule joint_map's
+    ``theta_hat.nc``.
 
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
     interruption reuses every valid record (see :func:`ssmobs.nuts.batch.run_trajectories`).
@@ -129,29 +114,31 @@ def run_sample_batch(
     from ..nuts.record_format import records_to_frame
     from ..stan_backends import get_backend
 
-    traj = read_trajectories(trajectories)
+    traj = read_trajectories(inputs.trajectories)
     model = traj.model
-    backend_name = io.read_json(marker, required=["backend"])["backend"]
-    if traj.K != scenario.K:
-        raise ValueError(f"scenario {scenario.name}: K = {scenario.K}, trajectories K = {traj.K}")
-    ks = list(scenario.stan_batches(scenario.batch_size(stan_cfg))[batch])
-    stan_cfg = scenario.stan_config(stan_cfg)  # the scenario's own NUTS settings over the block
+    backend_name = io.read_json(inputs.program, required=["backend"])["backend"]
+    name = inputs.scenario
+    if traj.K != inputs.K:
+        raise ValueError(f"scenario {name}: K = {inputs.K}, trajectories K = {traj.K}")
+    out = paths["table"]
+    ks = list(inputs.batch_of(Path(out).name))
+    records_dir, draws_dir = inputs.records, inputs.draws
     # the shared folders' files of this batch: no other job writes them
     io.sweep_temporaries(
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
     )
-    progress = Progress(f"NUTS {scenario.name} batch {batch}", len(ks), logger)
-    theta_hat = None if joint_map_theta is None else _theta_hat(joint_map_theta, traj.K)
+    progress = Progress(f"NUTS {name} batch {Path(out).stem[5:]}", len(ks), logger)
+    theta_hat = None if inputs.joint_map is None else _theta_hat(inputs.joint_map, traj.K)
     records = run_trajectories(
-        nuts_batch(scenario, traj, stan_cfg, convergence_cfg, threads, theta_hat),
+        nuts_batch(inputs, traj, theta_hat),
         get_backend(backend_name),
         ks,
         records_dir=records_dir,
-        keep_draws_for=set(stan_cfg["keep_draws"]) & set(ks),
+        keep_draws_for=set(inputs.stan_config["keep_draws"]) & set(ks),
         draws_dir=draws_dir,
         progress=progress,
     )
-    settings = ConvergenceSettings(**convergence_cfg)
+    settings = ConvergenceSettings(**inputs.convergence_config)
     io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
 
 
