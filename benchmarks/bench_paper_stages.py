@@ -137,10 +137,10 @@ def phase_trajectories(config: dict, scenarios: list[Any], work: Path, n: int) -
             time.sleep(20)
             continue
         _, sc, k = min(ready, key=lambda t: t[0])
-        ds = scenario_set(sc)
-        if ds.name not in cache:
-            cache[ds.name] = trajectories(sc, work / "sets" / f"{ds.name}.nc")
-        traj = cache[ds.name]
+        # per scenario: scenarios of other models share a set (same q, K, seed)
+        if sc.name not in cache:
+            cache[sc.name] = trajectories(sc, work / "sets" / f"{scenario_set(sc).name}.nc")
+        traj = cache[sc.name]
         if sc.model.slug not in programs:
             programs[sc.model.slug] = compiled_programs(native, sc.model.slug)[gradients]
         row: dict[str, Any] = {"scenario": sc.name, "k": k}

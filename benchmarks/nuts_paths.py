@@ -92,7 +92,8 @@ def run_one(
     return Measured(
         cpu_s=cpu_seconds() - c0,
         wall_s=time.perf_counter() - w0,
-        driver_cpu_s=float(rec["timings"]["backend"]["sample_cpu"]),
+        # absent when the sampler raised (the record says so)
+        driver_cpu_s=float(rec["timings"].get("backend", {}).get("sample_cpu", "nan")),
         converged=bool(rec["converged"]),
         record=rec,
     )
