@@ -97,7 +97,7 @@ def _write(root: Path, files: dict[str, str]) -> Path:
             },
         ),
         (
-            "k_selection",
+            "k_selection_points",
             {
                 "stages/k_selection/grid.py",
                 "design/disturbance_sets.py",
@@ -674,7 +674,7 @@ def test_a_model_without_package_imports_is_keyed_by_its_module_alone():
     }
     registry = set(module_closure((MODEL_REGISTRY,)))
     assert "models/base.py" in registry
-    for stage in ("trajectories", "check_model", "nuts_records", "k_selection", "map_cells"):
+    for stage in ("trajectories", "check_model", "nuts_records", "k_selection_points", "map_cells"):
         assert registry <= set(module_closure(STAGES[stage].code)), stage
     assert registry <= set(module_closure(STAGES["outputs"].code))  # Figure 2's model
 

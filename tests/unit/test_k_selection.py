@@ -256,22 +256,37 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
         assert row["c_paper"] == ("(0.01, 0.03)" if shown else "")
 
 
-def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path):
+def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path, monkeypatch):
     """Rule k_selection_grid: the sets are made in the job (as rule design_disturbances would
     write them), every point is cached as it finishes, and a rerun reuses them."""
+    import dataclasses
     import json
 
+    from ssmobs.config.stage_inputs import k_selection_grid_inputs
     from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
-    sc = Scenario.from_config(same_a09(x0=8.0, K=8))
-    args = (tmp_path / "design", sc, [8, 16], "random", 1, "nested", {}, {"b_max": None})
-    (tmp_path / "design").mkdir()
-    rows = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid.json")
+    config = {
+        "scenarios": [same_a09(x0=8.0, K=8, joint_map_start="observations")],
+        "joint_map": {},
+        "design": {"b_max": None},
+    }
+    entry = {"scenario": "s", "K_grid": [8, 16], "methods": ["random"], "sets": ["nested"]}
+    inputs = k_selection_grid_inputs(
+        {**entry, "seeds": [1]}, config, points=str(tmp_path / "points"), design="d0"
+    )
+    assert inputs.grid_of("random_nested_seed1.json") == ("random", "nested", 1)
+    inputs = dataclasses.replace(inputs, design="d0")
+    monkeypatch.chdir(tmp_path)
+    rows = run_k_selection_grid(inputs, {"grid": tmp_path / "random_nested_seed1.json"})
     assert [r["K_i"] for r in rows] == [8, 16]
-    assert len(list((tmp_path / "design").glob("q8_K*_random_seed*.nc"))) == 2
-    assert json.loads((tmp_path / "grid.json").read_text())["points"] == rows
-    stamp = {p: p.stat().st_mtime_ns for p in (tmp_path / "points").glob("K*.json")}
+    design = tmp_path / "results" / "shared" / "design_disturbances" / "d0"
+    assert len(list(design.glob("q8_K*_random_seed*.nc"))) == 2
+    assert json.loads((tmp_path / "random_nested_seed1.json").read_text())["points"] == rows
+    points = tmp_path / "points" / "random_nested_seed1"
+    stamp = {p: p.stat().st_mtime_ns for p in points.glob("K*.json")}
     assert len(stamp) == 2
-    again = run_k_selection_grid(*args, points_dir=tmp_path / "points", out=tmp_path / "grid2.json")
+    again_path = tmp_path / "again" / "random_nested_seed1.json"
+    again_path.parent.mkdir()
+    again = run_k_selection_grid(inputs, {"grid": again_path})
     assert again == rows
     assert {p: p.stat().st_mtime_ns for p in stamp} == stamp

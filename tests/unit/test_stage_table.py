@@ -49,7 +49,8 @@ def _rule(stage: str) -> str:
 
 
 def test_every_entry_names_code_and_scripts_that_exist():
-    assert {"trajectories", "joint_map", "exact", "gather"} <= set(WITH_INPUTS)
+    assert {"trajectories", "joint_map", "exact", "gather", "nuts_batches"} <= set(WITH_INPUTS)
+    assert "k_selection_grid" in WITH_INPUTS
     for name, stage in STAGES.items():
         for entry in stage.code:
             assert (PACKAGE_DIR / entry.partition(":")[0]).is_file(), (name, entry)
@@ -78,11 +79,12 @@ def test_the_stage_reads_its_inputs_and_nothing_else(stage):
     rule = _rule(stage)
     params = rule.split("params:")[1].split("script:")[0]
     assert re.findall(r"^\s+(\w+)=", params, flags=re.M) == ["inputs"]
-    assert re.search(rf'PATHS\.inputs\(\s*"{stage}", wc\.scenario', params)
+    assert re.search(rf'PATHS\.inputs\(\s*"{stage}", wc\.(scenario|ksel)', params)
     outputs = dict(
         re.findall(r'^\s+(\w+)="([^"]+)"', rule.split("output:")[1].split("log:")[0], re.M)
     )
-    assert outputs == STAGES[stage].paths("{scenario}", "{key}")
+    owner = "{ksel}" if STAGES[stage].of == "k_selection" else "{scenario}"
+    assert outputs == STAGES[stage].paths(owner, "{key}")
     # the script passes the params' inputs and the outputs, and reads no other param
     script = REPO / "workflow" / "scripts" / f"{STAGES[stage].scripts[0]}.py"
     read = {
@@ -110,8 +112,9 @@ def _changed(value):
 @pytest.mark.parametrize("stage", WITH_INPUTS)
 def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
     keys = smoke_keys()
-    name = next(n for n, sc in keys.scenarios.items() if sc.get(stage, True))
-    at = {p: {"K": int(keys.scenarios[name]["K"]), "batch_size": 4}[p] for p in STAGES[stage].per}
+    owners = keys.k_selections if STAGES[stage].of == "k_selection" else keys.scenarios
+    name = next(iter(owners))
+    at = {p: {"K": int(owners[name].get("K", 0)), "batch_size": 4}[p] for p in STAGES[stage].per}
     inputs = keys.inputs(stage, name, **at)
     base = keys.stage_key(stage, name, **at)
     assert keys.stage_key(stage, name, **at) == base  # the same inputs, the same key

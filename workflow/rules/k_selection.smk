@@ -6,7 +6,7 @@ rule k_selection_grid:
     """Joint-MAP summaries V_{K_i} for every K_i of one disturbance method, set variant and
     seed (Sec. IV.A); the sets are made in the job, every point is cached as it finishes."""
     output:
-        "results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.json",
+        grid="results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.json",
     log:
         "results/k_selection/{ksel}/{key}/{method}_{sets}_seed{seed}.log",
     conda:
@@ -16,14 +16,10 @@ rule k_selection_grid:
         mem_mb=4000,
         runtime=120,
     params:
-        scenario=lambda wc: keyed_input(
-            "k_selection_grid", wc.ksel, wc.key, SCENARIOS[KSEL[wc.ksel]["scenario"]]
+        # what the stage reads, and its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: keyed_input(
+            "k_selection_grid", wc.ksel, wc.key, PATHS.inputs("k_selection_grid", wc.ksel)
         ),
-        settings=config["joint_map"],
-        K_grid=lambda wc: KSEL[wc.ksel]["K_grid"],
-        design=config["design"],
-        design_dir=DESIGN_DIR,
-        points=lambda wc: PATHS.ksel_points_dir(wc.ksel, wc.method, wc.sets, wc.seed),
     script:
         "../scripts/k_selection_grid.py"
 

@@ -272,7 +272,8 @@ class CacheKeys:
             value = getattr(self, shared)
             reads[shared] = value(name) if callable(value) else value
         reads.update({per: at[per] for per in entry.builder_per})
-        return entry.inputs(self.scenarios[name], self.config, **reads)
+        own = self.k_selections[name] if entry.of == "k_selection" else self.scenarios[name]
+        return entry.inputs(own, self.config, **reads)
 
     def stage_key(self, stage: str, name: str, **at: int) -> str:
         """The key of a stage with an inputs object: its content and the stage's code (and
@@ -363,20 +364,15 @@ class CacheKeys:
             "settings": joint_map_settings(sc, self.config["joint_map"], single_start=True),
             "design": self.design,
             "model_code": self.model_code(sc["model"]),
-            "code": self.code("k_selection"),
+            "code": self.code("k_selection_points"),
         }
         return self._key("k_selection_points", ksel, payload)
 
     def k_selection_grid(self, ksel: str) -> str:
-        """The grids of one k_selection entry: its points' key, the grid of K_i and the
-        scenario's name (both written into the grid files)."""
-        ks = self.k_selections[ksel]
-        payload = {
-            "points": self.k_selection_points(ksel),
-            "K_grid": [int(K) for K in ks["K_grid"]],
-            "scenario_name": ks["scenario"],
-        }
-        return self._key("k_selection_grid", ksel, payload)
+        """The grids of one k_selection entry
+        (:class:`~ssmobs.config.stage_inputs.KSelectionGridInputs`): its points' folder (their
+        key), the grid of K_i, the grid files and the scenario's name (written into them)."""
+        return self.stage_key("k_selection_grid", ksel)
 
     def map_cells(self, name: str) -> list[tuple[dict[str, Any], str]]:
         """Every cell of one observability map (issue 21) with its own key: the cell's

@@ -330,24 +330,20 @@ class RunPaths:
 
     def ksel_grids_dir(self, ksel: str) -> str:
         """The grid files of one k_selection entry (keyed by its points' key and the grid)."""
-        return f"results/k_selection/{ksel}/{self.keys.k_selection_grid(ksel)}"
+        key = self.keys.k_selection_grid(ksel)
+        return STAGES["k_selection_grid"].folder_of(ksel, key)
 
     def ksel_points_dir(self, ksel: str, method: str, sets: str, seed: int | str) -> str:
         """The cached points V_{K_i} of one grid, one file per K_i, keyed without the grid
         and the entry: every k_selection entry on the same scenario finds them."""
-        key = self.keys.k_selection_points(ksel)
-        return f"results/shared/k_selection_points/{key}/{method}_{sets}_seed{seed}"
+        points = self.inputs("k_selection_grid", ksel).points
+        return f"{points}/{method}_{sets}_seed{seed}"
 
     def k_selection_grids(self, name: str) -> list[str]:
         """Every (method, sets, seed) grid of one k_selection entry: every seed of every
         method (a design set's seed starts its optimiser, so its K is a distribution too)."""
-        ks = self.k_selections[name]
-        return [
-            f"{self.ksel_grids_dir(name)}/{method}_{sets}_seed{seed}.json"
-            for method in ks["methods"]
-            for sets in ks["sets"]
-            for seed in ks["seeds"]
-        ]
+        grids = self.inputs("k_selection_grid", name).grids
+        return [f"{self.ksel_grids_dir(name)}/{file}" for file, *_ in grids]
 
     @staticmethod
     def selection(name: str) -> str:

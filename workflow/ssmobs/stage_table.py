@@ -20,6 +20,7 @@ from .config.stage_inputs import (
     exact_inputs,
     gather_inputs,
     joint_map_inputs,
+    k_selection_grid_inputs,
     nuts_batches_inputs,
     trajectories_inputs,
 )
@@ -61,6 +62,8 @@ class Stage:
     shared: tuple[str, ...] = ()
     #: whether the stage runs the scenario's model, so its key holds the model's code
     runs_model: bool = False
+    #: what the stage is keyed for: a scenario, or a ``k_selection`` entry (by its name)
+    of: str = "scenario"
 
     def folder_of(self, scenario: str, key: str) -> str:
         """This stage's keyed folder for a scenario and its key."""
@@ -136,7 +139,24 @@ STAGES: dict[str, Stage] = {
         folder="results/{scenario}/joint_map/{key}",
         outputs={"table": "joint_map.parquet", "theta": "theta_hat.nc", "summary": "summary.json"},
     ),
-    "k_selection": Stage(("stages/k_selection/grid.py",), ("k_selection_grid",)),
+    # the points V_{K_i} of the choice of K, shared by the k_selection entries on a scenario
+    "k_selection_points": Stage(
+        ("stages/k_selection/grid.py",),
+        ("k_selection_grid",),
+        folder="results/shared/k_selection_points/{key}",
+    ),
+    # the grids of one k_selection entry (its name in place of a scenario's)
+    "k_selection_grid": Stage(
+        ("stages/k_selection/grid.py",),
+        ("k_selection_grid",),
+        inputs=k_selection_grid_inputs,
+        entry="run_k_selection_grid",
+        reads={"points": ("k_selection_points", "")},
+        shared=("design",),
+        of="k_selection",
+        folder="results/k_selection/{scenario}/{key}",
+        outputs={"grid": "{method}_{sets}_seed{seed}.json"},
+    ),
     "program": Stage(
         ("stages/stan.py:run_build_stan_model",),
         ("build_stan_model",),

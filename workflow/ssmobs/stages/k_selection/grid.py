@@ -8,6 +8,7 @@ is in :mod:`ssmobs.stages.k_selection.choice`.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,6 +20,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from ...config.scenario import Scenario
+    from ...config.stage_inputs import KSelectionGridInputs
 
 logger = logging.getLogger("ssmobs")
 
@@ -57,34 +59,41 @@ def run_k_selection_point(
     return info
 
 
-def run_k_selection_grid(
-    design_dir: PathLike,
-    scenario: Scenario,
-    K_grid: list[int],
-    method: str,
-    seed: int,
-    sets: str,
-    settings: dict,
-    design_cfg: dict,
-    *,
-    points_dir: PathLike,
-    out: PathLike,
-) -> list[dict]:
-    """Rule k_selection_grid: V_{K_i} for every K_i of one grid (method, set variant, seed).
+def _point_scenario(inputs: KSelectionGridInputs) -> Scenario:
+    """The scenario the points of a grid compute with, made from the grid's inputs alone
+    (each point sets its K, method and seed)."""
+    from ...config.scenario import Scenario
 
-    Each point is cached on its own in ``points_dir/K<K_i>.json`` as soon as it is done (a
-    rerun after a kill computes only the missing ones; grids of other k_selection entries on
-    the same scenario find it too, and a file lock keeps two jobs from computing it at once),
-    each set in ``design_dir`` (:func:`ssmobs.design.disturbance_sets.disturbance_set`)."""
+    return Scenario.from_config(inputs.scenario_config)
+
+
+def run_k_selection_grid(inputs: KSelectionGridInputs, paths: Mapping[str, PathLike]) -> list[dict]:
+    """Rule k_selection_grid: V_{K_i} for every K_i of one grid (method, set variant, seed),
+    from its :class:`~ssmobs.config.stage_inputs.KSelectionGridInputs` alone; ``paths``: the
+    output ``grid``, whose file name names the grid (as in :data:`ssmobs.stage_table.STAGES`).
+
+    Each point is cached on its own in the points' folder, ``K<K_i>.json``, as soon as it is
+    done (a rerun after a kill computes only the missing ones; grids of other k_selection
+    entries on the same scenario find it too, and a file lock keeps two jobs from computing
+    it at once), each set among the design sets
+    (:func:`ssmobs.design.disturbance_sets.disturbance_set`)."""
+    from ...config.stage_inputs import design_set_path
     from ...design.disturbance_sets import disturbance_set
     from ...k_selection import set_seed
 
-    progress = Progress(f"choice of K {scenario.name} {method} {sets} seed {seed}", len(K_grid))
+    out = paths["grid"]
+    method, sets, seed = inputs.grid_of(Path(out).name)
+    points_dir = Path(inputs.points) / f"{method}_{sets}_seed{seed}"
+    sc = _point_scenario(inputs)
+    settings = inputs.settings_config
+    progress = Progress(
+        f"choice of K {inputs.scenario} {method} {sets} seed {seed}", len(inputs.K_grid)
+    )
     rows = []
-    for K in K_grid:
-        point = Path(points_dir) / f"K{K}.json"
+    for K in inputs.K_grid:
+        point = points_dir / f"K{K}.json"
         info = None
-        with io.file_lock(Path(points_dir) / ".locks" / f"K{K}.lock"):
+        with io.file_lock(points_dir / ".locks" / f"K{K}.lock"):
             if point.exists():
                 try:
                     info = io.read_checked_json(point, required=["K_i", "method", "seed"])
@@ -92,14 +101,13 @@ def run_k_selection_grid(
                     logger.warning("recomputing: %s", err.what)
             if info is None:
                 s = set_seed(seed, K, sets)
-                path = Path(design_dir) / f"q{scenario.disturbance_dim}_K{K}_{method}_seed{s}.nc"
-                matrix, attrs = disturbance_set(
-                    path, scenario.disturbance_dim, K, method, s, design_cfg
-                )
+                q = sc.disturbance_dim
+                path = design_set_path(inputs.design, q, K, method, s)
+                matrix, attrs = disturbance_set(path, q, K, method, s, inputs.design_config)
                 info = run_k_selection_point(
-                    matrix, attrs, scenario, K, method, seed, settings, point, sets=sets
+                    matrix, attrs, sc, K, method, seed, settings, point, sets=sets
                 )
-        rows.append({**info, "scenario": scenario.name})
+        rows.append({**info, "scenario": inputs.scenario})
         progress.update()
     io.write_json(out, {"points": rows})
     return rows
