@@ -77,7 +77,7 @@ def run_k_selection_grid(inputs: KSelectionGridInputs, paths: Mapping[str, PathL
     entries on the same scenario find it too, and a file lock keeps two jobs from computing
     it at once), each set among the design sets
     (:func:`ssmobs.design.disturbance_sets.disturbance_set`)."""
-    from ...config.stage_inputs import design_set_path
+    from ...config.stage_inputs.frozen import design_set_path
     from ...design.disturbance_sets import disturbance_set
     from ...k_selection import set_seed
 

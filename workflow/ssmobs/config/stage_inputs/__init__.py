@@ -1,0 +1,41 @@
+"""What each stage reads, as one frozen object built from the scenario and the config
+(issue 62): the rule passes it as its only param, ``run_<stage>(inputs, paths)`` reads
+nothing else, and its content (:func:`inputs_payload`) with the stage's code is the stage's
+cache key (:mod:`ssmobs.cache_keys`), so what is keyed is exactly what is read.
+
+Each builder takes a validated scenario entry, the validated config and the paths of the
+keyed files the stage reads (they carry the upstream keys); :data:`ssmobs.stage_table.STAGES`
+names each stage's builder.
+
+One module per stage (design, joint_map, exact, nuts, k_selection) and the frozen values they
+share (:mod:`~ssmobs.config.stage_inputs.frozen`); everything is importable from here.
+"""
+
+from __future__ import annotations
+
+from .design import TrajectoriesInputs, trajectories_inputs
+from .exact import ExactInputs, exact_inputs
+from .frozen import DESIGN_DIR, DESIGN_SET, design_set_path, inputs_payload
+from .joint_map import JointMapInputs, joint_map_inputs
+from .k_selection import KSelectionGridInputs, k_selection_grid_inputs
+from .nuts import NUTS_THREADS, GatherInputs, NutsBatchesInputs, gather_inputs, nuts_batches_inputs
+
+__all__ = [
+    "DESIGN_DIR",
+    "DESIGN_SET",
+    "NUTS_THREADS",
+    "ExactInputs",
+    "GatherInputs",
+    "JointMapInputs",
+    "KSelectionGridInputs",
+    "NutsBatchesInputs",
+    "TrajectoriesInputs",
+    "design_set_path",
+    "exact_inputs",
+    "gather_inputs",
+    "inputs_payload",
+    "joint_map_inputs",
+    "k_selection_grid_inputs",
+    "nuts_batches_inputs",
+    "trajectories_inputs",
+]
