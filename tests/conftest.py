@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import functools
 import sys
-from pathlib import Path
 from typing import Any
 
 import pytest
+from repo_paths import REPO_DIR, WORKFLOW_DIR
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
+sys.path.insert(0, str(WORKFLOW_DIR))
 
 
 #: the scheduling units of `make test` and `make test-slow` that take longest, longest first
@@ -48,7 +48,7 @@ def _scope(nodeid: str) -> str:
 def _module_scope(module: str) -> str:
     """The scheduling unit of a test module: itself, or "smoke_run" for every module that
     uses the session-wide smoke run (tests/workflow/conftest.py)."""
-    path = Path(__file__).resolve().parents[1] / module
+    path = REPO_DIR / module
     if path.is_file() and "smoke_run" in path.read_text():
         return "smoke_run"
     return module

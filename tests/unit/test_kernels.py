@@ -12,10 +12,9 @@ from pathlib import Path
 
 import pytest
 import tomllib
+from repo_paths import PACKAGE_DIR, REPO_DIR, WORKFLOW_DIR
 from ssmobs import kernels
 from ssmobs.cache_keys import CacheKeys
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def state(kernel: str = "Haswell", threads: int = 1, dispatch: tuple[str, ...] = ("X86_V3",)):
@@ -60,7 +59,7 @@ def test_problems_name_each_departure_from_the_fixed_kernels(monkeypatch):
 
 def test_a_process_started_with_the_environment_has_the_fixed_kernels():
     code = "from ssmobs import kernels; print(kernels.require())"
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **kernels.environment()}
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(WORKFLOW_DIR), **kernels.environment()}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("kernels: BLAS openblas")
@@ -79,7 +78,7 @@ def test_scipys_blas_is_listed_without_importing_scipy_linalg():
         "n = sum(i['user_api'] == 'blas' for i in threadpool_info()); "
         "print(json.dumps([first, kernels.in_force(), unimported, n]))"
     )
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **kernels.environment()}
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(WORKFLOW_DIR), **kernels.environment()}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     first, after_import, unimported, n_blas = json.loads(out.stdout)
@@ -92,7 +91,7 @@ def test_scipys_blas_is_listed_without_importing_scipy_linalg():
 def test_a_job_started_without_it_refuses_to_compute():
     """A script run outside Snakemake, with four threads: one clear error, no numbers."""
     code = "from ssmobs import log; log.setup('/dev/null')"
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"),
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(WORKFLOW_DIR),
            "OPENBLAS_NUM_THREADS": "4"}  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode != 0
@@ -103,7 +102,7 @@ def test_a_job_started_without_it_refuses_to_compute():
 def test_every_cache_key_holds_the_kernel_settings():
     import yaml
 
-    config = yaml.safe_load((ROOT / "config" / "smoke.yaml").read_text())
+    config = yaml.safe_load((REPO_DIR / "config" / "smoke.yaml").read_text())
     from ssmobs.config import validation as ssmobs_config
 
     ssmobs_config.validate(config)
@@ -115,12 +114,12 @@ def test_every_cache_key_holds_the_kernel_settings():
 
 def test_every_dependency_is_pinned_to_one_version_in_the_constraints_file():
     pins = {}
-    for line in (ROOT / "envs" / "constraints.txt").read_text().splitlines():
+    for line in (REPO_DIR / "envs" / "constraints.txt").read_text().splitlines():
         if line and not line.startswith("#"):
             name, _, version = line.partition("==")
             assert version, f"envs/constraints.txt: {line!r} is not name==version"
             pins[re.sub(r"[-_.]+", "-", name.lower())] = version
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    project = tomllib.loads((REPO_DIR / "pyproject.toml").read_text())["project"]
     deps = project["dependencies"] + [d for ds in project["optional-dependencies"].values()
                                       for d in ds]  # fmt: skip
     for dep in deps:
@@ -135,7 +134,7 @@ def test_the_environment_has_the_pinned_versions(module):
 
     pins = dict(
         line.split("==")
-        for line in (ROOT / "envs" / "constraints.txt").read_text().splitlines()
+        for line in (REPO_DIR / "envs" / "constraints.txt").read_text().splitlines()
         if "==" in line and not line.startswith("#")
     )
     assert importlib.import_module(module).__version__ == pins[module]
@@ -147,7 +146,7 @@ def test_a_script_restarts_itself_with_the_fixed_kernels(tmp_path):
         "import os\nfrom ssmobs import kernels\nkernels.restart_with_fixed_kernels()\n"
         "print(os.environ['OPENBLAS_NUM_THREADS'], kernels.require().startswith('kernels:'))\n"
     )
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"),
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(WORKFLOW_DIR),
            "OPENBLAS_NUM_THREADS": "4"}  # fmt: skip
     out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -187,7 +186,7 @@ def test_the_docs_name_exactly_the_entry_points_that_warn():
     import ast
 
     warned = set()
-    for path in sorted((ROOT / "workflow" / "ssmobs").rglob("*.py")):
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
             if (
                 isinstance(node, ast.Call)
@@ -196,7 +195,7 @@ def test_the_docs_name_exactly_the_entry_points_that_warn():
                 and isinstance(node.args[0], ast.Constant)
             ):
                 warned.add(node.args[0].value)
-    text = (ROOT / "docs" / "reproducibility.md").read_text()
+    text = (REPO_DIR / "docs" / "reproducibility.md").read_text()
     said = re.search(r"^- warns: (.*?);$", text, flags=re.M | re.S)
     silent = re.search(r"^- does not warn \(.*?\):\s+(.*?)\s+and every", text, flags=re.M | re.S)
     assert said is not None and silent is not None

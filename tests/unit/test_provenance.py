@@ -5,14 +5,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from repo_paths import REPO_DIR
 from ssmobs import provenance
 
 pytestmark = pytest.mark.unit
 
-REPO = Path(__file__).resolve().parents[2]
 CONFIG = "outputs_dir: out\nstan: {backend: pystan}\nscenarios: []\n"
 
 
@@ -129,11 +128,11 @@ def test_provenance_says_which_gradient_path_made_the_draws(monkeypatch):
         "my_own_model": "analytic",
         "same": "autodiff",
     }
-    paper = provenance.gradient_paths(read_config_file(REPO / "config" / "paper.yaml"))
+    paper = provenance.gradient_paths(read_config_file(REPO_DIR / "config" / "paper.yaml"))
     assert paper["gradients"] == "analytic"
     assert set(paper["gradients_by_model"].values()) == {"analytic"}
     assert len(paper["gradients_by_model"]) == 6
     monkeypatch.setattr(provenance, "numerics", lambda: {})
-    record = provenance.provenance(REPO / "config" / "paper.yaml", 0.0, 1.0, "make paper")
+    record = provenance.provenance(REPO_DIR / "config" / "paper.yaml", 0.0, 1.0, "make paper")
     assert record["stan"]["gradients"] == "analytic"
     assert record["stan"]["gradients_by_model"] == paper["gradients_by_model"]

@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 import yaml
+from repo_paths import REPO_DIR
 
 pytestmark = pytest.mark.unit
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 def _rules() -> set[str]:
-    text = "\n".join(p.read_text() for p in (ROOT / "workflow" / "rules").glob("*.smk"))
-    text += (ROOT / "Snakefile").read_text()
+    text = "\n".join(p.read_text() for p in (REPO_DIR / "workflow" / "rules").glob("*.smk"))
+    text += (REPO_DIR / "Snakefile").read_text()
     rules = set(re.findall(r"^rule (\w+):", text, flags=re.M))
     local = set()
     for names in re.findall(r"^localrules:\s*([\w,\s]+?)$", text, flags=re.M):
@@ -24,7 +22,9 @@ def _rules() -> set[str]:
 
 
 def test_every_job_rule_has_resources_and_no_stale_rule_is_named():
-    profile = yaml.safe_load((ROOT / "config" / "profiles" / "slurm" / "config.yaml").read_text())
+    profile = yaml.safe_load(
+        (REPO_DIR / "config" / "profiles" / "slurm" / "config.yaml").read_text()
+    )
     named = set(profile["set-resources"])
     rules = _rules()
     assert named - rules == set(), "set-resources names rules that do not exist"
@@ -34,8 +34,8 @@ def test_every_job_rule_has_resources_and_no_stale_rule_is_named():
 def test_conda_environment_lists_every_dependency_of_pyproject():
     import tomllib
 
-    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
-    env = yaml.safe_load((ROOT / "envs" / "ssmobs.yaml").read_text())
+    deps = tomllib.loads((REPO_DIR / "pyproject.toml").read_text())["project"]["dependencies"]
+    env = yaml.safe_load((REPO_DIR / "envs" / "ssmobs.yaml").read_text())
     listed = [d for d in env["dependencies"] if isinstance(d, str)]
     listed += next(d["pip"] for d in env["dependencies"] if isinstance(d, dict))
     names = {re.split(r"[<>=!~ ]", d, maxsplit=1)[0].lower() for d in listed}

@@ -11,12 +11,11 @@ import time
 from pathlib import Path
 
 import pytest
+from repo_paths import REPO_DIR, WORKFLOW_DIR
 from ssmobs.config import preflight
 from ssmobs.config.validation import ConfigError, check_config_files, read_config_file
 
 pytestmark = pytest.mark.unit
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def message(path) -> str:
@@ -34,7 +33,7 @@ def run_preflight(config_file: str, cwd: Path) -> subprocess.CompletedProcess[st
         capture_output=True,
         text=True,
         cwd=cwd,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        env={"PYTHONPATH": str(WORKFLOW_DIR), "PATH": "/usr/bin:/bin"},
         timeout=120,
     )
 
@@ -90,7 +89,7 @@ def test_invalid_values_name_the_file(tmp_path):
 
 @pytest.mark.parametrize("name", ["config.yaml", "smoke.yaml", "paper.yaml"])
 def test_profiles_pass(name):
-    assert preflight.check_config_file(REPO / "config" / name)["scenarios"]
+    assert preflight.check_config_file(REPO_DIR / "config" / name)["scenarios"]
 
 
 def test_command_line_prints_one_line_and_fails(tmp_path):
@@ -226,7 +225,7 @@ def makefile_recipes() -> dict[str, list[str]]:
     """Each Makefile target's recipe lines (tab-indented lines under `target: ...`)."""
     recipes: dict[str, list[str]] = {}
     target = None
-    for line in (REPO / "Makefile").read_text().splitlines():
+    for line in (REPO_DIR / "Makefile").read_text().splitlines():
         if line.startswith("\t") and target is not None:
             recipes[target].append(line.strip())
         elif m := re.match(r"^([A-Za-z0-9_-]+):(?!=)", line):
@@ -248,7 +247,7 @@ def test_every_make_target_that_runs_snakemake_runs_the_preflight_first():
         assert any(x.startswith("$(PREFLIGHT)") for x in lines[:first]), target
     wrapped = [t for t, r in recipes.items() if any("with_provenance" in x for x in r)]
     assert {"tables", "section4", "map", "committed"} <= set(wrapped)
-    assert "$(PREFLIGHT) $(1)" in (REPO / "Makefile").read_text()  # inside with_provenance
+    assert "$(PREFLIGHT) $(1)" in (REPO_DIR / "Makefile").read_text()  # inside with_provenance
 
 
 # ------------------------------------------------------------------------ writable folders
@@ -284,7 +283,7 @@ def in_child(code: str, cwd: Path, prefix: list[str] | None = None) -> str:
         capture_output=True,
         text=True,
         cwd=cwd,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        env={"PYTHONPATH": str(WORKFLOW_DIR), "PATH": "/usr/bin:/bin"},
         timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
@@ -354,7 +353,7 @@ def test_the_make_targets_stop_when_snakemake_cannot_write_its_folder(tmp_path):
     when it cannot write there; the preflight says it in one line (here a file is in the
     way, which holds for root too)."""
     (tmp_path / ".snakemake").write_text("not a folder\n")
-    proc = run_preflight(str(REPO / "config" / "smoke.yaml"), cwd=tmp_path)
+    proc = run_preflight(str(REPO_DIR / "config" / "smoke.yaml"), cwd=tmp_path)
     assert proc.returncode == 1
     assert proc.stderr == (
         "error: this run cannot write where its jobs write: .snakemake (a file, not a "

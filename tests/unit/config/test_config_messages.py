@@ -13,11 +13,10 @@ from pathlib import Path
 import pytest
 import yaml
 from factories import same_a09
+from repo_paths import WORKFLOW_DIR
 from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def scenarios(n: int, **changes) -> list[dict]:
@@ -111,7 +110,7 @@ def run_preflight(*args: str, cwd: Path) -> subprocess.CompletedProcess:
         capture_output=True,
         text=True,
         cwd=cwd,
-        env={"PYTHONPATH": str(REPO / "workflow"), "PATH": "/usr/bin:/bin"},
+        env={"PYTHONPATH": str(WORKFLOW_DIR), "PATH": "/usr/bin:/bin"},
     )
 
 

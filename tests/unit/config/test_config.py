@@ -3,31 +3,29 @@
 from __future__ import annotations
 
 import copy
-from pathlib import Path
 
 import pytest
 import yaml
-
-REPO = Path(__file__).resolve().parents[2]
 from factories import same_a09
+from repo_paths import REPO_DIR
 from ssmobs.config import validation as cfg
 
 pytestmark = pytest.mark.unit
 
 #: every profile of config/ (paper_values.yaml holds the paper's numbers, not a profile)
 PROFILES = sorted(
-    p.relative_to(REPO / "config").as_posix()
+    p.relative_to(REPO_DIR / "config").as_posix()
     for p in [
-        *(REPO / "config").glob("*.yaml"),
-        *(REPO / "config").glob("section4_rows/*.yaml"),
-        *(REPO / "config").glob("stan_variants/*.yaml"),
+        *(REPO_DIR / "config").glob("*.yaml"),
+        *(REPO_DIR / "config").glob("section4_rows/*.yaml"),
+        *(REPO_DIR / "config").glob("stan_variants/*.yaml"),
     ]
     if p.name != "paper_values.yaml"
 )
 
 
 def load(name: str) -> dict:
-    return yaml.safe_load((REPO / "config" / name).read_text())
+    return yaml.safe_load((REPO_DIR / "config" / name).read_text())
 
 
 @pytest.mark.parametrize("name", PROFILES)
@@ -358,7 +356,7 @@ def test_too_many_jobs_refused_even_when_memory_fits():
 
 
 def test_slurm_profile_raises_the_limits():
-    profile = yaml.safe_load((REPO / "config/profiles/slurm/config.yaml").read_text())
+    profile = yaml.safe_load((REPO_DIR / "config/profiles/slurm/config.yaml").read_text())
     limits = profile["config"]["limits"]
     schema = cfg.load_schema()["properties"]["limits"]["properties"]
     assert limits["job_memory_gib"] > schema["job_memory_gib"]["default"]

@@ -10,12 +10,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from repo_paths import REPO_DIR, WORKFLOW_DIR
 from ssmobs import kernels
 
 pytestmark = pytest.mark.unit
-
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPTS = sorted((ROOT / "workflow" / "scripts").glob("*.py"))
+SCRIPTS = sorted((REPO_DIR / "workflow" / "scripts").glob("*.py"))
 
 #: a rule script's first line, run on its own with a job of one output
 START = """
@@ -62,7 +61,7 @@ def _start(tmp_path: Path, env: dict[str, str]) -> tuple[subprocess.CompletedPro
     leftover = tmp_path / ".out.csv.abcdEFGH.csv"
     leftover.write_text("half written")
     args = [str(tmp_path / "job.log"), str(tmp_path / "out.csv")]
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT / "workflow"), **env}
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(WORKFLOW_DIR), **env}
     out = subprocess.run(
         [sys.executable, "-c", START, *args], env=env, capture_output=True, text=True
     )

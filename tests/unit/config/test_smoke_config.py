@@ -9,22 +9,21 @@ from pathlib import Path
 import pytest
 import yaml
 from factories import same_a09
+from repo_paths import REPO_DIR
 from ssmobs.config import validation as cfg
 from ssmobs.config.smoke import SMOKE_K, main, smoke_overlay
 
 pytestmark = pytest.mark.unit
-
-REPO = Path(__file__).resolve().parents[2]
 PROFILES = sorted(
-    p.relative_to(REPO).as_posix()
-    for p in [*(REPO / "config").glob("*.yaml"), *(REPO / "config").glob("*/*.yaml")]
+    p.relative_to(REPO_DIR).as_posix()
+    for p in [*(REPO_DIR / "config").glob("*.yaml"), *(REPO_DIR / "config").glob("*/*.yaml")]
     if p.name not in ("paper_values.yaml", "smoke.yaml", "stan_variants_by_row.yaml")
 )
 
 
 @pytest.mark.parametrize("path", PROFILES)
 def test_every_profile_has_a_valid_smoke_overlay_on_small_sizes(path):
-    conf = yaml.safe_load((REPO / path).read_text())
+    conf = yaml.safe_load((REPO_DIR / path).read_text())
     before = copy.deepcopy(conf)
     overlay = cfg.validate(smoke_overlay(conf, Path(path).stem))
     assert conf == before  # the study's config is not changed
@@ -66,7 +65,7 @@ def test_scenario_settings_follow_the_smaller_K():
 
 def test_the_overlay_file_and_the_make_recipe(tmp_path, capsys):
     out = tmp_path / "results" / "smoke_configs" / "stoch_vol.yaml"
-    assert main([str(REPO / "config" / "stoch_vol.yaml"), "--out", str(out)]) == 0
+    assert main([str(REPO_DIR / "config" / "stoch_vol.yaml"), "--out", str(out)]) == 0
     assert "paper_figures/smoke_stoch_vol/" in capsys.readouterr().out
     text = out.read_text()
     assert text.startswith("# Made by `make smoke CONFIG=")
@@ -81,7 +80,7 @@ def test_the_overlay_file_and_the_make_recipe(tmp_path, capsys):
     # the make target: the overlay, its preflight and Snakemake on it (printed, not run)
     plan = subprocess.run(
         ["make", "--no-print-directory", "-n", "smoke", "CONFIG=config/stoch_vol.yaml"],
-        cwd=REPO,
+        cwd=REPO_DIR,
         capture_output=True,
         text=True,
         check=True,

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from repo_paths import REPO_DIR
 from ssmobs.reports.propriety_notes import NOT_SHOWN_IMPROPER
 
-REPO = Path(__file__).resolve().parents[2]
-HOOK = REPO / "docs" / "hooks" / "committed_tables.py"
+HOOK = REPO_DIR / "docs" / "hooks" / "committed_tables.py"
 
 ONLY_A = {  # (Sep, d=2, p=1) with b and c on (-1, 1): x0 drops out at c = 0, inside the prior
     "model": "sep_d2_p1",
@@ -122,7 +122,7 @@ def test_rows_table_withholds_an_improper_rows_k_stan(tmp_path: Path, hook) -> N
     assert "`abc` (" not in text
 
 
-COMMITTED_ROWS = REPO / "paper_figures" / "section4_rows"
+COMMITTED_ROWS = REPO_DIR / "paper_figures" / "section4_rows"
 
 
 @pytest.mark.skipif(
@@ -143,7 +143,7 @@ def test_site_shows_no_k_stan_of_the_committed_improper_rows(hook) -> None:
 @pytest.fixture(scope="module")
 def provenance_hook():
     pytest.importorskip("mkdocs")
-    path = REPO / "docs" / "hooks" / "provenance.py"
+    path = REPO_DIR / "docs" / "hooks" / "provenance.py"
     spec = importlib.util.spec_from_file_location("docs_provenance_hook", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-README = (REPO / "README.md").read_text()
+from repo_paths import PACKAGE_DIR, REPO_DIR
+
+README = (REPO_DIR / "README.md").read_text()
 #: the repository layout, a page of the documentation site
-LAYOUT_PAGE = (REPO / "docs" / "reference" / "layout.md").read_text()
+LAYOUT_PAGE = (REPO_DIR / "docs" / "reference" / "layout.md").read_text()
 
 
 def _section(start: str, end: str, text: str = README) -> str:
@@ -19,9 +19,9 @@ def _section(start: str, end: str, text: str = README) -> str:
 def test_diagram_names_every_rule():
     diagram = _section("```mermaid", "```\n")
     rules = set()
-    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+    for smk in (REPO_DIR / "workflow" / "rules").glob("*.smk"):
         rules |= set(re.findall(r"^rule (\w+):", smk.read_text(), flags=re.M))
-    rules |= set(re.findall(r"^rule (\w+):", (REPO / "Snakefile").read_text(), flags=re.M))
+    rules |= set(re.findall(r"^rule (\w+):", (REPO_DIR / "Snakefile").read_text(), flags=re.M))
     rules.discard("all")
     drawn = set(re.findall(r"\[(\w+)", diagram))
     assert rules - drawn == set(), "rules missing from the README's diagram"
@@ -30,7 +30,7 @@ def test_diagram_names_every_rule():
 
 def test_layout_names_every_module_and_rule_file():
     layout = _section("```\n", "```\n", LAYOUT_PAGE)
-    package = REPO / "workflow" / "ssmobs"
+    package = PACKAGE_DIR
     subpackages = {p.parent.name for p in package.glob("*/__init__.py")}
     for pkg in subpackages:
         assert f"{pkg}/" in layout, f"subpackage {pkg}/ missing from docs/reference/layout.md"
@@ -44,6 +44,6 @@ def test_layout_names_every_module_and_rule_file():
     own = {"base", "log_posterior", "symmetries", "propriety", "check_cases", "self_check"}
     known = modules | own  # the models package's own modules (models.INTERNAL_MODULES)
     assert named <= known, "layout names modules that do not exist"
-    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+    for smk in (REPO_DIR / "workflow" / "rules").glob("*.smk"):
         stem = smk.stem.replace("common", "common.smk")
         assert stem in layout, f"rule file {smk.name} missing from docs/reference/layout.md"

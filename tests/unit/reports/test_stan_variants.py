@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from repo_paths import REPO_DIR
 from ssmobs.config.validation import ConfigError, validate
 from ssmobs.reports.stan_variants import (
     OURS,
@@ -24,8 +25,7 @@ from ssmobs.reports.stan_variants import (
     write_variant_table,
 )
 
-REPO = Path(__file__).resolve().parents[2]
-SPEC = REPO / "config/tables/stan_variants_by_row.yaml"
+SPEC = REPO_DIR / "config/tables/stan_variants_by_row.yaml"
 
 SCENARIO = {
     "name": "base",
@@ -206,7 +206,7 @@ def test_a_spec_without_its_keys_is_refused(tmp_path):
 def test_the_committed_table_is_what_the_committed_studies_give(monkeypatch, tmp_path):
     """Regenerating the table from the committed folders gives the committed bytes: a study
     committed or replaced without `make variant-table` fails here."""
-    monkeypatch.chdir(REPO)
+    monkeypatch.chdir(REPO_DIR)
     spec = read_spec(SPEC)
     assert all(Path(p).is_file() for p in spec_inputs(spec))
     csv, md = Path(f"{spec['output']}.csv"), Path(f"{spec['output']}.md")
@@ -219,7 +219,7 @@ def test_the_committed_table_is_what_the_committed_studies_give(monkeypatch, tmp
 def test_the_committed_table_withholds_the_improper_row(monkeypatch):
     """(Sep, d=2, p=1) with only a restricted is improper (c = 0 inside (-1, 1)): the
     committed table shows no |K^Stan|/K for it under any set-up, and the paper's 0.743."""
-    monkeypatch.chdir(REPO)
+    monkeypatch.chdir(REPO_DIR)
     spec = read_spec(SPEC)
     lines = variant_rows(spec["baselines"], spec["studies"])
     only_a = lines[lines["row"] == "sep_d2_p1_a_T50"]
@@ -232,7 +232,7 @@ def test_the_committed_table_withholds_the_improper_row(monkeypatch):
 
 
 def test_every_row_has_its_baseline_first(monkeypatch):
-    monkeypatch.chdir(REPO)
+    monkeypatch.chdir(REPO_DIR)
     spec = read_spec(SPEC)
     lines = variant_rows(spec["baselines"], spec["studies"])
     firsts = lines.groupby("row", sort=False).head(1)

@@ -4,10 +4,10 @@ the cache keys hold the same merge, nothing more and nothing less."""
 from __future__ import annotations
 
 import copy
-from pathlib import Path
 
 import pytest
 import yaml
+from repo_paths import REPO_DIR
 from ssmobs.cache_keys import CacheKeys
 from ssmobs.config.blocks import joint_map_settings, stan_settings
 from ssmobs.config.scenario import Scenario
@@ -15,11 +15,9 @@ from ssmobs.config.validation import validate
 
 pytestmark = pytest.mark.unit
 
-REPO = Path(__file__).resolve().parents[2]
-
 
 def smoke() -> dict:
-    return validate(yaml.safe_load((REPO / "config" / "smoke.yaml").read_text()))
+    return validate(yaml.safe_load((REPO_DIR / "config" / "smoke.yaml").read_text()))
 
 
 def test_the_scenario_and_the_keys_merge_the_joint_map_block_alike():

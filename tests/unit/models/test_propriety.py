@@ -5,13 +5,13 @@ docs/method/improper-posteriors.md documents."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from growth_model import Growth
 from phase_model import PhaseTracking
+from repo_paths import REPO_DIR
 from ricker_model import Ricker
 from ssmobs.models import get_model
 from ssmobs.models.propriety import model_dropouts, posterior_propriety
@@ -19,8 +19,6 @@ from two_component_model import TwoComponents
 from two_gain_model import TwoGains
 
 pytestmark = pytest.mark.unit
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_translation_on_a_flat_x0_makes_the_posterior_improper():
@@ -141,7 +139,7 @@ def _documented(name):
 
 
 def test_shipped_models_under_the_config_priors_give_the_documented_cases():
-    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config = yaml.safe_load((REPO_DIR / "config" / "config.yaml").read_text())
     seen = set()
     for sc in config["scenarios"]:
         model = get_model(sc["model"])

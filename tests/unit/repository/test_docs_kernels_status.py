@@ -7,8 +7,9 @@ import json
 from pathlib import Path
 
 import pytest
+from repo_paths import REPO_DIR
 
-HOOK = Path(__file__).resolve().parents[2] / "docs" / "hooks" / "provenance.py"
+HOOK = REPO_DIR / "docs" / "hooks" / "provenance.py"
 
 
 @pytest.fixture(scope="module")

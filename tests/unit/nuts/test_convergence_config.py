@@ -15,7 +15,7 @@ from ssmobs.nuts.convergence_sensitivity import (
     sensitivity_table,
 )
 from ssmobs.stages.outputs.paper_tables import run_convergence_sensitivity
-from test_convergence import make_draws  # noqa: E402  (tests/unit is on sys.path)
+from test_convergence import make_draws  # noqa: E402  (this folder is on sys.path)
 
 pytestmark = pytest.mark.unit
 

@@ -8,10 +8,9 @@ import ast
 from pathlib import Path
 
 import pytest
+from repo_paths import PACKAGE_DIR
 
 pytestmark = pytest.mark.unit
-
-PACKAGE_DIR = Path(__file__).resolve().parents[2] / "workflow" / "ssmobs"
 MAX_POSITIONAL = 8
 MAX_PARAMETERS = 12
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import tracemalloc
-from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import REPO_DIR
 from ssmobs.config import budget
 from ssmobs.config.scenario import Scenario
 from ssmobs.design.disturbances import design_disturbances
@@ -139,8 +139,7 @@ def test_every_committed_profile_fits_the_time_budget():
     import yaml
     from ssmobs.config import validation as cfg
 
-    repo = Path(__file__).resolve().parents[2]
-    profiles = [*(repo / "config").glob("*.yaml"), *(repo / "config").glob("*/*.yaml")]
+    profiles = [*(REPO_DIR / "config").glob("*.yaml"), *(REPO_DIR / "config").glob("*/*.yaml")]
     for path in sorted(profiles):
         raw = yaml.safe_load(path.read_text())
         if not isinstance(raw, dict) or "scenarios" not in raw:

@@ -7,10 +7,9 @@ import ast
 from pathlib import Path
 
 import pytest
+from repo_paths import PACKAGE_DIR
 
 pytestmark = pytest.mark.unit
-
-PACKAGE_DIR = Path(__file__).resolve().parents[2] / "workflow" / "ssmobs"
 
 
 def _module_name(path: Path, package_dir: Path) -> str:

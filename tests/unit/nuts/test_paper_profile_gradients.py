@@ -4,15 +4,14 @@ model silently falls back to Stan's autodiff or is refused at its first Stan job
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from repo_paths import REPO_DIR
 from ssmobs.config.validation import read_config_file
 from ssmobs.nuts.stan_program import stan_program
 
 pytestmark = pytest.mark.unit
 
-PAPER = Path(__file__).resolve().parents[2] / "config" / "paper.yaml"
+PAPER = REPO_DIR / "config" / "paper.yaml"
 
 
 def test_the_paper_profile_samples_every_model_with_generated_gradients():
