@@ -367,7 +367,7 @@ def test_a_read_only_cache_stops_before_any_job_and_a_run_with_nothing_to_do_rea
     results/ and what to do, while a run with nothing to do, and a dry run, need no writing.
     results/ is made read-only with chmod; root writes through permission bits, so as root
     Snakemake runs without that override (setpriv drops CAP_DAC_OVERRIDE), as another user
-    would (tests/unit/test_preflight.py also checks a read-only file system)."""
+    would (tests/unit/config/test_preflight.py also checks a read-only file system)."""
     import os
 
     prefix = []

@@ -4,7 +4,7 @@
 section per top-level key of ``workflow/schemas/config.schema.yaml`` and one table row per
 key at any depth (type, default, allowed values, description), so the page cannot drift
 from the schema.  ``--check`` writes nothing and exits 1 when the page differs from what
-the schema gives (``make docs`` runs it; ``tests/unit/test_config_reference.py`` too).
+the schema gives (``make docs`` runs it; ``tests/unit/config/test_config_reference.py`` too).
 
 Key paths: ``a.b`` is the key ``b`` of the mapping ``a``; ``a[].b`` the key ``b`` of every
 entry of the list ``a``.

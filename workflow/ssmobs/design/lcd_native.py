@@ -21,7 +21,7 @@ for the tests and the benchmark.  All give the same bits: the source fixes the o
 every sum (the compiler may not reorder floating-point sums without fast-math), and every
 vectorised loop runs element-wise IEEE operations (+, -, *, /, compares and selects, bit
 operations on the doubles' bits, loads), which are correctly rounded on two lanes as on
-eight; a test (``tests/unit/test_lcd_native.py``) compares the bytes of value and gradient
+eight; a test (``tests/unit/design/test_lcd_native.py``) compares the bytes of value and gradient
 of every build this CPU runs on random sets, and the kernels test runs the build
 :func:`kernel` picks and the baseline.
 

@@ -21,7 +21,7 @@ Why not ArviZ's KDE (``arviz_stats``' ``kde``, formerly ``az.kde``): it is binne
 convolves directly on a 512-point grid over [min, max], so its grid error grows with the
 range of the draws (heavy tails), it loops in Python per component, and its default
 bandwidth ("experimental": mean of Silverman's rule and ISJ) is not the paper's.  Both
-agree on the mode well within Monte Carlo error (``tests/unit/test_marginal_map.py``).
+agree on the mode well within Monte Carlo error (``tests/unit/nuts/test_marginal_map.py``).
 
 Empirical quantiles are R's type 7 (NumPy's default ``linear``), as ``quantile()`` in R.
 """
