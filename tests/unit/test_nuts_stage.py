@@ -577,18 +577,111 @@ class _Sampled(Exception):
     """Raised by the stub of run_trajectories: the job got as far as sampling."""
 
 
+def write_marker(path, model, header=None):
+    """A build job's marker of ``model``'s hand-written program (and ``header``)."""
+    from ssmobs.stan_backends import stan_file
+
+    marker = {"backend": "native", "program_file": str(stan_file(model))}
+    path.write_text(json.dumps({**marker, "header_file": None if header is None else str(header)}))
+
+
+def _batch_inputs(tmp_path, entry=None, **stan):
+    """The inputs of batch 1 (k = 2, 3) of a Same scenario whose trajectories, program's
+    marker and folders lie in ``tmp_path``."""
+    from ssmobs.config.scenario import Scenario
+    from ssmobs.config.stage_inputs import nuts_batches_inputs
+    from ssmobs.design.trajectories import make_trajectories, write_trajectories
+
+    sc = Scenario.from_config(same_a09(T=3))
+    write_trajectories(tmp_path / "t.nc", make_trajectories(sc, np.zeros((6, 4))))
+    write_marker(tmp_path / "marker.json", "same")
+    stan_cfg = {
+        "batch_size": 2,
+        "keep_draws": [],
+        "chains": 1,
+        "iter_warmup": 10,
+        "iter_sampling": 10,
+        "adapt_delta": 0.8,
+        "max_treedepth": 10,
+        **stan,
+    }
+    entry = {**same_a09(T=3), "name": sc.name, "K": 4, "seed": sc.seed, "stan_init": "random"}
+    return nuts_batches_inputs(
+        entry,
+        {"stan": stan_cfg, "convergence": {"rhat_max": 1.05, "implementation": "arviz"}},
+        trajectories=str(tmp_path / "t.nc"),
+        program_marker=str(tmp_path / "marker.json"),
+        joint_map="unused",
+        own_program=True,
+        records=str(tmp_path / "records"),
+        batch_size=2,
+    )
+
+
+def test_a_batch_job_writes_no_program_and_samples_as_its_records_are_keyed(tmp_path, monkeypatch):
+    """Issue 62: a NUTS batch runs the program its build job's marker names (it writes none:
+    generating one fails here) with exactly the settings its records are keyed by."""
+    import ssmobs.nuts.analytic_program
+    import ssmobs.nuts.batch
+    import ssmobs.nuts.stan_program
+    from ssmobs.stages.stan import run_sample_batch
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a NUTS batch job wrote a Stan program")
+
+    for module, name in [
+        (ssmobs.nuts.stan_program, "stan_program"),
+        (ssmobs.nuts.stan_program, "write_analytic_program"),
+        (ssmobs.nuts.analytic_program, "write_analytic_program"),
+    ]:
+        monkeypatch.setattr(module, name, refuse)
+    seen = []
+
+    def sample(batch, backend, ks, **kwargs):
+        seen.append((batch, backend.name, list(ks), kwargs))
+        raise _Sampled
+
+    monkeypatch.setattr(ssmobs.nuts.batch, "run_trajectories", sample)
+    inputs = _batch_inputs(tmp_path, init_radius=0.5, adapt_delta=0.9, gradients="analytic")
+    header = tmp_path / "same_analytic.hpp"
+    header.write_text("// the generated gradient")
+    write_marker(tmp_path / "marker.json", "same", header)
+    with pytest.raises(_Sampled):
+        run_sample_batch(inputs, {"table": tmp_path / "batch1.parquet"})
+    ((batch, backend, ks, kwargs),) = seen
+    record = inputs.record
+    assert (backend, ks) == ("native", [2, 3])
+    assert json.loads((tmp_path / "marker.json").read_text())["program_file"] == str(
+        batch.stan_file
+    )
+    assert batch.user_header == header
+    assert batch.sampler == SamplerSettings(
+        chains=1, iter_warmup=10, iter_sampling=10, adapt_delta=0.9, init_radius=0.5
+    )
+    assert dict(record.sampler) == {
+        k: v for k, v in dataclasses.asdict(batch.sampler).items() if k != "workers"
+    }
+    assert (batch.scenario, batch.seed, batch.init) == (record.scenario, record.seed, "random")
+    assert batch.convergence == ConvergenceSettings(rhat_max=1.05, implementation="arviz")
+    assert record.diagnostics == "arviz"
+    assert kwargs["records_dir"] == inputs.records and kwargs["keep_draws_for"] == set()
+    # a program built for another gradient path than the records are keyed by is refused
+    autodiff = _batch_inputs(tmp_path)
+    write_marker(tmp_path / "marker.json", "same", header)
+    with pytest.raises(ValueError, match="autodiff gradients, but the program"):
+        run_sample_batch(autodiff, {"table": tmp_path / "batch1.parquet"})
+    # a marker whose program is gone (the program cache cleared) stops the job in one line
+    header.unlink()
+    with pytest.raises(FileNotFoundError, match="delete .*marker.json and run again"):
+        run_sample_batch(inputs, {"table": tmp_path / "batch1.parquet"})
+
+
 def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path, monkeypatch):
     """A killed sample_nuts job leaves temporaries of single records and draws in the folders
     all batches share; the next job of that batch removes its own, not other batches'."""
     import ssmobs.nuts.batch
-    from ssmobs.config.scenario import Scenario
-    from ssmobs.config.stage_inputs import nuts_batches_inputs
-    from ssmobs.design.trajectories import make_trajectories, write_trajectories
     from ssmobs.stages.stan import run_sample_batch
 
-    sc = Scenario.from_config(same_a09(T=3))
-    write_trajectories(tmp_path / "t.nc", make_trajectories(sc, np.zeros((6, 4))))
-    (tmp_path / "marker.json").write_text(json.dumps({"backend": "native"}))
     records, draws = tmp_path / "records", tmp_path / "draws"
     records.mkdir()
     draws.mkdir()
@@ -601,25 +694,7 @@ def test_batch_job_sweeps_its_records_temporaries_in_the_shared_folders(tmp_path
         raise _Sampled
 
     monkeypatch.setattr(ssmobs.nuts.batch, "run_trajectories", stub)
-    stan_cfg = {
-        "batch_size": 2,
-        "keep_draws": [],
-        "chains": 1,
-        "iter_warmup": 10,
-        "iter_sampling": 10,
-        "adapt_delta": 0.8,
-        "max_treedepth": 10,
-    }
-    entry = {**same_a09(T=3), "name": sc.name, "K": 4, "seed": sc.seed, "stan_init": "random"}
-    inputs = nuts_batches_inputs(
-        entry,
-        {"stan": stan_cfg, "convergence": {}},
-        trajectories=str(tmp_path / "t.nc"),
-        program_marker=str(tmp_path / "marker.json"),
-        joint_map="unused",
-        records=str(records),
-        batch_size=2,
-    )
+    inputs = _batch_inputs(tmp_path)
     inputs = dataclasses.replace(inputs, draws=str(draws))
     assert inputs.batch_of("batch1.parquet") == (2, 3)
     with pytest.raises(_Sampled):

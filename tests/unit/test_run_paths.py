@@ -127,12 +127,13 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
             scenario=name,
             key=keys.check_model(name, True),
         )
-        assert smoke.program_marker(model) == rule_path(
+        assert keys.program_marker(name) == rule_path(
             "results/shared/stan/{backend}/{model}/{key}.json",
             backend="native",
             model=model,
             key=keys.program(model),
         )
+        assert smoke.checked_program(model) == [keys.program_marker(name)]
         batches = smoke.nuts_batches(name)
         assert len(batches) == -(-len(smoke.scenario_objects[name].stan_trajectories) // size)
         assert batches == [
@@ -152,7 +153,7 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
             "results/{scenario}/gather_nuts/{key}/marginal_map.parquet", **gather
         )
         assert keys.nuts_records(name) in smoke.records_dir(name)
-        assert smoke.records_dir(name) != smoke.draws_dir(name)
+        assert smoke.draws_dir(name) == f"results/{name}/draws/{keys.nuts_records(name)}"
     for name in smoke.exact_scenarios:
         K = smoke.scenario_objects[name].exact_trajectories
         assert smoke.exact_summary(name) == rule_path(
@@ -310,7 +311,10 @@ def test_rule_params_come_from_the_entries():
     params = paths.select_k_params(name)
     assert params["scenario"] is paths.scenarios[params["ksel"]["scenario"]]
     model = paths.stan_models[0]
-    assert paths.checked_program(model) == [paths.program_marker(model)]
+    name = next(n for n in paths.stan_scenarios if paths.scenarios[n]["model"] == model)
+    assert paths.checked_program(model) == [paths.keys.program_marker(name)]
+    cmdstan = RunPaths.from_config(paths.config, paths.keys, "cmdstanpy")
+    assert cmdstan.checked_program(model) == []
     sc = paths.scenario_objects[paths.stan_scenarios[0]]
     read = paths.design_set(sc.name, sc.K)
     assert read == paths.disturbances(sc.disturbance_dim, sc.K, sc.method, sc.seed)
@@ -350,6 +354,9 @@ def test_run_paths_write_no_generated_program(tmp_path, monkeypatch):
     assert paths.stan_gradients == "analytic"
     planned = paths.stan_programs
     assert planned and all(header is not None for _, header in planned.values())
+    paths.compute_every_key()
+    for name in paths.stan_scenarios:  # what a NUTS batch reads: the build job's marker
+        assert paths.nuts_inputs(name).record.program in paths.cached_outputs()
     assert not (tmp_path / "cache").exists()  # nothing written
     assert housekeeping.unbuilt_programs(planned) == sorted(planned)
     model = sorted(planned)[0]

@@ -7,6 +7,7 @@ the key."""
 from __future__ import annotations
 
 import ast
+import copy
 import dataclasses
 import inspect
 import re
@@ -25,6 +26,9 @@ pytestmark = pytest.mark.unit
 REPO = PACKAGE_DIR.parents[1]
 #: the stages with an inputs object
 WITH_INPUTS = sorted(n for n, s in STAGES.items() if s.inputs is not None)
+#: ... and of them those a rule runs by an entry of their own (the NUTS records are written
+#: by rule sample_nuts, whose inputs hold theirs whole)
+WITH_ENTRY = [n for n in WITH_INPUTS if STAGES[n].entry is not None]
 
 
 def smoke_keys() -> CacheKeys:
@@ -49,7 +53,8 @@ def _rule(stage: str) -> str:
 
 
 def test_every_entry_names_code_and_scripts_that_exist():
-    assert {"trajectories", "joint_map", "exact", "gather", "nuts_batches"} <= set(WITH_INPUTS)
+    assert {"trajectories", "joint_map", "exact", "gather", "nuts_batches"} <= set(WITH_ENTRY)
+    assert "nuts_records" in WITH_INPUTS
     assert "k_selection_grid" in WITH_INPUTS
     for name, stage in STAGES.items():
         for entry in stage.code:
@@ -61,7 +66,7 @@ def test_every_entry_names_code_and_scripts_that_exist():
         assert stage.folder is not None or not stage.outputs, name
 
 
-@pytest.mark.parametrize("stage", WITH_INPUTS)
+@pytest.mark.parametrize("stage", WITH_ENTRY)
 def test_the_stage_reads_its_inputs_and_nothing_else(stage):
     module, function = _entry(stage)
     assert function.startswith("run_")
@@ -70,10 +75,7 @@ def test_the_stage_reads_its_inputs_and_nothing_else(stage):
     body = ast.parse(inspect.getsource(getattr(module, function)))
     names = {n.id for n in ast.walk(body) if isinstance(n, ast.Name)}
     names |= {
-        n.attr
-        for n in ast.walk(body)
-        if isinstance(n, ast.Attribute)
-        and not (isinstance(n.value, ast.Name) and n.value.id == "inputs")
+        n.attr for n in ast.walk(body) if isinstance(n, ast.Attribute) and _root(n) != "inputs"
     }
     assert not names & {"Scenario", "scenario", "config", "snakemake"}, names
     rule = _rule(stage)
@@ -95,6 +97,14 @@ def test_the_stage_reads_its_inputs_and_nothing_else(stage):
         and node.value.attr == "params"
     }
     assert read == {"inputs"}
+
+
+def _root(node: ast.Attribute) -> str | None:
+    """The name an attribute chain starts at (``inputs`` of ``inputs.record.scenario``)."""
+    value = node.value
+    while isinstance(value, ast.Attribute):
+        value = value.value
+    return value.id if isinstance(value, ast.Name) else None
 
 
 def _changed(value):
@@ -201,7 +211,76 @@ def test_the_nuts_inputs_name_the_batches_rule_sample_nuts_writes():
         ks = [tuple(r) for r in sc.stan_batches(paths.batch_size(name))]
         assert [inputs.batch_of(file) for file, _ in inputs.tables] == ks
         assert (inputs.records, inputs.draws) == (paths.records_dir(name), paths.draws_dir(name))
-        assert inputs.program == paths.program_marker(sc.model.slug)
-        assert (inputs.joint_map is None) == (sc.stan_init != "joint_map")
+        assert inputs.record.program == keys.program_marker(name)
+        assert keys.program_marker(name).startswith(f"results/shared/stan/native/{sc.model.slug}/")
+        assert (inputs.record.joint_map is None) == (sc.stan_init != "joint_map")
     name = paths.stan_scenarios[0]
     assert keys.nuts_batches(name, 4) != keys.nuts_batches(name, 2)
+
+
+def test_the_nuts_batches_read_the_records_inputs_whole():
+    """What determines a NUTS record (the records' key) is what the batch job samples with:
+    the batches' inputs hold the records' inputs object itself, and their records folder is
+    the one keyed by it."""
+    keys = smoke_keys()
+    for name, sc in keys.scenarios.items():
+        if not sc["stan"]:
+            continue
+        record = keys.inputs("nuts_records", name)
+        batches = keys.inputs("nuts_batches", name, batch_size=4)
+        assert batches.record == record
+        assert batches.records == STAGES["nuts_records"].folder_of(name, keys.nuts_records(name))
+        assert Path(batches.draws).name == keys.nuts_records(name)
+        assert record.trajectories == keys.inputs("joint_map", name).trajectories
+        assert record.model == sc["model"] and record.scenario == name
+        assert "implementation" not in dict(batches.thresholds)
+        assert batches.convergence_config["implementation"] == record.diagnostics
+        payload = keys.describe()[f"nuts_records:{name}:{keys.nuts_records(name)}"]
+        assert payload["model_code"] == keys.model_code(sc["model"])
+
+
+def test_every_field_of_the_records_inputs_moves_the_batches_key(monkeypatch):
+    """A record's inputs changed in any field give other batch tables as well as other
+    records (the batches read them whole)."""
+    keys = smoke_keys()
+    name = next(n for n, sc in keys.scenarios.items() if sc["stan"])
+    batches = keys.inputs("nuts_batches", name, batch_size=4)
+    base = keys.stage_key("nuts_batches", name, batch_size=4)
+    for field in dataclasses.fields(batches.record):
+        value = getattr(batches.record, field.name)
+        new = "other" if field.name == "model" else _changed(value)
+        other = dataclasses.replace(
+            batches, record=dataclasses.replace(batches.record, **{field.name: new})
+        )
+        monkeypatch.setattr(keys, "inputs", lambda s, n, other=other, **at: other)
+        assert keys.stage_key("nuts_batches", name, batch_size=4) != base, field.name
+        monkeypatch.undo()
+
+
+def test_the_records_key_holds_what_the_old_field_lists_held():
+    """The records' inputs hold each setting the records' key was made of before its inputs
+    object, normalised the same way (Stan's default init radius left out), and nothing of
+    the scenario that determines no record (its description, batch size, kept draws)."""
+    keys = smoke_keys()
+    name = next(n for n, sc in keys.scenarios.items() if sc["stan"])
+    sc, stan = keys.scenarios[name], keys.config["stan"]
+    record = keys.inputs("nuts_records", name)
+    assert dict(record.sampler) == {
+        f: stan[f]
+        for f in ("chains", "iter_warmup", "iter_sampling", "adapt_delta", "max_treedepth")
+    }
+    assert (record.seed, record.stan_init, record.prior) == (
+        sc["seed"],
+        sc["stan_init"],
+        sc["prior"],
+    )
+    assert record.gradients == stan.get("gradients", "autodiff")
+    assert record.diagnostics == keys.config["convergence"].get("implementation", "vectorized")
+    edited = copy.deepcopy(keys.config)
+    entry = next(e for e in edited["scenarios"] if e["name"] == name)
+    entry.update(description="another text", stan_batch_size=1)
+    edited["stan"]["keep_draws"] = [0, 1]
+    edited["stan"]["batch_size"] = 1
+    assert CacheKeys(edited, "native", repo=REPO).nuts_records(name) == keys.nuts_records(name)
+    edited["stan"]["init_radius"] = 0.5
+    assert CacheKeys(edited, "native", repo=REPO).nuts_records(name) != keys.nuts_records(name)

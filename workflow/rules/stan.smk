@@ -2,8 +2,9 @@
 
 
 rule build_stan_model:
-    """Compile stan/<model>.stan (or the program generated from a model without one) once
-    with the configured backend (native, cmdstanpy, PyStan)."""
+    """Compile stan/<model>.stan (or the program generated from a model without one, or
+    with analytic gradients, which this job alone writes) once with the configured backend
+    (native, cmdstanpy, PyStan); the marker names the program the NUTS batches run."""
     input:
         lambda wc: keyed_input("program", wc.model, wc.key, PATHS.stan_source(wc.model)),
     output:
@@ -27,9 +28,13 @@ rule sample_nuts:
     input:
         unpack(lambda wc: PATHS.stan_init_inputs(wc.scenario)),
         trajectories=lambda wc: keyed_input(
-            "nuts_batches", wc.scenario, wc.key, PATHS.nuts_inputs(wc.scenario).trajectories
+            "nuts_batches",
+            wc.scenario,
+            wc.key,
+            PATHS.nuts_inputs(wc.scenario).record.trajectories,
         ),
-        marker=lambda wc: PATHS.nuts_inputs(wc.scenario).program,
+        # the program it runs is the one this job built (the marker names it)
+        marker=lambda wc: PATHS.nuts_inputs(wc.scenario).record.program,
         checked=lambda wc: PATHS.check(wc.scenario, stan=True),
     output:
         table="results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",

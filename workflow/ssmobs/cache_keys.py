@@ -33,7 +33,8 @@ from typing import Any
 
 from . import kernels
 from .code_hashing import syntax_digest
-from .config.blocks import joint_map_settings, stan_gradients, stan_settings
+from .config.blocks import joint_map_settings, stan_gradients
+from .config.stage_inputs import SAMPLER_FIELDS as SAMPLER_FIELDS  # its readers' old import
 from .config.stage_inputs import inputs_payload
 from .stage_code import (
     PACKAGE_DIR,
@@ -44,26 +45,13 @@ from .stage_code import (
     model_closure,
     outside_code,
 )
-from .stage_table import NATIVE_DRIVER, NATIVE_SHADOW_HEADERS, STAGES
-from .stan_backends.base import program_digest, sampler_key
+from .stage_table import NATIVE_DRIVER, NATIVE_SHADOW_HEADERS, PROGRAM_MARKER, STAGES
+from .stan_backends.base import program_digest
 
 
 # --------------------------------------------------------------------------- the keys
 def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
     return {n: entry.get(n) for n in names}
-
-
-#: ... its NUTS records (beside the trajectories); the name enters Stan's seed
-NUTS_FIELDS = ("name", "prior", "stan_init", "seed")
-#: the NUTS settings that determine a record (batch_size and keep_draws only group them)
-SAMPLER_FIELDS = (
-    "chains",
-    "iter_warmup",
-    "iter_sampling",
-    "adapt_delta",
-    "max_treedepth",
-    "init_radius",
-)
 
 
 def check_case(sc: Mapping[str, Any]) -> dict[str, Any]:
@@ -298,9 +286,17 @@ class CacheKeys:
 
     def program_marker(self, name: str) -> str:
         """The marker of scenario ``name``'s compiled program (rule build_stan_model's
-        output) for this run's backend (:attr:`backend_name`)."""
+        output, :data:`~ssmobs.stage_table.PROGRAM_MARKER`) for this run's backend
+        (:attr:`backend_name`)."""
         model = self.scenarios[name]["model"]
-        return f"results/shared/stan/{self.backend_name}/{model}/{self.program(model)}.json"
+        return PROGRAM_MARKER.format(
+            backend=self.backend_name, model=model, key=self.program(model)
+        )
+
+    def own_program(self, name: str) -> bool:
+        """Whether scenario ``name``'s model has a hand-written ``stan/<model>.stan`` (else
+        NUTS runs its generated program)."""
+        return self.has_stan_file(self.scenarios[name]["model"])
 
     def program(self, model: str) -> str:
         """The compiled-program marker of ``model`` for the configured backend and its Stan
@@ -316,27 +312,10 @@ class CacheKeys:
         return self._key("program", model, payload)
 
     def nuts_records(self, name: str) -> str:
-        """Everything that determines a trajectory's NUTS record (not the thresholds of
-        the convergence checks: they are applied to the stored diagnostics by gather)."""
-        sc = self.scenarios[name]
-        # the scenario's own NUTS settings over the stan block (absent: the block's)
-        stan = stan_settings(sc, self.config["stan"])
-        payload = {
-            "trajectories": self.trajectories(name),
-            "scenario": _pick(sc, NUTS_FIELDS),
-            # one Stan seed for all trajectories; absent, so earlier keys stay, when per k
-            **({"stan_seed": sc["stan_seed"]} if sc.get("stan_seed") is not None else {}),
-            # chains that start at the joint MAP depend on it
-            **({"joint_map": self.joint_map(name)} if sc.get("stan_init") == "joint_map" else {}),
-            "sampler": sampler_key(_pick(stan, SAMPLER_FIELDS)),
-            "diagnostics": self.config["convergence"].get("implementation", "vectorized"),
-            "program": self.program(sc["model"]),
-            "model_code": self.model_code(sc["model"]),
-            "code": self.code("nuts_records"),
-            # analytic gradients: draws equal in distribution, not bit for bit
-            **self.gradients(sc["model"]),
-        }
-        return self._key("nuts_records", name, payload)
+        """The NUTS records' key (:class:`~ssmobs.config.stage_inputs.NutsRecordsInputs`):
+        everything that determines a trajectory's record, not the thresholds of the
+        convergence checks (the batch tables apply them to the stored diagnostics)."""
+        return self.stage_key("nuts_records", name)
 
     def nuts_batches(self, name: str, batch_size: int) -> str:
         """The NUTS batch tables' key for batches of ``batch_size``

@@ -243,16 +243,17 @@ class RunPaths:
 
     # -- NUTS (Sec. III.C) -----------------------------------------------------------------
 
-    def program_marker(self, model: str) -> str:
-        """The marker of a model's Stan program built with this run's backend."""
-        return f"results/shared/stan/{self.backend}/{model}/{self.keys.program(model)}.json"
-
     def checked_program(self, model: str) -> list[str]:
         """What the model check evaluates, when sampling builds it too: with the native
-        backend, build_stan_model's program, so the check runs the cached executable after
-        the one compile (no check job compiles, none waits on another's build lock).  A plain
-        input: a rebuilt program reruns its check, as it reruns the sampling."""
-        return [self.program_marker(model)] if self.backend == "native" else []
+        backend, build_stan_model's program (its marker:
+        :meth:`ssmobs.cache_keys.CacheKeys.program_marker`), so the check runs the cached
+        executable after the one compile (no check job compiles, none waits on another's
+        build lock).  A plain input: a rebuilt program reruns its check, as it reruns the
+        sampling."""
+        if self.backend != "native":
+            return []
+        name = next(n for n, sc in self.scenarios.items() if sc["model"] == model)
+        return [self.keys.program_marker(name)]
 
     def select_k_params(self, name: str) -> dict[str, Any]:
         """What the choice of K of k_selection entry ``name`` reads: the entry and its
@@ -277,8 +278,9 @@ class RunPaths:
         return STAGES["nuts_records"].folder_of(name, self.keys.nuts_records(name))
 
     def draws_dir(self, name: str) -> str:
-        """The kept draws of a scenario's NUTS runs (stan.keep_draws)."""
-        return f"results/{name}/draws/{self.keys.nuts_records(name)}"
+        """The kept draws of a scenario's NUTS runs (stan.keep_draws), as rule sample_nuts
+        reads them."""
+        return str(self.nuts_inputs(name).draws)
 
     def batch_dir(self, name: str) -> str:
         """The batch tables of a scenario's NUTS stage."""
@@ -384,7 +386,7 @@ class RunPaths:
         for name in self.stan_scenarios:
             out += [self.check(name, stan=True), *self.nuts_batches(name)]
             out += [self.stan_summary(name), self.stan_table(name)]
-        out += [self.program_marker(model) for model in self.stan_models]
+        out += [self.keys.program_marker(name) for name in self.stan_scenarios]
         for name in self.exact_scenarios:
             sc = self.scenario_objects[name]
             for K in {sc.K, sc.exact_trajectories}:

@@ -22,6 +22,7 @@ from .config.stage_inputs import (
     joint_map_inputs,
     k_selection_grid_inputs,
     nuts_batches_inputs,
+    nuts_records_inputs,
     trajectories_inputs,
 )
 
@@ -57,8 +58,9 @@ class Stage:
     #: of ``per``, what the builder takes by keyword (where no output it reads carries it)
     builder_per: tuple[str, ...] = ()
     #: the keys or paths of shared stages it reads (:class:`~ssmobs.cache_keys.CacheKeys`
-    #: attributes: ``design``, the design sets' key; ``program_marker``, called with the
-    #: scenario's name), passed to the builder by keyword
+    #: attributes: ``design``, the design sets' key; called with the scenario's name:
+    #: ``program_marker``, its compiled program's marker, and ``own_program``, whether its
+    #: model has a hand-written Stan program), passed to the builder by keyword
     shared: tuple[str, ...] = ()
     #: whether the stage runs the scenario's model, so its key holds the model's code
     runs_model: bool = False
@@ -92,6 +94,10 @@ NATIVE_SHADOW_HEADERS = tuple(
         for p in (PACKAGE_DIR / "stan_backends" / "native_include").rglob("*.hpp")
     )
 )
+#: the marker of a model's compiled program (rule build_stan_model's output) for a backend
+#: and the program's key; it names the program and header the build job compiled, which the
+#: NUTS batches run
+PROGRAM_MARKER = "results/shared/stan/{backend}/{model}/{key}.json"
 #: the compiled pair kernel of the LCD design sets (its flags are in lcd_native.py)
 LCD_KERNEL = "design/lcd_kernel/lcd_kernel.cpp"
 #: the rule scripts of the stamped tables and figures
@@ -157,16 +163,25 @@ STAGES: dict[str, Stage] = {
         folder="results/k_selection/{scenario}/{key}",
         outputs={"grid": "{method}_{sets}_seed{seed}.json"},
     ),
+    # a model's compiled program: its marker is PROGRAM_MARKER (not a keyed folder)
     "program": Stage(
         ("stages/stan.py:run_build_stan_model",),
         ("build_stan_model",),
         (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
     ),
-    # the records of every trajectory, one file each (resumable, shared by batchings)
+    # the records of every trajectory, one file each (resumable, shared by batchings),
+    # written by rule sample_nuts, whose inputs hold these whole (no entry of their own)
     "nuts_records": Stage(
         ("stages/stan.py:run_sample_batch", "nuts/record_cache.py"),
         ("sample_nuts",),
         (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+        inputs=nuts_records_inputs,
+        reads={
+            "trajectories": ("trajectories", "trajectories"),
+            "joint_map": ("joint_map", "theta"),
+        },
+        shared=("program_marker", "own_program"),
+        runs_model=True,
         folder="results/{scenario}/sample_nuts/records/{key}",
     ),
     # the batch tables of one batch size, batch{b}.parquet
@@ -182,7 +197,7 @@ STAGES: dict[str, Stage] = {
         },
         per=("batch_size",),
         builder_per=("batch_size",),
-        shared=("program_marker",),
+        shared=("program_marker", "own_program"),
         folder="results/{scenario}/sample_nuts/{key}",
         outputs={"table": "batch{batch}.parquet"},
     ),

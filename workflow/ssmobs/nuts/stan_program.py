@@ -1,8 +1,9 @@
 """Which Stan program NUTS runs for a model (Sec. III.C): the hand-written
 ``stan/<model>.stan``, or the program with the generated analytic gradients
 (:mod:`ssmobs.nuts.analytic_program`).  :func:`stan_program` writes a generated program into
-the cache (the build job and the NUTS jobs); :func:`planned_stan_program` only says where it
-lies (the planning of a run, which writes nothing).
+the cache (rule build_stan_model's job; the NUTS jobs run the program its marker names);
+:func:`planned_stan_program` only says where it lies (the planning of a run, which writes
+nothing).
 """
 
 from __future__ import annotations

@@ -18,16 +18,18 @@ from . import PathLike
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..config.stage_inputs import GatherInputs, NutsBatchesInputs
+    from ..config.stage_inputs import GatherInputs, NutsBatchesInputs, NutsRecordsInputs
     from ..design.trajectories import Trajectories
     from ..nuts.batch import NutsBatch
+    from ..nuts.convergence import ConvergenceSettings
     from ..stan_backends.base import SamplerSettings
 
 logger = logging.getLogger("ssmobs")
 
 
-def sampler_settings(stan_cfg: dict, threads: int = 1) -> SamplerSettings:
-    """The NUTS settings of config block ``stan`` (``threads``: parallel chain processes)."""
+def sampler_settings(stan_cfg: Mapping[str, Any], threads: int = 1) -> SamplerSettings:
+    """The NUTS settings of config block ``stan``, or of a record's sampler settings
+    (``threads``: parallel chain processes)."""
     from ..stan_backends.base import SamplerSettings
 
     return SamplerSettings(
@@ -49,38 +51,69 @@ def header_kwargs(header: Path | None) -> dict[str, Path]:
 def run_build_stan_model(
     model: str, backend: str, out: PathLike, gradients: str = "autodiff"
 ) -> dict:
-    """Rule build_stan_model: compile the model's program
-    (:func:`~ssmobs.nuts.stan_program.stan_program`) once; write the backend's marker."""
+    """Rule build_stan_model: write the model's program where it is generated
+    (:func:`~ssmobs.nuts.stan_program.stan_program`, the one job that writes it), compile it
+    once and write the backend's marker, which names the program and its C++ header
+    (``program_file``, ``header_file``: what the NUTS batches run)."""
     from ..nuts.stan_program import stan_program
     from ..stan_backends import get_backend
 
     program, header = stan_program(model, gradients)
-    marker = get_backend(backend).compile(program, **header_kwargs(header))
+    marker = {
+        **get_backend(backend).compile(program, **header_kwargs(header)),
+        "program_file": str(program),
+        "header_file": None if header is None else str(header),
+    }
     io.write_json(out, marker)
     return marker
 
 
+def built_program(marker: PathLike) -> tuple[str, Path, Path | None]:
+    """The backend, the Stan program and its C++ header (or None) that rule build_stan_model
+    compiled, from its marker; a one-line error where a file it names is gone (a cleared
+    program cache: deleting the marker builds it again)."""
+    built = io.read_json(marker, required=["backend", "program_file", "header_file"])
+    program = Path(built["program_file"])
+    header = None if built["header_file"] is None else Path(built["header_file"])
+    for path in (program, header):
+        if path is not None and not path.is_file():
+            raise FileNotFoundError(
+                f"{path}: the Stan program that {marker} names is gone (was the program "
+                f"cache cleared?); delete {marker} and run again to build it"
+            )
+    return str(built["backend"]), program, header
+
+
 def nuts_batch(
-    inputs: NutsBatchesInputs,
+    inputs: NutsRecordsInputs,
     traj: Trajectories,
+    program: tuple[Path, Path | None],
+    threads: int,
+    convergence: ConvergenceSettings,
     init_theta: np.ndarray | None = None,
 ) -> NutsBatch:
-    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`) from its
-    :class:`~ssmobs.config.stage_inputs.NutsBatchesInputs`: its design trajectories, true
-    values, prior bounds, seeds and chains' start, its Stan program (the analytic one where
-    the stan block asks for it), the NUTS settings and the thresholds; ``init_theta``: the
-    joint MAP of every k (``stan_init: joint_map``)."""
-    from ..config.blocks import stan_gradients
+    """The NUTS batch of a scenario (:class:`ssmobs.nuts.batch.NutsBatch`) from what
+    determines its records (:class:`~ssmobs.config.stage_inputs.NutsRecordsInputs`): its
+    design trajectories, true values, prior bounds, seeds and chains' start, the sampler
+    settings on ``threads`` chain processes; ``program``: the Stan program and C++ header
+    its build job compiled (:func:`built_program`); ``convergence``: the checks;
+    ``init_theta``: the joint MAP of every k (``stan_init: joint_map``)."""
     from ..nuts.batch import NutsBatch
-    from ..nuts.convergence import ConvergenceSettings
-    from ..nuts.stan_program import stan_program
 
     model = traj.model
-    stan_cfg = inputs.stan_config
-    program, header = stan_program(model.slug, stan_gradients(stan_cfg))
+    if model.slug != inputs.model:
+        raise ValueError(
+            f"scenario {inputs.scenario}: model {inputs.model}, trajectories' model {model.slug}"
+        )
+    stan_file, header = program
+    if (header is not None) != (inputs.gradients == "analytic"):  # a program of another key
+        raise ValueError(
+            f"scenario {inputs.scenario}: {inputs.gradients} gradients, but the program "
+            f"{stan_file} was built {'with' if header else 'without'} a gradient header"
+        )
     return NutsBatch(
         model=model,
-        stan_file=program,
+        stan_file=stan_file,
         z=traj.z,
         x_true=traj.x,
         bounds=model.prior_bounds(traj.omega, inputs.prior_config),
@@ -88,8 +121,8 @@ def nuts_batch(
         x0_true=traj.x0,
         scenario=inputs.scenario,
         seed=inputs.seed,
-        sampler=sampler_settings(stan_cfg, inputs.threads),
-        convergence=ConvergenceSettings(**inputs.convergence_config),
+        sampler=sampler_settings(dict(inputs.sampler), threads),
+        convergence=convergence,
         init=inputs.stan_init,
         stan_seed=inputs.stan_seed,
         init_theta=init_theta,
@@ -101,8 +134,9 @@ def run_sample_batch(inputs: NutsBatchesInputs, paths: Mapping[str, PathLike]) -
     """Rule sample_nuts: NUTS, checks and marginal MAPs for one batch of trajectories, from
     its :class:`~ssmobs.config.stage_inputs.NutsBatchesInputs` alone; ``paths``: the output
     ``table``, whose file name names the batch (as in :data:`ssmobs.stage_table.STAGES`).
-    Where the chains start at the joint MAP, ``inputs.joint_map`` is rule joint_map's
-    ``theta_hat.nc``.
+    Where the chains start at the joint MAP, ``inputs.record.joint_map`` is rule joint_map's
+    ``theta_hat.nc``.  The Stan program is the one rule build_stan_model compiled, named by
+    its marker: this job writes no program.
 
     Each trajectory's record is written on its own as soon as it is done; a rerun after an
     interruption reuses every valid record (see :func:`ssmobs.nuts.batch.run_trajectories`).
@@ -114,10 +148,10 @@ def run_sample_batch(inputs: NutsBatchesInputs, paths: Mapping[str, PathLike]) -
     from ..nuts.record_format import records_to_frame
     from ..stan_backends import get_backend
 
-    traj = read_trajectories(inputs.trajectories)
-    model = traj.model
-    backend_name = io.read_json(inputs.program, required=["backend"])["backend"]
-    name = inputs.scenario
+    record = inputs.record
+    traj = read_trajectories(record.trajectories)
+    backend_name, program, header = built_program(record.program)
+    name = inputs.record.scenario
     if traj.K != inputs.K:
         raise ValueError(f"scenario {name}: K = {inputs.K}, trajectories K = {traj.K}")
     out = paths["table"]
@@ -128,18 +162,19 @@ def run_sample_batch(inputs: NutsBatchesInputs, paths: Mapping[str, PathLike]) -
         [record_path(records_dir, k) for k in ks] + [draws_path(draws_dir, k) for k in ks]
     )
     progress = Progress(f"NUTS {name} batch {Path(out).stem[5:]}", len(ks), logger)
-    theta_hat = None if inputs.joint_map is None else _theta_hat(inputs.joint_map, traj.K)
+    theta_hat = None if record.joint_map is None else _theta_hat(record.joint_map, traj.K)
+    settings = ConvergenceSettings(**inputs.convergence_config)
     records = run_trajectories(
-        nuts_batch(inputs, traj, theta_hat),
+        nuts_batch(record, traj, (program, header), inputs.threads, settings, theta_hat),
         get_backend(backend_name),
         ks,
         records_dir=records_dir,
-        keep_draws_for=set(inputs.stan_config["keep_draws"]) & set(ks),
+        keep_draws_for=set(inputs.keep_draws) & set(ks),
         draws_dir=draws_dir,
         progress=progress,
     )
-    settings = ConvergenceSettings(**inputs.convergence_config)
-    io.write_parquet(out, apply_thresholds(records_to_frame(records, model, traj.T), settings))
+    frame = records_to_frame(records, traj.model, traj.T)
+    io.write_parquet(out, apply_thresholds(frame, settings))
 
 
 def _theta_hat(path: PathLike, K: int) -> Any:

@@ -18,17 +18,30 @@ from .exact import ExactInputs, exact_inputs
 from .frozen import DESIGN_DIR, DESIGN_SET, design_set_path, inputs_payload
 from .joint_map import JointMapInputs, joint_map_inputs
 from .k_selection import KSelectionGridInputs, k_selection_grid_inputs
-from .nuts import NUTS_THREADS, GatherInputs, NutsBatchesInputs, gather_inputs, nuts_batches_inputs
+from .nuts import (
+    DRAWS_DIR,
+    NUTS_THREADS,
+    SAMPLER_FIELDS,
+    GatherInputs,
+    NutsBatchesInputs,
+    NutsRecordsInputs,
+    gather_inputs,
+    nuts_batches_inputs,
+    nuts_records_inputs,
+)
 
 __all__ = [
     "DESIGN_DIR",
     "DESIGN_SET",
+    "DRAWS_DIR",
     "NUTS_THREADS",
+    "SAMPLER_FIELDS",
     "ExactInputs",
     "GatherInputs",
     "JointMapInputs",
     "KSelectionGridInputs",
     "NutsBatchesInputs",
+    "NutsRecordsInputs",
     "TrajectoriesInputs",
     "design_set_path",
     "exact_inputs",
@@ -37,5 +50,6 @@ __all__ = [
     "joint_map_inputs",
     "k_selection_grid_inputs",
     "nuts_batches_inputs",
+    "nuts_records_inputs",
     "trajectories_inputs",
 ]
