@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -162,24 +164,30 @@ def test_nested_random_sets_share_points_and_independent_sets_do_not():
         set_seed(1, 100, "shared")
 
 
-def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
+def test_select_k_stage_scores_each_set_variant_separately(tmp_path, monkeypatch):
     from ssmobs import io
-    from ssmobs.design.disturbances import design_disturbances
+    from ssmobs.config.stage_inputs import k_selection_points_inputs
     from ssmobs.k_selection import set_seed
     from ssmobs.stages.k_selection.choice import run_select_k
     from ssmobs.stages.k_selection.grid import run_k_selection_point
 
-    sc = Scenario.from_config(same_a09(x0=8.0, K=40, prior="restricted", paper_ref="same_a09_T4"))
+    entry = same_a09(
+        x0=8.0, K=40, prior="restricted", paper_ref="same_a09_T4", joint_map_start="observations"
+    )
+    sc = Scenario.from_config(entry)
+    config = {"scenarios": [entry], "joint_map": {}, "design": {"b_max": None}}
+    shared = k_selection_points_inputs({"scenario": "s"}, config, design="d0")
+    paper_values = Path("config/paper_values.yaml").resolve()
+    monkeypatch.chdir(tmp_path)  # the points make their design sets below results/shared/
     points = []
     for sets in ("independent", "nested"):
         for K in (40, 80, 120):
-            d = design_disturbances(8, K, "random", set_seed(3, K, sets))
-            path = tmp_path / f"d_{sets}_{K}.nc"
-            io.write_disturbances(path, d)
+            point = shared.point(K, "random", sets, 3)
             out = tmp_path / f"{sets}_K{K}.json"
-            matrix, attrs = io.read_disturbances(path, q=8, K=K)
-            info = run_k_selection_point(matrix, attrs, sc, K, "random", 3, {}, out, sets=sets)
+            info = run_k_selection_point(point, {"point": out})
             assert (info["sets"], info["seed"], info["set_seed"]) == (sets, 3, set_seed(3, K, sets))
+            assert (tmp_path / point.design_set(8, info["set_seed"])).is_file()
+            assert io.read_checked_json(out, required=["K_i"]) == info
             points.append(info)
     grid = tmp_path / "grid.json"  # what rule k_selection_grid writes
     io.write_json(grid, {"points": points})
@@ -188,7 +196,7 @@ def test_select_k_stage_scores_each_set_variant_separately(tmp_path):
         ksel,
         sc,
         [grid],
-        "config/paper_values.yaml",
+        paper_values,
         tmp_path / "sel.json",
         tmp_path / "v.csv",
         [str(tmp_path / "f.png")],
@@ -259,10 +267,9 @@ def test_papers_k_is_shown_only_beside_the_papers_thresholds(tmp_path):
 def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path, monkeypatch):
     """Rule k_selection_grid: the sets are made in the job (as rule design_disturbances would
     write them), every point is cached as it finishes, and a rerun reuses them."""
-    import dataclasses
     import json
 
-    from ssmobs.config.stage_inputs import k_selection_grid_inputs
+    from ssmobs.config.stage_inputs import k_selection_grid_inputs, k_selection_points_inputs
     from ssmobs.stages.k_selection.grid import run_k_selection_grid
 
     config = {
@@ -275,7 +282,7 @@ def test_grid_job_makes_its_sets_and_reuses_finished_points(tmp_path, monkeypatc
         {**entry, "seeds": [1]}, config, points=str(tmp_path / "points"), design="d0"
     )
     assert inputs.grid_of("random_nested_seed1.json") == ("random", "nested", 1)
-    inputs = dataclasses.replace(inputs, design="d0")
+    assert inputs.points_inputs == k_selection_points_inputs(entry, config, design="d0")
     monkeypatch.chdir(tmp_path)
     rows = run_k_selection_grid(inputs, {"grid": tmp_path / "random_nested_seed1.json"})
     assert [r["K_i"] for r in rows] == [8, 16]

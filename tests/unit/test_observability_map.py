@@ -4,6 +4,7 @@ be unobservable."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from factories import same_a09
 from ssmobs.cache_keys import CacheKeys
 from ssmobs.config.maps import cell_entries
+from ssmobs.config.stage_inputs import DESIGN_SET, MAP_CELLS_DIR
 from ssmobs.config.validation import ConfigError, validate
 from ssmobs.stages import observability_map as om
 
@@ -82,60 +84,87 @@ def test_cell_keys_follow_the_settings_that_determine_them():
     assert sorted(k for _, k in other) == sorted(base.values())  # the name is no part of it
 
 
-def fake_cells(tmp_path, monkeypatch, row):
-    """The cells of map MAP with cell_summary replaced by ``row(scenario)``: the names of the
-    cells it computed, the config, the map's entry, its cells and map_table's other args."""
-    calls: list[str] = []
+def _inputs(conf: dict, name: str = "m"):
+    """What rule observability_map_cells reads for map ``name`` (the object of its key)."""
+    keys = CacheKeys(conf, "native")
+    return keys.lookup("map", name, keys.map_table(name))["inputs"]
 
-    def fake_summary(scenario, disturbances, design_cfg, joint, exact):
-        calls.append(scenario.name)
-        return row(scenario)
+
+def _at(inputs, cells_dir):
+    """``inputs`` with its cells cached in ``cells_dir``."""
+    return dataclasses.replace(inputs, cells_dir=str(cells_dir))
+
+
+def fake_cells(tmp_path, monkeypatch, row):
+    """The cells of map MAP with cell_summary replaced by ``row(cell inputs)``: the (value,
+    T) of the cells it computed, the config and the map job's inputs (cells in tmp_path)."""
+    calls: list[tuple[float, int]] = []
+
+    def fake_summary(cell):
+        calls.append((cell.omega_config["a"], cell.T))
+        return row(cell)
 
     monkeypatch.setattr(om, "cell_summary", fake_summary)
     conf = config(MAP)
-    cells = CacheKeys(conf, "native").map_cells("m")
-    args = (tmp_path / "design", conf["design"], conf["joint_map"], None, tmp_path / "cells")
-    return calls, conf, conf["observability_maps"][0], cells, args
+    return calls, conf, _at(_inputs(conf), tmp_path / "cells")
 
 
 def test_only_missing_or_damaged_cells_are_computed(tmp_path, monkeypatch):
-    calls, conf, entry, cells, args = fake_cells(
-        tmp_path, monkeypatch, lambda sc: {"K_max": 1, "K_max_frac": 0.05, "exact": False}
+    calls, conf, inputs = fake_cells(
+        tmp_path, monkeypatch, lambda cell: {"K_max": 1, "K_max_frac": 0.05, "exact": False}
     )
-    frame = om.map_table(entry, cells, *args)
+    frame = om.map_table(inputs)
     assert len(calls) == 4 and list(frame["T"]) == [4, 10, 4, 10]
     wider = copy.deepcopy(conf)
     wider["observability_maps"][0]["values"] = [0.5, 0.9, 0.99]
-    more = CacheKeys(wider, "native").map_cells("m")
-    (tmp_path / "cells" / f"{cells[0][1]}.json").write_text("{not json")
+    more = _at(_inputs(wider), tmp_path / "cells")
+    (tmp_path / "cells" / f"{inputs.cells[0][0]}.json").write_text("{not json")
     calls.clear()
-    frame = om.map_table(wider["observability_maps"][0], more, *args)
-    assert calls == ["m_a0.5_T4", "m_a0.99_T4", "m_a0.99_T10"]
+    frame = om.map_table(more)
+    assert calls == [(0.5, 4), (0.99, 4), (0.99, 10)]
     assert len(frame) == 6 and list(frame["value"]) == [0.5, 0.5, 0.9, 0.9, 0.99, 0.99]
+
+
+def test_the_map_job_reads_the_cells_its_key_is_made_of():
+    """The map's key is the content of what its job reads: its name, varied parameter, cells
+    folder and every cell with its key; another map of the same cells shares the cells'
+    keys and files but not the table's key (the table names the map)."""
+    conf = config(MAP, {**MAP, "name": "other"})
+    keys = CacheKeys(conf, "native")
+    inputs = keys.lookup("map", "m", keys.map_table("m"))["inputs"]
+    other = keys.lookup("map", "other", keys.map_table("other"))["inputs"]
+    assert [k for _, k in keys.map_cells("m")] == [k for k, _ in inputs.cells]
+    assert inputs.cells == other.cells and keys.map_table("m") != keys.map_table("other")
+    assert inputs.cell_file(inputs.cells[0][0]).startswith(MAP_CELLS_DIR + "/")
+    assert (inputs.map, inputs.vary) == ("m", "a")
+    for key, cell in inputs.cells:
+        assert keys.lookup("map_cell", f"m_a{cell.omega_config['a']:g}_T{cell.T}", key) == {
+            "inputs": cell
+        }
 
 
 def test_a_table_of_cached_cells_equals_one_of_fresh_cells(tmp_path, monkeypatch):
     """A rerun after a kill reads some cells from their files: the map's table must be the
     same bytes as a fresh run's (the JSON file sorts its keys, a fresh row does not)."""
 
-    calls, _, entry, cells, args = fake_cells(
+    calls, _, inputs = fake_cells(
         tmp_path,
         monkeypatch,
-        lambda sc: {
+        lambda cell: {
             "K_max": np.int64(3),
-            "K_max_frac": np.float64(sc.T / 70),
+            "K_max_frac": np.float64(cell.T / 70),
             "K_max_frac_lo95": 0.01,
             "K_max_frac_hi95": 0.3,
             "lvar_median_a": math.nan,
             "exact": False,
         },
     )
-    fresh = om.map_table(entry, cells, *args)
-    for _, key in cells[1:]:
+    fresh = om.map_table(inputs)
+    for key, _ in inputs.cells[1:]:
         (tmp_path / "cells" / f"{key}.json").unlink()
     calls.clear()
-    resumed = om.map_table(entry, cells, *args)
-    assert len(calls) == len(cells) - 1  # the first cell came from its file
+    resumed = om.map_table(inputs)
+    assert len(calls) == len(inputs.cells) - 1  # the first cell came from its file
     assert resumed.to_csv(index=False) == fresh.to_csv(index=False)
     # the order cell_summary makes, not the file's sorted one
     assert list(fresh.columns[-6:]) == [
@@ -148,7 +177,7 @@ def test_a_table_of_cached_cells_equals_one_of_fresh_cells(tmp_path, monkeypatch
     ]
 
 
-def test_random_walk_at_T4_is_unobservable(tmp_path):
+def test_random_walk_at_T4_is_unobservable(tmp_path, monkeypatch):
     """ranWalk, T = 4 (Sec. IV): no joint MAP passes the checks, and few trajectories have
     a unique interior maximum of p(a | z)."""
     conf = config(
@@ -161,16 +190,11 @@ def test_random_walk_at_T4_is_unobservable(tmp_path):
             "K": 40,
         }
     )
-    ((cell, _),) = CacheKeys(conf, "native").map_cells("m")
-    from ssmobs.config.scenario import Scenario
-
-    row = om.cell_summary(
-        Scenario.from_config(cell),
-        tmp_path / "q8_K40_design_seed1.nc",
-        conf["design"],
-        conf["joint_map"],
-        conf["exact_marginal"],
-    )
+    ((_, cell),) = _inputs(conf).cells
+    monkeypatch.chdir(tmp_path)  # its design set is made below results/shared/
+    row = om.cell_summary(cell)
+    made = DESIGN_SET.format(key="*", q=8, K=40, method="design", seed=1)
+    assert len(list(tmp_path.glob(made))) == 1
     assert row["K_max"] == 0 and row["K_max_frac_hi95"] < 0.1
     assert row["exact"] and row["exact_unique_frac"] < 0.5
 
@@ -196,7 +220,7 @@ def test_cell_keys_follow_the_number_of_starts():
         assert set(other) == set(base) and set(other.values()).isdisjoint(base.values())
 
 
-def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
+def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path, monkeypatch):
     """|K^max_unique| of a cell is the joint-MAP stage's count (trajectories with exactly one
     distinct maximum that passes the checks, ssmobs.joint_map.multi_start) on the same trajectories:
     with one start it equals |K^max|; from 4 starts (the base's joint_map_n_starts) it is
@@ -209,14 +233,16 @@ def test_a_cell_counts_unique_maxima_as_the_joint_map_stage_does(tmp_path):
     from ssmobs.joint_map.multi_start_summary import multi_start_summary
     from ssmobs.joint_map.problem import JointMapProblem
 
+    monkeypatch.chdir(tmp_path)  # the cells make their design sets below results/shared/
     rows = {}
     for n in (1, 4):
         entry = {**MULT, "base": {**MULT["base"], "joint_map_n_starts": n}}
         conf = config(entry)
         ((cell, _),) = CacheKeys(conf, "native").map_cells("m")
+        ((_, inputs),) = _inputs(conf).cells
         sc = Scenario.from_config(cell)
-        path = tmp_path / f"q{sc.disturbance_dim}_K{sc.K}_design_seed1.nc"
-        rows[n] = om.cell_summary(sc, path, conf["design"], conf["joint_map"], None)
+        rows[n] = om.cell_summary(dataclasses.replace(inputs, exact=None))
+        path = tmp_path / inputs.design_set(sc.disturbance_dim)  # the set the cell made
         matrix, attrs = disturbance_set(path, sc.disturbance_dim, sc.K, sc.method, sc.seed, {})
         traj = make_trajectories(sc, matrix, provenance=attrs)
         settings = JointMapSettings.from_mapping({**conf["joint_map"], "n_starts": n})

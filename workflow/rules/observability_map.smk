@@ -7,7 +7,7 @@ rule observability_map_cells:
     """Every cell of one map: design set, joint MAP and (models linear in the states) exact
     marginal; each cell cached as it finishes."""
     output:
-        "results/observability_map/{map}/{key}/cells.parquet",
+        table="results/observability_map/{map}/{key}/cells.parquet",
     log:
         "results/observability_map/{map}/{key}/cells.log",
     conda:
@@ -17,13 +17,8 @@ rule observability_map_cells:
         mem_mb=4000,
         runtime=120,
     params:
-        entry=lambda wc: keyed_input("map", wc.map, wc.key, MAPS[wc.map]),
-        cells=lambda wc: MAP_CELLS[wc.map],
-        design=config["design"],
-        design_dir=DESIGN_DIR,
-        joint_settings=config["joint_map"],
-        exact_settings=config["exact_marginal"],
-        cells_dir=MAP_CELLS_DIR,
+        # what the job reads: the object its key is made of (ssmobs.config.stage_inputs)
+        inputs=lambda wc: expect_key("map", wc.map, wc.key)["inputs"],
     script:
         "../scripts/observability_map_cells.py"
 

@@ -4,14 +4,4 @@ from ssmobs import log
 from ssmobs.stages.observability_map import run_map_cells
 
 log.start_job(snakemake)
-p = snakemake.params
-run_map_cells(
-    p.entry,
-    p.cells,
-    p.design_dir,
-    p.design,
-    p.joint_settings,
-    p.exact_settings,
-    p.cells_dir,
-    snakemake.output[0],
-)
+run_map_cells(snakemake.params.inputs, dict(snakemake.output.items()))

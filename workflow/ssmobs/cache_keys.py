@@ -33,9 +33,15 @@ from typing import Any
 
 from . import kernels
 from .code_hashing import syntax_digest
-from .config.blocks import joint_map_settings, stan_gradients
+from .config.blocks import stan_gradients
+from .config.maps import cell_entries
 from .config.stage_inputs import SAMPLER_FIELDS as SAMPLER_FIELDS  # its readers' old import
-from .config.stage_inputs import inputs_payload
+from .config.stage_inputs import (
+    inputs_payload,
+    k_selection_points_inputs,
+    map_cell_inputs,
+    map_cells_inputs,
+)
 from .stage_code import (
     PACKAGE_DIR,
     REPO_DIR,
@@ -333,16 +339,17 @@ class CacheKeys:
         return self.stage_key("exact", name, K=int(K))
 
     def k_selection_points(self, ksel: str) -> str:
-        """Each point V_{K_i} of one k_selection entry (Sec. IV.A), cached one file per K_i:
-        not the grid, so that a point a changed grid keeps is not computed again."""
+        """Each point V_{K_i} of one k_selection entry (Sec. IV.A), cached one file per K_i
+        and grid: what every point of its scenario reads
+        (:class:`~ssmobs.config.stage_inputs.KSelectionPointsInputs`), the model's code and
+        the points' code; not the grid nor the entry, so that a point a changed grid keeps,
+        or another entry on the scenario asks for, is not computed again (a point's K_i,
+        method, set variant and seed are its file's name in the keyed folder)."""
         ks = self.k_selections[ksel]
-        sc = self.scenarios[ks["scenario"]]
+        inputs = k_selection_points_inputs(ks, self.config, design=self.design)
         payload = {
-            "scenario": _pick(sc, ("model", "omega", "x0", "T", "prior")),
-            # the scenario's start of the states, the paper's one start
-            "settings": joint_map_settings(sc, self.config["joint_map"], single_start=True),
-            "design": self.design,
-            "model_code": self.model_code(sc["model"]),
+            "inputs": inputs_payload(inputs),
+            "model_code": self.model_code(inputs.model),
             "code": self.code("k_selection_points"),
         }
         return self._key("k_selection_points", ksel, payload)
@@ -350,33 +357,43 @@ class CacheKeys:
     def k_selection_grid(self, ksel: str) -> str:
         """The grids of one k_selection entry
         (:class:`~ssmobs.config.stage_inputs.KSelectionGridInputs`): its points' folder (their
-        key), the grid of K_i, the grid files and the scenario's name (written into them)."""
+        key) with what every point reads, the grid of K_i, the grid files and the scenario's
+        name (written into them)."""
         return self.stage_key("k_selection_grid", ksel)
 
     def map_cells(self, name: str) -> list[tuple[dict[str, Any], str]]:
-        """Every cell of one observability map (issue 21) with its own key: the cell's
-        scenario entry but its name, the design sets' key, the joint-MAP settings, the exact
-        settings where the map runs the exact stage, the model's code and the cells' code.
-        A cell two maps share, or that an extended grid keeps, has the same key."""
-        from .config.maps import cell_entries
-
+        """Every cell of one observability map (issue 21), its scenario entry
+        (:func:`ssmobs.config.maps.cell_entries`) with its own key: what the cell reads
+        (:class:`~ssmobs.config.stage_inputs.MapCellInputs`: no name, no map), the model's
+        code and the cells' code.  A cell two maps share, or that an extended grid keeps,
+        has the same key; :meth:`lookup` of ``("map_cell", cell name, key)`` gives
+        ``{"inputs": ...}``, the object the key is made of."""
         entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
         out = []
         for cell in cell_entries(entry):
+            inputs = map_cell_inputs(cell, self.config, design=self.design, exact=entry["exact"])
             payload = {
-                "cell": {k: v for k, v in cell.items() if k != "name"},
-                "design": self.design,
-                "settings": joint_map_settings(cell, self.config["joint_map"]),
-                "exact": self.config["exact_marginal"] if entry["exact"] else None,
-                "model_code": self.model_code(cell["model"]),
+                "inputs": inputs_payload(inputs),
+                "model_code": self.model_code(inputs.model),
                 "code": self.code("map_cells"),
             }
-            out.append((cell, self._key("map_cell", cell["name"], payload)))
+            key = self._key("map_cell", cell["name"], payload, inputs=inputs)
+            out.append((cell, key))
         return out
 
     def map_table(self, name: str) -> str:
-        """The table of every cell of one observability map: its cells' keys."""
-        return self._key("map", name, {"cells": [key for _, key in self.map_cells(name)]})
+        """The table of every cell of one observability map: what rule
+        observability_map_cells reads (:class:`~ssmobs.config.stage_inputs.MapCellsInputs`:
+        the map's name and varied parameter, each cell's key and inputs); :meth:`lookup` of
+        ``("map", name, key)`` gives ``{"inputs": ...}``, the rule's only param."""
+        entry = next(m for m in self.config["observability_maps"] if m["name"] == name)
+        cells = [
+            (key, self.lookup("map_cell", cell["name"], key)["inputs"])
+            for cell, key in self.map_cells(name)
+        ]
+        inputs = map_cells_inputs(entry, cells)
+        payload = {"inputs": inputs_payload(inputs), "code": self.code("map_cells")}
+        return self._key("map", name, payload, inputs=inputs)
 
     def output(self, name: str, inputs: Iterable[str], params: Any) -> str:
         """A table or figure of ``outputs_dir``: its keyed inputs, its parameters and the

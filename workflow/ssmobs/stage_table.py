@@ -145,10 +145,12 @@ STAGES: dict[str, Stage] = {
         folder="results/{scenario}/joint_map/{key}",
         outputs={"table": "joint_map.parquet", "theta": "theta_hat.nc", "summary": "summary.json"},
     ),
-    # the points V_{K_i} of the choice of K, shared by the k_selection entries on a scenario
+    # the points V_{K_i} of the choice of K, shared by the k_selection entries on a scenario,
+    # computed in rule k_selection_grid's job (its script is the grid's): keyed by what each
+    # reads (config.stage_inputs.KSelectionPointsInputs), its K_i and grid in its file's name
     "k_selection_points": Stage(
-        ("stages/k_selection/grid.py",),
-        ("k_selection_grid",),
+        ("stages/k_selection/grid.py:run_k_selection_point",),
+        (),
         folder="results/shared/k_selection_points/{key}",
     ),
     # the grids of one k_selection entry (its name in place of a scenario's)
@@ -227,7 +229,9 @@ STAGES: dict[str, Stage] = {
         folder="results/{scenario}/exact_marginal/{key}",
         outputs={"table": "marginal_map.parquet", "summary": "summary.json"},
     ),
-    # the cells of an observability map: what computes a cell, not the map's table or figure
+    # the cells of an observability map: what computes a cell, not the map's table or figure;
+    # each cell keyed by what it reads (config.stage_inputs.MapCellInputs), the map's job by
+    # its cells (MapCellsInputs, cache_keys.CacheKeys.map_table)
     "map_cells": Stage(
         ("stages/observability_map.py:run_map_cells",), ("observability_map_cells",)
     ),

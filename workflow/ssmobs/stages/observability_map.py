@@ -17,8 +17,9 @@ scenario (model, Omega, x0, prior, method, seed) with one parameter set to each 
   maximum (Definition 3) with its interval, and over those the median Laplace standard
   deviation and the median width of the 90 % interval of every Omega component ("how
   well"), plus the fraction whose cut-off improper spike is not negligible.
-Each cell is cached on its own under its content key (the cell, K, the design, joint-MAP and
-exact settings and the code; :meth:`ssmobs.cache_keys.CacheKeys.map_cells`), so a grid
+Each cell is cached on its own under its content key, what it reads
+(:class:`~ssmobs.config.stage_inputs.MapCellInputs`: the cell, K, the design, joint-MAP and
+exact settings) with the code (:meth:`ssmobs.cache_keys.CacheKeys.map_cells`), so a grid
 extended by new values or horizons computes only the new cells.
 """
 
@@ -29,15 +30,18 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from .. import io
 from ..binomial import clopper_pearson
-from ..config.scenario import Scenario
 from ..log import Progress
+from . import PathLike
+
+if TYPE_CHECKING:
+    from ..config.stage_inputs import MapCellInputs, MapCellsInputs
 
 logger = logging.getLogger("ssmobs")
 
@@ -50,38 +54,38 @@ def _median(values: np.ndarray) -> float:
     return float(np.median(values)) if values.size else math.nan
 
 
-def cell_summary(
-    scenario: Scenario,
-    disturbances: str | os.PathLike,
-    design_cfg: Mapping[str, Any],
-    joint_settings: Mapping[str, Any],
-    exact_settings: Mapping[str, Any] | None,
-) -> dict[str, Any]:
-    """One cell: its design trajectories, joint MAP and (``exact_settings`` given and the
-    model linear in the states) exact marginal; the row of the map's table (module
-    docstring), without the map's own columns."""
+def cell_summary(inputs: MapCellInputs) -> dict[str, Any]:
+    """One cell, from its :class:`~ssmobs.config.stage_inputs.MapCellInputs` alone: its
+    design trajectories, joint MAP and (the map runs the exact stage and the model is linear
+    in the states) exact marginal; the row of the map's table (module docstring), without
+    the map's own columns."""
     from ..design.disturbance_sets import disturbance_set
-    from ..design.trajectories import make_trajectories
+    from ..design.trajectories import trajectories_of
     from ..exact.marginal import exact_marginal
     from ..exact.settings import ExactSettings
     from ..joint_map.multi_start_summary import multi_start_of
     from ..joint_map.problem import JointMapProblem
+    from ..models import get_model
 
-    model = scenario.model
-    matrix, attrs = disturbance_set(
-        disturbances,
-        scenario.disturbance_dim,
-        scenario.K,
-        scenario.method,
-        scenario.seed,
-        dict(design_cfg),
+    model = get_model(inputs.model)
+    K = inputs.K
+    q = (model.obs_dim + model.state_dim) * inputs.T
+    path = inputs.design_set(q)
+    matrix, attrs = disturbance_set(path, q, K, inputs.method, inputs.seed, inputs.design_config)
+    traj = trajectories_of(
+        model,
+        np.array(model.omega_array(inputs.omega_config), dtype=float),
+        np.atleast_1d(np.asarray(inputs.x0_config, dtype=float)),
+        inputs.T,
+        matrix,
+        name="",  # a cell is keyed by what it computes, not by a name
+        method=inputs.method,
+        seed=inputs.seed,
+        provenance=attrs,
     )
-    traj = make_trajectories(scenario, matrix, provenance=attrs)
-    settings = scenario.joint_map_config(joint_settings)
     # every start's results and the distinct maxima; start 0 alone is the joint MAP of K^max
-    problem = JointMapProblem.of_trajectories(traj, scenario.prior, settings)
+    problem = JointMapProblem.of_trajectories(traj, inputs.prior_config, inputs.settings_config)
     _, frame, info = multi_start_of(problem)
-    K = scenario.K
     row: dict[str, Any] = {"K_max": int(info["K_max"])}
     row["K_max_frac"] = row["K_max"] / K
     row["K_max_frac_lo95"], row["K_max_frac_hi95"] = clopper_pearson(row["K_max"], K)
@@ -93,6 +97,7 @@ def cell_summary(
     ok = (frame["status"] == "ok").to_numpy()
     for name in model.param_names:
         row[f"lvar_median_{name}"] = _median(frame.loc[ok, f"lvar_{name}"].to_numpy(float))
+    exact_settings = inputs.exact_config
     row["exact"] = exact_settings is not None and model.linear_in_states
     if exact_settings is not None and model.linear_in_states:
         result = exact_marginal(
@@ -137,48 +142,36 @@ def _read_cell(path: Path) -> dict[str, Any] | None:
         return None
 
 
-def map_table(
-    entry: Mapping[str, Any],
-    cells: Sequence[tuple[Mapping[str, Any], str]],
-    design_dir: str | os.PathLike,
-    design_cfg: Mapping[str, Any],
-    joint_settings: Mapping[str, Any],
-    exact_settings: Mapping[str, Any] | None,
-    cells_dir: str | os.PathLike,
-) -> pd.DataFrame:
-    """One row per cell of a map (``cells``: each cell's scenario entry and content key).
+def map_table(inputs: MapCellsInputs) -> pd.DataFrame:
+    """One row per cell of a map, from its :class:`~ssmobs.config.stage_inputs.MapCellsInputs`
+    alone.
 
-    A cell found in ``cells_dir/<key>.json`` is read, any other computed and written there
-    at once (a rerun after a kill computes only the missing cells); every row is the one its
-    file holds, its columns in :func:`cell_columns`' order, so a resumed map's table is the
-    same bytes as a fresh one's."""
+    A cell found in its file (:meth:`~ssmobs.config.stage_inputs.MapCellsInputs.cell_file`)
+    is read, any other computed (:func:`cell_summary`) and written there at once (a rerun
+    after a kill computes only the missing cells); every row is the one its file holds, its
+    columns in :func:`cell_columns`' order, so a resumed map's table is the same bytes as a
+    fresh one's."""
     from ..models import get_model
 
-    names = get_model(entry["base"]["model"]).param_names  # every cell's model
-    progress = Progress(f"observability map {entry['name']}", len(cells))
+    progress = Progress(f"observability map {inputs.map}", len(inputs.cells))
     rows = []
-    for cell, key in cells:
-        path = Path(cells_dir) / f"{key}.json"
+    for key, cell in inputs.cells:
+        path = Path(inputs.cell_file(key))
         row = _read_cell(path)
         if row is None:
-            sc = Scenario.from_config(cell)
-            disturbances = (
-                Path(design_dir) / f"q{sc.disturbance_dim}_K{sc.K}_{sc.method}_seed{sc.seed}.nc"
-            )
-            io.write_checked_json(
-                path, cell_summary(sc, disturbances, design_cfg, joint_settings, exact_settings)
-            )
+            io.write_checked_json(path, cell_summary(cell))
             row = _read_cell(path)  # a fresh row as a cached one reads (JSON types)
             if row is None:
                 raise io.CorruptFileError(f"{path}: not readable right after writing it")
+        names = get_model(cell.model).param_names
         rows.append(
             {
-                "map": entry["name"],
-                "model": cell["model"],
-                "vary": entry["vary"],
-                "value": float(cell["omega"][entry["vary"]]),
-                "T": int(cell["T"]),
-                "K": int(cell["K"]),
+                "map": inputs.map,
+                "model": cell.model,
+                "vary": inputs.vary,
+                "value": float(cell.omega_config[inputs.vary]),
+                "T": cell.T,
+                "K": cell.K,
                 **{c: row[c] for c in cell_columns(names, row)},
             }
         )
@@ -252,28 +245,12 @@ def figure_map(
     plt.close(fig)
 
 
-def run_map_cells(
-    entry: Mapping[str, Any],
-    cells: Sequence[tuple[Mapping[str, Any], str]],
-    design_dir: str | os.PathLike,
-    design_cfg: Mapping[str, Any],
-    joint_settings: Mapping[str, Any],
-    exact_settings: Mapping[str, Any],
-    cells_dir: str | os.PathLike,
-    out: str | os.PathLike,
-) -> pd.DataFrame:
-    """Rule observability_map_cells: every cell of one map (:func:`map_table`; the exact
-    settings apply where the map runs the exact stage), as one table at ``out``."""
-    frame = map_table(
-        entry,
-        cells,
-        design_dir,
-        design_cfg,
-        joint_settings,
-        exact_settings if entry["exact"] else None,
-        cells_dir,
-    )
-    io.write_parquet(out, frame)
+def run_map_cells(inputs: MapCellsInputs, paths: Mapping[str, PathLike]) -> pd.DataFrame:
+    """Rule observability_map_cells: every cell of one map (:func:`map_table`) from its
+    :class:`~ssmobs.config.stage_inputs.MapCellsInputs` alone, as one table at the output
+    ``table`` of ``paths``."""
+    frame = map_table(inputs)
+    io.write_parquet(paths["table"], frame)
     return frame
 
 

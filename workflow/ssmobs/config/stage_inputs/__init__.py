@@ -7,8 +7,9 @@ Each builder takes a validated scenario entry, the validated config and the path
 keyed files the stage reads (they carry the upstream keys); :data:`ssmobs.stage_table.STAGES`
 names each stage's builder.
 
-One module per stage (design, joint_map, exact, nuts, k_selection) and the frozen values they
-share (:mod:`~ssmobs.config.stage_inputs.frozen`); everything is importable from here.
+One module per stage (design, joint_map, exact, nuts, k_selection, map_cell) and the frozen
+values they share (:mod:`~ssmobs.config.stage_inputs.frozen`); everything is importable from
+here.
 """
 
 from __future__ import annotations
@@ -17,7 +18,20 @@ from .design import TrajectoriesInputs, trajectories_inputs
 from .exact import ExactInputs, exact_inputs
 from .frozen import DESIGN_DIR, DESIGN_SET, design_set_path, inputs_payload
 from .joint_map import JointMapInputs, joint_map_inputs
-from .k_selection import KSelectionGridInputs, k_selection_grid_inputs
+from .k_selection import (
+    KSelectionGridInputs,
+    KSelectionPointInputs,
+    KSelectionPointsInputs,
+    k_selection_grid_inputs,
+    k_selection_points_inputs,
+)
+from .map_cell import (
+    MAP_CELLS_DIR,
+    MapCellInputs,
+    MapCellsInputs,
+    map_cell_inputs,
+    map_cells_inputs,
+)
 from .nuts import (
     DRAWS_DIR,
     NUTS_THREADS,
@@ -34,12 +48,17 @@ __all__ = [
     "DESIGN_DIR",
     "DESIGN_SET",
     "DRAWS_DIR",
+    "MAP_CELLS_DIR",
     "NUTS_THREADS",
     "SAMPLER_FIELDS",
     "ExactInputs",
     "GatherInputs",
     "JointMapInputs",
     "KSelectionGridInputs",
+    "KSelectionPointInputs",
+    "KSelectionPointsInputs",
+    "MapCellInputs",
+    "MapCellsInputs",
     "NutsBatchesInputs",
     "NutsRecordsInputs",
     "TrajectoriesInputs",
@@ -49,6 +68,9 @@ __all__ = [
     "inputs_payload",
     "joint_map_inputs",
     "k_selection_grid_inputs",
+    "k_selection_points_inputs",
+    "map_cell_inputs",
+    "map_cells_inputs",
     "nuts_batches_inputs",
     "nuts_records_inputs",
     "trajectories_inputs",
