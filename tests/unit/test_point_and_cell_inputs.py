@@ -69,15 +69,17 @@ def test_every_field_of_the_points_inputs_moves_the_points_key(smoke, monkeypatc
     keys = CacheKeys(smoke, "native")
     base = keys.k_selection_points(ksel)
     inputs = k_selection_points_inputs(keys.k_selections[ksel], smoke, design=keys.design)
+    assert keys.inputs("k_selection_points", ksel) == inputs  # the table's builder
     assert CacheKeys(smoke, "native").k_selection_points(ksel) == base  # same inputs, same key
     payload = keys.describe()[f"k_selection_points:{ksel}:{base}"]
     assert payload["inputs"] == inputs_payload(inputs)
+    assert payload["model_code"] == keys.model_code(inputs.model)
     for field in _fields(inputs):
         other = dataclasses.replace(inputs, **{field: _other(field, getattr(inputs, field))})
-        monkeypatch.setattr(cache_keys, "k_selection_points_inputs", lambda *a, o=other, **k: o)
-        assert CacheKeys(smoke, "native").k_selection_points(ksel) != base, field
+        monkeypatch.setattr(keys, "inputs", lambda *a, o=other, **k: o)
+        assert keys.k_selection_points(ksel) != base, field
     monkeypatch.undo()
-    assert CacheKeys(smoke, "native").k_selection_points(ksel) == base
+    assert keys.k_selection_points(ksel) == base
 
 
 def test_a_point_is_its_shared_inputs_and_its_file_in_their_keyed_folder(smoke):

@@ -36,12 +36,7 @@ from .code_hashing import syntax_digest
 from .config.blocks import stan_gradients
 from .config.maps import cell_entries
 from .config.stage_inputs import SAMPLER_FIELDS as SAMPLER_FIELDS  # its readers' old import
-from .config.stage_inputs import (
-    inputs_payload,
-    k_selection_points_inputs,
-    map_cell_inputs,
-    map_cells_inputs,
-)
+from .config.stage_inputs import inputs_payload, map_cell_inputs, map_cells_inputs
 from .stage_code import (
     PACKAGE_DIR,
     REPO_DIR,
@@ -345,14 +340,7 @@ class CacheKeys:
         the points' code; not the grid nor the entry, so that a point a changed grid keeps,
         or another entry on the scenario asks for, is not computed again (a point's K_i,
         method, set variant and seed are its file's name in the keyed folder)."""
-        ks = self.k_selections[ksel]
-        inputs = k_selection_points_inputs(ks, self.config, design=self.design)
-        payload = {
-            "inputs": inputs_payload(inputs),
-            "model_code": self.model_code(inputs.model),
-            "code": self.code("k_selection_points"),
-        }
-        return self._key("k_selection_points", ksel, payload)
+        return self.stage_key("k_selection_points", ksel)
 
     def k_selection_grid(self, ksel: str) -> str:
         """The grids of one k_selection entry

@@ -21,6 +21,7 @@ from .config.stage_inputs import (
     gather_inputs,
     joint_map_inputs,
     k_selection_grid_inputs,
+    k_selection_points_inputs,
     nuts_batches_inputs,
     nuts_records_inputs,
     trajectories_inputs,
@@ -151,6 +152,10 @@ STAGES: dict[str, Stage] = {
     "k_selection_points": Stage(
         ("stages/k_selection/grid.py:run_k_selection_point",),
         (),
+        inputs=k_selection_points_inputs,
+        shared=("design",),
+        runs_model=True,
+        of="k_selection",
         folder="results/shared/k_selection_points/{key}",
     ),
     # the grids of one k_selection entry (its name in place of a scenario's)
