@@ -35,7 +35,6 @@ from . import kernels
 from .code_hashing import syntax_digest
 from .config.blocks import stan_gradients
 from .config.maps import cell_entries
-from .config.stage_inputs import SAMPLER_FIELDS as SAMPLER_FIELDS  # its readers' old import
 from .config.stage_inputs import inputs_payload, map_cell_inputs, map_cells_inputs
 from .stage_code import (
     PACKAGE_DIR,

@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 from factories import same_a09
-from ssmobs.cache_keys import SAMPLER_FIELDS
 from ssmobs.config import validation as cfg
+from ssmobs.config.stage_inputs import SAMPLER_FIELDS
 from ssmobs.exact.settings import ExactSettings
 from ssmobs.joint_map.settings import JointMapSettings
 from ssmobs.nuts.convergence import ConvergenceSettings

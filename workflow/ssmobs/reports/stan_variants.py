@@ -26,8 +26,8 @@ import pandas as pd
 
 from ssmobs import io
 from ssmobs.binomial import format_fraction
-from ssmobs.cache_keys import SAMPLER_FIELDS
 from ssmobs.config.blocks import stan_settings
+from ssmobs.config.stage_inputs import SAMPLER_FIELDS
 from ssmobs.config.validation import ConfigError, read_config_file, validate
 from ssmobs.reports.propriety_notes import (
     NOT_SHOWN_IMPROPER,
