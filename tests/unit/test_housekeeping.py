@@ -3,6 +3,8 @@ damaged files, leftovers of an earlier config and the guards' lines."""
 
 from __future__ import annotations
 
+import json
+import shutil
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -277,3 +279,63 @@ def test_an_output_without_its_checksum_record_is_unverified(tmp_path, monkeypat
     keyed = Path("results/sc/joint_map/0123456789ab/summary.json")
     repairs = hk.damaged_output_repairs([(keyed, "why")], [], {"0123456789ab"})
     assert repairs.changes == [(keyed, None)] and repairs.targets == [str(keyed)]
+
+
+# -- program markers whose program is gone (issue 62) ------------------------------------------
+
+
+def _marker(path: Path, program: Path, header: Path | None) -> Path:
+    """A build job's marker at ``path`` naming ``program`` and ``header``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header_file = None if header is None else str(header)
+    path.write_text(
+        json.dumps({"backend": "native", "program_file": str(program), "header_file": header_file})
+    )
+    return path
+
+
+def test_a_program_marker_whose_program_is_gone_is_removed(tmp_path, monkeypatch):
+    """A cleared program cache leaves the marker in results/ naming a generated program that
+    no longer exists: the marker is made again (its build job writes the program), not
+    reused; one whose files exist stays, and so does a hand-written program's (no header)."""
+    monkeypatch.chdir(tmp_path)
+    cache = tmp_path / "cache" / "analytic" / "m-0123"
+    cache.mkdir(parents=True)
+    program, header = cache / "m.stan", cache / "m.hpp"
+    program.write_text("// program\n")
+    header.write_text("// header\n")
+    own = tmp_path / "own.stan"
+    own.write_text("// hand-written\n")
+    stan = Path("results/shared/stan/native")
+    kept = _marker(stan / "m" / "0123456789ab.json", program, header)
+    hand = _marker(stan / "own" / "0123456789ab.json", own, None)
+    header_gone = _marker(stan / "h" / "0123456789ab.json", program, cache / "gone.hpp")
+    check = Path("results/sc/check_model_stan/0123456789ab.json")
+    check.parent.mkdir(parents=True)
+    check.write_text('{"ok": true}\n')
+    record_checksums([kept, hand, header_gone, check])
+    paths = [kept, hand, header_gone, check]
+    assert hk.orphaned_program_markers(paths) == [
+        (
+            header_gone,
+            f"{header_gone} names the Stan program {cache / 'gone.hpp'}, which is gone "
+            f"(a cleared program cache): its build job writes it again",
+        )
+    ]
+    shutil.rmtree(tmp_path / "cache")  # the program cache cleared
+    found = hk.unrecorded_files(paths)
+    assert [p for p, _ in found] == [header_gone, kept]
+    (why,) = [w for p, w in found if p == kept]
+    assert f"names the Stan program {program} and {header}, which is gone" in why
+    # removed and made again in this run (its key is current): build_stan_model runs
+    repairs = hk.damaged_output_repairs(found, [], {"0123456789ab"})
+    assert repairs.changes == [(header_gone, None), (kept, None)]
+    assert repairs.targets == [str(header_gone), str(kept)]
+    assert all(line.startswith("made again, not reused: ") for line in repairs.warnings)
+    hk.apply_changes(repairs.changes)
+    assert hand.is_file() and check.is_file() and not kept.exists()
+    # a marker with its checksum record deleted is said once, as unrecorded
+    (Path("results/checksums") / f"{hand}.sha256").unlink()
+    own.unlink()
+    ((path, why),) = hk.unrecorded_files(paths)
+    assert path == hand and "has no checksum record" in why

@@ -10,7 +10,8 @@ reused (it takes stock of the files then):
   (:func:`damaged_trajectory_repairs`), NUTS batches whose records changed after them
   (:func:`damaged_batch_repairs`), and any output that no longer matches the checksum its
   job recorded or has lost that record (:func:`damaged_output_repairs`,
-  :func:`unrecorded_files`);
+  :func:`unrecorded_files`), and program markers whose Stan program is gone from the program
+  cache (:func:`orphaned_program_markers`: rule build_stan_model runs again and writes it);
 
 all of them only while no other run holds the lock of the directory
 (:func:`ssmobs.config.run_lock.lock_decision`).  After a successful run of every target,
@@ -40,7 +41,10 @@ Change = tuple[Path, Path | None]
 KEY_PATTERN = re.compile("[0-9a-f]{12}")
 #: suffixes of the tables and figures a run writes into outputs_dir
 OUTPUT_SUFFIXES = (".csv", ".md", ".tex", ".pdf", ".png")
-#: the rules whose jobs build a model's Stan program where the program cache lacks it
+#: the rules whose jobs compile a model's Stan program into the program cache where it lacks
+#: the executable (a partly cleared cache).  Only build_stan_model writes a generated program
+#: (with a sampling backend other than the native one the model check generates its own too):
+#: a marker whose program is gone is removed before the DAG (:func:`orphaned_program_markers`)
 PROGRAM_BUILDING_RULES = frozenset({"build_stan_model", "check_model_stan", "sample_nuts"})
 
 
@@ -187,9 +191,20 @@ def unrecorded_files(
     """Every existing file of ``paths`` (outputs later jobs read) without a readable checksum
     record of its own in ``store`` (deleted, unreadable, or results copied without
     ``results/checksums/``), with why: it is unverified, so made again, not trusted, as a
-    damaged one is (:func:`damaged_output_repairs`).  Reads files, decides nothing."""
+    damaged one is (:func:`damaged_output_repairs`).  A program marker whose Stan program is
+    gone (:func:`orphaned_program_markers`) cannot be used either: it is among them.  Reads
+    files, decides nothing."""
+    files = sorted({Path(p) for p in paths})
+    found = _without_checksum_record(files, store)
+    listed = {p for p, _ in found}
+    found += [(p, why) for p, why in orphaned_program_markers(files) if p not in listed]
+    return sorted(found)
+
+
+def _without_checksum_record(paths: Iterable[Path], store: Path) -> list[tuple[Path, str]]:
+    """The existing files of ``paths`` without a checksum record that vouches for them."""
     found: list[tuple[Path, str]] = []
-    for path in sorted({Path(p) for p in paths}):
+    for path in paths:
         record = checksum_record(path, store)
         try:
             expected, _, where = record.read_text().rstrip("\n").partition("  ")
@@ -198,6 +213,45 @@ def unrecorded_files(
         vouches = len(expected) == 64 and bool(where) and checksum_record(where, store) == record
         if path.is_file() and not vouches:
             found.append((path, f"{path} has no checksum record in {store}/ (unverified)"))
+    return found
+
+
+#: what a program marker (rule build_stan_model's output) names: the Stan program it compiled
+#: and its C++ header (None: a program without one)
+PROGRAM_MARKER_FILES = ("program_file", "header_file")
+
+
+def orphaned_program_markers(paths: Iterable[str | Path]) -> list[tuple[Path, str]]:
+    """Every program marker of ``paths`` (a ``.json`` file that names the Stan program and C++
+    header rule build_stan_model compiled, :data:`PROGRAM_MARKER_FILES`) that names a file no
+    longer there, with why.  The generated programs live in the program cache
+    (:mod:`ssmobs.stan_backends.cache`), which a user may clear while the marker stays in
+    ``results/``: removed, the marker is made again by its build job, the one job that
+    writes a generated program, before a NUTS batch or the model check needs it.  Reads
+    files, decides nothing."""
+    found: list[tuple[Path, str]] = []
+    for path in sorted({Path(p) for p in paths}):
+        if path.suffix != ".json" or not path.is_file():
+            continue
+        try:
+            marker = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # an unreadable file is the checksum checks' business
+        if not isinstance(marker, dict) or not all(k in marker for k in PROGRAM_MARKER_FILES):
+            continue
+        gone = [
+            str(marker[k])
+            for k in PROGRAM_MARKER_FILES
+            if marker[k] is not None and not Path(str(marker[k])).is_file()
+        ]
+        if gone:
+            found.append(
+                (
+                    path,
+                    f"{path} names the Stan program {' and '.join(gone)}, which is gone "
+                    f"(a cleared program cache): its build job writes it again",
+                )
+            )
     return found
 
 
