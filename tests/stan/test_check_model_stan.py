@@ -36,6 +36,39 @@ def test_every_model_agrees_with_its_stan_program(slug):
         assert any(c.startswith("analytic gradients:") for c in report.checks)
 
 
+def test_the_workflows_check_runs_the_program_its_build_job_wrote(tmp_path, monkeypatch):
+    """Rule check_model_stan (issue 62): the analytic program rule build_stan_model wrote and
+    compiled, named by its marker, is what the check compiles and compares with the Python
+    model and with its autodiff twin; the check writes no program of its own."""
+    import json
+
+    import ssmobs.model_check.program as checked
+    from ssmobs.model_check.check import run_check_model
+    from ssmobs.stages.stan import run_build_stan_model
+
+    marker = tmp_path / "marker.json"
+    built = run_build_stan_model("same", "native", marker, "analytic")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the check wrote a generated program")
+
+    monkeypatch.setattr(checked, "write_analytic_program", refuse)
+    case = {"model": "same", "omega": {"a": 0.9}, "x0": [0.0], "prior": None}
+    out = tmp_path / "check.json"
+    report = run_check_model(
+        "same",
+        [case],
+        out,
+        stan_path=stan_file("same"),
+        gradients="analytic",
+        program_marker=marker,
+    )
+    assert json.loads(out.read_text())["ok"] is True
+    assert any(c.startswith("stan compiled:") for c in report.checks)
+    assert any(c.startswith("analytic gradients:") for c in report.checks)
+    assert built["header_file"] is not None and Path(built["program_file"]).is_file()
+
+
 #: a test that compiles a broken copy of a program (about 30-50 CPU-s each, cached by content
 #: only for that copy): the check's messages for a user's mistake, a rare path, so in
 #: `make test-slow` (issue 48); the check on the real programs and a program that stanc

@@ -10,9 +10,11 @@ report = run_check_model(
     inputs["scenarios"],
     snakemake.output[0],
     stan=inputs["stan"],
-    # no file for a model without stan/<model>.stan: the check generates its program
+    # no file for a model without stan/<model>.stan: its program is generated
     stan_path=(snakemake.input.get("stan") or None) if inputs["stan"] else None,
     gradients=inputs["gradients"],
+    # with the native backend, build_stan_model's marker: the check runs the program it wrote
+    program_marker=next(iter(snakemake.input.get("program", [])), None),
 )
 for line in report.checks:
     logger.info("model %s: checked %s", inputs["model"], line)

@@ -64,10 +64,12 @@ def analytic_problems(
     program: AnalyticProgram | None = None,
 ) -> list[str]:
     """Analytic against autodiff for one case (empty list: they agree).  ``program``: the
-    program to check (default: generated from the model and its Stan program
-    ``stan_path``).  The autodiff side is the program's own twin when it holds both model
-    blocks (one compile), else ``stan_path`` compiled apart (a whole generated program
-    against a hand-written one)."""
+    program to check (the model check passes the one it runs,
+    :func:`ssmobs.model_check.program.checked_program`; None, for a direct call: generated
+    here from the model and its Stan program ``stan_path``, written into the program cache
+    as the build job would write it).  The autodiff side is the program's own twin when it
+    holds both model blocks (one compile), else ``stan_path`` compiled apart (a whole
+    generated program against a hand-written one)."""
     from ..stan_backends.native import NativeBackend
 
     rng = np.random.default_rng(seed)

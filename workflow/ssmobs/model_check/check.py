@@ -33,7 +33,9 @@ A model without ``stan/<slug>.stan`` is checked with the program generated from 
 (:func:`ssmobs.nuts.analytic_program.generated_stan_code`, the one NUTS runs): steps 2 and 3
 on that program, and in step 4 its gradient against the Python model's (it has no
 autodiff twin); a model whose support constraints no generated program can express stops
-with one line.
+with one line.  In the workflow a generated program is the one rule build_stan_model wrote
+and compiled, named by its marker; the command line writes it itself
+(:mod:`ssmobs.model_check.program`).
 
 Each step lives in its own module: the cases in :mod:`ssmobs.models.check_cases`, step 1 in
 :mod:`ssmobs.models.self_check` (the symmetry report in
@@ -65,6 +67,7 @@ from ..models.check_cases import (
     prior_variant_cases,
 )
 from ..models.self_check import CHECK_T, model_check_seed, python_stage_problems
+from .program import ProgramFiles, built_program_files, checked_program, same_program
 from .stan import stan_problems
 from .stan_source import stan_source_problems
 from .symmetry_report import SymmetryReport, symmetry_report
@@ -139,6 +142,7 @@ def check_model(
     backend: str = "native",
     gradients: str = "autodiff",
     prior_cases: Sequence[CheckCase] | None = None,
+    built: ProgramFiles | None = None,
 ) -> CheckReport:
     """Every check of this module for one model; the report lists each problem found.
 
@@ -147,7 +151,10 @@ def check_model(
     it at the first case, with problems, so that one mistake gives one message.  Once the
     Python stage passes, the symmetries and the propriety of the posterior under the prior
     of each of ``prior_cases`` (default ``cases``) are found from the terms
-    (:mod:`ssmobs.model_check.symmetry_report`): reported, never a problem.
+    (:mod:`ssmobs.model_check.symmetry_report`): reported, never a problem.  ``built``: the
+    program and header rule build_stan_model compiled for NUTS (its marker:
+    :func:`~ssmobs.model_check.program.built_program_files`), what steps 3 and 4 run; None:
+    a generated program is written here (:mod:`ssmobs.model_check.program`).
     """
     from ..stan_backends import has_stan_file, stan_file
 
@@ -165,7 +172,7 @@ def check_model(
         report.analysis = _analysis(model, list(prior_cases) if prior_cases else cases, T, seed)
     if report.problems or not stan:
         return report
-    from ..nuts.analytic_program import generation_problem, write_analytic_program
+    from ..nuts.analytic_program import generation_problem
 
     generated = None
     if stan_path is not None or has_stan_file(slug):
@@ -175,7 +182,7 @@ def check_model(
         report.record("stan program generated from the model", [problem] if problem else [])
         if report.problems:
             return report
-        generated = write_analytic_program(model, None)
+        generated = checked_program(model, None, built)
         path = generated.stan_file
     report.record(
         f"stan source {path.name}: parameter names/order, data declarations",
@@ -186,7 +193,9 @@ def check_model(
     # what steps 3 and 4 compile: the program NUTS runs
     analytic = None
     if generated is None and gradients == "analytic":
-        analytic = write_analytic_program(model, path)
+        analytic = checked_program(model, path, built)
+    elif generated is None and built is not None:
+        same_program(path, built)
     program = generated or analytic
     compiled, header = (path, None) if program is None else (program.stan_file, program.header)
     found = _first_problems(
@@ -237,11 +246,14 @@ def run_check_model(
     stan: bool = True,
     stan_path: str | Path | None = None,
     gradients: str = "autodiff",
+    program_marker: str | Path | None = None,
 ) -> CheckReport:
-    """Rule check_model: check the model for the default cases and the true values of every
-    configured case under every prior variant (:func:`prior_variant_cases`), and its
-    analytic gradients when NUTS uses them; write the report; raise
-    :class:`ModelCheckError` listing every problem."""
+    """Rules check_model and check_model_stan: check the model for the default cases and
+    the true values of every configured case under every prior variant
+    (:func:`prior_variant_cases`), and its analytic gradients when NUTS uses them; write the
+    report; raise :class:`ModelCheckError` listing every problem.  ``program_marker``: rule
+    build_stan_model's marker (with the native backend), whose program the Stan check runs
+    as it is (no generated program is written here); None: see :func:`check_model`."""
     model = get_model(slug)
     cases = default_cases(model)
     for scenario_case in cases_from_scenarios(scenarios, slug):
@@ -256,6 +268,7 @@ def run_check_model(
         stan_path=stan_path,
         gradients=gradients,
         prior_cases=scenario_cases or None,
+        built=None if program_marker is None else built_program_files(program_marker),
     )
     if report.problems:
         raise ModelCheckError(
