@@ -49,7 +49,7 @@ def rule_patterns(paths: RunPaths) -> set[str]:
     outputs_dir and the design folder filled in), with Snakemake's {wildcards}."""
     names = {
         "OUT": paths.outputs_dir,
-        "DESIGN_DIR": f"results/shared/design_disturbances/{paths.keys.design}",
+        "PATHS.design_dir": f"results/shared/design_disturbances/{paths.keys.design}",
     }
     found = set()
     for smk in sorted(RULES.glob("*.smk")):
@@ -91,7 +91,7 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
 
     stan = smoke.stan_scenarios
     assert stan and smoke.joint_scenarios and smoke.exact_scenarios
-    for name, sc in smoke.scenario_objects.items():
+    for name, sc in smoke.scenarios.items():
         for K in {sc.K, sc.exact_trajectories}:
             assert smoke.trajectories(name, K) == rule_path(
                 "results/{scenario}/design_trajectories/{key}/trajectories.nc",
@@ -120,7 +120,7 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
             "results/{scenario}/joint_map/{key}/joint_map.parquet", **joint
         )
     for name in stan:
-        model = smoke.scenario_objects[name].model.slug
+        model = smoke.scenarios[name].model.slug
         size = smoke.batch_size(name)
         assert smoke.check(name, stan=True) == rule_path(
             "results/{scenario}/check_model_stan/{key}.json",
@@ -135,7 +135,7 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
         )
         assert smoke.checked_program(model) == [keys.program_marker(name)]
         batches = smoke.nuts_batches(name)
-        assert len(batches) == -(-len(smoke.scenario_objects[name].stan_trajectories) // size)
+        assert len(batches) == -(-len(smoke.scenarios[name].stan_trajectories) // size)
         assert batches == [
             rule_path(
                 "results/{scenario}/sample_nuts/{key}/batch{batch}.parquet",
@@ -155,7 +155,7 @@ def test_every_stage_path_is_a_rules_output_under_its_key(smoke):
         assert keys.nuts_records(name) in smoke.records_dir(name)
         assert smoke.draws_dir(name) == f"results/{name}/draws/{keys.nuts_records(name)}"
     for name in smoke.exact_scenarios:
-        K = smoke.scenario_objects[name].exact_trajectories
+        K = smoke.scenarios[name].exact_trajectories
         assert smoke.exact_summary(name) == rule_path(
             "results/{scenario}/exact_marginal/{key}/summary.json",
             scenario=name,
@@ -254,7 +254,7 @@ def test_study_inputs_and_exact_comparison_name_their_scenarios_files(smoke):
     for name in smoke.exact_vs_stan_scenarios:
         inputs = smoke.exact_vs_stan_inputs(name)
         assert inputs["stan"] == smoke.stan_table(name)
-        assert inputs["exact"] == smoke.exact_table(name, smoke.scenarios[name]["K"])
+        assert inputs["exact"] == smoke.exact_table(name, smoke.scenarios[name].K)
 
 
 def test_every_key_is_computed_up_front_and_map_cells_are_returned(smoke):
@@ -274,21 +274,21 @@ def test_every_key_is_computed_up_front_and_map_cells_are_returned(smoke):
     for name in smoke.stan_scenarios:
         assert computed("gather", name, smoke.stan_summary(name))
         assert computed("check_model_stan", name, smoke.check(name, stan=True))
-    for name, sc in smoke.scenario_objects.items():
+    for name, sc in smoke.scenarios.items():
         assert computed("joint_map", name, smoke.joint_summary(name))
         assert computed("exact", name, smoke.exact_table(name, sc.exact_trajectories))
     for name in smoke.k_selections:
         assert computed("k_selection_grid", name, smoke.ksel_grids_dir(name))
     assert fresh.every_trajectories() == [
         fresh.trajectories(n, K)
-        for n, sc in fresh.scenario_objects.items()
+        for n, sc in fresh.scenarios.items()
         for K in {sc.K, sc.exact_trajectories}
     ]
 
 
 def test_the_stan_models_are_those_of_the_stan_scenarios_once_each():
     paths = run_paths("config")  # several scenarios of each model
-    models = {paths.scenarios[n]["model"] for n in paths.stan_scenarios}
+    models = {paths.scenarios[n].slug for n in paths.stan_scenarios}
     assert paths.stan_models == sorted(models)
     assert len(paths.stan_models) < len(paths.stan_scenarios)
 
@@ -309,13 +309,13 @@ def test_rule_params_come_from_the_entries():
     paths = run_paths("config")
     name = next(iter(paths.k_selections))
     params = paths.select_k_params(name)
-    assert params["scenario"] is paths.scenarios[params["ksel"]["scenario"]]
+    assert params["scenario"] is paths.scenario_entry(params["ksel"]["scenario"])
     model = paths.stan_models[0]
-    name = next(n for n in paths.stan_scenarios if paths.scenarios[n]["model"] == model)
+    name = next(n for n in paths.stan_scenarios if paths.scenarios[n].slug == model)
     assert paths.checked_program(model) == [paths.keys.program_marker(name)]
     cmdstan = RunPaths.from_config(paths.config, paths.keys, "cmdstanpy")
     assert cmdstan.checked_program(model) == []
-    sc = paths.scenario_objects[paths.stan_scenarios[0]]
+    sc = paths.scenarios[paths.stan_scenarios[0]]
     read = paths.design_set(sc.name, sc.K)
     assert read == paths.disturbances(sc.disturbance_dim, sc.K, sc.method, sc.seed)
     assert f"_K{sc.K}_" in read and read.startswith(paths.design_dir + "/")
@@ -362,3 +362,59 @@ def test_run_paths_write_no_generated_program(tmp_path, monkeypatch):
     model = sorted(planned)[0]
     assert stan_program(model, "analytic") == planned[model]  # the build job writes there
     assert all(f is not None and f.is_file() for f in planned[model])
+
+
+#: what the rule files may bind at their top level: RunPaths, the keys and outputs_dir
+#: (what the rules ask), and the glue of common.smk and of the table made on request from
+#: committed files (stan_variants.smk); never a copy of one of RunPaths' answers
+RULE_GLOBALS = {"PATHS", "KEYS", "OUT", "REPO", "STAN_BACKEND", "OUTPUTS_DIR_UNSET"}
+RULE_GLOBALS |= {"STAMPS", "STAMPS_ON_REQUEST", "DAMAGED_TARGETS"}
+RULE_GLOBALS |= {"VARIANT_TABLE", "VARIANT_TABLE_SPEC", "VARIANT_TABLE_INPUTS"}
+RULE_GLOBALS |= {"VARIANT_TABLE_STAMP"}
+
+
+def test_the_rules_speak_one_vocabulary():
+    """Issue 62: the rules ask PATHS for the scenarios of each stage, paths and targets;
+    no rule file copies an answer of RunPaths into a global of its own."""
+    files = [REPO / "Snakefile", *sorted(RULES.glob("*.smk"))]
+    bound = {
+        (f.name, m.group(1))
+        for f in files
+        for m in re.finditer(r"^([A-Za-z_][A-Za-z0-9_, ]*?)\s*=(?!=)", f.read_text(), re.M)
+    }
+    names = {(file, n.strip()) for file, found in bound for n in found.split(",")}
+    assert {n for _, n in names if n.isupper()} <= RULE_GLOBALS
+    assert not [n for _, n in names if not n.isupper() and not n.startswith("_")]
+    text = "".join(f.read_text() for f in files)
+    assert "PATHS.compute_every_key()" in text
+    for gone in ["SCENARIOS", "STAN_SCENARIOS", "DESIGN_DIR", "MAP_CELLS", "PAPER_OUTPUTS"]:
+        assert not re.search(rf"\b{gone}\b", text), gone
+
+
+def test_the_scenarios_are_typed_and_each_entry_is_the_configs():
+    paths = run_paths("config")
+    entries = paths.config["scenarios"]
+    assert list(paths.scenarios) == [e["name"] for e in entries]
+    for entry in entries:
+        sc = paths.scenarios[entry["name"]]
+        assert (sc.slug, sc.K, sc.stan) == (entry["model"], entry["K"], entry["stan"])
+        assert paths.scenario_entry(entry["name"]) is entry  # what a script's params carry
+    assert paths.models == sorted({e["model"] for e in entries})
+
+
+def test_the_paper_outputs_scenarios_and_tables_inputs_come_from_run_paths():
+    paths = run_paths("config")
+    wanted = paths.config["paper_outputs"]
+    assert paths.table_ii_scenarios == list(wanted["tables_2_3"]) != []
+    assert paths.figure3_scenarios == list(wanted["figure3"]) != []
+    assert set(paths.table_ii_scenarios + paths.figure3_scenarios) <= set(paths.scenarios)
+    inputs, params = paths.paper_tables_inputs(), paths.paper_tables_params()
+    assert inputs["joint"] == [paths.joint_summary(n) for n in params["joint_names"]]
+    assert inputs["marginal"] == [paths.stan_summary(n) for n in params["marginal_names"]]
+    assert inputs["exact"] == [paths.exact_summary(n) for n in params["exact_names"]]
+    assert params["marginal_names"] == paths.stan_scenarios and params["tables_2_3"] == list(
+        wanted["tables_2_3"]
+    )
+    mu0 = paths.mu0_sweep_params()
+    assert mu0["scenarios"] == [paths.scenario_entry(n) for n in paths.mu0_scenarios] != []
+    assert mu0["mu0_per_T"] == paths.config["mu0_sweep"]["mu0_per_T"]

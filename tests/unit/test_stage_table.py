@@ -187,12 +187,12 @@ def test_the_gather_inputs_read_every_batch_table_and_the_records():
         inputs = paths.gather_inputs(name)
         assert list(inputs.batches) == paths.nuts_batches(name) and len(inputs.batches) > 0
         assert inputs.records == paths.records_dir(name)
-        assert inputs.stan_trajectories == paths.scenario_objects[name].stan_trajectories
+        assert inputs.stan_trajectories == paths.scenarios[name].stan_trajectories
         assert inputs.convergence_config == keys.config["convergence"]
     name = paths.stan_scenarios[0]
     assert keys.gather(name, 4) != keys.gather(name, 2)
     assert len(keys.inputs("gather", name, batch_size=1).batches) == len(
-        paths.scenario_objects[name].stan_trajectories
+        paths.scenarios[name].stan_trajectories
     )
 
 
@@ -204,7 +204,7 @@ def test_the_nuts_inputs_name_the_batches_rule_sample_nuts_writes():
     keys = smoke_keys()
     paths = RunPaths.from_config(keys.config, keys, "native")
     for name in paths.stan_scenarios:
-        sc = paths.scenario_objects[name]
+        sc = paths.scenarios[name]
         inputs = paths.nuts_inputs(name)
         tables = [f"{paths.batch_dir(name)}/{file}" for file, _ in inputs.tables]
         assert tables == paths.nuts_batches(name)

@@ -13,7 +13,7 @@ from ssmobs.config import validation as ssmobs_config  # noqa: E402
 from ssmobs import housekeeping  # noqa: E402
 from ssmobs.config.validation import ConfigError  # noqa: E402
 from ssmobs.models import ModelDefinitionError  # noqa: E402
-from ssmobs.run_paths import MAP_CELLS_DIR, RunPaths  # noqa: E402
+from ssmobs.run_paths import RunPaths  # noqa: E402
 from ssmobs.stan_backends import resolve_backend  # noqa: E402
 from ssmobs.cache_keys import CacheKeys, UnknownKeyError  # noqa: E402
 from ssmobs.code_hashing import DynamicImportError  # noqa: E402
@@ -85,25 +85,12 @@ try:
     KEYS = CacheKeys.for_backend(config, STAN_BACKEND, repo=REPO)
 except (ValueError, BackendError) as err:
     raise WorkflowError(f"stan.backend {STAN_BACKEND!r} cannot start here: {err}") from None
-#: every path of this run
+#: every path of this run, the names of the scenarios of each stage and the targets: the
+#: rules ask it (ssmobs/run_paths.py), never a copy of its attributes
 PATHS = RunPaths.from_config(config, KEYS, STAN_BACKEND)
-SCENARIOS, KSEL = PATHS.scenarios, PATHS.k_selections
-STUDIES, MAPS = PATHS.studies, PATHS.maps
-JOINT_SCENARIOS, STAN_SCENARIOS = PATHS.joint_scenarios, PATHS.stan_scenarios
-MU0_SCENARIOS = PATHS.mu0_scenarios
-#: the config asks for the paper's tables and figures (ssmobs.config.validation.asks_for_paper_outputs)
-PAPER_OUTPUTS = PATHS.paper_outputs
-#: the scenarios the paper's tables and figures show (config key paper_outputs)
-TABLE_II_SCENARIOS = list(config["paper_outputs"]["tables_2_3"])
-FIGURE3_SCENARIOS = list(config["paper_outputs"]["figure3"])
-FIGURE4_SCENARIO = PATHS.figure4_scenario
-EXACT_SCENARIOS = PATHS.exact_scenarios
-EXACT_VS_STAN_SCENARIOS = PATHS.exact_vs_stan_scenarios
-#: the design sets of this config's design settings and code
-DESIGN_DIR = PATHS.design_dir
-#: every cell of every observability map with its key (issue 21); every other key up front
+# every key up front (the cells of every observability map too, issue 21)
 try:  # a model whose code imports by a form that cannot be followed cannot be keyed
-    MAP_CELLS = PATHS.compute_every_key()
+    PATHS.compute_every_key()
 except DynamicImportError as err:
     raise WorkflowError(str(err)) from None
 #: stamp files (results/outputs/...) of the tables and figures, with their current keys
@@ -148,10 +135,10 @@ def stamp_key(wildcards, output):
 
 
 wildcard_constraints:
-    scenario="|".join(map(re.escape, SCENARIOS)) or "NONE",
-    ksel="|".join(map(re.escape, KSEL)) or "NONE",
-    study="|".join(map(re.escape, STUDIES)) or "NONE",
-    map="|".join(map(re.escape, MAPS)) or "NONE",
+    scenario="|".join(map(re.escape, PATHS.scenarios)) or "NONE",
+    ksel="|".join(map(re.escape, PATHS.k_selections)) or "NONE",
+    study="|".join(map(re.escape, PATHS.studies)) or "NONE",
+    map="|".join(map(re.escape, PATHS.maps)) or "NONE",
     q=r"\d+",
     K=r"\d+",
     seed=r"\d+",
@@ -159,7 +146,7 @@ wildcard_constraints:
     sets="independent|nested",
     batch=r"\d+",
     backend="native|cmdstanpy|pystan",
-    model="|".join(sorted({sc["model"] for sc in config["scenarios"]})) or "NONE",
+    model="|".join(PATHS.models) or "NONE",
     key=r"[0-9a-f]{12}",
 
 
@@ -178,7 +165,7 @@ def stop_without_compiler():
     import shutil
     from ssmobs.stan_backends.native_build import compiler
 
-    if not STAN_SCENARIOS or shutil.which(compiler()):
+    if not PATHS.stan_scenarios or shutil.which(compiler()):
         return
     unbuilt = housekeeping.unbuilt_programs(PATHS.stan_programs)
     if not unbuilt:
@@ -256,7 +243,7 @@ def repairs_before_the_dag():
             Path(PATHS.stan_summary(n)).exists(),
             (PATHS.stan_summary(n), PATHS.stan_table(n)),
         )
-        for n in STAN_SCENARIOS
+        for n in PATHS.stan_scenarios
         for table in PATHS.nuts_batches(n)
     )
     changes += found.changes + batches.changes

@@ -4,11 +4,11 @@
 rule design_disturbances:
     """K point-symmetric LCD design disturbances of N(0, I_q) (or a random baseline), shared by scenarios."""
     output:
-        f"{DESIGN_DIR}/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.nc",
+        f"{PATHS.design_dir}/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.nc",
     log:
-        f"{DESIGN_DIR}/logs/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.log",
+        f"{PATHS.design_dir}/logs/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.log",
     benchmark:
-        f"{DESIGN_DIR}/benchmarks/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.tsv"
+        f"{PATHS.design_dir}/benchmarks/q{{q}}_K{{K}}_{{method}}_seed{{seed}}.tsv"
     conda:
         "../../envs/ssmobs.yaml"
     threads: 1

@@ -1,9 +1,9 @@
 # Every figure of paper_figures/ (the paper's Figures 2-4 and ours); the figure of the choice
 # of K comes with its rule select_k (k_selection.smk), the observability studies' with theirs.
 
-# the paper's figures where the config asks for them (PAPER_OUTPUTS); the figure draws model
-# Same's trajectories: its module keys the figure too
-if PAPER_OUTPUTS:
+# the paper's figures where the config asks for them (PATHS.paper_outputs); the figure draws
+# model Same's trajectories: its module keys the figure too
+if PATHS.paper_outputs:
     register_stamp(
         "figure_design_points",
         [PATHS.figure2_disturbances()],
@@ -32,22 +32,22 @@ rule figure_design_points:
         "../scripts/figure_design_points.py"
 
 
-FIGURE3_INPUTS = {
-    "joint": [PATHS.joint_table(n) for n in FIGURE3_SCENARIOS],
-    "marginal": [PATHS.stan_table(n) for n in FIGURE3_SCENARIOS],
-}
-if PAPER_OUTPUTS:
+if PATHS.paper_outputs:
     register_stamp(
         "figure_joint_vs_marginal",
-        [*FIGURE3_INPUTS["joint"], *FIGURE3_INPUTS["marginal"]],
-        [SCENARIOS[n] for n in FIGURE3_SCENARIOS],
+        [
+            *map(PATHS.joint_table, PATHS.figure3_scenarios),
+            *map(PATHS.stan_table, PATHS.figure3_scenarios),
+        ],
+        [PATHS.scenario_entry(n) for n in PATHS.figure3_scenarios],
     )
 
 
 rule figure_joint_vs_marginal:
     """Figure 3: joint- vs marginal-MAP estimates of (a, x0) of the scenarios of paper_outputs.figure3."""
     input:
-        **FIGURE3_INPUTS,
+        joint=[PATHS.joint_table(n) for n in PATHS.figure3_scenarios],
+        marginal=[PATHS.stan_table(n) for n in PATHS.figure3_scenarios],
     output:
         figure=report(
             multiext(f"{OUT}/fig3_joint_vs_marginal", ".pdf", ".png"),
@@ -61,17 +61,17 @@ rule figure_joint_vs_marginal:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenarios=[SCENARIOS[n] for n in FIGURE3_SCENARIOS],
+        scenarios=[PATHS.scenario_entry(n) for n in PATHS.figure3_scenarios],
         key=stamp_key,
     script:
         "../scripts/figure_joint_vs_marginal.py"
 
 
-if FIGURE4_SCENARIO:
+if PATHS.figure4_scenario:
     register_stamp(
-        f"figure_profile_posterior_{FIGURE4_SCENARIO}",
-        [PATHS.trajectories(FIGURE4_SCENARIO)],
-        {"scenario": SCENARIOS[FIGURE4_SCENARIO], "grid": config["figure4"]},
+        f"figure_profile_posterior_{PATHS.figure4_scenario}",
+        [PATHS.trajectories(PATHS.figure4_scenario)],
+        {"scenario": PATHS.scenario_entry(PATHS.figure4_scenario), "grid": config["figure4"]},
     )
 
 
@@ -91,7 +91,7 @@ rule figure_profile_posterior:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
+        scenario=lambda wc: PATHS.scenario_entry(wc.scenario),
         grid=config["figure4"],
         key=stamp_key,
     script:
@@ -99,7 +99,7 @@ rule figure_profile_posterior:
 
 
 # its input is a stamped table: the table's key keys the figure
-if PAPER_OUTPUTS:
+if PATHS.paper_outputs:
     register_stamp(
         "figure_observability", [f"{OUT}/section4_summary.csv"], STAMPS[PATHS.stamp("paper_tables")]
     )
@@ -127,11 +127,11 @@ rule figure_observability:
         "../scripts/figure_observability.py"
 
 
-for _name in EXACT_VS_STAN_SCENARIOS:
+for _name in PATHS.exact_vs_stan_scenarios:
     register_stamp(
         f"figure_exact_vs_stan_{_name}",
         list(PATHS.exact_vs_stan_inputs(_name).values()),
-        SCENARIOS[_name],
+        PATHS.scenario_entry(_name),
     )
 
 
@@ -153,7 +153,7 @@ rule figure_exact_vs_stan:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenario=lambda wc: SCENARIOS[wc.scenario],
+        scenario=lambda wc: PATHS.scenario_entry(wc.scenario),
         key=stamp_key,
     script:
         "../scripts/figure_exact_vs_stan.py"

@@ -29,20 +29,18 @@ rule joint_map:
         "../scripts/joint_map.py"
 
 
-MU0_INPUTS = [PATHS.trajectories(n) for n in MU0_SCENARIOS]
-MU0_PARAMS = {
-    "scenarios": [SCENARIOS[n] for n in MU0_SCENARIOS],
-    "settings": config["joint_map"],
-    "mu0_per_T": config["mu0_sweep"]["mu0_per_T"],
-}
-if PAPER_OUTPUTS:  # the paper's table, where the config asks for the paper's outputs
-    register_stamp("table_mu0_sweep", [*MU0_INPUTS, "config/paper_values.yaml"], MU0_PARAMS)
+if PATHS.paper_outputs:  # the paper's table, where the config asks for the paper's outputs
+    register_stamp(
+        "table_mu0_sweep",
+        [*map(PATHS.trajectories, PATHS.mu0_scenarios), "config/paper_values.yaml"],
+        PATHS.mu0_sweep_params(),
+    )
 
 
 rule joint_map_mu0_sweep:
     """|K^max|/K of the Sep models over barrier starts mu_0 (the gradient-balance rule first)."""
     input:
-        trajectories=MU0_INPUTS,
+        trajectories=[PATHS.trajectories(n) for n in PATHS.mu0_scenarios],
         paper_values="config/paper_values.yaml",
     output:
         table=report(
@@ -60,7 +58,7 @@ rule joint_map_mu0_sweep:
         mem_mb=4000,
         runtime=120,
     params:
-        **MU0_PARAMS,
+        **PATHS.mu0_sweep_params(),
         key=stamp_key,
     script:
         "../scripts/joint_map_mu0_sweep.py"

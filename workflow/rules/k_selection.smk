@@ -24,7 +24,7 @@ rule k_selection_grid:
         "../scripts/k_selection_grid.py"
 
 
-for _name in KSEL:
+for _name in PATHS.k_selections:
     register_stamp(
         f"select_k_{_name}",
         [*PATHS.k_selection_grids(_name), "config/paper_values.yaml"],
@@ -59,12 +59,13 @@ rule select_k:
         "../scripts/select_k.py"
 
 
-SELECTIONS = [PATHS.selection(name) for name in KSEL]
 # the selections are stamped files: their stamps' keys key the table; made for this
 # config's k_selection entries, or (empty) with the paper's outputs
-if KSEL or PAPER_OUTPUTS:
+if PATHS.k_selections or PATHS.paper_outputs:
     register_stamp(
-        "table_k_selection", SELECTIONS, [STAMPS[PATHS.stamp(f"select_k_{name}")] for name in KSEL]
+        "table_k_selection",
+        [PATHS.selection(name) for name in PATHS.k_selections],
+        [STAMPS[PATHS.stamp(f"select_k_{name}")] for name in PATHS.k_selections],
     )
 
 
@@ -72,7 +73,7 @@ rule table_k_selection:
     """Chosen K for every k_selection entry, method and seed, beside the paper's K, and how
     often each K was chosen over the seeds."""
     input:
-        SELECTIONS,
+        [PATHS.selection(name) for name in PATHS.k_selections],
     output:
         table=report(
             multiext(f"{OUT}/table_k_selection", ".csv", ".md", ".tex"),

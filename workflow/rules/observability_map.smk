@@ -23,8 +23,8 @@ rule observability_map_cells:
         "../scripts/observability_map_cells.py"
 
 
-for _name in MAPS:
-    register_stamp(f"map_{_name}", [PATHS.map_cells_table(_name)], {"entry": MAPS[_name]})
+for _name in PATHS.maps:
+    register_stamp(f"map_{_name}", [PATHS.map_cells_table(_name)], {"entry": PATHS.maps[_name]})
 
 
 rule observability_map:
@@ -47,7 +47,7 @@ rule observability_map:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        entry=lambda wc: MAPS[wc.map],
+        entry=lambda wc: PATHS.maps[wc.map],
         key=stamp_key,
     script:
         "../scripts/observability_map.py"

@@ -1,37 +1,24 @@
 # Stage 4: the paper's tables in paper_figures/ (ours beside the paper's values); figures: figures.smk.
 
-PAPER_TABLES_INPUTS = {
-    "joint": [PATHS.joint_summary(n) for n in JOINT_SCENARIOS],
-    "marginal": [PATHS.stan_summary(n) for n in STAN_SCENARIOS],
-    "exact": [PATHS.exact_summary(n) for n in EXACT_SCENARIOS],
-    "paper_values": "config/paper_values.yaml",
-}
-PAPER_TABLES_PARAMS = {
-    "scenarios": config["scenarios"],
-    "tables_2_3": TABLE_II_SCENARIOS,
-    "joint_names": JOINT_SCENARIOS,
-    "marginal_names": STAN_SCENARIOS,
-    "exact_names": EXACT_SCENARIOS,
-}
 # the paper's tables, and the convergence tables below, where the config asks for them
-# (PAPER_OUTPUTS: it names a scenario of the paper or sets paper_outputs)
-if PAPER_OUTPUTS:
+# (PATHS.paper_outputs: it names a scenario of the paper or sets paper_outputs)
+if PATHS.paper_outputs:
     register_stamp(
         "paper_tables",
         [
-            *PAPER_TABLES_INPUTS["joint"],
-            *PAPER_TABLES_INPUTS["marginal"],
-            *PAPER_TABLES_INPUTS["exact"],
+            *PATHS.paper_tables_inputs()["joint"],
+            *PATHS.paper_tables_inputs()["marginal"],
+            *PATHS.paper_tables_inputs()["exact"],
             "config/paper_values.yaml",
         ],
-        PAPER_TABLES_PARAMS,
+        PATHS.paper_tables_params(),
     )
 
 
 rule paper_tables:
     """Tables II, III and the Section IV summary as CSV, Markdown and LaTeX."""
     input:
-        **PAPER_TABLES_INPUTS,
+        **PATHS.paper_tables_inputs(),
     output:
         table2=report(
             multiext(f"{OUT}/table2_joint_vs_marginal", ".csv", ".md", ".tex"),
@@ -56,18 +43,17 @@ rule paper_tables:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        **PAPER_TABLES_PARAMS,
+        **PATHS.paper_tables_params(),
         key=stamp_key,
     script:
         "../scripts/paper_tables.py"
 
 
-SENSITIVITY_INPUTS = [PATHS.stan_table(n) for n in STAN_SCENARIOS]
-if PAPER_OUTPUTS:
+if PATHS.paper_outputs:
     register_stamp(
         "convergence_sensitivity",
-        SENSITIVITY_INPUTS,
-        {"scenarios": STAN_SCENARIOS, "convergence": config["convergence"]},
+        [PATHS.stan_table(n) for n in PATHS.stan_scenarios],
+        {"scenarios": PATHS.stan_scenarios, "convergence": config["convergence"]},
     )
 
 
@@ -75,7 +61,7 @@ rule convergence_sensitivity:
     """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted, and
     how the runs that did not converge failed."""
     input:
-        tables=SENSITIVITY_INPUTS,
+        tables=[PATHS.stan_table(n) for n in PATHS.stan_scenarios],
     output:
         table=report(
             multiext(f"{OUT}/table_convergence_sensitivity", ".csv", ".md", ".tex"),
@@ -90,7 +76,7 @@ rule convergence_sensitivity:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenarios=STAN_SCENARIOS,
+        scenarios=PATHS.stan_scenarios,
         convergence=config["convergence"],
         key=stamp_key,
     script:

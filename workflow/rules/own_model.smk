@@ -32,9 +32,9 @@ rule check_model_stan:
             "check_model_stan",
             wc.scenario,
             wc.key,
-            PATHS.stan_source(SCENARIOS[wc.scenario]["model"]),
+            PATHS.stan_source(PATHS.scenarios[wc.scenario].slug),
         ),
-        program=lambda wc: PATHS.checked_program(SCENARIOS[wc.scenario]["model"]),
+        program=lambda wc: PATHS.checked_program(PATHS.scenarios[wc.scenario].slug),
     output:
         "results/{scenario}/check_model_stan/{key}.json",
     log:
@@ -50,7 +50,7 @@ rule check_model_stan:
         "../scripts/check_model.py"
 
 
-for _name in STUDIES:
+for _name in PATHS.studies:
     register_stamp(
         f"observability_study_{_name}",
         [p for paths in PATHS.study_inputs(_name).values() for p in paths],

@@ -25,13 +25,11 @@ from typing import Any
 from .cache_keys import CacheKeys
 from .config.blocks import stan_gradients
 from .config.scenario import Scenario
-from .config.stage_inputs import DESIGN_DIR, design_set_path
+from .config.stage_inputs import DESIGN_DIR, MAP_CELLS_DIR, design_set_path
 from .config.validation import asks_for_paper_outputs
 from .stage_table import STAGES
 
-#: the folder of the cached cells of every observability map (by their own keys, shared by
-#: maps and profiles)
-MAP_CELLS_DIR = "results/observability_map/cells"
+__all__ = ["MAP_CELLS_DIR", "RunPaths"]
 
 
 def _each(stem: str, exts: Iterable[str]) -> list[str]:
@@ -55,10 +53,9 @@ class RunPaths:
     backend: str
     #: config key outputs_dir: where the tables and figures go
     outputs_dir: str
-    #: the scenario entries by name (as the config holds them), in config order
-    scenarios: Mapping[str, Mapping[str, Any]]
-    #: the same entries as typed objects
-    scenario_objects: Mapping[str, Scenario]
+    #: the scenarios by name, in config order (a script's params carry the entry as the
+    #: config holds it: :meth:`scenario_entry`)
+    scenarios: Mapping[str, Scenario]
     #: the k_selection entries by name
     k_selections: Mapping[str, Mapping[str, Any]]
     #: the observability_studies entries by name
@@ -72,14 +69,12 @@ class RunPaths:
     @classmethod
     def from_config(cls, config: Mapping[str, Any], keys: CacheKeys, backend: str) -> RunPaths:
         """The paths of a run of the checked ``config`` with its ``keys`` and ``backend``."""
-        scenarios = {sc["name"]: sc for sc in config["scenarios"]}
         return cls(
             config=config,
             keys=keys,
             backend=backend,
             outputs_dir=config["outputs_dir"],
-            scenarios=scenarios,
-            scenario_objects={n: Scenario.from_config(sc) for n, sc in scenarios.items()},
+            scenarios={sc["name"]: Scenario.from_config(sc) for sc in config["scenarios"]},
             k_selections={ks["name"]: ks for ks in config["k_selection"]},
             studies={st["name"]: st for st in config["observability_studies"]},
             maps={m["name"]: m for m in config["observability_maps"]},
@@ -91,11 +86,11 @@ class RunPaths:
         plans only its own job and looks its key up directly.  Returns every cell of every
         observability map with its key (issue 21), by map."""
         keys = self.keys
-        for name, sc in self.scenario_objects.items():
+        for name, sc in self.scenarios.items():
             keys.check_model(name)
             keys.joint_map(name)
             keys.trajectories(name)
-            if self.scenarios[name]["stan"]:  # a model may have no Stan program where none runs
+            if sc.stan:  # a model may have no Stan program where none runs
                 keys.check_model(name, stan=True)
                 keys.program(sc.model.slug)
                 keys.gather(name, self.batch_size(name))  # its batches, records
@@ -110,20 +105,30 @@ class RunPaths:
 
     # -- the scenarios of each stage -------------------------------------------------------
 
+    def scenario_entry(self, name: str) -> Mapping[str, Any]:
+        """Scenario ``name`` as the config holds it: what a script's params carry (the
+        script builds its :class:`~ssmobs.config.scenario.Scenario`)."""
+        return next(sc for sc in self.config["scenarios"] if sc["name"] == name)
+
+    @property
+    def models(self) -> list[str]:
+        """The models of every scenario, sorted, each once."""
+        return sorted({sc.slug for sc in self.scenarios.values()})
+
     @property
     def joint_scenarios(self) -> list[str]:
         """The scenarios with a joint MAP stage (Sec. III.B)."""
-        return [n for n, sc in self.scenarios.items() if sc["joint_map"]]
+        return [n for n, sc in self.scenarios.items() if sc.joint_map]
 
     @property
     def stan_scenarios(self) -> list[str]:
         """The scenarios with a NUTS stage (Sec. III.C)."""
-        return [n for n, sc in self.scenarios.items() if sc["stan"]]
+        return [n for n, sc in self.scenarios.items() if sc.stan]
 
     @property
     def stan_models(self) -> list[str]:
         """The models of the scenarios with a NUTS stage, sorted, each once."""
-        return sorted({sc["model"] for sc in self.scenarios.values() if sc["stan"]})
+        return sorted({sc.slug for sc in self.scenarios.values() if sc.stan})
 
     def stan_source(self, model: str) -> str | list[str]:
         """``stan/<model>.stan``, or no file (an empty list, for a rule's input) for a model
@@ -152,17 +157,35 @@ class RunPaths:
     def mu0_scenarios(self) -> list[str]:
         """The joint-MAP scenarios of the models the barrier-start sweep covers."""
         models = self.config["mu0_sweep"]["models"]
-        return [n for n, sc in self.scenarios.items() if sc["joint_map"] and sc["model"] in models]
+        return [n for n, sc in self.scenarios.items() if sc.joint_map and sc.slug in models]
+
+    def mu0_sweep_params(self) -> dict[str, Any]:
+        """What the barrier-start sweep reads: its scenarios' entries and settings."""
+        return {
+            "scenarios": [self.scenario_entry(n) for n in self.mu0_scenarios],
+            "settings": self.config["joint_map"],
+            "mu0_per_T": self.config["mu0_sweep"]["mu0_per_T"],
+        }
 
     @property
     def exact_scenarios(self) -> list[str]:
         """The scenarios whose model the exact marginal applies to (linear in the states)."""
-        return [n for n, sc in self.scenario_objects.items() if sc.exact_applies]
+        return [n for n, sc in self.scenarios.items() if sc.exact_applies]
 
     @property
     def exact_vs_stan_scenarios(self) -> list[str]:
         """The exact scenarios with a NUTS stage too (their comparison figure)."""
-        return [n for n in self.exact_scenarios if self.scenarios[n]["stan"]]
+        return [n for n in self.exact_scenarios if self.scenarios[n].stan]
+
+    @property
+    def table_ii_scenarios(self) -> list[str]:
+        """The scenarios of Tables II and III (config key paper_outputs.tables_2_3)."""
+        return list(self.config["paper_outputs"]["tables_2_3"])
+
+    @property
+    def figure3_scenarios(self) -> list[str]:
+        """The scenarios of Figure 3 (config key paper_outputs.figure3)."""
+        return list(self.config["paper_outputs"]["figure3"])
 
     @property
     def figure4_scenario(self) -> str | None:
@@ -172,7 +195,7 @@ class RunPaths:
 
     def batch_size(self, name: str) -> int:
         """The trajectories of one NUTS job of scenario ``name``."""
-        return self.scenario_objects[name].batch_size(self.config["stan"])
+        return self.scenarios[name].batch_size(self.config["stan"])
 
     # -- design (Sec. III.A) ---------------------------------------------------------------
 
@@ -188,7 +211,7 @@ class RunPaths:
     def design_set(self, name: str, K: int) -> str:
         """The design set the design trajectories of scenario ``name`` at K read
         (:meth:`~ssmobs.config.stage_inputs.TrajectoriesInputs.design_set`)."""
-        sc = self.scenario_objects[name]
+        sc = self.scenarios[name]
         return self.inputs("trajectories", name, K=int(K)).design_set(sc.disturbance_dim)
 
     def figure2_disturbances(self) -> str:
@@ -209,14 +232,14 @@ class RunPaths:
 
     def trajectories(self, name: str, K: int | None = None) -> str:
         """The design trajectories of a scenario at K (its own K by default)."""
-        K = self.scenario_objects[name].K if K is None else K
+        K = self.scenarios[name].K if K is None else K
         return self.stage_paths("trajectories", name, K=int(K))["trajectories"]
 
     def every_trajectories(self) -> list[str]:
         """The design trajectories of every scenario, at its K and at its exact stage's K."""
         return [
             self.trajectories(name, K)
-            for name, sc in self.scenario_objects.items()
+            for name, sc in self.scenarios.items()
             for K in {sc.K, sc.exact_trajectories}
         ]
 
@@ -237,7 +260,7 @@ class RunPaths:
 
     def stan_init_inputs(self, name: str) -> dict[str, str]:
         """The joint MAP of every trajectory when the scenario's chains start there."""
-        if self.scenarios[name]["stan_init"] == "joint_map":
+        if self.scenarios[name].stan_init == "joint_map":
             return {"joint_map": self.stage_paths("joint_map", name)["theta"]}
         return {}
 
@@ -252,19 +275,19 @@ class RunPaths:
         sampling."""
         if self.backend != "native":
             return []
-        name = next(n for n, sc in self.scenarios.items() if sc["model"] == model)
+        name = next(n for n, sc in self.scenarios.items() if sc.slug == model)
         return [self.keys.program_marker(name)]
 
     def select_k_params(self, name: str) -> dict[str, Any]:
         """What the choice of K of k_selection entry ``name`` reads: the entry and its
         scenario."""
         entry = self.k_selections[name]
-        return {"ksel": entry, "scenario": self.scenarios[entry["scenario"]]}
+        return {"ksel": entry, "scenario": self.scenario_entry(entry["scenario"])}
 
     def study_params(self, name: str) -> dict[str, Any]:
         """What observability study ``name`` reads: the entry, its scenarios, those with a
         joint MAP and with NUTS, and the stan block."""
-        scs = [self.scenarios[n] for n in self.studies[name]["scenarios"]]
+        scs = [self.scenario_entry(n) for n in self.studies[name]["scenarios"]]
         return {
             "study": self.studies[name],
             "scenarios": scs,
@@ -289,7 +312,7 @@ class RunPaths:
 
     def nuts_batches(self, name: str) -> list[str]:
         """Every batch table of a scenario's NUTS stage, in batch order."""
-        ranges = self.scenario_objects[name].stan_batches(self.batch_size(name))
+        ranges = self.scenarios[name].stan_batches(self.batch_size(name))
         return [f"{self.batch_dir(name)}/batch{b}.parquet" for b in range(len(ranges))]
 
     def nuts_inputs(self, name: str) -> Any:
@@ -320,12 +343,12 @@ class RunPaths:
 
     def exact_summary(self, name: str) -> str:
         """Summary of the exact stage at the scenario's exact_K (the one the tables show)."""
-        K = self.scenario_objects[name].exact_trajectories
+        K = self.scenarios[name].exact_trajectories
         return self.stage_paths("exact", name, K=K)["summary"]
 
     def exact_vs_stan_inputs(self, name: str) -> dict[str, str]:
         """The NUTS and exact marginal MAP tables of a scenario at its K (its figure)."""
-        K = self.scenarios[name]["K"]
+        K = self.scenarios[name].K
         return {"stan": self.stan_table(name), "exact": self.exact_table(name, K)}
 
     # -- the choice of K (Sec. IV.A) and observability maps ---------------------------------
@@ -355,8 +378,8 @@ class RunPaths:
     def study_inputs(self, name: str) -> dict[str, list[str]]:
         """The summaries (and NUTS tables) of the scenarios of one observability study."""
         names = self.studies[name]["scenarios"]
-        joint = [n for n in names if self.scenarios[n]["joint_map"]]
-        stan = [n for n in names if self.scenarios[n]["stan"]]
+        joint = [n for n in names if self.scenarios[n].joint_map]
+        stan = [n for n in names if self.scenarios[n].stan]
         return {
             "joint": [self.joint_summary(n) for n in joint],
             "stan": [self.stan_summary(n) for n in stan],
@@ -367,6 +390,25 @@ class RunPaths:
         """The table of every cell of one observability map."""
         return f"results/observability_map/{name}/{self.keys.map_table(name)}/cells.parquet"
 
+    def paper_tables_inputs(self) -> dict[str, Any]:
+        """The summaries the paper's tables read (Tables II, III, Sec. IV), by stage."""
+        return {
+            "joint": [self.joint_summary(n) for n in self.joint_scenarios],
+            "marginal": [self.stan_summary(n) for n in self.stan_scenarios],
+            "exact": [self.exact_summary(n) for n in self.exact_scenarios],
+            "paper_values": "config/paper_values.yaml",
+        }
+
+    def paper_tables_params(self) -> dict[str, Any]:
+        """What the paper's tables read beside their inputs: the entries, names by stage."""
+        return {
+            "scenarios": self.config["scenarios"],
+            "tables_2_3": self.table_ii_scenarios,
+            "joint_names": self.joint_scenarios,
+            "marginal_names": self.stan_scenarios,
+            "exact_names": self.exact_scenarios,
+        }
+
     # -- what must be verified before it is read --------------------------------------------
 
     def cached_outputs(self) -> list[str]:
@@ -375,7 +417,7 @@ class RunPaths:
         to be reused (:func:`ssmobs.io.unrecorded_files`).  The stamped tables and figures
         are added by the Snakefile for the stamps that are current."""
         out = []
-        for name, sc in self.scenario_objects.items():
+        for name, sc in self.scenarios.items():
             out.append(self.check(name))
             for K in {sc.K, sc.exact_trajectories}:
                 trajectories = self.trajectories(name, K)
@@ -388,7 +430,7 @@ class RunPaths:
             out += [self.stan_summary(name), self.stan_table(name)]
         out += [self.keys.program_marker(name) for name in self.stan_scenarios]
         for name in self.exact_scenarios:
-            sc = self.scenario_objects[name]
+            sc = self.scenarios[name]
             for K in {sc.K, sc.exact_trajectories}:
                 out += list(self.stage_paths("exact", name, K=K).values())
         for name in self.k_selections:

@@ -152,7 +152,7 @@ def test_every_field_of_the_map_jobs_inputs_moves_its_key(smoke, monkeypatch):
     base = keys.map_table(name)
     inputs = keys.lookup("map", name, base)["inputs"]
     assert inputs.cells_dir == MAP_CELLS_DIR and inputs.map == name
-    assert run_paths.MAP_CELLS_DIR == MAP_CELLS_DIR  # where RunPaths and the rules look
+    assert run_paths.MAP_CELLS_DIR is MAP_CELLS_DIR  # one constant: where RunPaths looks
     assert [key for _, key in keys.map_cells(name)] == [key for key, _ in inputs.cells]
     real = cache_keys.map_cells_inputs
     for field in _fields(inputs):
