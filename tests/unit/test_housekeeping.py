@@ -318,15 +318,16 @@ def test_a_program_marker_whose_program_is_gone_is_removed(tmp_path, monkeypatch
     assert hk.orphaned_program_markers(paths) == [
         (
             header_gone,
-            f"{header_gone} names the Stan program {cache / 'gone.hpp'}, which is gone "
-            f"(a cleared program cache): its build job writes it again",
+            f"{header_gone} names files of its Stan program that are gone "
+            f"({cache / 'gone.hpp'}; was the program cache cleared?): its build job writes "
+            f"them again",
         )
     ]
     shutil.rmtree(tmp_path / "cache")  # the program cache cleared
     found = hk.unrecorded_files(paths)
     assert [p for p, _ in found] == [header_gone, kept]
     (why,) = [w for p, w in found if p == kept]
-    assert f"names the Stan program {program} and {header}, which is gone" in why
+    assert f"names files of its Stan program that are gone ({program}, {header}; " in why
     # removed and made again in this run (its key is current): build_stan_model runs
     repairs = hk.damaged_output_repairs(found, [], {"0123456789ab"})
     assert repairs.changes == [(header_gone, None), (kept, None)]

@@ -393,6 +393,20 @@ def test_one_file_model_runs_through_nuts(tmp_path):
     # every record ran the generated program with its C++ header
     assert all(json.loads(r.read_text())["status"] == "ok" for r in records)
     assert (work / "paper_figures" / "one" / "ours_one_observability.csv").stat().st_size > 0
+    # a cleared program cache (issue 62): the marker stays in results/, the generated program
+    # it names is gone; the run removes the marker, the build job writes the program again
+    # and the model check and the batches run it
+    marker = only(work, f"results/shared/stan/native/{slug}/*.json")
+    built = json.loads(marker.read_text())
+    programs = [Path(built[k]) for k in ("program_file", "header_file")]
+    for path in programs:
+        path.unlink()
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/one.yaml")
+    said = f"made again, not reused: {marker.relative_to(work)} names files of its Stan program"
+    assert said in proc.stdout + proc.stderr
+    assert all(path.is_file() for path in programs)
+    assert json.loads(marker.read_text()) == built
+    assert json.loads(only(work, "results/one_T10/check_model_stan/*.json").read_text())["ok"]
 
 
 @pytest.mark.slow  # a model module with a syntax error (a rare path; issue 48)

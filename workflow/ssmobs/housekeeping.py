@@ -248,8 +248,9 @@ def orphaned_program_markers(paths: Iterable[str | Path]) -> list[tuple[Path, st
             found.append(
                 (
                     path,
-                    f"{path} names the Stan program {' and '.join(gone)}, which is gone "
-                    f"(a cleared program cache): its build job writes it again",
+                    f"{path} names files of its Stan program that are gone "
+                    f"({', '.join(gone)}; was the program cache cleared?): its build job "
+                    f"writes them again",
                 )
             )
     return found
