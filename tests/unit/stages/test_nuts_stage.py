@@ -672,7 +672,9 @@ def test_a_batch_job_writes_no_program_and_samples_as_its_records_are_keyed(tmp_
         run_sample_batch(autodiff, {"table": tmp_path / "batch1.parquet"})
     # a marker whose program is gone (the program cache cleared) stops the job in one line
     header.unlink()
-    with pytest.raises(FileNotFoundError, match="delete .*marker.json and run again"):
+    with pytest.raises(
+        FileNotFoundError, match="marker.json names is gone .*run the workflow again"
+    ):
         run_sample_batch(inputs, {"table": tmp_path / "batch1.parquet"})
 
 

@@ -22,9 +22,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..io import read_json
 from ..models import StateSpaceModel
 from ..nuts.analytic_program import AnalyticProgram, analytic_program_files, write_analytic_program
+from ..nuts.stan_program import built_program
 
 #: a Stan program and its C++ header (None: a program without one)
 ProgramFiles = tuple[Path, Path | None]
@@ -32,18 +32,8 @@ ProgramFiles = tuple[Path, Path | None]
 
 def built_program_files(marker: str | Path) -> ProgramFiles:
     """The Stan program and C++ header (or None) that rule build_stan_model compiled, as its
-    marker names them; FileNotFoundError in one line where one is gone (a cleared program
-    cache: the workflow removes such a marker before it builds its DAG,
-    :func:`ssmobs.housekeeping.orphaned_program_markers`, so its build job writes it again)."""
-    built = read_json(marker, required=["program_file", "header_file"])
-    program = Path(built["program_file"])
-    header = None if built["header_file"] is None else Path(built["header_file"])
-    for path in (program, header):
-        if path is not None and not path.is_file():
-            raise FileNotFoundError(
-                f"{path}: the Stan program that {marker} names is gone (was the program cache "
-                f"cleared?); run the workflow again: it builds the program first"
-            )
+    marker names them (:func:`ssmobs.nuts.stan_program.built_program`)."""
+    _, program, header = built_program(marker)
     return program, header
 
 

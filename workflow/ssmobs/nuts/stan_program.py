@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import io
 from ..models import get_model
 from ..stan_backends import has_stan_file, stan_file
 from .analytic_program import analytic_program_files, write_analytic_program
@@ -46,3 +47,21 @@ def _program(model: str, gradients: str, *, write: bool) -> tuple[Path, Path | N
         return path, None
     generated = make(get_model(model), path)
     return generated.stan_file, generated.header
+
+
+def built_program(marker: str | Path) -> tuple[str, Path, Path | None]:
+    """The backend, the Stan program and its C++ header (or None) that rule build_stan_model
+    compiled, as its marker names them (the one reader of a marker, for the NUTS batches and
+    the model check); FileNotFoundError in one line where one is gone (a cleared program
+    cache: the workflow removes such a marker before it builds its DAG,
+    :func:`ssmobs.housekeeping.orphaned_program_markers`, so its build job writes it again)."""
+    built = io.read_json(marker, required=["backend", "program_file", "header_file"])
+    program = Path(built["program_file"])
+    header = None if built["header_file"] is None else Path(built["header_file"])
+    for path in (program, header):
+        if path is not None and not path.is_file():
+            raise FileNotFoundError(
+                f"{path}: the Stan program that {marker} names is gone (was the program cache "
+                f"cleared?); run the workflow again: it builds the program first"
+            )
+    return str(built["backend"]), program, header

@@ -68,22 +68,6 @@ def run_build_stan_model(
     return marker
 
 
-def built_program(marker: PathLike) -> tuple[str, Path, Path | None]:
-    """The backend, the Stan program and its C++ header (or None) that rule build_stan_model
-    compiled, from its marker; a one-line error where a file it names is gone (a cleared
-    program cache: deleting the marker builds it again)."""
-    built = io.read_json(marker, required=["backend", "program_file", "header_file"])
-    program = Path(built["program_file"])
-    header = None if built["header_file"] is None else Path(built["header_file"])
-    for path in (program, header):
-        if path is not None and not path.is_file():
-            raise FileNotFoundError(
-                f"{path}: the Stan program that {marker} names is gone (was the program "
-                f"cache cleared?); delete {marker} and run again to build it"
-            )
-    return str(built["backend"]), program, header
-
-
 def nuts_batch(
     inputs: NutsRecordsInputs,
     traj: Trajectories,
@@ -96,8 +80,9 @@ def nuts_batch(
     determines its records (:class:`~ssmobs.config.stage_inputs.NutsRecordsInputs`): its
     design trajectories, true values, prior bounds, seeds and chains' start, the sampler
     settings on ``threads`` chain processes; ``program``: the Stan program and C++ header
-    its build job compiled (:func:`built_program`); ``convergence``: the checks;
-    ``init_theta``: the joint MAP of every k (``stan_init: joint_map``)."""
+    its build job compiled (:func:`~ssmobs.nuts.stan_program.built_program`);
+    ``convergence``: the checks; ``init_theta``: the joint MAP of every k
+    (``stan_init: joint_map``)."""
     from ..nuts.batch import NutsBatch
 
     model = traj.model
@@ -146,6 +131,7 @@ def run_sample_batch(inputs: NutsBatchesInputs, paths: Mapping[str, PathLike]) -
     from ..nuts.convergence import ConvergenceSettings, apply_thresholds
     from ..nuts.record_cache import draws_path, record_path
     from ..nuts.record_format import records_to_frame
+    from ..nuts.stan_program import built_program
     from ..stan_backends import get_backend
 
     record = inputs.record
