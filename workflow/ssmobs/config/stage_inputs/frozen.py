@@ -37,6 +37,43 @@ def plain(value: Any) -> Any:
     return value
 
 
+class ScenarioViews:
+    """The frozen design block, true values, prior and joint-MAP settings of an inputs object
+    that holds a scenario's values (a point of the choice of K, a cell of a map) back as the
+    config gives them."""
+
+    design_settings: tuple[tuple[str, Any], ...]
+    omega: Any
+    x0: Any
+    prior: Any
+    settings: tuple[tuple[str, Any], ...]
+
+    @property
+    def design_config(self) -> dict[str, Any]:
+        """The ``design`` block as the config gives it."""
+        return {k: plain(v) for k, v in self.design_settings}
+
+    @property
+    def omega_config(self) -> Any:
+        """The true parameters as the config gives them."""
+        return plain(self.omega)
+
+    @property
+    def x0_config(self) -> Any:
+        """The true initial state as the config gives it (a number or a list)."""
+        return plain(self.x0)
+
+    @property
+    def prior_config(self) -> Any:
+        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
+        return prior_config_of(self.prior)
+
+    @property
+    def settings_config(self) -> dict[str, Any]:
+        """The merged ``joint_map`` block as a mapping."""
+        return dict(self.settings)
+
+
 #: the folder of the design sets of one design key (rule design_disturbances)
 DESIGN_DIR = "results/shared/design_disturbances/{key}"
 #: one design set there

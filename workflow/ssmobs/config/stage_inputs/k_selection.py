@@ -8,11 +8,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..blocks import joint_map_settings
-from .frozen import design_set_path, frozen, plain, prior_config_of
+from .frozen import ScenarioViews, design_set_path, frozen
 
 
 @dataclass(frozen=True)
-class KSelectionPointsInputs:
+class KSelectionPointsInputs(ScenarioViews):
     """Everything a point V_{K_i} of a scenario reads but its place in a grid (Sec. IV.A):
     the design sets' key and settings (the job makes a missing set), the model, its true
     values, T and prior, and the merged joint-MAP settings of the paper's one start.  Its
@@ -31,31 +31,6 @@ class KSelectionPointsInputs:
     prior: Any
     #: the joint-MAP settings as sorted (key, value) pairs (one start)
     settings: tuple[tuple[str, Any], ...]
-
-    @property
-    def design_config(self) -> dict[str, Any]:
-        """The ``design`` block as the config gives it."""
-        return {k: plain(v) for k, v in self.design_settings}
-
-    @property
-    def omega_config(self) -> Any:
-        """The true parameters as the config gives them."""
-        return plain(self.omega)
-
-    @property
-    def x0_config(self) -> Any:
-        """The true initial state as the config gives it (a number or a list)."""
-        return plain(self.x0)
-
-    @property
-    def prior_config(self) -> Any:
-        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
-        return prior_config_of(self.prior)
-
-    @property
-    def settings_config(self) -> dict[str, Any]:
-        """The merged ``joint_map`` block as a mapping."""
-        return dict(self.settings)
 
     def point(self, K: int, method: str, sets: str, seed: int) -> KSelectionPointInputs:
         """The inputs of the point of K_i = ``K`` of the grid (method, set variant, seed)."""

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..blocks import joint_map_settings
-from .frozen import design_set_path, frozen, plain, prior_config_of
+from .frozen import ScenarioViews, design_set_path, frozen, plain
 
 #: the folder of the cached cells of every observability map, ``<key>.json`` each (by their
 #: own keys, shared by maps and profiles)
@@ -16,7 +16,7 @@ MAP_CELLS_DIR = "results/observability_map/cells"
 
 
 @dataclass(frozen=True)
-class MapCellInputs:
+class MapCellInputs(ScenarioViews):
     """Everything one cell of an observability map reads: the design sets' key and
     settings (the job makes a missing set), the model, its true values (the map's base with
     one parameter set to the cell's value), T, K, the disturbance method and seed (Sec.
@@ -41,31 +41,6 @@ class MapCellInputs:
     settings: tuple[tuple[str, Any], ...]
     #: the ``exact_marginal`` block as sorted (key, value) pairs, or None (no exact stage)
     exact: tuple[tuple[str, Any], ...] | None
-
-    @property
-    def design_config(self) -> dict[str, Any]:
-        """The ``design`` block as the config gives it."""
-        return {k: plain(v) for k, v in self.design_settings}
-
-    @property
-    def omega_config(self) -> Any:
-        """The true parameters as the config gives them."""
-        return plain(self.omega)
-
-    @property
-    def x0_config(self) -> Any:
-        """The true initial state as the config gives it (a number or a list)."""
-        return plain(self.x0)
-
-    @property
-    def prior_config(self) -> Any:
-        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
-        return prior_config_of(self.prior)
-
-    @property
-    def settings_config(self) -> dict[str, Any]:
-        """The merged ``joint_map`` block as a mapping."""
-        return dict(self.settings)
 
     @property
     def exact_config(self) -> dict[str, Any] | None:
