@@ -6,11 +6,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from .frozen import design_set_path, frozen, plain
+from .frozen import TruthViews, design_set_path, frozen
 
 
 @dataclass(frozen=True)
-class TrajectoriesInputs:
+class TrajectoriesInputs(TruthViews):
     """Everything rule design_trajectories reads (Sec. III.A, Eq. (1)): the design sets' key
     (which with q, K, method and seed names the design set read, :meth:`design_set`), the
     scenario's name, model, true values, T, K, method and seed (written into the file)."""
@@ -25,16 +25,6 @@ class TrajectoriesInputs:
     K: int
     method: str
     seed: int
-
-    @property
-    def omega_config(self) -> Any:
-        """The true parameters as the config gives them (a mapping or a list)."""
-        return plain(self.omega)
-
-    @property
-    def x0_config(self) -> Any:
-        """The true initial state as the config gives it (a number or a list)."""
-        return plain(self.x0)
 
     def design_set(self, q: int) -> str:
         """The design set of K disturbances of dimension ``q`` = (d + p) T the stage reads

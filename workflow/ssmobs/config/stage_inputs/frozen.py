@@ -37,14 +37,29 @@ def plain(value: Any) -> Any:
     return value
 
 
-class ScenarioViews:
+class TruthViews:
+    """The frozen true values of an inputs object back as the config gives them."""
+
+    omega: Any
+    x0: Any
+
+    @property
+    def omega_config(self) -> Any:
+        """The true parameters as the config gives them (a mapping or a list)."""
+        return plain(self.omega)
+
+    @property
+    def x0_config(self) -> Any:
+        """The true initial state as the config gives it (a number or a list)."""
+        return plain(self.x0)
+
+
+class ScenarioViews(TruthViews):
     """The frozen design block, true values, prior and joint-MAP settings of an inputs object
     that holds a scenario's values (a point of the choice of K, a cell of a map) back as the
     config gives them."""
 
     design_settings: tuple[tuple[str, Any], ...]
-    omega: Any
-    x0: Any
     prior: Any
     settings: tuple[tuple[str, Any], ...]
 
@@ -52,16 +67,6 @@ class ScenarioViews:
     def design_config(self) -> dict[str, Any]:
         """The ``design`` block as the config gives it."""
         return {k: plain(v) for k, v in self.design_settings}
-
-    @property
-    def omega_config(self) -> Any:
-        """The true parameters as the config gives them."""
-        return plain(self.omega)
-
-    @property
-    def x0_config(self) -> Any:
-        """The true initial state as the config gives it (a number or a list)."""
-        return plain(self.x0)
 
     @property
     def prior_config(self) -> Any:
