@@ -43,6 +43,7 @@ def test_the_workflows_check_runs_the_program_its_build_job_wrote(tmp_path, monk
     import json
 
     import ssmobs.model_check.program as checked
+    from ssmobs.config.stage_inputs import model_check_inputs
     from ssmobs.model_check.check import run_check_model
     from ssmobs.stages.stan import run_build_stan_model
 
@@ -54,15 +55,9 @@ def test_the_workflows_check_runs_the_program_its_build_job_wrote(tmp_path, monk
 
     monkeypatch.setattr(checked, "write_analytic_program", refuse)
     case = {"model": "same", "omega": {"a": 0.9}, "x0": [0.0], "prior": None}
+    inputs = model_check_inputs(case, {"stan": {"gradients": "analytic"}}, against_stan=True)
     out = tmp_path / "check.json"
-    report = run_check_model(
-        "same",
-        [case],
-        out,
-        stan_path=stan_file("same"),
-        gradients="analytic",
-        program_marker=marker,
-    )
+    report = run_check_model(inputs, {"report": out, "stan": stan_file("same"), "program": marker})
     assert json.loads(out.read_text())["ok"] is True
     assert any(c.startswith("stan compiled:") for c in report.checks)
     assert any(c.startswith("analytic gradients:") for c in report.checks)

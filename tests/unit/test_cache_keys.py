@@ -792,7 +792,8 @@ def test_each_input_of_the_model_check_keys_it(stan, field, value):
     edited = copy.deepcopy(base)
     edited["scenarios"][0][field] = value
     a, b = keys(base), keys(edited)
-    assert a.check_inputs("same_T4", stan) != b.check_inputs("same_T4", stan)
+    stage = "check_model_stan" if stan else "check_model"
+    assert a.inputs(stage, "same_T4") != b.inputs(stage, "same_T4")
     assert a.check_model("same_T4", stan) != b.check_model("same_T4", stan)
 
 
@@ -808,7 +809,8 @@ def test_a_field_the_model_check_does_not_read_leaves_its_key(stan, field, value
 def test_the_gradient_path_keys_the_stan_check_only():
     analytic = smoke("analytic")
     a, b = keys(smoke()), keys(analytic)
-    assert b.check_inputs("same_T4", stan=True)["gradients"] == "analytic"
+    assert b.inputs("check_model_stan", "same_T4").gradients == "analytic"
+    assert b.inputs("check_model", "same_T4").gradients == "autodiff"
     assert a.check_model("same_T4", stan=True) != b.check_model("same_T4", stan=True)
     assert a.check_model("same_T4") == b.check_model("same_T4")
 
@@ -817,8 +819,8 @@ def test_the_gradient_path_keys_the_stan_check_only():
     "prior", [None, "restricted", "unrestricted", {"a": [0, 1.5]}, {"a": "half_line"}]
 )
 def test_the_model_check_reads_the_same_cases_from_its_inputs_as_from_the_scenario(prior):
-    """The rule passes :meth:`CacheKeys.check_inputs` only: the cases the check builds from
-    it are those it would build from the whole scenario entry, so what is keyed is what is
+    """The rule passes the check's inputs object only: the cases the check builds from it
+    are those it would build from the whole scenario entry, so what is keyed is what is
     read."""
     from ssmobs.models import get_model
     from ssmobs.models.check_cases import cases_from_scenarios, prior_variant_cases
@@ -835,8 +837,45 @@ def test_the_model_check_reads_the_same_cases_from_its_inputs_as_from_the_scenar
         found = cases_from_scenarios(entries, "same")
         return [c for case in found for c in prior_variant_cases(model, case)]
 
-    inputs = keys(conf).check_inputs("same_T4")
-    assert inputs["model"] == "same" and cases(inputs["scenarios"]) == cases([sc])
+    inputs = keys(conf).inputs("check_model", "same_T4")
+    assert inputs.model == "same" and cases([inputs.case_config]) == cases([sc])
+
+
+@pytest.mark.parametrize(
+    ("prior", "x0"),
+    [
+        (None, 8),
+        ("restricted", [8.0]),
+        ({"a": [0, 1.5]}, 8),
+        ({"a": "half_line"}, 8.5),
+        ({"a": [0.1, 0.95], "b": "half_line"}, 8),
+    ],
+)
+def test_the_model_check_key_hashes_the_case_as_the_scenario_gives_it(prior, x0):
+    """The check's inputs object is frozen, and its payload is the dict the check's key held
+    before it (issue 62): the scenario's model, omega, x0 and interval prior as the config
+    gives them, so no key moved for the change of what the rule passes."""
+    from ssmobs.config.stage_inputs import ModelCheckInputs, check_case
+
+    conf = smoke()
+    sc = conf["scenarios"][0]
+    sc.pop("prior", None)
+    if prior is not None:
+        sc["prior"] = prior
+    sc["x0"] = x0
+    k = keys(conf)
+    for stan in (False, True):
+        stage = "check_model_stan" if stan else "check_model"
+        inputs = k.inputs(stage, "same_T4")
+        assert isinstance(inputs, ModelCheckInputs) and inputs.against_stan is stan
+        assert hash(inputs) == hash(k.inputs(stage, "same_T4"))  # frozen: hashable
+        assert inputs.case_config == check_case(sc)
+        interval = isinstance(prior, dict) and not all(isinstance(v, str) for v in prior.values())
+        assert ("prior" in inputs.case_config) is interval
+        key = k.check_model("same_T4", stan)
+        payload = k.describe()[f"{stage}:same_T4:{key}"]
+        assert payload["case"] == check_case(sc)
+        assert ("stan" in payload) is stan
 
 
 def test_a_generated_programs_keys_do_not_follow_the_gradient_switch(tmp_path, monkeypatch):

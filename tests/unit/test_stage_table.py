@@ -43,17 +43,32 @@ def _entry(stage: str):
 
 
 def _rule(stage: str) -> str:
-    """The text of the rule whose script is the stage's (one rule per script)."""
+    """The text of the rule whose script is the stage's: the rule named as the stage where
+    two rules share the script (check_model and check_model_stan), else the one rule."""
     script = STAGES[stage].scripts[0]
-    for smk in (REPO / "workflow" / "rules").glob("*.smk"):
+    found = []
+    for smk in sorted((REPO / "workflow" / "rules").glob("*.smk")):
         for block in re.split(r"\n(?=rule \w+:)", smk.read_text()):
             if f'"../scripts/{script}.py"' in block:
-                return block
-    raise AssertionError(f"no rule runs scripts/{script}.py")
+                found.append(block)
+    named = [b for b in found if b.startswith(f"rule {stage}:")]
+    assert found, f"no rule runs scripts/{script}.py"
+    assert len(found) == 1 or len(named) == 1, (stage, script)
+    return named[0] if named else found[0]
+
+
+def _key(keys: CacheKeys, stage: str, name: str, **at: int) -> str:
+    """The key of a stage with an inputs object: :meth:`CacheKeys.stage_key`, or for the
+    model check its own method, whose payload is the one hashed before its inputs object
+    (with the Stan program, the driver and our headers beside the inputs)."""
+    if stage in ("check_model", "check_model_stan"):
+        return keys.check_model(name, stan=stage == "check_model_stan")
+    return keys.stage_key(stage, name, **at)
 
 
 def test_every_entry_names_code_and_scripts_that_exist():
     assert {"trajectories", "joint_map", "exact", "gather", "nuts_batches"} <= set(WITH_ENTRY)
+    assert {"check_model", "check_model_stan"} <= set(WITH_ENTRY)
     assert "nuts_records" in WITH_INPUTS
     assert "k_selection_grid" in WITH_INPUTS
     for name, stage in STAGES.items():
@@ -86,7 +101,11 @@ def test_the_stage_reads_its_inputs_and_nothing_else(stage):
         re.findall(r'^\s+(\w+)="([^"]+)"', rule.split("output:")[1].split("log:")[0], re.M)
     )
     owner = "{ksel}" if STAGES[stage].of == "k_selection" else "{scenario}"
-    assert outputs == STAGES[stage].paths(owner, "{key}")
+    if STAGES[stage].folder is None:  # a keyed file, not a folder: the model check's report
+        output = rule.split("output:")[1].split("log:")[0].strip()
+        assert output == f'"results/{owner}/{stage}/{{key}}.json",'
+    else:
+        assert outputs == STAGES[stage].paths(owner, "{key}")
     # the script passes the params' inputs and the outputs, and reads no other param
     script = REPO / "workflow" / "scripts" / f"{STAGES[stage].scripts[0]}.py"
     read = {
@@ -126,8 +145,8 @@ def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
     name = next(iter(owners))
     at = {p: {"K": int(owners[name].get("K", 0)), "batch_size": 4}[p] for p in STAGES[stage].per}
     inputs = keys.inputs(stage, name, **at)
-    base = keys.stage_key(stage, name, **at)
-    assert keys.stage_key(stage, name, **at) == base  # the same inputs, the same key
+    base = _key(keys, stage, name, **at)
+    assert _key(keys, stage, name, **at) == base  # the same inputs, the same key
     fields = [f.name for f in dataclasses.fields(inputs)]
     assert fields and set(inputs_payload(inputs)) == {"stage_inputs", *fields}
     for field in fields:
@@ -136,9 +155,9 @@ def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
         new = next(m for m in sorted(MODELS) if m != value) if field == "model" else _changed(value)
         other = dataclasses.replace(inputs, **{field: new})
         monkeypatch.setattr(keys, "inputs", lambda s, n, other=other, **at: other)
-        assert keys.stage_key(stage, name, **at) != base, field
+        assert _key(keys, stage, name, **at) != base, field
     monkeypatch.undo()
-    assert keys.stage_key(stage, name, **at) == base
+    assert _key(keys, stage, name, **at) == base
 
 
 def test_the_joint_map_inputs_hold_what_the_stage_read_before():

@@ -18,8 +18,8 @@ rule check_model:
         mem_mb=4000,
         runtime=30,
     params:
-        # what the check reads, and its key is made of (ssmobs.cache_keys.CacheKeys.check_inputs)
-        inputs=lambda wc: KEYS.check_inputs(wc.scenario, stan=False),
+        # what the check reads, and its key is made of (ssmobs.config.stage_inputs.ModelCheckInputs)
+        inputs=lambda wc: PATHS.inputs("check_model", wc.scenario),
     script:
         "../scripts/check_model.py"
 
@@ -45,7 +45,7 @@ rule check_model_stan:
         mem_mb=4000,
         runtime=30,
     params:
-        inputs=lambda wc: KEYS.check_inputs(wc.scenario, stan=True),
+        inputs=lambda wc: PATHS.inputs("check_model_stan", wc.scenario),
     script:
         "../scripts/check_model.py"
 

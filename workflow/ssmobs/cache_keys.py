@@ -50,24 +50,6 @@ from .stan_backends.base import program_digest
 
 
 # --------------------------------------------------------------------------- the keys
-def _pick(entry: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
-    return {n: entry.get(n) for n in names}
-
-
-def check_case(sc: Mapping[str, Any]) -> dict[str, Any]:
-    """What the model check reads of scenario entry ``sc``
-    (:func:`ssmobs.models.check_cases.cases_from_scenarios`): its model, true values and
-    start, and its prior where that is an interval prior (a parameter with its own
-    ``[lower, upper]``), which is checked as configured; a named prior variant is no input,
-    as every variant of the model is checked whichever the scenario picks
-    (:func:`ssmobs.models.check_cases.prior_variant_cases`)."""
-    case = _pick(sc, ("model", "omega", "x0"))
-    prior = sc.get("prior")
-    if isinstance(prior, Mapping) and any(not isinstance(v, str) for v in prior.values()):
-        case["prior"] = dict(prior)
-    return case
-
-
 def _at(stage: str, at: Mapping[str, int]) -> dict[str, int]:
     """Of ``at``, what ``stage`` is keyed by (an upstream stage keyed per K, or not)."""
     return {k: v for k, v in at.items() if k in STAGES[stage].per}
@@ -195,48 +177,36 @@ class CacheKeys:
         generated from its Python module)."""
         return (self.repo / "stan" / f"{model}.stan").is_file()
 
-    def check_inputs(self, name: str, stan: bool = False) -> dict[str, Any]:
-        """Everything the model check of scenario ``name`` reads of the config, as the rule
-        passes it (its only params) and as :meth:`check_model` keys it, so the two cannot
-        drift: the model, the scenario's case (:func:`check_case`) and, against Stan, the
-        gradient path its program takes (``autodiff`` for a generated program, which is
-        analytic whatever the setting and checked the same way)."""
-        sc = self.scenarios[name]
-        own = stan and self.has_stan_file(sc["model"])
-        return {
-            "model": sc["model"],
-            "scenarios": [check_case(sc)],
-            "stan": stan,
-            "gradients": stan_gradients(self.config["stan"]) if own else "autodiff",
-        }
-
     def check_model(self, name: str, stan: bool = False) -> str:
-        """The model check at a scenario's true values (:meth:`check_inputs`): the Python
-        model alone (gates the design trajectories) or against the Stan program (gates the
-        NUTS runs)."""
-        inputs = self.check_inputs(name, stan)
-        model = inputs["model"]
-        (case,) = inputs["scenarios"]
+        """The model check at a scenario's true values: the Python model alone (gates the
+        design trajectories) or against the Stan program (gates the NUTS runs).  Keyed by
+        its inputs (:class:`~ssmobs.config.stage_inputs.ModelCheckInputs`, of stage
+        ``check_model`` or ``check_model_stan``): their case
+        (:func:`~ssmobs.config.stage_inputs.check_case`'s dict) with the model's code and
+        the check's; against Stan, the program, the check backend's Stan and the native
+        driver; a gradient path other than autodiff, with our headers.  Every field of the
+        inputs is in the payload, which is the one hashed before the inputs object."""
+        stage = "check_model_stan" if stan else "check_model"
+        inputs = self.inputs(stage, name)
         payload: dict[str, Any] = {
-            "case": case,
-            "model_code": self.model_code(model),
-            "code": self.code("check_model"),
+            "case": inputs.case_config,
+            "model_code": self.model_code(inputs.model),
+            "code": self.code(stage),
         }
-        if stan:
+        # with analytic gradients the check compares them with Stan's autodiff as well
+        gradients = {} if inputs.gradients == "autodiff" else {"gradients": inputs.gradients}
+        if inputs.against_stan:
             # the check runs the program in the native driver's log-density mode, whatever
             # backend samples: keyed by the program, that backend's Stan and the driver
-            payload["stan"] = self.stan_program(model)
+            payload["stan"] = self.stan_program(inputs.model)
             payload["check_backend"] = self.check_backend
             payload["driver"] = file_digest(self.package_dir / NATIVE_DRIVER)
-            # with analytic gradients the check compares them with Stan's autodiff as well
-            gradients = inputs["gradients"]
-            payload.update({} if gradients == "autodiff" else {"gradients": gradients})
-            if gradients != "autodiff" or not self.has_stan_file(model):
+            if gradients or not self.has_stan_file(inputs.model):
                 # ... and the sampler's gradient, through our headers (--sampler-gradient)
                 payload["shadow_headers"] = {
                     h: file_digest(self.package_dir / h) for h in NATIVE_SHADOW_HEADERS
                 }
-        return self._key("check_model_stan" if stan else "check_model", name, payload)
+        return self._key(stage, name, {**payload, **gradients})
 
     def trajectories(self, name: str, K: int | None = None) -> str:
         """The design trajectories' key at K (the scenario's own K by default;

@@ -22,6 +22,8 @@ from .config.stage_inputs import (
     joint_map_inputs,
     k_selection_grid_inputs,
     k_selection_points_inputs,
+    model_check_inputs,
+    model_check_stan_inputs,
     nuts_batches_inputs,
     nuts_records_inputs,
     trajectories_inputs,
@@ -135,8 +137,26 @@ STAGES: dict[str, Stage] = {
         folder="results/{scenario}/design_trajectories/{key}",
         outputs={"trajectories": "trajectories.nc", "checksum": "trajectories.nc.sha256"},
     ),
-    # the command line too: it was part of the check's module
-    "check_model": Stage(("model_check/check.py", "model_check/__main__.py"), ("check_model",)),
+    # the model check of the Python model alone; the command line too: it was part of the
+    # check's module.  Its output is a keyed file, results/{scenario}/check_model/<key>.json
+    # (RunPaths.check), not a keyed folder
+    "check_model": Stage(
+        ("model_check/check.py", "model_check/__main__.py"),
+        ("check_model",),
+        inputs=model_check_inputs,
+        entry="run_check_model",
+        runs_model=True,
+    ),
+    # ... and against the Stan program: the same code (the program, the native driver and
+    # our headers are keyed beside it: cache_keys.CacheKeys.check_model)
+    "check_model_stan": Stage(
+        ("model_check/check.py", "model_check/__main__.py"),
+        ("check_model",),
+        inputs=model_check_stan_inputs,
+        entry="run_check_model",
+        shared=("own_program",),
+        runs_model=True,
+    ),
     "joint_map": Stage(
         ("stages/joint_map.py",),
         ("joint_map",),

@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 from factories import same_a09
+from ssmobs.config.stage_inputs import model_check_inputs
 from ssmobs.model_check.stan_source import declared_names, stan_block, stan_source_problems
 from ssmobs.models import MODELS, get_model
 from ssmobs.models.base import StateSpaceModel
@@ -305,7 +306,8 @@ def test_the_check_reports_symmetries_and_propriety_per_scenario_prior(monkeypat
     scenario = {"model": model.slug, "omega": {"a1": 0.9, "a2": 0.3}, "x0": [2.0, -1.0]}
     scenario["prior"] = None
     out = tmp_path / "check.json"
-    report = cm.run_check_model(model.slug, [scenario], out, stan=False)
+    inputs = model_check_inputs(scenario, {"stan": {}})
+    report = cm.run_check_model(inputs, {"report": out})
     written = json.loads(out.read_text())
     assert written == report.to_dict()
     assert list(written)[:5] == ["slug", "ok", "checks", "failed", "problems"]

@@ -12,8 +12,9 @@ import pytest
 import ssmobs.model_check.analytic as analytic_check
 import ssmobs.model_check.check as cm
 import ssmobs.model_check.program as checked
+from ssmobs.config.stage_inputs import model_check_inputs
 from ssmobs.models import MODELS, get_model
-from ssmobs.models.check_cases import default_cases
+from ssmobs.models.check_cases import default_cases, default_values
 from ssmobs.nuts.analytic_program import (
     AnalyticProgram,
     analytic_program_files,
@@ -84,14 +85,11 @@ def test_the_stan_check_runs_the_analytic_program_its_build_job_wrote(
     monkeypatch.setenv("SSMOBS_CACHE", str(check_cache))
     _no_writing(monkeypatch)
     out = tmp_path / "check.json"
-    report = cm.run_check_model(
-        "same",
-        [],
-        out,
-        stan_path=stan_file("same"),
-        gradients="analytic",
-        program_marker=marker,
-    )
+    omega, x0 = default_values(model)  # the default cases only: no case of its own
+    entry = {"model": "same", "omega": omega, "x0": x0}
+    inputs = model_check_inputs(entry, {"stan": {"gradients": "analytic"}}, against_stan=True)
+    paths = {"report": out, "stan": stan_file("same"), "program": marker}
+    report = cm.run_check_model(inputs, paths)
     assert recorded["compiled"] == (built.stan_file, built.header)
     assert recorded["analytic"] == AnalyticProgram(built.stan_file, built.header)
     assert any(c.startswith("analytic gradients: ") for c in report.checks)

@@ -55,7 +55,7 @@ import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..log import LOGGER_NAME
 from ..models import StateSpaceModel, get_model
@@ -71,6 +71,9 @@ from .program import ProgramFiles, built_program_files, checked_program, same_pr
 from .stan import stan_problems
 from .stan_source import stan_source_problems
 from .symmetry_report import SymmetryReport, symmetry_report
+
+if TYPE_CHECKING:  # the inputs object is built by the rule, not here
+    from ..config.stage_inputs import ModelCheckInputs
 
 
 @dataclass
@@ -239,34 +242,30 @@ def check_model(
     return report
 
 
-def run_check_model(
-    slug: str,
-    scenarios: Sequence[Mapping[str, Any]],
-    out: str | Path,
-    stan: bool = True,
-    stan_path: str | Path | None = None,
-    gradients: str = "autodiff",
-    program_marker: str | Path | None = None,
-) -> CheckReport:
-    """Rules check_model and check_model_stan: check the model for the default cases and
-    the true values of every configured case under every prior variant
+def run_check_model(inputs: ModelCheckInputs, paths: Mapping[str, Any]) -> CheckReport:
+    """Rules check_model and check_model_stan: check ``inputs.model`` for the default cases
+    and the true values of the scenario's case under every prior variant
     (:func:`prior_variant_cases`), and its analytic gradients when NUTS uses them; write the
-    report; raise :class:`ModelCheckError` listing every problem.  ``program_marker``: rule
-    build_stan_model's marker (with the native backend), whose program the Stan check runs
-    as it is (no generated program is written here); None: see :func:`check_model`."""
+    report to ``paths["report"]``; raise :class:`ModelCheckError` listing every problem.
+    Against Stan, ``paths["stan"]``: the program's source (None: generated) and
+    ``paths["program"]``: rule build_stan_model's marker (with the native backend), whose
+    program the Stan check runs as it is (no generated program is written here); None: see
+    :func:`check_model`."""
+    slug = inputs.model
     model = get_model(slug)
     cases = default_cases(model)
-    for scenario_case in cases_from_scenarios(scenarios, slug):
+    scenario_cases = cases_from_scenarios([inputs.case_config], slug)
+    for scenario_case in scenario_cases:
         for case in prior_variant_cases(model, scenario_case):
             if case not in cases:
                 cases.append(case)
-    scenario_cases = cases_from_scenarios(scenarios, slug)
+    program_marker = paths.get("program") if inputs.against_stan else None
     report = check_model(
         slug,
         cases,
-        stan=stan,
-        stan_path=stan_path,
-        gradients=gradients,
+        stan=inputs.against_stan,
+        stan_path=paths.get("stan") if inputs.against_stan else None,
+        gradients=inputs.gradients,
         prior_cases=scenario_cases or None,
         built=None if program_marker is None else built_program_files(program_marker),
     )
@@ -278,6 +277,7 @@ def run_check_model(
     if report.analysis is not None:
         for line in report.analysis.lines(slug):
             logging.getLogger(LOGGER_NAME).info("%s", line)
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    Path(out).write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    out = Path(paths["report"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report.to_dict(), indent=2) + "\n")
     return report

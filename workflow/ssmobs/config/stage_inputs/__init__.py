@@ -7,9 +7,9 @@ Each builder takes a validated scenario entry, the validated config and the path
 keyed files the stage reads (they carry the upstream keys); :data:`ssmobs.stage_table.STAGES`
 names each stage's builder.
 
-One module per stage (design, joint_map, exact, nuts, k_selection, map_cell) and the frozen
-values they share (:mod:`~ssmobs.config.stage_inputs.frozen`); everything is importable from
-here.
+One module per stage (design, joint_map, exact, nuts, k_selection, map_cell, model_check)
+and the frozen values they share (:mod:`~ssmobs.config.stage_inputs.frozen`); everything is
+importable from here.
 """
 
 from __future__ import annotations
@@ -31,6 +31,12 @@ from .map_cell import (
     MapCellsInputs,
     map_cell_inputs,
     map_cells_inputs,
+)
+from .model_check import (
+    ModelCheckInputs,
+    check_case,
+    model_check_inputs,
+    model_check_stan_inputs,
 )
 from .nuts import (
     DRAWS_DIR,
@@ -59,9 +65,11 @@ __all__ = [
     "KSelectionPointsInputs",
     "MapCellInputs",
     "MapCellsInputs",
+    "ModelCheckInputs",
     "NutsBatchesInputs",
     "NutsRecordsInputs",
     "TrajectoriesInputs",
+    "check_case",
     "design_set_path",
     "exact_inputs",
     "gather_inputs",
@@ -71,6 +79,8 @@ __all__ = [
     "k_selection_points_inputs",
     "map_cell_inputs",
     "map_cells_inputs",
+    "model_check_inputs",
+    "model_check_stan_inputs",
     "nuts_batches_inputs",
     "nuts_records_inputs",
     "trajectories_inputs",
