@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 import yaml
 from ssmobs.cache_keys import CacheKeys
-from ssmobs.config.stage_inputs import inputs_payload
+from ssmobs.config.stage_inputs import DESIGN_DIR, inputs_payload
 from ssmobs.config.validation import validate
 from ssmobs.models import MODELS
-from ssmobs.stage_table import PACKAGE_DIR, STAGES
+from ssmobs.stage_table import PACKAGE_DIR, PROGRAM_MARKER, STAGES
 
 pytestmark = pytest.mark.unit
 
@@ -29,6 +29,9 @@ WITH_INPUTS = sorted(n for n, s in STAGES.items() if s.inputs is not None)
 #: ... and of them those a rule runs by an entry of their own (the NUTS records are written
 #: by rule sample_nuts, whose inputs hold theirs whole)
 WITH_ENTRY = [n for n in WITH_INPUTS if STAGES[n].entry is not None]
+#: ... and of them the shared stages, keyed once per config (the design sets) or per
+#: model (its compiled program), not per scenario
+SHARED = [n for n in WITH_INPUTS if STAGES[n].of in ("config", "model")]
 
 
 def smoke_keys() -> CacheKeys:
@@ -140,6 +143,9 @@ def _changed(value):
 
 @pytest.mark.parametrize("stage", WITH_INPUTS)
 def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
+    if stage in SHARED:
+        _every_field_of_a_shared_stages_inputs_moves_its_output(stage, monkeypatch)
+        return
     keys = smoke_keys()
     owners = keys.k_selections if STAGES[stage].of == "k_selection" else keys.scenarios
     name = next(iter(owners))
@@ -158,6 +164,52 @@ def test_every_field_of_the_inputs_moves_the_key(stage, monkeypatch):
         assert _key(keys, stage, name, **at) != base, field
     monkeypatch.undo()
     assert _key(keys, stage, name, **at) == base
+
+
+def _shared_output(keys: CacheKeys, stage: str, inputs, monkeypatch) -> str:
+    """Where shared stage ``stage`` puts its outputs when it reads ``inputs``: the design
+    sets' keyed folder, or a program's marker (named by its backend, model and key)."""
+    if stage == "design":
+        keys.__dict__.pop("design", None)  # a cached key
+        keys.__dict__["design_inputs"] = inputs
+        return DESIGN_DIR.format(key=keys.design)
+    monkeypatch.setattr(keys, "program_inputs", lambda model: inputs)
+    key = keys.program(inputs.model)
+    return PROGRAM_MARKER.format(backend=inputs.backend, model=inputs.model, key=key)
+
+
+def _every_field_of_a_shared_stages_inputs_moves_its_output(stage, monkeypatch):
+    """A shared stage's key keeps the payload it held before its inputs object
+    (``Stage.payload``), which leaves out the fields its outputs' path holds: any field
+    changed moves the key or that path."""
+    keys = smoke_keys()
+    model = next(iter(keys.scenarios.values()))["model"]
+    inputs = keys.design_inputs if stage == "design" else keys.program_inputs(model)
+    assert hash(inputs) == hash(dataclasses.replace(inputs))  # frozen, compared by content
+    base = _shared_output(keys, stage, inputs, monkeypatch)
+    assert _shared_output(keys, stage, inputs, monkeypatch) == base
+    fields = [f.name for f in dataclasses.fields(inputs)]
+    assert fields and STAGES[stage].payload is not None
+    for field in fields:
+        value = getattr(inputs, field)
+        new = next(m for m in sorted(MODELS) if m != value) if field == "model" else _changed(value)
+        other = dataclasses.replace(inputs, **{field: new})
+        assert _shared_output(keys, stage, other, monkeypatch) != base, field
+    assert _shared_output(keys, stage, inputs, monkeypatch) == base
+
+
+@pytest.mark.parametrize("stage", SHARED)
+def test_a_shared_stages_rule_passes_what_its_key_is_made_of(stage):
+    """The rule of a shared stage reads no config: its params come from the inputs object
+    its key is made of (for a program, the one of the key in its marker's path)."""
+    params = _rule(stage).split("params:")[1].split("script:")[0]
+    read = re.findall(r"^\s+(\w+)=(.*)$", params, flags=re.M)
+    assert read and not any(re.search(r"\bconfig\b", source) for _, source in read), read
+    made_of = {
+        "design": "KEYS.design_inputs.",
+        "program": 'expect_key("program", wc.model, wc.key)["inputs"].',
+    }[stage]
+    assert all(made_of in source for _, source in read), read
 
 
 def test_the_joint_map_inputs_hold_what_the_stage_read_before():

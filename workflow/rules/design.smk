@@ -16,7 +16,9 @@ rule design_disturbances:
         mem_mb=4000,
         runtime=30,
     params:
-        design=config["design"],
+        # the design block as its inputs give it, what the design key is made of
+        # (ssmobs.config.stage_inputs.DesignSetsInputs)
+        design=KEYS.design_inputs.design_config,
     script:
         "../scripts/design_disturbances.py"
 

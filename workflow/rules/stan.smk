@@ -17,8 +17,9 @@ rule build_stan_model:
         mem_mb=4000,
         runtime=30,
     params:
-        backend=lambda wc: wc.backend,
-        gradients=PATHS.stan_gradients,
+        # of the inputs its key is made of (ssmobs.config.stage_inputs.ProgramInputs)
+        backend=lambda wc: expect_key("program", wc.model, wc.key)["inputs"].backend,
+        gradients=lambda wc: expect_key("program", wc.model, wc.key)["inputs"].gradients,
     script:
         "../scripts/build_stan_model.py"
 

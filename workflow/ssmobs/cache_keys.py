@@ -33,7 +33,6 @@ from typing import Any
 
 from . import kernels
 from .code_hashing import syntax_digest
-from .config.blocks import stan_gradients
 from .config.maps import cell_entries
 from .config.stage_inputs import inputs_payload, map_cell_inputs, map_cells_inputs
 from .stage_code import (
@@ -165,12 +164,22 @@ class CacheKeys:
 
     # ------------------------------------------------------------------ stages
     @functools.cached_property
+    def design_inputs(self) -> Any:
+        """What rule design_disturbances reads
+        (:class:`~ssmobs.config.stage_inputs.DesignSetsInputs`), the design key's content."""
+        build = STAGES["design"].inputs
+        assert build is not None
+        return build(self.config)
+
+    @functools.cached_property
     def design(self) -> str:
-        """The design sets' settings and code (Sec. III.A); q, K, method, seed are in the
-        file name."""
-        return self._key(
-            "design", "shared", {"design": self.config["design"], "code": self.code("design")}
-        )
+        """The design sets' key (Sec. III.A): their inputs (:attr:`design_inputs`) and code;
+        q, K, method, seed are in the file name.  :meth:`lookup` of ``("design", "shared",
+        key)`` gives ``{"inputs": ...}``."""
+        entry, inputs = STAGES["design"], self.design_inputs
+        assert entry.payload is not None
+        payload = {**entry.payload(inputs), "code": self.code("design")}
+        return self._key("design", "shared", payload, inputs=inputs)
 
     def has_stan_file(self, model: str) -> bool:
         """Whether ``model`` has a hand-written ``stan/<model>.stan`` (else its program is
@@ -246,14 +255,6 @@ class CacheKeys:
         """The joint MAP's key (:class:`~ssmobs.config.stage_inputs.JointMapInputs`)."""
         return self.stage_key("joint_map", name)
 
-    def gradients(self, model: str) -> dict[str, str]:
-        """``{"gradients": "analytic"}`` when NUTS runs ``model`` with the generated analytic
-        gradients (config key ``stan.gradients``), else nothing, so the keys of autodiff
-        runs stay.  A model without ``stan/<model>.stan`` runs its generated program, the
-        same whatever the setting (:func:`ssmobs.nuts.stan_program.stan_program`): nothing."""
-        mode = stan_gradients(self.config["stan"])
-        return {} if mode == "autodiff" or not self.has_stan_file(model) else {"gradients": mode}
-
     def program_marker(self, name: str) -> str:
         """The marker of scenario ``name``'s compiled program (rule build_stan_model's
         output, :data:`~ssmobs.stage_table.PROGRAM_MARKER`) for this run's backend
@@ -268,18 +269,35 @@ class CacheKeys:
         NUTS runs its generated program)."""
         return self.has_stan_file(self.scenarios[name]["model"])
 
+    @functools.cache  # noqa: B019
+    def program_inputs(self, model: str) -> Any:
+        """What rule build_stan_model reads for ``model``
+        (:class:`~ssmobs.config.stage_inputs.ProgramInputs`): this run's backend
+        (:attr:`backend_name`) with its Stan version, the program (:meth:`stan_program`) and
+        the gradient path of a hand-written one."""
+        build = STAGES["program"].inputs
+        assert build is not None
+        return build(
+            model,
+            self.config,
+            backend=self.backend_name,
+            stan_version=self.backend,
+            program=self.stan_program(model),
+        )
+
     def program(self, model: str) -> str:
-        """The compiled-program marker of ``model`` for the configured backend and its Stan
-        version (so another Stan gives new programs, records and everything after them),
-        and for analytic gradients the model's terms they are generated from."""
-        payload = {
-            "backend": self.backend,
-            "stan": self.stan_program(model),
-            "code": self.code("program"),
-            **self.gradients(model),
-            **({"model_code": self.model_code(model)} if self.gradients(model) else {}),
-        }
-        return self._key("program", model, payload)
+        """The compiled-program marker's key of ``model``: its inputs
+        (:meth:`program_inputs`: the backend's Stan version, so another Stan gives new
+        programs, records and everything after them; the program; analytic gradients) with
+        the build's code and, for analytic gradients, the model's terms they are generated
+        from.  :meth:`lookup` of ``("program", model, key)`` gives ``{"inputs": ...}``, what
+        the rule passes."""
+        entry, inputs = STAGES["program"], self.program_inputs(model)
+        assert entry.payload is not None
+        payload = {**entry.payload(inputs), "code": self.code("program")}
+        if inputs.gradients != "autodiff":
+            payload["model_code"] = self.model_code(model)
+        return self._key("program", model, payload, inputs=inputs)
 
     def nuts_records(self, name: str) -> str:
         """The NUTS records' key (:class:`~ssmobs.config.stage_inputs.NutsRecordsInputs`):

@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from .config.stage_inputs import (
+    design_sets_inputs,
+    design_sets_payload,
     exact_inputs,
     gather_inputs,
     joint_map_inputs,
@@ -26,6 +28,8 @@ from .config.stage_inputs import (
     model_check_stan_inputs,
     nuts_batches_inputs,
     nuts_records_inputs,
+    program_inputs,
+    program_payload,
     trajectories_inputs,
 )
 
@@ -67,8 +71,16 @@ class Stage:
     shared: tuple[str, ...] = ()
     #: whether the stage runs the scenario's model, so its key holds the model's code
     runs_model: bool = False
-    #: what the stage is keyed for: a scenario, or a ``k_selection`` entry (by its name)
+    #: what the stage is keyed for: a scenario, or a ``k_selection`` entry (by its name);
+    #: for a shared stage, ``config`` (once per config, its builder given the config alone)
+    #: or ``model`` (once per model, its builder given the model's name, the config and, by
+    #: keyword, what :class:`~ssmobs.cache_keys.CacheKeys` knows of it: the backend, ...)
     of: str = "scenario"
+    #: what the key holds of the inputs where that is not
+    #: :func:`~ssmobs.config.stage_inputs.inputs_payload`: a shared stage keeps the payload
+    #: its key held before its inputs object, so no cache moved (the fields it leaves out
+    #: name the outputs' path instead)
+    payload: Callable[[Any], dict[str, Any]] | None = None
 
     def folder_of(self, scenario: str, key: str) -> str:
         """This stage's keyed folder for a scenario and its key."""
@@ -120,9 +132,16 @@ OUTPUT_SCRIPTS = (
 )
 
 STAGES: dict[str, Stage] = {
-    # the sets k_selection_grid makes (ssmobs.design.disturbance_sets) lie beside the design's
+    # keyed once per config (config.stage_inputs.DesignSetsInputs); a set's q, K, method
+    # and seed are its file's name in the keyed folder (config.stage_inputs.DESIGN_SET);
+    # the sets k_selection_grid makes (ssmobs.design.disturbance_sets) lie beside these
     "design": Stage(
-        ("stages/design.py:run_design_disturbances",), ("design_disturbances",), (LCD_KERNEL,)
+        ("stages/design.py:run_design_disturbances",),
+        ("design_disturbances",),
+        (LCD_KERNEL,),
+        inputs=design_sets_inputs,
+        payload=design_sets_payload,
+        of="config",
     ),
     # at K trajectories: the scenario's K and its exact_K
     "trajectories": Stage(
@@ -190,11 +209,15 @@ STAGES: dict[str, Stage] = {
         folder="results/k_selection/{scenario}/{key}",
         outputs={"grid": "{method}_{sets}_seed{seed}.json"},
     ),
-    # a model's compiled program: its marker is PROGRAM_MARKER (not a keyed folder)
+    # a model's compiled program (config.stage_inputs.ProgramInputs): its marker is
+    # PROGRAM_MARKER (not a keyed folder), named by the inputs' backend and model and the key
     "program": Stage(
         ("stages/stan.py:run_build_stan_model",),
         ("build_stan_model",),
         (NATIVE_DRIVER, *NATIVE_SHADOW_HEADERS),
+        inputs=program_inputs,
+        payload=program_payload,
+        of="model",
     ),
     # the records of every trajectory, one file each (resumable, shared by batchings),
     # written by rule sample_nuts, whose inputs hold these whole (no entry of their own)

@@ -15,6 +15,7 @@ importable from here.
 from __future__ import annotations
 
 from .design import TrajectoriesInputs, trajectories_inputs
+from .design_sets import DesignSetsInputs, design_sets_inputs, design_sets_payload
 from .exact import ExactInputs, exact_inputs
 from .frozen import DESIGN_DIR, DESIGN_SET, design_set_path, inputs_payload
 from .joint_map import JointMapInputs, joint_map_inputs
@@ -49,6 +50,7 @@ from .nuts import (
     nuts_batches_inputs,
     nuts_records_inputs,
 )
+from .program import ProgramInputs, program_inputs, program_payload
 
 __all__ = [
     "DESIGN_DIR",
@@ -57,6 +59,7 @@ __all__ = [
     "MAP_CELLS_DIR",
     "NUTS_THREADS",
     "SAMPLER_FIELDS",
+    "DesignSetsInputs",
     "ExactInputs",
     "GatherInputs",
     "JointMapInputs",
@@ -68,9 +71,12 @@ __all__ = [
     "ModelCheckInputs",
     "NutsBatchesInputs",
     "NutsRecordsInputs",
+    "ProgramInputs",
     "TrajectoriesInputs",
     "check_case",
     "design_set_path",
+    "design_sets_inputs",
+    "design_sets_payload",
     "exact_inputs",
     "gather_inputs",
     "inputs_payload",
@@ -83,5 +89,7 @@ __all__ = [
     "model_check_stan_inputs",
     "nuts_batches_inputs",
     "nuts_records_inputs",
+    "program_inputs",
+    "program_payload",
     "trajectories_inputs",
 ]
