@@ -308,8 +308,9 @@ def test_rule_params_come_from_the_entries():
     trajectories' inputs, as the rules read them from RunPaths."""
     paths = run_paths("config")
     name = next(iter(paths.k_selections))
-    params = paths.select_k_params(name)
-    assert params["scenario"] is paths.scenario_entry(params["ksel"]["scenario"])
+    inputs = paths.stamped_outputs[f"select_k_{name}"].inputs
+    assert inputs.ksel_entry == paths.k_selections[name]
+    assert inputs.scenario_entry == paths.scenario_entry(inputs.ksel_entry["scenario"])
     model = paths.stan_models[0]
     name = next(n for n in paths.stan_scenarios if paths.scenarios[n].slug == model)
     assert paths.checked_program(model) == [paths.keys.program_marker(name)]
@@ -368,7 +369,7 @@ def test_run_paths_write_no_generated_program(tmp_path, monkeypatch):
 #: (what the rules ask), and the glue of common.smk and of the table made on request from
 #: committed files (stan_variants.smk); never a copy of one of RunPaths' answers
 RULE_GLOBALS = {"PATHS", "KEYS", "OUT", "REPO", "STAN_BACKEND", "OUTPUTS_DIR_UNSET"}
-RULE_GLOBALS |= {"STAMPS", "STAMPS_ON_REQUEST", "DAMAGED_TARGETS"}
+RULE_GLOBALS |= {"STAMPED", "STAMPS", "STAMPS_ON_REQUEST", "DAMAGED_TARGETS"}
 RULE_GLOBALS |= {"VARIANT_TABLE", "VARIANT_TABLE_SPEC", "VARIANT_TABLE_INPUTS"}
 RULE_GLOBALS |= {"VARIANT_TABLE_STAMP"}
 
@@ -408,13 +409,15 @@ def test_the_paper_outputs_scenarios_and_tables_inputs_come_from_run_paths():
     assert paths.table_ii_scenarios == list(wanted["tables_2_3"]) != []
     assert paths.figure3_scenarios == list(wanted["figure3"]) != []
     assert set(paths.table_ii_scenarios + paths.figure3_scenarios) <= set(paths.scenarios)
-    inputs, params = paths.paper_tables_inputs(), paths.paper_tables_params()
-    assert inputs["joint"] == [paths.joint_summary(n) for n in params["joint_names"]]
-    assert inputs["marginal"] == [paths.stan_summary(n) for n in params["marginal_names"]]
-    assert inputs["exact"] == [paths.exact_summary(n) for n in params["exact_names"]]
-    assert params["marginal_names"] == paths.stan_scenarios and params["tables_2_3"] == list(
-        wanted["tables_2_3"]
-    )
+    tables = paths.stamped_outputs["paper_tables"]
+    inputs, params = tables.input_files, tables.inputs
+    assert inputs == paths.paper_tables_inputs()
+    assert inputs["joint"] == [paths.joint_summary(n) for n in params.joint_names]
+    assert inputs["marginal"] == [paths.stan_summary(n) for n in params.marginal_names]
+    assert inputs["exact"] == [paths.exact_summary(n) for n in params.exact_names]
+    assert list(params.marginal_names) == paths.stan_scenarios
+    assert list(params.tables_2_3) == list(wanted["tables_2_3"])
+    assert params.scenario_entries == paths.config["scenarios"]
     mu0 = paths.mu0_sweep_params()
     assert mu0["scenarios"] == [paths.scenario_entry(n) for n in paths.mu0_scenarios] != []
     assert mu0["mu0_per_T"] == paths.config["mu0_sweep"]["mu0_per_T"]

@@ -93,8 +93,13 @@ try:  # a model whose code imports by a form that cannot be followed cannot be k
     PATHS.compute_every_key()
 except DynamicImportError as err:
     raise WorkflowError(str(err)) from None
-#: stamp files (results/outputs/...) of the tables and figures, with their current keys
-STAMPS = {}
+#: every table and figure of this config by its stamp file (results/outputs/...): the files
+#: its rule reads, what it reads beside them and its key (ssmobs.config.stage_inputs.stamped)
+STAMPED = {PATHS.stamp(name): out for name, out in PATHS.stamped_outputs.items()}
+#: stamp files of the tables and figures, with their current keys: a stamp of another key is
+#: removed before the DAG is built, so its rule reruns even where file times and .snakemake/
+#: say nothing (e.g. a config edited back to an earlier one)
+STAMPS = {stamp: out.key for stamp, out in STAMPED.items()}
 #: stamps of rules made on request only (not targets of `all`), with their current keys
 STAMPS_ON_REQUEST = {}
 
@@ -117,21 +122,44 @@ def keyed_input(kind, name, key, paths):
 
 
 def register_stamp(name, inputs, params):
-    """Record the key of the table or figure whose stamp is ``PATHS.stamp(name)``: what made
-    its files in outputs_dir (keyed inputs, the content of other inputs, params, code).
-    A stamp of another key is removed before the DAG is built, so the rule reruns even where
-    file times and .snakemake/ say nothing (e.g. a config edited back to an earlier one)."""
-    STAMPS[PATHS.stamp(name)] = KEYS.output(f"{OUT}/{name}", inputs, params)
+    """The check of a table rule that still passes its settings one by one (rule
+    joint_map_mu0_sweep): its stamp's key, from the same files and settings, is the one
+    its record holds (``PATHS.stamped_outputs``), else the run stops."""
+    key = KEYS.output(f"{OUT}/{name}", inputs, params)
+    if STAMPS.get(PATHS.stamp(name)) != key:
+        raise WorkflowError(f"{name}: its rule's settings are not the ones its stamp keys")
+
+
+def stamped_output(stamp):
+    """The record of the table or figure whose stamp file is ``stamp``."""
+    if stamp not in STAMPED:  # asked for by name, but not one of this config's outputs
+        raise WorkflowError(
+            f"{stamp}: this config does not make this table or figure (the paper's are "
+            f"made for a config that names a scenario of the paper or sets paper_outputs)"
+        )
+    return STAMPED[stamp]
+
+
+def stamped_files(name):
+    """The input function of the rule of the table or figure whose stamp is named ``name``
+    (a pattern with the rule's wildcards): the files its key holds, by input name."""
+
+    def files(wildcards):
+        stamp = PATHS.stamp(name.format(**dict(wildcards.items())))
+        return stamped_output(stamp).input_files
+
+    return files
+
+
+def stamped_inputs(wildcards, output):
+    """The ``inputs`` param of a table or figure rule: the very object its stamp's key holds
+    (ssmobs.config.stage_inputs.outputs), all its script reads beside its files."""
+    return stamped_output(output.stamp).inputs
 
 
 def stamp_key(wildcards, output):
     """The ``key`` param of a table or figure rule (its stamp's content)."""
-    if output.stamp not in STAMPS:  # asked for by name, but not one of this config's outputs
-        raise WorkflowError(
-            f"{output.stamp}: this config does not make this table or figure (the paper's "
-            f"are made for a config that names a scenario of the paper or sets paper_outputs)"
-        )
-    return STAMPS[output.stamp]
+    return stamped_output(output.stamp).key
 
 
 wildcard_constraints:

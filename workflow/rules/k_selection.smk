@@ -24,19 +24,14 @@ rule k_selection_grid:
         "../scripts/k_selection_grid.py"
 
 
-for _name in PATHS.k_selections:
-    register_stamp(
-        f"select_k_{_name}",
-        [*PATHS.k_selection_grids(_name), "config/paper_values.yaml"],
-        PATHS.select_k_params(_name),
-    )
+# the choice of K and its table: which a config makes, the files each reads, what it reads
+# beside them and its stamp's key: PATHS.stamped_outputs (ssmobs.config.stage_inputs.stamped)
 
 
 rule select_k:
     """The smallest K_i whose V_{K_i} agrees with all larger K_j within (c1, c2), per method."""
     input:
-        grids=lambda wc: PATHS.k_selection_grids(wc.ksel),
-        paper_values="config/paper_values.yaml",
+        unpack(stamped_files("select_k_{ksel}")),
     output:
         json="results/k_selection/{ksel}/selection.json",
         csv="results/k_selection/{ksel}/v_vectors.csv",
@@ -52,28 +47,21 @@ rule select_k:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        ksel=lambda wc: PATHS.select_k_params(wc.ksel)["ksel"],
-        scenario=lambda wc: PATHS.select_k_params(wc.ksel)["scenario"],
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/select_k.py"
 
 
-# the selections are stamped files: their stamps' keys key the table; made for this
-# config's k_selection entries, or (empty) with the paper's outputs
-if PATHS.k_selections or PATHS.paper_outputs:
-    register_stamp(
-        "table_k_selection",
-        [PATHS.selection(name) for name in PATHS.k_selections],
-        [STAMPS[PATHS.stamp(f"select_k_{name}")] for name in PATHS.k_selections],
-    )
+# the selections are stamped files: their stamps' keys key the table; made for this config's
+# k_selection entries, or (empty) with the paper's outputs
 
 
 rule table_k_selection:
     """Chosen K for every k_selection entry, method and seed, beside the paper's K, and how
     often each K was chosen over the seeds."""
     input:
-        [PATHS.selection(name) for name in PATHS.k_selections],
+        unpack(stamped_files("table_k_selection")),
     output:
         table=report(
             multiext(f"{OUT}/table_k_selection", ".csv", ".md", ".tex"),
@@ -88,6 +76,7 @@ rule table_k_selection:
     conda:
         "../../envs/ssmobs.yaml"
     params:
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/table_k_selection.py"

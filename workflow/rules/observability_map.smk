@@ -23,14 +23,14 @@ rule observability_map_cells:
         "../scripts/observability_map_cells.py"
 
 
-for _name in PATHS.maps:
-    register_stamp(f"map_{_name}", [PATHS.map_cells_table(_name)], {"entry": PATHS.maps[_name]})
+# the map's table and figure: the files it reads, what it reads beside them and its stamp's
+# key: PATHS.stamped_outputs (ssmobs.config.stage_inputs.stamped)
 
 
 rule observability_map:
     """Where in (true parameter, T) one model is observable, and how well: table and figure."""
     input:
-        cells=lambda wc: PATHS.map_cells_table(wc.map),
+        unpack(stamped_files("map_{map}")),
     output:
         csv=f"{OUT}/map_{{map}}.csv",
         md=f"{OUT}/map_{{map}}.md",
@@ -47,7 +47,7 @@ rule observability_map:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        entry=lambda wc: PATHS.maps[wc.map],
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/observability_map.py"

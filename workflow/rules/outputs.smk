@@ -1,24 +1,14 @@
 # Stage 4: the paper's tables in paper_figures/ (ours beside the paper's values); figures: figures.smk.
 
-# the paper's tables, and the convergence tables below, where the config asks for them
-# (PATHS.paper_outputs: it names a scenario of the paper or sets paper_outputs)
-if PATHS.paper_outputs:
-    register_stamp(
-        "paper_tables",
-        [
-            *PATHS.paper_tables_inputs()["joint"],
-            *PATHS.paper_tables_inputs()["marginal"],
-            *PATHS.paper_tables_inputs()["exact"],
-            "config/paper_values.yaml",
-        ],
-        PATHS.paper_tables_params(),
-    )
+# the paper's tables and the convergence tables below are made where the config asks for
+# them (it names a scenario of the paper or sets paper_outputs); the files each reads, what it
+# reads beside them and its stamp's key: PATHS.stamped_outputs
 
 
 rule paper_tables:
     """Tables II, III and the Section IV summary as CSV, Markdown and LaTeX."""
     input:
-        **PATHS.paper_tables_inputs(),
+        unpack(stamped_files("paper_tables")),
     output:
         table2=report(
             multiext(f"{OUT}/table2_joint_vs_marginal", ".csv", ".md", ".tex"),
@@ -43,25 +33,17 @@ rule paper_tables:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        **PATHS.paper_tables_params(),
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/paper_tables.py"
-
-
-if PATHS.paper_outputs:
-    register_stamp(
-        "convergence_sensitivity",
-        [PATHS.stan_table(n) for n in PATHS.stan_scenarios],
-        {"scenarios": PATHS.stan_scenarios, "convergence": config["convergence"]},
-    )
 
 
 rule convergence_sensitivity:
     """|K^Stan| of every scenario under R-hat 1.01 / 1.05 and tree depth warned / counted, and
     how the runs that did not converge failed."""
     input:
-        tables=[PATHS.stan_table(n) for n in PATHS.stan_scenarios],
+        unpack(stamped_files("convergence_sensitivity")),
     output:
         table=report(
             multiext(f"{OUT}/table_convergence_sensitivity", ".csv", ".md", ".tex"),
@@ -76,8 +58,7 @@ rule convergence_sensitivity:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        scenarios=PATHS.stan_scenarios,
-        convergence=config["convergence"],
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/convergence_sensitivity.py"

@@ -50,18 +50,14 @@ rule check_model_stan:
         "../scripts/check_model.py"
 
 
-for _name in PATHS.studies:
-    register_stamp(
-        f"observability_study_{_name}",
-        [p for paths in PATHS.study_inputs(_name).values() for p in paths],
-        PATHS.study_params(_name),
-    )
+# a study's table and figure: the files it reads, what it reads beside them and its stamp's
+# key: PATHS.stamped_outputs (ssmobs.config.stage_inputs.stamped)
 
 
 rule observability_study:
     """|K^max|/K and |K^Stan|/K of one model over T: table and figure in paper_figures/."""
     input:
-        unpack(lambda wc: PATHS.study_inputs(wc.study)),
+        unpack(stamped_files("observability_study_{study}")),
     output:
         csv=f"{OUT}/ours_{{study}}_observability.csv",
         md=f"{OUT}/ours_{{study}}_observability.md",
@@ -73,11 +69,7 @@ rule observability_study:
     conda:
         "../../envs/ssmobs.yaml"
     params:
-        study=lambda wc: PATHS.study_params(wc.study)["study"],
-        scenarios=lambda wc: PATHS.study_params(wc.study)["scenarios"],
-        joint_names=lambda wc: PATHS.study_params(wc.study)["joint_names"],
-        stan_names=lambda wc: PATHS.study_params(wc.study)["stan_names"],
-        stan_settings=config["stan"],
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/observability_study.py"

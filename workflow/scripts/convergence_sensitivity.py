@@ -5,10 +5,10 @@ from ssmobs import io, log
 from ssmobs.stages.outputs.paper_tables import run_convergence_sensitivity
 
 log.start_job(snakemake)
-p = snakemake.params
+p = snakemake.params.inputs
 run_convergence_sensitivity(
     dict(zip(p.scenarios, snakemake.input.tables, strict=True)),
-    p.convergence,
+    p.convergence_config,
     list(snakemake.output.table),
     list(snakemake.output.failures),
 )

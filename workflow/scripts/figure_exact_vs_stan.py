@@ -6,7 +6,7 @@ from ssmobs.stages.outputs.figures import run_figure_exact_vs_stan
 
 logger = log.start_job(snakemake)
 table = run_figure_exact_vs_stan(
-    Scenario.from_config(snakemake.params.scenario),
+    Scenario.from_config(snakemake.params.inputs.scenario_entry),
     snakemake.input.stan,
     snakemake.input.exact,
     list(snakemake.output.figure),

@@ -4,7 +4,7 @@ from ssmobs import io, log
 from ssmobs.stages.outputs.figures import run_figure_joint_vs_marginal
 
 log.start_job(snakemake)
-scenarios = snakemake.params.scenarios
+scenarios = snakemake.params.inputs.scenario_entries
 names = [sc["name"] for sc in scenarios]
 run_figure_joint_vs_marginal(
     scenarios,

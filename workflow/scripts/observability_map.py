@@ -7,7 +7,7 @@ log.start_job(snakemake)
 out = snakemake.output
 write_map(
     snakemake.input.cells,
-    snakemake.params.entry,
+    snakemake.params.inputs.map_entry,
     {"csv": out.csv, "md": out.md, "png": out.png, "pdf": out.pdf},
 )
 # what made these files (rule of the cache: the stamp holds their key)

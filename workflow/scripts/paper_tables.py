@@ -4,9 +4,9 @@ from ssmobs import io, log
 from ssmobs.stages.outputs.paper_tables import run_paper_tables
 
 log.start_job(snakemake)
-p, inp, out = snakemake.params, snakemake.input, snakemake.output
+p, inp, out = snakemake.params.inputs, snakemake.input, snakemake.output
 run_paper_tables(
-    p.scenarios,
+    p.scenario_entries,
     list(p.tables_2_3),
     dict(zip(p.joint_names, inp.joint, strict=True)),
     dict(zip(p.marginal_names, inp.marginal, strict=True)),

@@ -5,10 +5,10 @@ from ssmobs.config.scenario import Scenario
 from ssmobs.stages.k_selection.choice import run_select_k
 
 log.start_job(snakemake)
-p, out = snakemake.params, snakemake.output
+p, out = snakemake.params.inputs, snakemake.output
 run_select_k(
-    p.ksel,
-    Scenario.from_config(p.scenario),
+    p.ksel_entry,
+    Scenario.from_config(p.scenario_entry),
     list(snakemake.input.grids),
     snakemake.input.paper_values,
     out.json,

@@ -26,6 +26,8 @@ from .cache_keys import CacheKeys
 from .config.blocks import stan_gradients
 from .config.scenario import Scenario
 from .config.stage_inputs import DESIGN_DIR, MAP_CELLS_DIR, design_set_path
+from .config.stage_inputs.outputs import mu0_sweep_inputs
+from .config.stage_inputs.stamped import StampedOutput, stamped_outputs
 from .config.validation import asks_for_paper_outputs
 from .stage_table import STAGES
 
@@ -160,12 +162,10 @@ class RunPaths:
         return [n for n, sc in self.scenarios.items() if sc.joint_map and sc.slug in models]
 
     def mu0_sweep_params(self) -> dict[str, Any]:
-        """What the barrier-start sweep reads: its scenarios' entries and settings."""
-        return {
-            "scenarios": [self.scenario_entry(n) for n in self.mu0_scenarios],
-            "settings": self.config["joint_map"],
-            "mu0_per_T": self.config["mu0_sweep"]["mu0_per_T"],
-        }
+        """What the barrier-start sweep reads, as plain data: its inputs object's keyed
+        content (:class:`~ssmobs.config.stage_inputs.outputs.Mu0SweepInputs`)."""
+        entries = [self.scenario_entry(n) for n in self.mu0_scenarios]
+        return dict(mu0_sweep_inputs(entries, self.config).keyed())
 
     @property
     def exact_scenarios(self) -> list[str]:
@@ -278,24 +278,6 @@ class RunPaths:
         name = next(n for n, sc in self.scenarios.items() if sc.slug == model)
         return [self.keys.program_marker(name)]
 
-    def select_k_params(self, name: str) -> dict[str, Any]:
-        """What the choice of K of k_selection entry ``name`` reads: the entry and its
-        scenario."""
-        entry = self.k_selections[name]
-        return {"ksel": entry, "scenario": self.scenario_entry(entry["scenario"])}
-
-    def study_params(self, name: str) -> dict[str, Any]:
-        """What observability study ``name`` reads: the entry, its scenarios, those with a
-        joint MAP and with NUTS, and the stan block."""
-        scs = [self.scenario_entry(n) for n in self.studies[name]["scenarios"]]
-        return {
-            "study": self.studies[name],
-            "scenarios": scs,
-            "joint_names": [sc["name"] for sc in scs if sc["joint_map"]],
-            "stan_names": [sc["name"] for sc in scs if sc["stan"]],
-            "stan_settings": self.config["stan"],
-        }
-
     def records_dir(self, name: str) -> str:
         """The per-trajectory NUTS records of a scenario (resumable, shared by batchings)."""
         return STAGES["nuts_records"].folder_of(name, self.keys.nuts_records(name))
@@ -399,16 +381,6 @@ class RunPaths:
             "paper_values": "config/paper_values.yaml",
         }
 
-    def paper_tables_params(self) -> dict[str, Any]:
-        """What the paper's tables read beside their inputs: the entries, names by stage."""
-        return {
-            "scenarios": self.config["scenarios"],
-            "tables_2_3": self.table_ii_scenarios,
-            "joint_names": self.joint_scenarios,
-            "marginal_names": self.stan_scenarios,
-            "exact_names": self.exact_scenarios,
-        }
-
     # -- what must be verified before it is read --------------------------------------------
 
     def cached_outputs(self) -> list[str]:
@@ -446,6 +418,17 @@ class RunPaths:
     def stamps_dir(self) -> str:
         """The folder of the stamps of this run's tables and figures."""
         return f"results/outputs/{self.outputs_dir}"
+
+    @functools.cached_property
+    def stamped_outputs(self) -> dict[str, StampedOutput]:
+        """Every table and figure of this run by stamp name (:meth:`stamp`): the files its
+        rule reads, what it reads beside them (its inputs object) and its stamp's key
+        (:func:`ssmobs.config.stage_inputs.stamped.stamped_outputs`)."""
+
+        def key(name: str, files: list[str], content: Any) -> str:
+            return self.keys.output(f"{self.outputs_dir}/{name}", files, content)
+
+        return stamped_outputs(self, key)
 
     def stamp(self, name: str) -> str:
         """The stamp file of a table or figure rule, ``name`` possibly a pattern with
