@@ -130,7 +130,7 @@ def register_stamp(name, inputs, params):
         raise WorkflowError(f"{name}: its rule's settings are not the ones its stamp keys")
 
 
-def stamped_output(stamp):
+def stamp_record(stamp):
     """The record of the table or figure whose stamp file is ``stamp``."""
     if stamp not in STAMPED:  # asked for by name, but not one of this config's outputs
         raise WorkflowError(
@@ -146,7 +146,7 @@ def stamped_files(name):
 
     def files(wildcards):
         stamp = PATHS.stamp(name.format(**dict(wildcards.items())))
-        return stamped_output(stamp).input_files
+        return stamp_record(stamp).input_files
 
     return files
 
@@ -154,12 +154,12 @@ def stamped_files(name):
 def stamped_inputs(wildcards, output):
     """The ``inputs`` param of a table or figure rule: the very object its stamp's key holds
     (ssmobs.config.stage_inputs.outputs), all its script reads beside its files."""
-    return stamped_output(output.stamp).inputs
+    return stamp_record(output.stamp).inputs
 
 
 def stamp_key(wildcards, output):
     """The ``key`` param of a table or figure rule (its stamp's content)."""
-    return stamped_output(output.stamp).key
+    return stamp_record(output.stamp).key
 
 
 wildcard_constraints:
