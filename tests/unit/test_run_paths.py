@@ -418,6 +418,6 @@ def test_the_paper_outputs_scenarios_and_tables_inputs_come_from_run_paths():
     assert list(params.marginal_names) == paths.stan_scenarios
     assert list(params.tables_2_3) == list(wanted["tables_2_3"])
     assert params.scenario_entries == paths.config["scenarios"]
-    mu0 = paths.mu0_sweep_params()
+    mu0 = paths.stamped_outputs["table_mu0_sweep"].inputs.keyed()
     assert mu0["scenarios"] == [paths.scenario_entry(n) for n in paths.mu0_scenarios] != []
     assert mu0["mu0_per_T"] == paths.config["mu0_sweep"]["mu0_per_T"]

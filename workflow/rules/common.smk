@@ -121,15 +121,6 @@ def keyed_input(kind, name, key, paths):
     return paths
 
 
-def register_stamp(name, inputs, params):
-    """The check of a table rule that still passes its settings one by one (rule
-    joint_map_mu0_sweep): its stamp's key, from the same files and settings, is the one
-    its record holds (``PATHS.stamped_outputs``), else the run stops."""
-    key = KEYS.output(f"{OUT}/{name}", inputs, params)
-    if STAMPS.get(PATHS.stamp(name)) != key:
-        raise WorkflowError(f"{name}: its rule's settings are not the ones its stamp keys")
-
-
 def stamp_record(stamp):
     """The record of the table or figure whose stamp file is ``stamp``."""
     if stamp not in STAMPED:  # asked for by name, but not one of this config's outputs

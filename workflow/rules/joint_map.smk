@@ -29,19 +29,14 @@ rule joint_map:
         "../scripts/joint_map.py"
 
 
-if PATHS.paper_outputs:  # the paper's table, where the config asks for the paper's outputs
-    register_stamp(
-        "table_mu0_sweep",
-        [*map(PATHS.trajectories, PATHS.mu0_scenarios), "config/paper_values.yaml"],
-        PATHS.mu0_sweep_params(),
-    )
+# the paper's table, where the config asks for the paper's outputs: the files it reads, what
+# it reads beside them and its stamp's key: PATHS.stamped_outputs
 
 
 rule joint_map_mu0_sweep:
     """|K^max|/K of the Sep models over barrier starts mu_0 (the gradient-balance rule first)."""
     input:
-        trajectories=[PATHS.trajectories(n) for n in PATHS.mu0_scenarios],
-        paper_values="config/paper_values.yaml",
+        unpack(stamped_files("table_mu0_sweep")),
     output:
         table=report(
             multiext(f"{OUT}/table_mu0_sweep", ".csv", ".md", ".tex"),
@@ -58,7 +53,7 @@ rule joint_map_mu0_sweep:
         mem_mb=4000,
         runtime=120,
     params:
-        **PATHS.mu0_sweep_params(),
+        inputs=stamped_inputs,
         key=stamp_key,
     script:
         "../scripts/joint_map_mu0_sweep.py"

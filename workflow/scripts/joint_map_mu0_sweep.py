@@ -5,12 +5,13 @@ from ssmobs.config.scenario import Scenario
 from ssmobs.stages.outputs.mu0_sweep import run_joint_map_mu0_sweep
 
 log.start_job(snakemake)
-p = snakemake.params
-names = [sc["name"] for sc in p.scenarios]
+p = snakemake.params.inputs
+entries = p.scenario_entries
+names = [sc["name"] for sc in entries]
 run_joint_map_mu0_sweep(
     dict(zip(names, snakemake.input.trajectories, strict=True)),
-    {sc["name"]: Scenario.from_config(sc) for sc in p.scenarios},
-    dict(p.settings),
+    {sc["name"]: Scenario.from_config(sc) for sc in entries},
+    p.settings_config,
     list(p.mu0_per_T),
     snakemake.input.paper_values,
     list(snakemake.output.table),

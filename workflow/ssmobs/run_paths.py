@@ -26,7 +26,6 @@ from .cache_keys import CacheKeys
 from .config.blocks import stan_gradients
 from .config.scenario import Scenario
 from .config.stage_inputs import DESIGN_DIR, MAP_CELLS_DIR, design_set_path
-from .config.stage_inputs.outputs import mu0_sweep_inputs
 from .config.stage_inputs.stamped import StampedOutput, stamped_outputs
 from .config.validation import asks_for_paper_outputs
 from .stage_table import STAGES
@@ -152,7 +151,7 @@ class RunPaths:
     @property
     def stan_gradients(self) -> str:
         """The config key ``stan.gradients`` (:func:`ssmobs.config.blocks.stan_gradients`),
-        for the rule that builds a program."""
+        for the planned programs (:attr:`stan_programs`)."""
         return stan_gradients(self.config["stan"])
 
     @property
@@ -160,12 +159,6 @@ class RunPaths:
         """The joint-MAP scenarios of the models the barrier-start sweep covers."""
         models = self.config["mu0_sweep"]["models"]
         return [n for n, sc in self.scenarios.items() if sc.joint_map and sc.slug in models]
-
-    def mu0_sweep_params(self) -> dict[str, Any]:
-        """What the barrier-start sweep reads, as plain data: its inputs object's keyed
-        content (:class:`~ssmobs.config.stage_inputs.outputs.Mu0SweepInputs`)."""
-        entries = [self.scenario_entry(n) for n in self.mu0_scenarios]
-        return dict(mu0_sweep_inputs(entries, self.config).keyed())
 
     @property
     def exact_scenarios(self) -> list[str]:

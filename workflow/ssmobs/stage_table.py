@@ -295,6 +295,8 @@ STAGES: dict[str, Stage] = {
             "stages/k_selection/choice.py",
             "reports/observability_study.py",
             "stages/observability_map.py:write_map,figure_map",
+            # the objects the scripts read back (their read-back properties)
+            "config/stage_inputs/outputs.py",
         ),
         OUTPUT_SCRIPTS,
     ),
