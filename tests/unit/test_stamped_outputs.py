@@ -113,7 +113,7 @@ def test_the_keys_hold_the_configs_values_as_it_gives_them():
         paths.scenario_entry(n) for n in paths.figure3_scenarios
     ]
     assert records["convergence_sensitivity"].inputs.keyed() == {
-        "scenarios": paths.stan_scenarios,
+        "scenarios": [paths.scenario_entry(n) for n in paths.stan_scenarios],
         "convergence": config["convergence"],
     }
     for name, entry in paths.studies.items():

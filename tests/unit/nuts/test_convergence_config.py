@@ -117,6 +117,7 @@ def test_sensitivity_stage_reads_tables_and_writes_the_table(tmp_path):
         config_with()["convergence"],
         [tmp_path / f"sens.{ext}" for ext in ("csv", "md", "tex")],
         [tmp_path / f"fails.{ext}" for ext in ("csv", "md", "tex")],
+        configs={"a": same_a09(name="a")},
     )
     assert out["rhat1.05_treedepth_fails"].tolist() == [2]
     text = (tmp_path / "sens.md").read_text()

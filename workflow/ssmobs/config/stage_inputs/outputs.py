@@ -148,11 +148,22 @@ class PaperTablesInputs(OutputInputs):
 
 @dataclass(frozen=True)
 class ConvergenceSensitivityInputs(OutputInputs):
-    """The convergence tables: the NUTS scenarios' names, in the order of their tables, and
-    the config block ``convergence``."""
+    """The convergence tables: the NUTS scenarios' entries, in the order of their tables
+    (the propriety of each posterior, Sec. IV, decides whether its |K^Stan| counts are
+    shown), and the config block ``convergence``."""
 
-    scenarios: tuple[str, ...]
+    scenarios: tuple[Pairs, ...]
     convergence: Pairs
+
+    @property
+    def scenario_names(self) -> list[str]:
+        """The scenarios' names, in the order of their tables."""
+        return [str(dict(sc)["name"]) for sc in self.scenarios]
+
+    @property
+    def scenario_entries(self) -> dict[str, dict[str, Any]]:
+        """Scenario name -> its entry as the config gives it."""
+        return {str(sc["name"]): sc for sc in thaw(self.scenarios)}
 
     @property
     def convergence_config(self) -> dict[str, Any]:
@@ -292,9 +303,11 @@ def paper_tables_inputs(
 def convergence_sensitivity_inputs(
     config: Mapping[str, Any], stan_names: Iterable[str]
 ) -> ConvergenceSensitivityInputs:
-    """The convergence tables' inputs for the NUTS scenarios ``stan_names``."""
+    """The convergence tables' inputs for the NUTS scenarios ``stan_names``: their entries."""
+    entries = {sc["name"]: sc for sc in config["scenarios"]}
     return ConvergenceSensitivityInputs(
-        scenarios=_names(stan_names), convergence=freeze(config["convergence"])
+        scenarios=freeze([entries[name] for name in _names(stan_names)]),
+        convergence=freeze(config["convergence"]),
     )
 
 

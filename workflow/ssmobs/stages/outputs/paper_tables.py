@@ -5,6 +5,7 @@ convergence checks' sensitivity tables (rule convergence_sensitivity, Sec. III.C
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from ... import io
@@ -115,15 +116,17 @@ def run_convergence_sensitivity(
     convergence_cfg: dict,
     paths: list[PathLike],
     failure_paths: list[PathLike],
-    configs: dict[str, dict] | None = None,
+    *,
+    configs: Mapping[str, Mapping[str, Any]],
 ) -> pandas.DataFrame:
     """Rule convergence_sensitivity: |K^Stan| per scenario under other R-hat / tree-depth
     rules, and how the runs that did not converge failed (``failure_paths``).
 
     Re-evaluates the stored per-trajectory diagnostics (no new sampling); ``tables`` maps
-    scenario names to their gather_nuts tables.  With ``configs`` (scenario name -> config
-    entry), a scenario whose posterior is improper shows no |K^Stan| count but the reason
-    in a column ``improper`` (:func:`mark_improper_counts`).
+    scenario names to their gather_nuts tables, ``configs`` the same names to their config
+    entries: a scenario whose posterior is improper shows no |K^Stan| count but
+    "not shown: improper" and the reason in a column ``improper``
+    (:func:`mark_improper_counts`).
     """
     from ...nuts.convergence import ConvergenceSettings
     from ...nuts.convergence_sensitivity import failure_pattern_table, sensitivity_table
@@ -144,33 +147,42 @@ def run_convergence_sensitivity(
         "transitions, and quantiles of their largest R-hat",
     )
     base = ConvergenceSettings(**convergence_cfg)
-    table = sensitivity_table(frames, base)
-    if configs is not None:
-        table = mark_improper_counts(table, configs)
-    write_table(
-        table,
-        paths,
+    table = mark_improper_counts(sensitivity_table(frames, base), configs)
+    caption = (
         "|K^Stan| under R-hat < 1.01 or < 1.05 and tree-depth saturation warned about "
         "or counted as a failure, and with R-hat and ESS checked on Omega and x0 only or on "
         f"Omega only (other thresholds as configured: divergences <= "
         f"{base.max_divergences}, ESS >= {base.ess_bulk_min:g}/{base.ess_tail_min:g}, "
-        f"E-BFMI >= {base.ebfmi_min:g})",
+        f"E-BFMI >= {base.ebfmi_min:g})"
     )
+    if "improper" in table.columns:
+        caption += CAPTION_IMPROPER
+    write_table(table, paths, caption)
     return table
 
 
-def mark_improper_counts(table: pandas.DataFrame, configs: dict[str, dict]) -> pandas.DataFrame:
+#: what the sensitivity table's caption adds when some scenario's posterior is improper
+CAPTION_IMPROPER = (
+    '. A scenario whose posterior is improper under its prior shows "not shown: improper" '
+    "in place of its counts and the reason in the column improper (K, its runs, stays)"
+)
+
+
+def mark_improper_counts(
+    table: pandas.DataFrame, configs: Mapping[str, Mapping[str, Any]]
+) -> pandas.DataFrame:
     """The sensitivity table with the |K^Stan| counts of every scenario whose posterior is
-    improper left empty (``K``, the runs, stays) and the column
-    ``improper`` (where some scenario is)."""
-    from ...reports.propriety_notes import config_note
+    improper (:mod:`ssmobs.reports.propriety_notes`) replaced by "not shown: improper"
+    (``K``, the runs, stays) and the reason in a column ``improper`` (where some scenario
+    is; otherwise the table as it was)."""
+    from ...reports.propriety_notes import NOT_SHOWN_IMPROPER, config_note
 
     notes = {name: config_note(configs[name]).improper for name in table["scenario"]}
     if not any(notes.values()):
         return table
-    out = table.astype({c: float for c in table.columns if c not in ("scenario", "K")})
+    counts = [c for c in table.columns if c not in ("scenario", "K")]
+    out = table.astype({c: object for c in counts})
     hidden = out["scenario"].map(notes).astype(bool).to_numpy()
-    counts = [c for c in out.columns if c not in ("scenario", "K")]
-    out.loc[hidden, counts] = float("nan")
+    out.loc[hidden, counts] = NOT_SHOWN_IMPROPER
     out["improper"] = out["scenario"].map(notes)
     return out
