@@ -250,3 +250,39 @@ def test_the_rules_key_follows_the_contents_of_what_it_reads(tmp_path):
     assert table_key(inputs) != before
     inputs[1].write_text(summary)
     assert table_key(inputs) == before  # content, not mtime
+
+
+def test_the_rules_key_follows_the_code_of_every_model_its_rows_name(tmp_path, monkeypatch):
+    """The propriety notes read the model's terms: an edit of a row model's module (here its
+    syntax digest changed) remakes the table; an edit of a model no row names does not."""
+    from ssmobs.reports import stan_variants
+
+    study = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    inputs = [study / "provenance.json", study / "section4_summary.csv"]
+    assert stan_variants.row_models(inputs) == ["same"]
+    before = table_key(inputs)
+    digest_of = stan_variants.syntax_digest
+
+    def edited(module: str):
+        def syntax_digest(path):
+            return "edited" if Path(path).as_posix().endswith(module) else digest_of(path)
+
+        return syntax_digest
+
+    monkeypatch.setattr(stan_variants, "syntax_digest", edited("models/same.py"))
+    assert table_key(inputs) != before
+    monkeypatch.setattr(stan_variants, "syntax_digest", edited("models/sep_mult.py"))
+    assert table_key(inputs) == before
+
+
+def test_a_row_models_code_is_keyed_as_the_stages_key_it(monkeypatch):
+    from ssmobs.cache_keys import CacheKeys
+    from ssmobs.reports.stan_variants import model_code, row_models
+
+    monkeypatch.chdir(REPO_DIR)
+    models = row_models(spec_inputs(read_spec(SPEC)))
+    assert models == ["same", "sep", "sep_d2_p1", "sep_mult", "sep_ranwalk"]
+    keys = CacheKeys({"scenarios": [], "k_selection": []}, "native", repo=REPO_DIR)
+    for model in models:
+        assert model_code(model) == keys.model_code(model)
+        assert f"models/{model}.py" in model_code(model)

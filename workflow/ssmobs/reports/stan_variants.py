@@ -26,6 +26,7 @@ import pandas as pd
 
 from ssmobs import io
 from ssmobs.binomial import format_fraction
+from ssmobs.code_hashing import syntax_digest
 from ssmobs.config.blocks import stan_settings
 from ssmobs.config.stage_inputs import SAMPLER_FIELDS
 from ssmobs.config.validation import ConfigError, read_config_file, validate
@@ -37,7 +38,14 @@ from ssmobs.reports.propriety_notes import (
     config_note,
 )
 from ssmobs.reports.tables import write_table
-from ssmobs.stage_code import code_digest, digest, file_digest
+from ssmobs.stage_code import (
+    PACKAGE_DIR,
+    code_digest,
+    digest,
+    file_digest,
+    model_closure,
+    outside_code,
+)
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
 TRAJECTORY_KEYS = ("model", "omega", "x0", "T", "method", "seed", "K", "prior", "stan_every")
@@ -226,11 +234,33 @@ def write_variant_table(
 
 
 def table_key(inputs: Sequence[str | os.PathLike]) -> str:
-    """The rule's content key: the bytes of every file it reads and the code that reads them
-    (its stamp's content: a stamp of another key is removed before the DAG is built, so the
-    rule reruns when either changes, whatever the file times)."""
+    """The rule's content key: the bytes of every file it reads, the code that reads them
+    and the code of every model its rows name (:func:`row_models`; the propriety notes read
+    the model's terms), so the rule reruns when any of them changes, whatever the file times
+    (its stamp's content: a stamp of another key is removed before the DAG is built)."""
     files = {os.fspath(p): file_digest(os.fspath(p)) for p in inputs}
-    return digest({"inputs": files, "code": code_digest("variant_table")})
+    models = {m: model_code(m) for m in row_models(inputs)}
+    return digest({"inputs": files, "code": code_digest("variant_table"), "models": models})
+
+
+def row_models(inputs: Sequence[str | os.PathLike]) -> list[str]:
+    """The models named by the scenarios of every committed config among ``inputs`` (each
+    folder's ``provenance.json``), sorted: every row's and every variant's model."""
+    models = set()
+    for path in inputs:
+        if Path(path).name == "provenance.json":
+            config = io.read_json(path, required=["config"])["config"]
+            models |= {str(sc["model"]) for sc in config["scenarios"]}
+    return sorted(models)
+
+
+def model_code(model: str) -> dict[str, str]:
+    """The code of model ``model`` as the stages key it
+    (:meth:`ssmobs.cache_keys.CacheKeys.model_code`): its module and the package modules it
+    runs (:func:`~ssmobs.stage_code.model_closure`) by their syntax, and what they import
+    from outside the package (:func:`~ssmobs.stage_code.outside_code`)."""
+    files = model_closure(model)
+    return {**{f: syntax_digest(PACKAGE_DIR / f) for f in files}, **outside_code(files)}
 
 
 def spec_inputs(spec: Mapping[str, Any]) -> list[str]:
