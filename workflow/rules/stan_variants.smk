@@ -7,8 +7,8 @@ from ssmobs.reports.stan_variants import read_spec, spec_inputs, table_key
 VARIANT_TABLE_SPEC = "config/tables/stan_variants_by_row.yaml"
 VARIANT_TABLE = read_spec(VARIANT_TABLE_SPEC)
 VARIANT_TABLE_INPUTS = spec_inputs(VARIANT_TABLE)
-# its stamp: the content key of the spec, the committed files and the code that reads them,
-# so that an edit of any of them remakes the table whatever the file times say
+# its stamp: the content key of the spec, the committed files, the code that reads them and
+# the code of every model the committed configs name (their propriety notes), so that an edit of any of them remakes the table whatever the file times say
 VARIANT_TABLE_STAMP = "results/outputs/stan_variant_table.key"
 if all(Path(p).is_file() for p in VARIANT_TABLE_INPUTS):
     STAMPS_ON_REQUEST[VARIANT_TABLE_STAMP] = table_key([VARIANT_TABLE_SPEC, *VARIANT_TABLE_INPUTS])
