@@ -253,11 +253,15 @@ def repairs_before_the_dag():
     found = housekeeping.damaged_trajectory_repairs(
         {path: checksum_problem(path) for path in PATHS.every_trajectories()}
     )
-    keep = config["stan"]["keep_draws"]
     batches = housekeeping.damaged_batch_repairs(
         housekeeping.BatchState(
             table,
-            changed_batch_records(table, PATHS.records_dir(n), PATHS.draws_dir(n), keep),
+            changed_batch_records(
+                table,
+                PATHS.records_dir(n),
+                PATHS.draws_dir(n),
+                PATHS.nuts_inputs(n).keep_draws,
+            ),
             Path(table).exists(),
             Path(PATHS.stan_summary(n)).exists(),
             (PATHS.stan_summary(n), PATHS.stan_table(n)),
