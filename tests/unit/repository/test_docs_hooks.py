@@ -131,8 +131,9 @@ COMMITTED_ROWS = REPO_DIR / "paper_figures" / "section4_rows"
     reason="no committed Section IV rows in this checkout",
 )
 def test_site_shows_no_k_stan_of_the_committed_improper_rows(hook) -> None:
-    """sep_b_T75 (a = 0 inside (-1, 1)) and sep_d1_p2_T50 (c = d inside (0, 1)^4) were
-    committed with |K^Stan|/K 0.59 and 0.00; the site writes the words instead."""
+    """sep_b_T75 (a = 0 inside (-1, 1)) and sep_d1_p2_T50 (c = d inside (0, 1)^4) are
+    improper (sep_d1_p2_T50's folder, made before the analysis, holds |K^Stan|/K 0.00); the
+    site writes the words instead."""
     text = hook.render_rows(COMMITTED_ROWS)
     for scenario in ("sep_b_T75", "sep_d1_p2_T50"):
         assert _row_of(text, scenario)[6] == NOT_SHOWN_IMPROPER
