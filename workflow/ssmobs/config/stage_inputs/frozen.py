@@ -54,19 +54,12 @@ class TruthViews:
         return plain(self.x0)
 
 
-class ScenarioViews(TruthViews):
-    """The frozen design block, true values, prior and joint-MAP settings of an inputs object
-    that holds a scenario's values (a point of the choice of K, a cell of a map) back as the
-    config gives them."""
+class JointMapViews:
+    """The frozen prior and joint-MAP settings of an inputs object back as the config gives
+    them."""
 
-    design_settings: tuple[tuple[str, Any], ...]
     prior: Any
     settings: tuple[tuple[str, Any], ...]
-
-    @property
-    def design_config(self) -> dict[str, Any]:
-        """The ``design`` block as the config gives it."""
-        return {k: plain(v) for k, v in self.design_settings}
 
     @property
     def prior_config(self) -> Any:
@@ -77,6 +70,19 @@ class ScenarioViews(TruthViews):
     def settings_config(self) -> dict[str, Any]:
         """The merged ``joint_map`` block as a mapping."""
         return dict(self.settings)
+
+
+class ScenarioViews(TruthViews, JointMapViews):
+    """The frozen design block, true values, prior and joint-MAP settings of an inputs object
+    that holds a scenario's values (a point of the choice of K, a cell of a map) back as the
+    config gives them."""
+
+    design_settings: tuple[tuple[str, Any], ...]
+
+    @property
+    def design_config(self) -> dict[str, Any]:
+        """The ``design`` block as the config gives it."""
+        return {k: plain(v) for k, v in self.design_settings}
 
 
 #: the folder of the design sets of one design key (rule design_disturbances)

@@ -7,11 +7,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..blocks import joint_map_settings
-from .frozen import frozen, prior_config_of
+from .frozen import JointMapViews, frozen
 
 
 @dataclass(frozen=True)
-class JointMapInputs:
+class JointMapInputs(JointMapViews):
     """Everything rule joint_map reads (Sec. III.B): the scenario's design trajectories
     (their keyed path), the scenario's name, model, T, method and seed (written into the
     summary), its prior and its merged ``joint_map`` block
@@ -27,16 +27,6 @@ class JointMapInputs:
     prior: Any
     #: the joint-MAP settings as sorted (key, value) pairs
     settings: tuple[tuple[str, Any], ...]
-
-    @property
-    def prior_config(self) -> Any:
-        """The prior as :meth:`StateSpaceModel.prior_bounds` takes it."""
-        return prior_config_of(self.prior)
-
-    @property
-    def settings_config(self) -> dict[str, Any]:
-        """The merged ``joint_map`` block as a mapping."""
-        return dict(self.settings)
 
 
 def joint_map_inputs(
