@@ -149,6 +149,17 @@ def test_an_improper_rows_stan_numbers_are_not_shown(tmp_path):
     assert "not shown" not in caption(lines.drop(columns="improper").reset_index())
 
 
+def test_a_folder_that_withheld_its_count_itself_is_read(tmp_path):
+    """A folder made after the propriety analysis leaves |K^Stan| of an improper row empty
+    in its own summary: the table reads it and says why, as for an older folder's count."""
+    base = _study(tmp_path / "row", [IMPROPER_ROW], {"only_a": float("nan")})
+    lines = variant_rows([{"folder": str(base), "scenario": "only_a"}], []).set_index("scenario")
+    assert pd.isna(lines.loc["only_a", "K_stan"]) and lines.loc["only_a", "runs"] == 20
+    assert lines.loc["only_a", "improper"].startswith("improper: x0 drops out")
+    table = variant_by_row(lines.reset_index()).set_index("Stan set-up")
+    assert table.loc[OURS, "sep_d2_p1_a_T50"] == "not shown: improper (20 runs)"
+
+
 def test_an_analysis_that_finds_nothing_shows_every_number(tmp_path):
     """The check reads the analysis it is given: with one that finds nothing the same
     folder shows its count, so the words above come from the analysis, not the row's name."""

@@ -161,7 +161,8 @@ def variant_rows(
                     "setup": setup_label(stan_setup(config, sc), base_setup),
                     "folder": folder,
                     "scenario": sc["name"],
-                    "K_stan": int(got["K_stan"]),
+                    # empty where the folder's own summary withheld it (improper)
+                    "K_stan": None if pd.isna(got["K_stan"]) else int(got["K_stan"]),
                     "runs": int(got["K_stan_runs"]),
                     "K_stan_frac": got["K_stan_frac"],
                     "K_stan_frac_lo95": got["K_stan_frac_lo95"],
