@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any
 
 from . import kernels
-from .code_hashing import syntax_digest
 from .config.maps import cell_entries
 from .config.stage_inputs import inputs_payload, map_cell_inputs, map_cells_inputs
 from .stage_code import (
@@ -41,8 +40,7 @@ from .stage_code import (
     code_digest,
     digest,
     file_digest,
-    model_closure,
-    outside_code,
+    model_code,
 )
 from .stage_table import NATIVE_DRIVER, NATIVE_SHADOW_HEADERS, PROGRAM_MARKER, STAGES
 from .stan_backends.base import program_digest
@@ -116,9 +114,7 @@ class CacheKeys:
         module outside the package and the pinned environment they import, directly or
         not (:func:`outside_code`), each by its :func:`syntax_digest` (a comment-only edit
         reruns nothing; its Stan program keys what it determines: :meth:`stan_program`)."""
-        files = model_closure(model, self.package_dir)
-        out = {f: syntax_digest(self.package_dir / f) for f in files}
-        return {**out, **outside_code(files, self.package_dir)}
+        return model_code(model, self.package_dir)
 
     def stan_program(self, model: str) -> str:
         """The model's Stan program with its ``#include`` files; for a model without one,

@@ -113,6 +113,16 @@ def outside_code(files: Iterable[str], package_dir: Path = PACKAGE_DIR) -> dict[
     return out
 
 
+def model_code(model: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
+    """The code of ``model`` as every key that runs it holds it: its module and the package
+    modules it runs (:func:`model_closure`) by their :func:`syntax_digest` (a comment-only
+    edit reruns nothing), and what they import from outside the package
+    (:func:`outside_code`)."""
+    files = model_closure(model, package_dir)
+    out = {f: syntax_digest(package_dir / f) for f in files}
+    return {**out, **outside_code(files, package_dir)}
+
+
 def code_digest(stage: str, package_dir: Path = PACKAGE_DIR) -> dict[str, str]:
     """File -> hash of the code a stage runs: its module closure (its stage module in
     :mod:`ssmobs.stages`, the glue that writes its outputs, and what that imports), its

@@ -266,13 +266,14 @@ def test_the_rules_key_follows_the_contents_of_what_it_reads(tmp_path):
 def test_the_rules_key_follows_the_code_of_every_model_its_rows_name(tmp_path, monkeypatch):
     """The propriety notes read the model's terms: an edit of a row model's module (here its
     syntax digest changed) remakes the table; an edit of a model no row names does not."""
+    from ssmobs import stage_code
     from ssmobs.reports import stan_variants
 
     study = _study(tmp_path / "row", [SCENARIO], {"base": 15})
     inputs = [study / "provenance.json", study / "section4_summary.csv"]
     assert stan_variants.row_models(inputs) == ["same"]
     before = table_key(inputs)
-    digest_of = stan_variants.syntax_digest
+    digest_of = stage_code.syntax_digest
 
     def edited(module: str):
         def syntax_digest(path):
@@ -280,9 +281,9 @@ def test_the_rules_key_follows_the_code_of_every_model_its_rows_name(tmp_path, m
 
         return syntax_digest
 
-    monkeypatch.setattr(stan_variants, "syntax_digest", edited("models/same.py"))
+    monkeypatch.setattr(stage_code, "syntax_digest", edited("models/same.py"))
     assert table_key(inputs) != before
-    monkeypatch.setattr(stan_variants, "syntax_digest", edited("models/sep_mult.py"))
+    monkeypatch.setattr(stage_code, "syntax_digest", edited("models/sep_mult.py"))
     assert table_key(inputs) == before
 
 

@@ -26,7 +26,6 @@ import pandas as pd
 
 from ssmobs import io
 from ssmobs.binomial import format_fraction
-from ssmobs.code_hashing import syntax_digest
 from ssmobs.config.blocks import stan_settings
 from ssmobs.config.stage_inputs import SAMPLER_FIELDS
 from ssmobs.config.validation import ConfigError, read_config_file, validate
@@ -38,14 +37,7 @@ from ssmobs.reports.propriety_notes import (
     config_note,
 )
 from ssmobs.reports.tables import write_table
-from ssmobs.stage_code import (
-    PACKAGE_DIR,
-    code_digest,
-    digest,
-    file_digest,
-    model_closure,
-    outside_code,
-)
+from ssmobs.stage_code import code_digest, digest, file_digest, model_code
 
 # what decides a scenario's design trajectories and its Stan subset (Sec. III)
 TRAJECTORY_KEYS = ("model", "omega", "x0", "T", "method", "seed", "K", "prior", "stan_every")
@@ -253,15 +245,6 @@ def row_models(inputs: Sequence[str | os.PathLike]) -> list[str]:
             config = io.read_json(path, required=["config"])["config"]
             models |= {str(sc["model"]) for sc in config["scenarios"]}
     return sorted(models)
-
-
-def model_code(model: str) -> dict[str, str]:
-    """The code of model ``model`` as the stages key it
-    (:meth:`ssmobs.cache_keys.CacheKeys.model_code`): its module and the package modules it
-    runs (:func:`~ssmobs.stage_code.model_closure`) by their syntax, and what they import
-    from outside the package (:func:`~ssmobs.stage_code.outside_code`)."""
-    files = model_closure(model)
-    return {**{f: syntax_digest(PACKAGE_DIR / f) for f in files}, **outside_code(files)}
 
 
 def spec_inputs(spec: Mapping[str, Any]) -> list[str]:
