@@ -40,10 +40,13 @@ SCENARIO = {
 }
 
 
-def _study(folder: Path, scenarios: list[dict], converged: dict[str, int]) -> Path:
-    """A committed-looking folder: provenance.json with the config, a Section IV summary."""
+def _study(
+    folder: Path, scenarios: list[dict], converged: dict[str, int], extra: dict | None = None
+) -> Path:
+    """A committed-looking folder: provenance.json with the config (``extra``: more of its
+    keys), a Section IV summary."""
     folder.mkdir(parents=True)
-    config = {"outputs_dir": "x", "scenarios": scenarios}
+    config = {"outputs_dir": "x", "scenarios": scenarios, **(extra or {})}
     (folder / "provenance.json").write_text(json.dumps({"config": config}))
     pd.DataFrame(
         [
@@ -100,7 +103,8 @@ def test_variants_line_up_under_their_rows_baseline(tmp_path):
     table = variant_by_row(lines)
     assert table.columns.tolist() == ["Stan set-up", "same_a07_T100"]
     assert table.iloc[1, 1] == "0.90 [0.68, 0.99] of 20"
-    assert table.iloc[-2].tolist() == ["paper", "0.808"]
+    assert table.iloc[-3].tolist() == ["paper", "0.808"]
+    assert table.iloc[-2].tolist() == ["gradients of the row's own set-up", "autodiff"]
     # Same under its restricted prior: x0 drops out at the end a = 0, numbers kept
     assert table.iloc[-1, 0] == "edge" and "a -> 0" in table.iloc[-1, 1]
     assert "improper" not in lines.columns
@@ -298,3 +302,33 @@ def test_a_row_models_code_is_keyed_as_the_stages_key_it(monkeypatch):
     for model in models:
         assert model_code(model) == keys.model_code(model)
         assert f"models/{model}.py" in model_code(model)
+
+
+def test_a_study_under_the_rows_own_setup_is_a_repeat_not_the_rows_cell(tmp_path):
+    """Issue 63: a row regenerated with the analytic path beside a study that ran the same
+    path on its trajectories: the study's line says it is the row's set-up again, the
+    baseline keeps its cell, and the line of gradients names the row's own path."""
+    analytic = {"stan": {"gradients": "analytic"}}
+    base = _study(tmp_path / "row", [SCENARIO], {"base": 15}, extra=analytic)
+    study = _study(tmp_path / "study", [{**SCENARIO, "name": "b"}], {"b": 14}, extra=analytic)
+    autodiff = _study(tmp_path / "older", [{**SCENARIO, "name": "c", "stan_seed": 1}], {"c": 12})
+    lines = variant_rows([{"folder": str(base), "scenario": "base"}], [str(study), str(autodiff)])
+    assert list(lines["setup"]) == [
+        OURS,
+        "the row's own set-up, again (study)",
+        "Stan's autodiff gradients, one Stan seed (1) for all",
+    ]
+    assert list(lines["gradients"]) == ["analytic", "analytic", "autodiff"]
+    table = variant_by_row(lines).set_index("Stan set-up")
+    assert table.loc[OURS, "same_a07_T100"] == "0.75 [0.51, 0.91] of 20"
+    assert table.loc["the row's own set-up, again (study)", "same_a07_T100"].startswith("0.70")
+    assert table.loc["gradients of the row's own set-up", "same_a07_T100"] == "analytic"
+
+
+def test_two_lines_of_one_setup_in_a_row_are_refused(tmp_path):
+    base = _study(tmp_path / "row", [SCENARIO], {"base": 15})
+    seeded = {**SCENARIO, "name": "s", "stan_seed": 2}
+    one = _study(tmp_path / "one", [seeded], {"s": 10})
+    two = _study(tmp_path / "two", [seeded], {"s": 11})
+    with pytest.raises(VariantTableError, match="one Stan seed .2. for all' twice"):
+        variant_rows([{"folder": str(base), "scenario": "base"}], [str(one), str(two)])

@@ -49,3 +49,6 @@ def test_committed_outputs_match_their_config_file(path: Path):
     # the folder is the one the config writes to, so no profile's run overwrites another's
     assert (REPO_DIR / prov["config"]["outputs_dir"]).resolve() == path.parent.resolve()
     assert prov["wall_seconds"] > 0 and len(prov["commit"]) == 40
+    # exactly what its recorded commit produces: a clean checkout, an empty results/
+    assert prov["uncommitted_changes"] is False, f"{path}: made with uncommitted changes"
+    assert prov["started_from_empty_results"] is True, f"{path}: results/ was not empty"

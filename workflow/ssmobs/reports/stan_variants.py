@@ -45,6 +45,10 @@ TRAJECTORY_KEYS = ("model", "omega", "x0", "T", "method", "seed", "K", "prior", 
 # path (issue 49), inits, seed
 SETUP_KEYS = (*SAMPLER_FIELDS, "gradients", "stan_init", "stan_seed")
 OURS = "ours (the row's own set-up)"
+#: the label of a study's run under exactly the row's own set-up (another run of it)
+AGAIN = "the row's own set-up, again ({folder})"
+#: the table's line naming the gradient path of each row's own set-up
+GRADIENTS_LINE = "gradients of the row's own set-up"
 CAPTION = (
     "Section IV under Stan set-ups the paper leaves open: |K^Stan|/K with its exact binomial "
     "95 % interval and the number of runs, per set-up (what it changes against the row's own "
@@ -98,10 +102,16 @@ def _describe(key: str, value: Any) -> str:
     return f"{key} {value}"
 
 
-def setup_label(variant: Mapping[str, Any], baseline: Mapping[str, Any]) -> str:
-    """What a variant's Stan set-up changes against its baseline's, in words."""
+def setup_label(
+    variant: Mapping[str, Any], baseline: Mapping[str, Any], again_in: str | None = None
+) -> str:
+    """What a variant's Stan set-up changes against its baseline's, in words; a study's run
+    under the baseline's very set-up (``again_in``: the study's folder) is labelled as a
+    repeat of it (:data:`AGAIN`), so it never takes the baseline's own cell."""
     changed = [_describe(k, variant[k]) for k in SETUP_KEYS if variant.get(k) != baseline.get(k)]
-    return ", ".join(changed) if changed else OURS
+    if changed:
+        return ", ".join(changed)
+    return OURS if again_in is None else AGAIN.format(folder=Path(again_in).name)
 
 
 def _checked_same_runs(
@@ -143,14 +153,16 @@ def variant_rows(
                     continue
                 _checked_same_runs(f"{folder}: {sc['name']}", config, sc, base_config, base)
                 members.append((folder, sc))
-        for folder, sc in members:
+        for i, (folder, sc) in enumerate(members):
             config, summary = loaded[folder]
             got = summary.loc[sc["name"]]
             note = config_note(sc, propriety)
+            setup = stan_setup(config, sc)
             lines.append(
                 {
                     "row": base["paper_ref"],
-                    "setup": setup_label(stan_setup(config, sc), base_setup),
+                    "setup": setup_label(setup, base_setup, None if i == 0 else folder),
+                    "gradients": setup["gradients"],
                     "folder": folder,
                     "scenario": sc["name"],
                     # empty where the folder's own summary withheld it (improper)
@@ -167,6 +179,13 @@ def variant_rows(
             notes.append(note)
     add_note_columns(lines, notes)
     frame = pd.DataFrame(lines)
+    twice = frame[frame.duplicated(["row", "setup"], keep=False)] if lines else frame
+    if not twice.empty:
+        first = twice.iloc[0]
+        raise VariantTableError(
+            f"row {first['row']!r}: set-up {first['setup']!r} twice, in "
+            f"{sorted(twice[twice['row'] == first['row']]['folder'])}: one cell per set-up"
+        )
     if not frame.empty:
         frame["K_stan"] = frame["K_stan"].astype("Int64")
     return frame
@@ -181,15 +200,18 @@ def _cell(line: Mapping[str, Any]) -> str:
 
 def variant_by_row(lines: pd.DataFrame) -> pd.DataFrame:
     """The table to read: a line per set-up, a column per row, cells "0.76 [0.69, 0.82]" (and
-    the number of runs), the paper's fractions after them; where some row has a finding of
-    the propriety analysis, the lines ``improper`` (the reason its cells are not shown) and
-    ``edge`` (an end-of-support finding, numbers kept) last."""
+    the number of runs), the paper's fractions and each row's own gradient path
+    (:data:`GRADIENTS_LINE`) after them; where some row has a finding of the propriety
+    analysis, the lines ``improper`` (the reason its cells are not shown) and ``edge`` (an
+    end-of-support finding, numbers kept) last."""
     rows = list(dict.fromkeys(lines["row"]))
     setups = list(dict.fromkeys([OURS, *lines["setup"]]))
     cells = {(line["setup"], line["row"]): _cell(line) for line in lines.to_dict("records")}
     table = [{"Stan set-up": s, **{r: cells.get((s, r), "") for r in rows}} for s in setups]
     paper = lines.groupby("row", sort=False)["K_stan_frac_paper"].first()
     table.append({"Stan set-up": "paper", **{r: f"{paper[r]:.3f}" for r in rows}})
+    own = lines[lines["setup"] == OURS].groupby("row", sort=False)["gradients"].first()
+    table.append({"Stan set-up": GRADIENTS_LINE, **{r: own[r] for r in rows}})
     for column in ("improper", "edge"):
         if column in lines.columns:
             # every scenario of a row shares its model and prior, so its first line speaks
