@@ -25,6 +25,7 @@ from mkdocs.config.defaults import MkDocsConfig
 from mkdocs.structure.files import Files
 from mkdocs.structure.pages import Page
 from ssmobs.binomial import format_fraction
+from ssmobs.config.blocks import stan_gradients
 from ssmobs.reports.paper_comparison import improper_scenarios, paper_comparison
 from ssmobs.reports.propriety_notes import NOT_SHOWN_IMPROPER
 
@@ -122,10 +123,19 @@ def render_optional_table(root: Path, path: str) -> str:
     )
 
 
+def made_with(prov: dict) -> str:
+    """The gradient path a committed run's NUTS took, from its ``provenance.json``: the
+    recorded ``stan.gradients``, else its config's key (``autodiff`` where unset: a folder
+    made before the setting existed sampled with Stan's autodiff)."""
+    recorded = prov.get("stan", {}).get("gradients")
+    return str(recorded or stan_gradients(prov["config"].get("stan", {})))
+
+
 def render_rows(folder: Path) -> str:
     """One line per committed row folder under ``folder`` (each a run of one config of
     ``config/section4_rows/``): |K^max|/K over all K, |K^Stan|/K over the Stan runs, with
-    their 95 % intervals, beside the paper's, and how the row was made.  A row whose
+    their 95 % intervals, beside the paper's, and how the row was made (commit, date,
+    gradient path, CPU-s: :func:`made_with`).  A row whose
     posterior is improper under its prior (the current analysis of the scenarios in the
     folder's ``provenance.json``, or the summary's own ``improper`` column:
     :func:`~ssmobs.reports.paper_comparison.improper_scenarios`) shows
@@ -138,7 +148,10 @@ def render_rows(folder: Path) -> str:
     withheld: dict[str, str] = {}
     for summary in sorted(folder.glob("*/section4_summary.csv")):
         prov = json.loads((summary.parent / "provenance.json").read_text())
-        made = f"`{prov['commit'][:12]}`, {prov['date_utc'][:10]}"
+        made = (
+            f"`{prov['commit'][:12]}`, {prov['date_utc'][:10]}, {made_with(prov)}, "
+            f"{prov['cpu_seconds']:,.0f} CPU-s"
+        )
         frame = pd.read_csv(summary)
         improper = improper_scenarios(summary.parent, [frame])
         for r in frame.to_dict("records"):

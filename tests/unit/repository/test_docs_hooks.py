@@ -57,16 +57,18 @@ def _summary_row(name: str, **extra: object) -> dict:
     }
 
 
-def _folder(path: Path, rows: list[dict], scenarios: list[dict] | None = None) -> Path:
+def _folder(path: Path, rows: list[dict], scenarios: list[dict] | None = None, **recorded) -> Path:
     """A committed run folder: its summary and, given ``scenarios``, a provenance whose
-    config holds them (what the current analysis of the folder reads)."""
+    config holds them (what the current analysis of the folder reads) and ``recorded``."""
     path.mkdir(parents=True)
     pd.DataFrame(rows).to_csv(path / "section4_summary.csv", index=False)
     if scenarios is not None:
         prov = {
             "commit": "0123456789abcdef" * 2,
             "date_utc": "2026-12-03T10:00:00+00:00",
+            "cpu_seconds": 1234.5,
             "config": {"outputs_dir": "x", "scenarios": scenarios},
+            **recorded,
         }
         (path / "provenance.json").write_text(json.dumps(prov))
     return path
@@ -120,6 +122,22 @@ def test_rows_table_withholds_an_improper_rows_k_stan(tmp_path: Path, hook) -> N
     assert only_a[7] == abc[7] == "0.74 [0.73, 0.76]"  # the paper's stays
     assert "`only_a` (improper: x0 drops out of the likelihood at c = 0" in text
     assert "`abc` (" not in text
+
+
+def test_rows_table_says_which_gradient_path_made_each_row(tmp_path: Path, hook) -> None:
+    """Issue 63: a row made before ``stan.gradients`` existed sampled with autodiff; a newer
+    one records its path; the table names it with the row's commit and CPU time."""
+    root = tmp_path / "section4_rows"
+    _folder(root / "old", [_summary_row("old")], [{"name": "old", **ALL_RESTRICTED}])
+    _folder(
+        root / "new",
+        [_summary_row("new")],
+        [{"name": "new", **ALL_RESTRICTED}],
+        stan={"gradients": "analytic"},
+    )
+    text = hook.render_rows(root)
+    assert _row_of(text, "old")[8] == "`0123456789ab`, 2026-12-03, autodiff, 1,234 CPU-s"
+    assert _row_of(text, "new")[8] == "`0123456789ab`, 2026-12-03, analytic, 1,234 CPU-s"
 
 
 COMMITTED_ROWS = REPO_DIR / "paper_figures" / "section4_rows"
