@@ -186,9 +186,9 @@ def compare(
         # over all K), or where some runs failed the checks (each run's numbers are over its
         # own converged subset, which differ by chance), the scenario is compared raw
         # (unpaired, conservative)
-        own_numbers = run_numbers(scenario, results)
+        own = run_numbers(scenario, results)
         subset = float(a["K_stan_runs"]) < float(a["K"])
-        subsets_differ = any(number(r, "K_stan_frac", own_numbers) < 1.0 for r in (o, a))
+        subsets_differ = any(number(r, "K_stan_frac", own) < 1.0 for r in (o, a))
         paired = not raw and not subset and not subsets_differ
         if not raw and not paired:
             why = (
@@ -201,7 +201,6 @@ def compare(
                 f"{scenario}: {why}; the paired yardstick does not apply: compared raw (unpaired)"
             )
         diffs = per_trajectory(scenario, results, components, not paired)
-        own = own_numbers
         rows: list[tuple[str, float, float, float, float, float]] = []
         for name, c in diffs.items():
             ex = exact_column(name)
